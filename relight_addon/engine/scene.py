@@ -1,0 +1,338 @@
+"""Scene data model of the radiosity engine: faces in, patches out.
+
+No bpy here. The bridge builds a :class:`FaceSet` from Blender meshes; the
+engine meshes it into a :class:`PatchSet` (``mesh_patches``), computes form
+factors on the patches and solves; per-face results are area-weighted means of
+the face's patches (``face_mean``).
+
+Units: lengths in metres, areas in m^2, radiosity and exitance in W/m^2,
+reflectance is the linear-RGB diffuse albedo (0..1).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "FaceSet",
+    "PatchSet",
+    "mesh_patches",
+    "face_mean",
+    "default_max_patch_size",
+    "polygon_faceset",
+    "SceneError",
+]
+
+
+class SceneError(ValueError):
+    """Bad input geometry or attributes; the message is meant for the user."""
+
+
+@dataclass
+class FaceSet:
+    """World-space polygons with per-face attributes (what the bridge exports).
+
+    ``triangles`` is a triangulation of every face (Blender's loop triangles
+    handle concave n-gons); ``triangle_face`` names the face of each triangle.
+    ``face_loops`` holds, per face, the ordered vertex indices of its polygon
+    (used to grid-split quads).
+    """
+
+    vertices: np.ndarray  # (V, 3) float64
+    triangles: np.ndarray  # (T, 3) int64 vertex indices
+    triangle_face: np.ndarray  # (T,) int64
+    face_loops: list  # F lists of vertex indices, polygon order
+    face_object: np.ndarray  # (F,) int64 index into object_names
+    face_index: np.ndarray  # (F,) int64 polygon index in the object's base mesh
+    object_names: list
+    reflectance: np.ndarray  # (F, 3) linear RGB albedo
+    exitance: np.ndarray  # (F, 3) W/m^2
+    target: np.ndarray = None  # (F,) bool
+    target_radiosity: np.ndarray = None  # (F, 3) W/m^2, zeros where not a target
+    forbidden: np.ndarray = None  # (F,) bool
+    warnings: list = field(default_factory=list)
+
+    def __post_init__(self):
+        F = len(self.face_loops)
+        self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
+        self.triangles = np.asarray(self.triangles, dtype=np.int64).reshape(-1, 3)
+        self.triangle_face = np.asarray(self.triangle_face, dtype=np.int64).reshape(-1)
+        self.face_object = np.asarray(self.face_object, dtype=np.int64).reshape(F)
+        self.face_index = np.asarray(self.face_index, dtype=np.int64).reshape(F)
+        self.reflectance = np.asarray(self.reflectance, dtype=np.float64).reshape(F, 3)
+        self.exitance = np.asarray(self.exitance, dtype=np.float64).reshape(F, 3)
+        if self.target is None:
+            self.target = np.zeros(F, dtype=bool)
+        if self.target_radiosity is None:
+            self.target_radiosity = np.zeros((F, 3))
+        if self.forbidden is None:
+            self.forbidden = np.zeros(F, dtype=bool)
+        self.target = np.asarray(self.target, dtype=bool).reshape(F)
+        self.target_radiosity = np.asarray(self.target_radiosity, dtype=np.float64).reshape(F, 3)
+        self.forbidden = np.asarray(self.forbidden, dtype=bool).reshape(F)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.face_loops)
+
+
+@dataclass
+class PatchSet:
+    """Patches: the radiosity elements. Each patch is one or more triangles.
+
+    All per-patch attributes are inherited from the face the patch came from.
+    """
+
+    tri_vertices: np.ndarray  # (T, 3, 3) float64 world-space triangles
+    tri_patch: np.ndarray  # (T,) int64 patch of each triangle
+    area: np.ndarray  # (P,) m^2
+    normal: np.ndarray  # (P, 3) unit normal (area-weighted over the patch's triangles)
+    center: np.ndarray  # (P, 3) area-weighted centroid
+    face: np.ndarray  # (P,) int64 index into the FaceSet's faces
+    reflectance: np.ndarray  # (P, 3)
+    exitance: np.ndarray  # (P, 3) W/m^2
+    target: np.ndarray  # (P,) bool
+    target_radiosity: np.ndarray  # (P, 3) W/m^2
+    forbidden: np.ndarray  # (P,) bool
+    n_faces: int
+    max_patch_size: float
+
+    @property
+    def n_patches(self) -> int:
+        return len(self.area)
+
+    @property
+    def candidate(self) -> np.ndarray:
+        """Candidate lights: every patch that is not forbidden."""
+        return ~self.forbidden
+
+    @property
+    def tri_area(self) -> np.ndarray:
+        v = self.tri_vertices
+        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+    def bounds(self):
+        v = self.tri_vertices.reshape(-1, 3)
+        return v.min(axis=0), v.max(axis=0)
+
+
+def default_max_patch_size(vertices: np.ndarray, divisions: float = 20.0) -> float:
+    """Default patch size: the scene's bounding-box diagonal / 20.
+
+    A 0.55 m Cornell box then gets patches of about 4.8 cm (roughly 12 x 12 per
+    wall); faces already smaller than that are kept whole.
+    """
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if len(v) == 0:
+        raise SceneError("the scene has no geometry")
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    if not np.isfinite(diag) or diag <= 0:
+        raise SceneError("the scene's geometry has no extent")
+    return diag / divisions
+
+
+def _grid_quad(p, nu, nv):
+    """Split a quad p[0..3] (polygon order) into nu x nv bilinear sub-quads.
+
+    Returns an array (nu*nv, 2, 3, 3): two triangles per sub-quad.
+    """
+    u = np.linspace(0.0, 1.0, nu + 1)
+    v = np.linspace(0.0, 1.0, nv + 1)
+    U, V = np.meshgrid(u, v, indexing="ij")
+    # bilinear: p0 (0,0), p1 (1,0), p2 (1,1), p3 (0,1)
+    G = ((1 - U)[..., None] * (1 - V)[..., None] * p[0] + U[..., None] * (1 - V)[..., None] * p[1]
+         + U[..., None] * V[..., None] * p[2] + (1 - U)[..., None] * V[..., None] * p[3])
+    a = G[:-1, :-1].reshape(-1, 3)
+    b = G[1:, :-1].reshape(-1, 3)
+    c = G[1:, 1:].reshape(-1, 3)
+    d = G[:-1, 1:].reshape(-1, 3)
+    t1 = np.stack([a, b, c], axis=1)
+    t2 = np.stack([a, c, d], axis=1)
+    return np.stack([t1, t2], axis=1)
+
+
+def _split_triangle(t, k):
+    """Split triangle t (3, 3) into k*k congruent sub-triangles, (k*k, 3, 3)."""
+    out = []
+    a, b, c = t
+    e1 = (b - a) / k
+    e2 = (c - a) / k
+    for i in range(k):
+        for j in range(k - i):
+            p = a + i * e1 + j * e2
+            out.append((p, p + e1, p + e2))
+            if j < k - i - 1:
+                out.append((p + e1, p + e1 + e2, p + e2))
+    return np.asarray(out)
+
+
+def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSet:
+    """Mesh faces into patches no larger than ``max_patch_size`` (metres).
+
+    - A face whose edges are all <= max_patch_size is one patch (its triangles).
+    - A larger quad is split into an nu x nv grid of bilinear sub-quads.
+    - Any other larger face (triangle, n-gon, concave n-gon) has each of its
+      triangles split into k x k sub-triangles, each a patch.
+    Degenerate (zero-area) triangles are dropped; a face with no area left
+    produces no patch and a warning in ``faces.warnings``.
+    """
+    V = faces.vertices
+    if not np.all(np.isfinite(V)):
+        raise SceneError("the scene has NaN or infinite vertex coordinates")
+    if faces.n_faces == 0 or len(faces.triangles) == 0:
+        raise SceneError("the scene has no faces")
+    if max_patch_size is None:
+        max_patch_size = default_max_patch_size(V)
+    max_patch_size = float(max_patch_size)
+    if not (max_patch_size > 0 and np.isfinite(max_patch_size)):
+        raise SceneError(f"max patch size must be a positive length, got {max_patch_size}")
+
+    tri_by_face = [[] for _ in range(faces.n_faces)]
+    for t, f in zip(faces.triangles, faces.triangle_face):
+        tri_by_face[f].append(t)
+
+    tris = []  # list of (n, 3, 3)
+    tri_patch = []
+    patch_face = []
+    degenerate = 0
+    scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    min_area = (1e-10 * scale) ** 2
+
+    def add_patch(tri_arr, f):
+        tri_arr = np.asarray(tri_arr, dtype=np.float64).reshape(-1, 3, 3)
+        ar = 0.5 * np.linalg.norm(np.cross(tri_arr[:, 1] - tri_arr[:, 0], tri_arr[:, 2] - tri_arr[:, 0]), axis=1)
+        tri_arr = tri_arr[ar > min_area]
+        if len(tri_arr) == 0:
+            return False
+        pid = len(patch_face)
+        patch_face.append(f)
+        tris.append(tri_arr)
+        tri_patch.append(np.full(len(tri_arr), pid, dtype=np.int64))
+        return True
+
+    for f in range(faces.n_faces):
+        ft = tri_by_face[f]
+        if not ft:
+            degenerate += 1
+            continue
+        ftri = V[np.asarray(ft)]  # (n, 3, 3)
+        loop = faces.face_loops[f]
+        edges = np.linalg.norm(ftri - np.roll(ftri, 1, axis=1), axis=2)
+        made = False
+        if edges.max() <= max_patch_size:
+            made = add_patch(ftri, f)
+        elif len(loop) == 4:
+            p = V[np.asarray(loop)]
+            nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / max_patch_size))
+            nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / max_patch_size))
+            for sub in _grid_quad(p, max(nu, 1), max(nv, 1)):
+                made |= add_patch(sub, f)
+        else:
+            for t in ftri:
+                k = int(np.ceil(np.linalg.norm(t - np.roll(t, 1, axis=0), axis=1).max() / max_patch_size))
+                for sub in _split_triangle(t, max(k, 1)):
+                    made |= add_patch(sub, f)
+        if not made:
+            degenerate += 1
+    if degenerate:
+        faces.warnings.append(f"{degenerate} zero-area or degenerate face(s) ignored")
+    if not patch_face:
+        raise SceneError("the scene has no face with a non-zero area")
+
+    tri_vertices = np.concatenate(tris)
+    tri_patch = np.concatenate(tri_patch)
+    patch_face = np.asarray(patch_face, dtype=np.int64)
+    P = len(patch_face)
+    e1 = tri_vertices[:, 1] - tri_vertices[:, 0]
+    e2 = tri_vertices[:, 2] - tri_vertices[:, 0]
+    cr = np.cross(e1, e2)
+    ta = 0.5 * np.linalg.norm(cr, axis=1)
+    area = np.bincount(tri_patch, weights=ta, minlength=P)
+    nsum = np.stack([np.bincount(tri_patch, weights=cr[:, k], minlength=P) for k in range(3)], axis=1)
+    nlen = np.linalg.norm(nsum, axis=1)
+    normal = nsum / np.where(nlen > 0, nlen, 1.0)[:, None]
+    tc = tri_vertices.mean(axis=1)
+    center = np.stack([np.bincount(tri_patch, weights=tc[:, k] * ta, minlength=P) for k in range(3)], axis=1)
+    center /= area[:, None]
+    return PatchSet(
+        tri_vertices=tri_vertices,
+        tri_patch=tri_patch,
+        area=area,
+        normal=normal,
+        center=center,
+        face=patch_face,
+        reflectance=faces.reflectance[patch_face].copy(),
+        exitance=faces.exitance[patch_face].copy(),
+        target=faces.target[patch_face].copy(),
+        target_radiosity=faces.target_radiosity[patch_face].copy(),
+        forbidden=faces.forbidden[patch_face].copy(),
+        n_faces=faces.n_faces,
+        max_patch_size=max_patch_size,
+    )
+
+
+def face_mean(patches: PatchSet, values: np.ndarray) -> np.ndarray:
+    """Area-weighted mean of per-patch ``values`` (P,) or (P, k) over each face.
+
+    Faces with no patch (degenerate) get 0.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    squeeze = values.ndim == 1
+    vals = values.reshape(len(patches.area), -1)
+    F = patches.n_faces
+    a = np.bincount(patches.face, weights=patches.area, minlength=F)
+    out = np.stack([np.bincount(patches.face, weights=vals[:, k] * patches.area, minlength=F)
+                    for k in range(vals.shape[1])], axis=1)
+    out /= np.where(a > 0, a, 1.0)[:, None]
+    return out[:, 0] if squeeze else out
+
+
+def polygon_faceset(polygons, reflectance=0.5, exitance=0.0, object_names=None, face_object=None):
+    """Build a FaceSet from a list of convex polygons given as (n, 3) vertex arrays.
+
+    Convenience for engine tests and synthetic scenes (fan triangulation, so
+    convex polygons only). ``reflectance`` and ``exitance`` are scalars, RGB
+    triples or per-face arrays.
+    """
+    verts = []
+    loops = []
+    tris = []
+    tri_face = []
+    base = 0
+    for f, poly in enumerate(polygons):
+        poly = np.asarray(poly, dtype=np.float64).reshape(-1, 3)
+        n = len(poly)
+        verts.append(poly)
+        loops.append(list(range(base, base + n)))
+        for k in range(1, n - 1):
+            tris.append((base, base + k, base + k + 1))
+            tri_face.append(f)
+        base += n
+    F = len(polygons)
+
+    def per_face(x):
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim == 0:
+            return np.full((F, 3), float(x))
+        if x.shape == (3,):
+            return np.tile(x, (F, 1))
+        if x.shape == (F,):
+            return np.repeat(x[:, None], 3, axis=1)
+        return x.reshape(F, 3)
+
+    if object_names is None:
+        object_names = ["polygons"]
+    if face_object is None:
+        face_object = np.zeros(F, dtype=np.int64)
+    return FaceSet(
+        vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
+        triangles=np.asarray(tris, dtype=np.int64).reshape(-1, 3),
+        triangle_face=np.asarray(tri_face, dtype=np.int64),
+        face_loops=loops,
+        face_object=face_object,
+        face_index=np.arange(F),
+        object_names=list(object_names),
+        reflectance=per_face(reflectance),
+        exitance=per_face(exitance),
+    )
