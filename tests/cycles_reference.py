@@ -1,0 +1,308 @@
+"""Cycles as the independent reference for per-face radiosity (test helpers, bpy).
+
+``cycles_face_radiance`` bakes Cycles' COMBINED outgoing radiance of every
+mesh face in the current Blender file and returns per-face means, with an
+estimate of Cycles' own Monte-Carlo noise on each mean.
+
+How a per-face mean is measured without edge bias:
+- each mesh gets a new UV map in which every polygon has its own square cell
+  of a grid (``cell_px`` texels, one texel of padding on each side). The
+  polygon is laid out in its own plane by a *similarity* (rotation + uniform
+  scale), so texel centres inside it sample the face uniformly by area;
+- the bake target is a float image pre-filled with a negative sentinel, baked
+  with margin 0 and without clearing: exactly the texels Cycles rasterised
+  (their centres lie inside the polygon) hold values, every other texel keeps
+  the sentinel. Nothing bleeds across faces, unlike a vertex-colour bake;
+- the face mean is the mean of its written texels (a stratified area average).
+
+Noise: Cycles' per-texel noise is estimated from differences of horizontally
+adjacent written texels (var(noise) ~ mean(d^2)/2, which removes the smooth
+true variation), and the standard error of a face mean is that sigma over
+sqrt(texel count). ``FaceRadiance.rel_noise`` is that error relative to the mean.
+
+Units: Blender's emission Color x Strength is radiance L (W m^-2 sr^-1); a
+COMBINED bake of a diffuse surface is its outgoing radiance, i.e. radiosity/pi.
+
+The Cycles scene is made Lambertian to match the radiosity model
+(``make_lambertian``): Principled BSDFs get Specular IOR Level, Metallic, Coat,
+Sheen, Transmission and Diffuse Roughness 0 (the Principled diffuse lobe is then
+Lambert with albedo Base Color); world black; no clamping, no glossy filter,
+no adaptive sampling, 64 bounces.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+import bpy
+
+SENTINEL = -1.0
+UV_NAME = "relight_face_cells"
+
+
+@dataclass
+class FaceRadiance:
+    """Per-face Cycles result for one object (faces in base-mesh polygon order)."""
+
+    radiance: np.ndarray  # (F, 3) mean outgoing radiance, W m^-2 sr^-1
+    std_error: np.ndarray  # (F, 3) Monte-Carlo standard error of that mean
+    n_texels: np.ndarray  # (F,) texels averaged
+
+    @property
+    def rel_noise(self) -> np.ndarray:
+        """(F, 3) standard error / mean (0 where the mean is 0)."""
+        m = np.abs(self.radiance)
+        return np.where(m > 0, self.std_error / np.where(m > 0, m, 1.0), 0.0)
+
+
+def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
+    """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake."""
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    c.samples = int(samples)
+    c.seed = int(seed)
+    c.use_animated_seed = False
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = True
+    c.caustics_refractive = True
+    c.max_bounces = 64
+    c.diffuse_bounces = 64
+    c.glossy_bounces = 64
+    c.transmission_bounces = 64
+    c.transparent_max_bounces = 64
+    c.min_light_bounces = 0
+    c.light_sampling_threshold = 0.0
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+    if threads:
+        scene.render.threads_mode = "FIXED"
+        scene.render.threads = int(threads)
+    # No world light.
+    world = scene.world or bpy.data.worlds.new("relight_black_world")
+    scene.world = world
+    world.use_nodes = True
+    bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
+    if bg is not None:
+        bg.inputs["Strength"].default_value = 0.0
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    world.color = (0.0, 0.0, 0.0)
+
+
+def make_lambertian(materials=None):
+    """Turn every Principled BSDF into a pure Lambert diffuse + emission."""
+    zero = ("Specular IOR Level", "Metallic", "Coat Weight", "Sheen Weight",
+            "Transmission Weight", "Subsurface Weight", "Diffuse Roughness")
+    for mat in (materials if materials is not None else bpy.data.materials):
+        if mat.node_tree is None:
+            continue
+        for node in mat.node_tree.nodes:
+            if node.type == "BSDF_PRINCIPLED":
+                for name in zero:
+                    if name in node.inputs:
+                        node.inputs[name].default_value = 0.0
+                node.inputs["Roughness"].default_value = 1.0
+
+
+def _face_cells(obj, cell_px: int, pad: int = 1):
+    """Give ``obj`` a UV map with one square cell per polygon (similarity layout).
+
+    Returns (resolution, grid columns). Cell f occupies texels
+    [col*cell_px, (col+1)*cell_px) x [row*cell_px, (row+1)*cell_px) with
+    col = f % n, row = f // n.
+    """
+    me = obj.data
+    F = len(me.polygons)
+    n = max(1, math.ceil(math.sqrt(F)))
+    res = n * cell_px
+    uv = me.uv_layers.get(UV_NAME) or me.uv_layers.new(name=UV_NAME)
+    me.uv_layers.active = uv
+    mw = np.array(obj.matrix_world)
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    co = co.reshape(-1, 3) @ mw[:3, :3].T + mw[:3, 3]
+    loop_vert = np.empty(len(me.loops), dtype=np.int64)
+    me.loops.foreach_get("vertex_index", loop_vert)
+    uvs = np.zeros((len(me.loops), 2))
+    inner = cell_px - 2 * pad
+    for f, poly in enumerate(me.polygons):
+        ls = np.arange(poly.loop_start, poly.loop_start + poly.loop_total)
+        p = co[loop_vert[ls]]
+        # Newell normal, in-plane orthonormal basis: a similarity onto the plane.
+        nrm = np.sum(np.cross(p, np.roll(p, -1, axis=0)), axis=0)
+        nrm /= np.linalg.norm(nrm) or 1.0
+        e = p[1] - p[0]
+        u = e / (np.linalg.norm(e) or 1.0)
+        v = np.cross(nrm, u)
+        q = np.stack([(p - p[0]) @ u, (p - p[0]) @ v], axis=1)
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        s = inner / max(float((hi - lo).max()), 1e-30)
+        q = (q - lo) * s + (inner - (hi - lo) * s) / 2 + pad  # centred in the cell, texels
+        col, row = f % n, f // n
+        uvs[ls] = (q + np.array([col * cell_px, row * cell_px])) / res
+    uv.data.foreach_set("uv", uvs.ravel())
+    return res, n
+
+
+def _bake_object(obj, res: int, pass_filter):
+    """COMBINED bake of ``obj`` into a float image pre-filled with the sentinel."""
+    img = bpy.data.images.new(f"relight_bake_{obj.name}", res, res, alpha=True, float_buffer=True)
+    img.colorspace_settings.name = "Non-Color"
+    img.pixels.foreach_set(np.full(res * res * 4, SENTINEL, dtype=np.float32))
+    saved = []
+    for slot in obj.material_slots:
+        mat = slot.material
+        if mat is None or mat.node_tree is None:
+            continue
+        nt = mat.node_tree
+        node = nt.nodes.new("ShaderNodeTexImage")
+        node.image = img
+        saved.append((nt, node, nt.nodes.active))
+        nt.nodes.active = node
+    if not saved:
+        raise ValueError(f"object {obj.name!r} needs a node material to be baked")
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    try:
+        bpy.ops.object.bake(type="COMBINED", pass_filter=pass_filter, margin=0, use_clear=False,
+                            target="IMAGE_TEXTURES", uv_layer=UV_NAME)
+        px = np.empty(res * res * 4, dtype=np.float32)
+        img.pixels.foreach_get(px)
+    finally:
+        for nt, node, active in saved:
+            nt.nodes.remove(node)
+            if active is not None:
+                nt.nodes.active = active
+        bpy.data.images.remove(img)
+    return px.reshape(res, res, 4)  # [row (v), col (u), rgba]
+
+
+def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
+    rad = np.zeros((F, 3))
+    se = np.zeros((F, 3))
+    cnt = np.zeros(F, dtype=np.int64)
+    for f in range(F):
+        col, row = f % n, f // n
+        cell = px[row * cell_px:(row + 1) * cell_px, col * cell_px:(col + 1) * cell_px]
+        written = cell[..., 3] > SENTINEL / 2
+        rgb = cell[..., :3].astype(np.float64)
+        cnt[f] = written.sum()
+        if cnt[f] == 0:
+            raise ValueError(f"face {f}: Cycles baked no texel (cell {cell_px} px too small?)")
+        rad[f] = rgb[written].mean(axis=0)
+        pair = written[:, 1:] & written[:, :-1]
+        d = (rgb[:, 1:] - rgb[:, :-1])[pair]
+        sigma = np.sqrt(0.5 * (d ** 2).mean(axis=0)) if len(d) else np.abs(rad[f])
+        se[f] = sigma / np.sqrt(cnt[f])
+    if not np.all(np.isfinite(rad)):
+        raise ValueError("Cycles bake produced non-finite values")
+    return FaceRadiance(radiance=rad, std_error=se, n_texels=cnt)
+
+
+def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
+                         blend_path: str | None = None, threads: int = 0) -> dict:
+    """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
+
+    Works on the current Blender data, or opens ``blend_path`` first. Modifies
+    the open file (UV maps, materials made Lambertian, Cycles settings): use
+    it on a throw-away copy. Returns {object name: FaceRadiance}.
+    """
+    if blend_path is not None:
+        bpy.ops.wm.open_mainfile(filepath=str(blend_path))
+    scene = bpy.context.scene
+    configure_cycles(scene, samples, seed, threads)
+    make_lambertian()
+    if objects is None:
+        objects = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
+    # Direct + indirect, diffuse + emission: everything a Lambertian surface sends out.
+    pass_filter = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
+    out = {}
+    for obj in objects:
+        if len(obj.data.polygons) == 0:
+            continue
+        res, n = _face_cells(obj, cell_px)
+        px = _bake_object(obj, res, pass_filter)
+        out[obj.name] = _face_stats(px, len(obj.data.polygons), n, cell_px)
+    return out
+
+
+# ---------------------------------------------------------------------------
+# Scenes built in Python (bpy), shared by the tests.
+
+def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0):
+    mat = bpy.data.materials.new(name)
+    mat.use_nodes = True
+    p = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
+    p.inputs["Base Color"].default_value = (*base_color, 1.0)
+    p.inputs["Emission Color"].default_value = (*emission, 1.0)
+    p.inputs["Emission Strength"].default_value = strength
+    return mat
+
+
+def grid_quads(origin, du, dv, nu, nv):
+    """Vertices and quad faces of an nu x nv grid spanning origin + [0,1]du + [0,1]dv.
+
+    Faces wind so that the normal is du x dv.
+    """
+    origin, du, dv = (np.asarray(x, dtype=np.float64) for x in (origin, du, dv))
+    verts = [origin + du * (i / nu) + dv * (j / nv) for j in range(nv + 1) for i in range(nu + 1)]
+    faces = [(j * (nu + 1) + i, j * (nu + 1) + i + 1, (j + 1) * (nu + 1) + i + 1, (j + 1) * (nu + 1) + i)
+             for j in range(nv) for i in range(nu)]
+    return verts, faces
+
+
+def add_mesh_object(name, verts, faces, material):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata([tuple(map(float, v)) for v in verts], [], faces)
+    me.update()
+    obj = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.data.materials.append(material)
+    return obj
+
+
+def reset_blender():
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
+def build_parallel_emitter_scene(side=1.0, height=0.5, n_recv=6, strength=2.0, albedo=0.6):
+    """A black square emitter above a parallel grey receiver of the same size.
+
+    The emitter (Base Color 0, emission radiance ``strength``) faces down at
+    ``height``; the receiver (albedo ``albedo``) is split into n_recv x n_recv
+    faces. No interreflection: the receiver's radiance is albedo * E / pi with
+    E = pi * strength * (point-to-rectangle form factor), closed form.
+    """
+    reset_blender()
+    if bpy.context.scene.world is None:
+        bpy.context.scene.world = bpy.data.worlds.new("World")
+    h = side / 2
+    v, f = grid_quads((-h, -h, 0.0), (side, 0, 0), (0, side, 0), n_recv, n_recv)
+    recv = add_mesh_object("Receiver", v, f, _material("grey", (albedo,) * 3))
+    v, f = grid_quads((-h, -h, height), (0, side, 0), (side, 0, 0), 1, 1)  # normal -z
+    add_mesh_object("Emitter", v, f, _material("lamp", (0.0,) * 3, (1.0, 1.0, 1.0), strength))
+    return recv
+
+
+def rect_point_form_factor(x, y, h, x0, x1, y0, y1):
+    """Form factor from a point (x, y, 0) facing +z to the parallel rectangle
+    [x0,x1] x [y0,y1] at height h (closed form, superposition of corner rectangles)."""
+
+    def corner(a, b):  # rectangle with one corner above the point, sides a, b (signed)
+        X, Y = np.abs(a) / h, np.abs(b) / h
+        val = (X / np.sqrt(1 + X * X) * np.arctan(Y / np.sqrt(1 + X * X))
+               + Y / np.sqrt(1 + Y * Y) * np.arctan(X / np.sqrt(1 + Y * Y))) / (2 * np.pi)
+        return np.sign(a) * np.sign(b) * val
+
+    return (corner(x1 - x, y1 - y) - corner(x0 - x, y1 - y)
+            - corner(x1 - x, y0 - y) + corner(x0 - x, y0 - y))
