@@ -306,3 +306,76 @@ def rect_point_form_factor(x, y, h, x0, x1, y0, y1):
 
     return (corner(x1 - x, y1 - y) - corner(x0 - x, y1 - y)
             - corner(x1 - x, y0 - y) + corner(x0 - x, y0 - y))
+
+
+def one_sided_emission(materials=None):
+    """Make Principled emission one-sided (front only), as in the radiosity model.
+
+    Cycles' mesh emission is two-sided; Emission Strength becomes
+    strength * (1 - Backfacing).
+    """
+    for mat in (materials if materials is not None else bpy.data.materials):
+        if mat.node_tree is None:
+            continue
+        nt = mat.node_tree
+        for node in list(nt.nodes):
+            if node.type != "BSDF_PRINCIPLED":
+                continue
+            sock = node.inputs["Emission Strength"]
+            if sock.is_linked or sock.default_value == 0.0:
+                continue
+            geo = nt.nodes.new("ShaderNodeNewGeometry")
+            front = nt.nodes.new("ShaderNodeMath")
+            front.operation = "MULTIPLY_ADD"  # backfacing * (-s) + s
+            front.inputs[1].default_value = -sock.default_value
+            front.inputs[2].default_value = sock.default_value
+            nt.links.new(geo.outputs["Backfacing"], front.inputs[0])
+            nt.links.new(front.outputs["Value"], sock)
+
+
+CORNELL_SIZE = 0.55
+CORNELL_WHITE = (0.73, 0.71, 0.68)
+CORNELL_RED = (0.63, 0.065, 0.05)
+CORNELL_GREEN = (0.14, 0.45, 0.09)
+
+
+def build_cornell_box(n=5, radiance=10.0):
+    """A closed-top Cornell-like box (open front), built from quads, in metres.
+
+    Walls (0.55 m) are n x n grids of quads; the ceiling's central cell
+    (n odd) is the light, flush with the ceiling, Principled emission
+    radiance ``radiance`` (W m^-2 sr^-1, exitance pi * radiance). Two
+    axis-aligned white boxes stand on the floor. Returns the objects.
+    """
+    if n % 2 != 1:
+        raise ValueError("n must be odd so that the light is the central ceiling cell")
+    reset_blender()
+    bpy.context.scene.world = bpy.data.worlds.new("World")
+    L = CORNELL_SIZE
+    white = _material("white", CORNELL_WHITE)
+    objs = []
+    # name, origin, du, dv (normal du x dv points into the room)
+    walls = [("Floor", (0, 0, 0), (L, 0, 0), (0, L, 0), white),
+             ("Back", (0, L, 0), (L, 0, 0), (0, 0, L), white),
+             ("Left", (0, 0, 0), (0, L, 0), (0, 0, L), _material("red", CORNELL_RED)),
+             ("Right", (L, 0, 0), (0, 0, L), (0, L, 0), _material("green", CORNELL_GREEN))]
+    for name, o, du, dv, mat in walls:
+        v, f = grid_quads(o, du, dv, n, n)
+        objs.append(add_mesh_object(name, v, f, mat))
+    v, f = grid_quads((0, 0, L), (0, L, 0), (L, 0, 0), n, n)
+    ceiling = add_mesh_object("Ceiling", v, f, white)
+    ceiling.data.materials.append(_material("light", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), radiance))
+    centre = (n // 2) * n + n // 2
+    ceiling.data.polygons[centre].material_index = 1
+    objs.append(ceiling)
+
+    def box(name, x0, y0, w, d, h):
+        x1, y1 = x0 + w, y0 + d
+        verts = [(x0, y0, 0), (x1, y0, 0), (x1, y1, 0), (x0, y1, 0),
+                 (x0, y0, h), (x1, y0, h), (x1, y1, h), (x0, y1, h)]
+        faces = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]  # outward
+        return add_mesh_object(name, verts, faces, white)
+
+    objs.append(box("ShortBox", 0.13, 0.065, 0.165, 0.165, 0.165))
+    objs.append(box("TallBox", 0.29, 0.29, 0.165, 0.165, 0.33))
+    return objs
