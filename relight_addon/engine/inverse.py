@@ -1,0 +1,422 @@
+"""The inverse radiosity system: the paper's "mathematical phase".
+
+Per channel (R, G, B) the forward system is ``A b = e`` with
+``A = I - diag(rho) F`` (b radiosity and e self-exitance, both W/m^2).
+The user paints radiosities ``b_P`` on a set P of m patches (targets) and
+allows lights on a set C of candidates (every patch that is not forbidden);
+forbidden patches have e = 0.
+
+Two formulations of the same inverse problem, plus a physical one:
+
+``solver="svd"`` (the paper, [Conte02])
+    Substitute the knowns into ``A b - e = 0``: the unknowns are b on the
+    unpainted patches U and e on the candidates C, so
+    ``[A[:, U]  -I[:, C]] [b_U; e_C] = -A[:, P] b_P``, i.e. ``M x = r``
+    (n rows, |U| + |C| columns). Its minimum-norm least-squares solution via
+    the SVD pseudo-inverse, singular values below ``rcond * s_max`` cut off
+    (default ``rcond = max(rows, cols) * eps``), gives e_x.
+``solver="reduced"``
+    The forward system is linear, so on the targets ``b_P = T e_C`` with T
+    the rows P, columns C of ``A^-1`` (from an LU factorisation of A, never
+    forming the inverse). The minimum-norm least-squares solution of
+    ``T e_C = b_P`` (m x |C|). The two routes have different minimum-norm
+    solutions; both reproduce feasible targets to solver precision.
+``solver="nnls"`` (beyond the paper)
+    Non-negative least squares on T per channel: a physical configuration
+    (e >= 0) at the cost of a residual when the targets are not reachable
+    with positive lights.
+
+The error of any configuration is Eq. 1 through T:
+``sqrt(sum over targets and the 3 channels of (b_P - T e_C)^2)``.
+"""
+from __future__ import annotations
+
+import time
+import warnings as _warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.optimize as sopt
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .scene import SceneError
+
+__all__ = [
+    "InverseError",
+    "InverseProblem",
+    "InverseResult",
+    "solve_inverse",
+    "direct_lighting_problem",
+    "radiosity_matrix",
+    "SOLVERS",
+]
+
+SOLVERS = ("svd", "reduced", "nnls")
+
+#: condition-number estimate of A above which the problem warns
+ILL_CONDITIONED = 1e8
+
+
+class InverseError(SceneError):
+    """The inverse problem cannot be set up or solved; the message is for the user."""
+
+
+def radiosity_matrix(F, rho_channel):
+    """``A = I - diag(rho) F`` for one channel (dense ndarray or sparse CSC)."""
+    rho = np.asarray(rho_channel, dtype=np.float64)
+    n = len(rho)
+    if sp.issparse(F):
+        return (sp.identity(n, format="csc") - sp.diags(rho) @ F.astype(np.float64)).tocsc()
+    A = -(rho[:, None] * np.asarray(F, dtype=np.float64))
+    A[np.diag_indices(n)] += 1.0
+    return A
+
+
+def _channel_groups(reflectance):
+    """Group the channels whose reflectance vectors are identical (grey scenes: one group)."""
+    groups = []
+    for c in range(3):
+        for g in groups:
+            if np.array_equal(reflectance[:, g[0]], reflectance[:, c]):
+                g.append(c)
+                break
+        else:
+            groups.append([c])
+    return groups
+
+
+class _Factor:
+    """LU factorisation of A for one channel, with its 1-norm condition estimate."""
+
+    def __init__(self, A):
+        self.sparse = sp.issparse(A)
+        if self.sparse:
+            try:
+                self.lu = spla.splu(A.tocsc())
+            except RuntimeError as exc:  # exactly singular
+                raise InverseError(
+                    "the radiosity system I - rho F is singular (a closed scene with reflectance 1?)") from exc
+            self.cond = float("nan")
+            try:
+                self.cond = float(spla.onenormest(A) * spla.onenormest(spla.LinearOperator(
+                    A.shape, matvec=self.lu.solve, rmatvec=lambda x: self.lu.solve(x, trans="T"))))
+            except Exception:  # the estimate is advisory only
+                pass
+        else:
+            with _warnings.catch_warnings():
+                _warnings.simplefilter("ignore", sla.LinAlgWarning)
+                self.lu = sla.lu_factor(A, check_finite=False)
+            diag = np.abs(np.diag(self.lu[0]))
+            if diag.min() <= np.finfo(float).eps * max(diag.max(), 1.0):
+                raise InverseError(
+                    "the radiosity system I - rho F is singular (a closed scene with reflectance 1?)")
+            anorm = np.abs(A).sum(axis=0).max()
+            rc, _ = sla.lapack.dgecon(self.lu[0], anorm, norm="1")
+            self.cond = float(1.0 / rc) if rc > 0 else float("inf")
+
+    def solve(self, rhs, trans=False):
+        if self.sparse:
+            return self.lu.solve(np.asarray(rhs, dtype=np.float64), trans="T" if trans else "N")
+        return sla.lu_solve(self.lu, rhs, trans=1 if trans else 0, check_finite=False)
+
+
+@dataclass
+class InverseResult:
+    """Solution of the inverse problem.
+
+    exitance: (|C|, 3) W/m^2 on the candidates (``problem.candidates`` order).
+    rank: numerical rank used by the pseudo-inverse (min over channels; for
+    nnls the number of lights with a non-zero exitance).
+    error: Eq. 1 through T; relative_error = error / ||b_P||.
+    n_negative: number of candidates with at least one negative channel.
+    seconds: wall time of the mathematical phase (building and solving the system,
+    including the LU factorisation when T is needed and not yet cached).
+    """
+
+    solver: str
+    exitance: np.ndarray
+    rank: int
+    error: float
+    relative_error: float
+    n_negative: int
+    seconds: float
+    rcond: float | None = None
+    warnings: list = field(default_factory=list)
+
+    def patch_exitance(self, problem):
+        return problem.patch_exitance(self.exitance)
+
+
+class InverseProblem:
+    """Inverse lighting problem on patches.
+
+    F: (P, P) form factors (dense ndarray or scipy.sparse), F[i, j] from i to j.
+    area (P,) m^2, reflectance (P, 3), target_mask (P,) bool with
+    target_radiosity (P, 3) W/m^2 (only the targets' rows are used),
+    candidate_mask (P,) bool (not forbidden), center (P, 3), normal (P, 3).
+    Patch centres and normals are only used by the reduction's distributions;
+    ``exitance`` (P, 3) optionally holds the scene's own emitters (for the
+    Gauss-Seidel error route and direct-lighting mode).
+    """
+
+    def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
+                 center=None, normal=None):
+        if sp.issparse(F):
+            F = F.tocsr()
+            n = F.shape[0]
+            data = F.data
+        else:
+            F = np.asarray(F)
+            n = F.shape[0] if F.ndim == 2 else -1
+            data = F
+        if F.ndim != 2 or F.shape != (n, n) or n == 0:
+            raise InverseError(f"form factors must be a square (P, P) matrix, got shape {F.shape}")
+        if not np.all(np.isfinite(data)):
+            raise InverseError("the form factors contain NaN or infinite values")
+        self.F = F
+        self.n_patches = n
+
+        def arr(x, shape, name, dtype=np.float64):
+            try:
+                a = np.asarray(x, dtype=dtype).reshape(shape)
+            except (ValueError, TypeError) as exc:
+                raise InverseError(f"{name} must have shape {shape}") from exc
+            if dtype is np.float64 and not np.all(np.isfinite(a)):
+                raise InverseError(f"{name} contains NaN or infinite values")
+            return a
+
+        self.area = arr(area, (n,), "area")
+        if np.any(self.area <= 0):
+            raise InverseError(f"patch areas must be positive; patches {np.flatnonzero(self.area <= 0)[:10].tolist()} are not")
+        self.reflectance = arr(reflectance, (n, 3), "reflectance")
+        if np.any(self.reflectance < 0) or np.any(self.reflectance > 1):
+            raise InverseError("reflectance must lie in [0, 1]")
+        self.target_mask = arr(target_mask, (n,), "target mask", dtype=bool)
+        tr = arr(target_radiosity, (n, 3), "target radiosity")
+        self.candidate_mask = arr(candidate_mask, (n,), "candidate mask", dtype=bool)
+        self.center = arr(center, (n, 3), "centre") if center is not None else np.zeros((n, 3))
+        self.normal = arr(normal, (n, 3), "normal") if normal is not None else np.zeros((n, 3))
+        self.targets = np.flatnonzero(self.target_mask)
+        self.candidates = np.flatnonzero(self.candidate_mask)
+        if len(self.targets) == 0:
+            raise InverseError("no target: paint a radiosity on at least one face")
+        if len(self.candidates) == 0:
+            raise InverseError("no candidate light: every face is forbidden")
+        self.b_target = tr[self.targets].copy()  # (m, 3)
+        if np.any(self.b_target < 0):
+            raise InverseError("target radiosities must be non-negative")
+        self.target_norm = float(np.linalg.norm(self.b_target))
+        self.exitance = np.zeros((n, 3))
+        self._factors = None
+        self._transfer = None
+        self.transfer_seconds = None
+        self.warnings = []
+
+    # -- system ---------------------------------------------------------
+    @property
+    def m(self):
+        return len(self.targets)
+
+    def factors(self):
+        """LU factors of A per channel (channels with identical reflectance share one)."""
+        if self._factors is None:
+            self._factors = [None] * 3
+            for g in _channel_groups(self.reflectance):
+                fac = _Factor(radiosity_matrix(self.F, self.reflectance[:, g[0]]))
+                for c in g:
+                    self._factors[c] = fac
+            cond = max(f.cond for f in self._factors)
+            if np.isfinite(cond) and cond > ILL_CONDITIONED or np.isinf(cond):
+                self.warnings.append(
+                    f"the radiosity system is ill-conditioned (condition estimate {cond:.3g}); "
+                    "reflectances close to 1 in a closed scene amplify every error")
+        return self._factors
+
+    @property
+    def condition(self):
+        """1-norm condition estimate of A, worst channel."""
+        return max(f.cond for f in self.factors())
+
+    @property
+    def transfer(self):
+        """T per channel: list of 3 arrays (m, |C|), rows P and columns C of A^-1.
+
+        Computed with the smaller of ``A^T Y = I[:, P]`` (m right-hand sides) and
+        ``A X = I[:, C]`` (|C| right-hand sides) from the LU factors.
+        """
+        if self._transfer is None:
+            t0 = time.perf_counter()
+            facs = self.factors()
+            n, P, C = self.n_patches, self.targets, self.candidates
+            T = [None] * 3
+            done = {}
+            for c in range(3):
+                if id(facs[c]) in done:
+                    T[c] = done[id(facs[c])]
+                    continue
+                if len(P) <= len(C):
+                    rhs = np.zeros((n, len(P)))
+                    rhs[P, np.arange(len(P))] = 1.0
+                    Y = facs[c].solve(rhs, trans=True)  # Y^T = rows P of A^-1
+                    T[c] = np.ascontiguousarray(Y[C].T)
+                else:
+                    rhs = np.zeros((n, len(C)))
+                    rhs[C, np.arange(len(C))] = 1.0
+                    X = facs[c].solve(rhs)  # columns C of A^-1
+                    T[c] = np.ascontiguousarray(X[P])
+                if not np.all(np.isfinite(T[c])):
+                    raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
+                done[id(facs[c])] = T[c]
+            self._transfer = T
+            self.transfer_seconds = time.perf_counter() - t0
+            self._check_reachable()
+        return self._transfer
+
+    def _check_reachable(self):
+        T = self._transfer
+        scale = max(float(np.abs(t).max()) for t in T)
+        reach = np.zeros(self.m, dtype=bool)
+        for t in T:
+            reach |= np.abs(t).max(axis=1) > 1e-12 * max(scale, 1e-300)
+        self.unreachable = self.targets[~reach]
+        bad = self.targets[(~reach) & (self.b_target.max(axis=1) > 0)]
+        if len(bad) == len(self.targets):
+            raise InverseError(
+                "no candidate light reaches any target (occluded or every reaching face forbidden); "
+                f"target patches {bad[:20].tolist()}")
+        if len(bad):
+            self.warnings.append(
+                f"{len(bad)} target(s) cannot be met, no candidate light reaches them: patches "
+                f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
+
+    # -- evaluation -----------------------------------------------------
+    def target_radiosity_of(self, e_C):
+        """Radiosity (m, 3) on the targets produced by candidate exitances e_C (|C|, 3)."""
+        e_C = np.asarray(e_C, dtype=np.float64).reshape(len(self.candidates), 3)
+        return np.stack([self.transfer[c] @ e_C[:, c] for c in range(3)], axis=1)
+
+    def error(self, e_C):
+        """Eq. 1: sqrt of the sum over targets and channels of squared differences (W/m^2)."""
+        return float(np.linalg.norm(self.target_radiosity_of(e_C) - self.b_target))
+
+    def relative_error(self, e_C):
+        return self.error(e_C) / self.target_norm if self.target_norm > 0 else self.error(e_C)
+
+    def patch_exitance(self, e_C):
+        """Full (P, 3) exitance with e_C on the candidates and 0 elsewhere."""
+        out = np.zeros((self.n_patches, 3))
+        out[self.candidates] = np.asarray(e_C, dtype=np.float64).reshape(-1, 3)
+        return out
+
+    def forward_radiosity(self, e_full):
+        """Exact forward solution B (P, 3) of A B = e through the LU factors."""
+        e_full = np.asarray(e_full, dtype=np.float64).reshape(self.n_patches, 3)
+        return np.stack([self.factors()[c].solve(e_full[:, c]) for c in range(3)], axis=1)
+
+    @classmethod
+    def from_patches(cls, patches, F):
+        """Problem from a PatchSet (targets, target radiosities, forbidden) and its form factors."""
+        return cls(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                   ~patches.forbidden, patches.center, patches.normal)
+
+
+def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None):
+    """Direct-lighting mode: reduce the scene's own emitters.
+
+    The candidates are the current lights (patches with a positive exitance in any
+    channel); every other patch is a target at the radiosity the full
+    configuration gives it. Returns ``(problem, e_x)`` with e_x the lights'
+    exitances (|C|, 3), the starting configuration of a reduction.
+    """
+    exitance = np.asarray(exitance, dtype=np.float64)
+    n = exitance.shape[0] if exitance.ndim == 2 else -1
+    if exitance.ndim != 2 or exitance.shape[1] != 3 or not np.all(np.isfinite(exitance)):
+        raise InverseError("exitance must be a finite (P, 3) array")
+    if np.any(exitance < 0):
+        raise InverseError("direct-lighting mode needs non-negative exitances")
+    lights = exitance.max(axis=1) > 0
+    if not lights.any():
+        raise InverseError("the scene has no light (no patch with a positive exitance)")
+    if lights.all():
+        raise InverseError("every patch is a light: no patch is left to compare radiosities on")
+    prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal)
+    B = prob.forward_radiosity(exitance)
+    prob.b_target = B[prob.targets].copy()
+    prob.target_norm = float(np.linalg.norm(prob.b_target))
+    prob.exitance = exitance.copy()
+    return prob, exitance[lights].copy()
+
+
+def _lstsq_min_norm(M, R, rcond, driver):
+    """Minimum-norm least squares through the SVD with relative cut-off rcond. Returns (X, rank)."""
+    if driver == "gelsd":
+        X, _, rank, _ = sla.lstsq(M, R, cond=rcond, lapack_driver="gelsd", check_finite=False)
+        return X, int(rank)
+    if driver == "svd":
+        U, s, Vt = sla.svd(M, full_matrices=False, check_finite=False, lapack_driver="gesdd")
+        keep = s > rcond * (s[0] if len(s) else 0.0)
+        X = Vt[keep].T @ ((U[:, keep].T @ R) / s[keep][:, None])
+        return X, int(keep.sum())
+    raise ValueError(f"unknown SVD driver {driver!r}; use 'gelsd' or 'svd'")
+
+
+def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver="gelsd"):
+    """Solve the inverse problem; see the module docstring for the formulations.
+
+    rcond: relative singular-value cut-off of the pseudo-inverse (default
+    ``max(rows, cols) * machine eps``, as numpy's matrix_rank). svd_driver:
+    'gelsd' (LAPACK divide-and-conquer least squares) or 'svd' (explicit SVD
+    pseudo-inverse); both give the same minimum-norm solution.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"unknown inverse solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    if rcond is not None and not (np.isfinite(rcond) and 0 <= rcond < 1):
+        raise ValueError(f"rcond must be in [0, 1), got {rcond}")
+    t0 = time.perf_counter()
+    C, P = problem.candidates, problem.targets
+    n = problem.n_patches
+    warns = []
+    e = np.zeros((len(C), 3))
+    ranks = []
+    used_rcond = None
+    if solver == "svd":
+        U = np.flatnonzero(~problem.target_mask)
+        for g in _channel_groups(problem.reflectance):
+            A = radiosity_matrix(problem.F, problem.reflectance[:, g[0]])
+            if sp.issparse(A):
+                A = A.toarray()
+            M = np.zeros((n, len(U) + len(C)))
+            M[:, :len(U)] = A[:, U]
+            M[C, len(U) + np.arange(len(C))] = -1.0
+            R = -(A[:, P] @ problem.b_target[:, g])
+            used_rcond = rcond if rcond is not None else max(M.shape) * np.finfo(float).eps
+            X, rank = _lstsq_min_norm(M, R, used_rcond, svd_driver)
+            e[:, g] = X[len(U):]
+            ranks.append(rank)
+        seconds = time.perf_counter() - t0
+    else:
+        T = problem.transfer
+        for c in range(3):
+            if solver == "reduced":
+                used_rcond = rcond if rcond is not None else max(T[c].shape) * np.finfo(float).eps
+                X, rank = _lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used_rcond, svd_driver)
+                e[:, c] = X[:, 0]
+                ranks.append(rank)
+            else:
+                e[:, c], _ = sopt.nnls(T[c], problem.b_target[:, c], maxiter=50 * T[c].shape[1])
+        if solver == "nnls":
+            ranks.append(int((e.max(axis=1) > 0).sum()))
+        seconds = time.perf_counter() - t0
+    if not np.all(np.isfinite(e)):
+        raise InverseError("the inverse solve produced non-finite exitances (ill-posed system)")
+    err = problem.error(e)
+    rel = err / problem.target_norm if problem.target_norm > 0 else err
+    warns.extend(problem.warnings)
+    if solver == "nnls" and rel > 1e-3:
+        warns.append(f"no non-negative configuration meets the targets: residual {err:.4g} W/m^2 "
+                     f"({100 * rel:.3g}% of the targets' norm)")
+    return InverseResult(solver=solver, exitance=e, rank=int(min(ranks)), error=err, relative_error=rel,
+                         n_negative=int((e < 0).any(axis=1).sum()), seconds=seconds,
+                         rcond=used_rcond, warnings=warns)
