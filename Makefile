@@ -31,3 +31,4 @@ bench: setup
 
 clean:
 	rm -rf $(OUT) build dist wheels .pytest_cache
+include mk/extension.mk
