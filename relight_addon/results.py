@@ -166,3 +166,226 @@ def apply_configuration(obj, polygon_index, radiance) -> int:
     mesh.polygons.foreach_set("material_index", new_index)
     mesh.update()
     return len(polygon_index)
+
+
+# --- the radiosity colour layer -----------------------------------------------------------
+
+RADIOSITY_ATTRIBUTE = "relight_radiosity"
+ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
+
+
+def smooth_corner_colors(mesh, face_values) -> np.ndarray:
+    """Corner colours (L, 4) from per-face values (F, 3): each vertex takes the area-weighted
+    mean of the faces around it, so the layer is smooth across shared vertices."""
+    n_poly = len(mesh.polygons)
+    n_vert = len(mesh.vertices)
+    n_loop = len(mesh.loops)
+    face_values = np.asarray(face_values, dtype=np.float64).reshape(n_poly, 3)
+    area = np.empty(n_poly)
+    mesh.polygons.foreach_get("area", area)
+    loop_total = np.empty(n_poly, dtype=np.int64)
+    mesh.polygons.foreach_get("loop_total", loop_total)
+    loop_vert = np.empty(n_loop, dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", loop_vert)
+    loop_face = np.repeat(np.arange(n_poly), loop_total)
+    w = area[loop_face]
+    acc = np.zeros((n_vert, 3))
+    for k in range(3):
+        acc[:, k] = np.bincount(loop_vert, weights=w * face_values[loop_face, k], minlength=n_vert)
+    wsum = np.bincount(loop_vert, weights=w, minlength=n_vert)
+    vert = acc / np.where(wsum > 0, wsum, 1.0)[:, None]
+    out = np.ones((n_loop, 4), dtype=np.float32)
+    out[:, :3] = vert[loop_vert]
+    return out
+
+
+def write_radiosity_layer(obj, face_radiosity) -> None:
+    """Write per-face radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
+    holding radiance B/pi (comparable with a Cycles COMBINED bake), and make it the active
+    and render colour. The previous active colour is remembered for ``remove_radiosity_layer``."""
+    mesh = obj.data
+    face_radiosity = np.asarray(face_radiosity, dtype=np.float64)
+    if not np.all(np.isfinite(face_radiosity)):
+        raise ValueError(f"{obj.name}: refusing to write non-finite radiosity")
+    colors = smooth_corner_colors(mesh, face_radiosity / np.pi)
+    attr = mesh.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is None:
+        if ORIGINAL_ACTIVE_COLOR_PROP not in mesh.keys():
+            active = mesh.color_attributes.active_color
+            mesh[ORIGINAL_ACTIVE_COLOR_PROP] = active.name if active is not None else ""
+            mesh["relight_original_render_color"] = mesh.color_attributes.render_color_index
+        attr = mesh.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+    attr.data.foreach_set("color", colors.ravel())
+    mesh.color_attributes.active_color = attr
+    mesh.color_attributes.render_color_index = mesh.color_attributes.find(RADIOSITY_ATTRIBUTE)
+    mesh.update()
+
+
+def remove_radiosity_layer(obj) -> bool:
+    mesh = obj.data
+    attr = mesh.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is None:
+        return False
+    mesh.color_attributes.remove(attr)
+    name = mesh.get(ORIGINAL_ACTIVE_COLOR_PROP, "")
+    if name and name in mesh.color_attributes:
+        mesh.color_attributes.active_color = mesh.color_attributes[name]
+    if "relight_original_render_color" in mesh.keys():
+        idx = int(mesh["relight_original_render_color"])
+        if 0 <= idx < len(mesh.color_attributes):
+            mesh.color_attributes.render_color_index = idx
+        del mesh["relight_original_render_color"]
+    if ORIGINAL_ACTIVE_COLOR_PROP in mesh.keys():
+        del mesh[ORIGINAL_ACTIVE_COLOR_PROP]
+    mesh.update()
+    return True
+
+
+# --- the stored curve: store, apply a point, clear ------------------------------------------
+
+RESULT_PROP = "relight_result"
+_cache = {}
+
+
+def store_result(scene, outcome) -> None:
+    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied."""
+    from .curve_store import pack_curve
+
+    text = pack_curve(outcome.stored)
+    scene[RESULT_PROP] = text
+    _cache.clear()
+
+
+def load_result(scene) -> dict:
+    from .curve_store import unpack_curve
+
+    text = scene.get(RESULT_PROP)
+    if not text:
+        raise KeyError("no Relight result in this scene: run Solve & Reduce first")
+    key = (scene.name, hash(text))
+    if key not in _cache:
+        _cache.clear()
+        _cache[key] = unpack_curve(text)
+    return _cache[key]
+
+
+def apply_stored_point(scene, index) -> dict:
+    """Show configuration ``index`` of the stored curve: emissive light faces (positive
+    exitances only: a material cannot emit negative light) and the radiosity layer.
+    Returns {"lights": n shown, "negative": n not shown}."""
+    data = load_result(scene)
+    n_points = len(data["n_lights"])
+    if not 0 <= index < n_points:
+        raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
+    names = data["objects"]
+    exitance = data["exitance"][index]
+    lit = np.any(exitance != 0, axis=1)
+    negative = np.any(exitance < 0, axis=1)
+    shown = 0
+    for oi, name in enumerate(names):
+        obj = scene.objects.get(name)
+        if obj is None or obj.type != "MESH":
+            continue
+        sel = (data["light_object"] == oi) & lit & ~negative
+        faces = data["light_face"][sel]
+        if len(faces) and faces.max() >= len(obj.data.polygons):
+            raise ValueError(f"{name} has changed since the solve: solve again")
+        shown += apply_configuration(obj, faces, exitance[sel] / np.pi)
+        rsel = data["radiosity_object"] == oi
+        if np.any(rsel):
+            face_b = np.zeros((len(obj.data.polygons), 3))
+            idx = data["radiosity_face"][rsel]
+            if idx.max() >= len(face_b):
+                raise ValueError(f"{name} has changed since the solve: solve again")
+            face_b[idx] = data["radiosity"][index][rsel]
+            write_radiosity_layer(obj, face_b)
+    return {"lights": shown, "negative": int(negative.sum())}
+
+
+def clear_results(scene) -> int:
+    """Remove every trace of Relight's results from the scene's meshes and the stored curve."""
+    n = 0
+    for obj in scene.objects:
+        if obj.type != "MESH":
+            continue
+        a = clear_configuration(obj)
+        b = remove_radiosity_layer(obj)
+        n += int(a or b)
+    if RESULT_PROP in scene.keys():
+        del scene[RESULT_PROP]
+    coll = bpy.data.collections.get("Relight Lights")
+    if coll is not None:
+        for o in list(coll.objects):
+            data = o.data
+            bpy.data.objects.remove(o)
+            if data is not None and data.users == 0:
+                bpy.data.lights.remove(data)
+        bpy.data.collections.remove(coll)
+    img = bpy.data.images.get(CHART_IMAGE)
+    if img is not None:
+        bpy.data.images.remove(img)
+    _cache.clear()
+    return n
+
+
+def make_area_lights(scene, index) -> int:
+    """Real Blender area lights for configuration ``index``: a square light of the face's
+    area at its centre, facing along its normal, with power = exitance x area (W)."""
+    from mathutils import Vector
+
+    data = load_result(scene)
+    exitance = data["exitance"][index]
+    power = exitance * data["light_area"][:, None]
+    sel = np.flatnonzero(np.any(exitance > 0, axis=1) & ~np.any(exitance < 0, axis=1))
+    coll = bpy.data.collections.get("Relight Lights")
+    if coll is None:
+        coll = bpy.data.collections.new("Relight Lights")
+        scene.collection.children.link(coll)
+    for o in list(coll.objects):
+        bpy.data.objects.remove(o)
+    for k in sel:
+        total = float(power[k].sum())
+        light = bpy.data.lights.new(f"Relight light {k}", "AREA")
+        light.shape = "SQUARE"
+        light.size = float(np.sqrt(data["light_area"][k]))
+        light.energy = total  # Blender's area-light power is in W (radiant flux)
+        light.color = tuple(float(c) for c in power[k] / max(power[k].max(), 1e-30))
+        obj = bpy.data.objects.new(light.name, light)
+        obj.location = Vector(data["light_center"][k])
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = Vector((0, 0, -1)).rotation_difference(Vector(data["light_normal"][k]))
+        coll.objects.link(obj)
+    return len(sel)
+
+
+CHART_IMAGE = ".relight_error_curve"
+
+
+def update_chart(scene) -> None:
+    """Redraw the error-curve chart image, marking the shown configuration. Call it after a
+    solve or a change of configuration, never from a panel's draw (no ID writes there)."""
+    from .curve_store import error_chart
+
+    settings = scene.relight
+    if len(settings.curve) == 0:
+        return
+    pixels = error_chart([p.n_lights for p in settings.curve], [p.relative_error for p in settings.curve],
+                         [p.n_negative for p in settings.curve], current=settings.curve_index)
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.get(CHART_IMAGE)
+    if img is None or tuple(img.size) != (w, h):
+        if img is not None:
+            bpy.data.images.remove(img)
+        img = bpy.data.images.new(CHART_IMAGE, w, h, alpha=True, float_buffer=True)
+    img.pixels.foreach_set(pixels.ravel())
+    img.update()
+    img.preview_ensure()
+    img.preview.reload()
+
+
+def chart_icon(scene) -> int:
+    """icon_value of the error-curve chart, 0 when there is none (safe in draw())."""
+    img = bpy.data.images.get(CHART_IMAGE)
+    if img is None or img.preview is None:
+        return 0
+    return img.preview.icon_id

@@ -1,0 +1,423 @@
+"""Operators of the Relight tab. Thin: Blender data in and out through the bridge, the
+work in ``jobs`` (the same code path as the CLI)."""
+from __future__ import annotations
+
+import threading
+
+import bmesh
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, IntProperty
+
+from .. import bridge, jobs, results
+from ..engine.options import JobOptions
+from ..engine.scene import SceneError
+
+TARGET = bridge.TARGET_ATTRIBUTE
+FORBIDDEN = bridge.FORBIDDEN_ATTRIBUTE
+
+
+def job_options(settings) -> JobOptions:
+    return JobOptions(
+        rays_per_patch=settings.rays_per_patch,
+        max_patch_size=settings.max_patch_size or None,
+        seed=settings.seed,
+        threads=_preferences_threads(),
+        solver=settings.solver,
+        selection=settings.selection,
+        distribution=settings.distribution,
+        max_lights=settings.max_lights if settings.use_max_lights else None,
+        error_threshold=settings.error_threshold if settings.use_error_threshold else None,
+        require_positive=settings.require_positive,
+    ).validate()
+
+
+def _preferences_threads():
+    addon = bpy.context.preferences.addons.get(__package__.rpartition(".")[0])
+    threads = getattr(addon.preferences, "threads", 0) if addon else 0
+    return threads or None
+
+
+def _mesh_objects(context, selected_only=False):
+    objs = context.selected_objects if selected_only else context.scene.objects
+    return [o for o in objs if o.type == "MESH"]
+
+
+# --- targets ---------------------------------------------------------------------------
+
+class RELIGHT_OT_paint_targets(bpy.types.Operator):
+    """Create the target colour layer if missing (alpha 0 = unpainted), make it active and
+    enter Vertex Paint: painted corners get alpha 1"""
+    bl_idname = "relight.paint_targets"
+    bl_label = "Paint Targets"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        obj = context.active_object
+        bridge.ensure_target_layer(obj.data)
+        if context.mode != "PAINT_VERTEX":
+            bpy.ops.object.mode_set(mode="VERTEX_PAINT")
+        brush = getattr(context.tool_settings.vertex_paint, "brush", None)
+        if brush is not None and hasattr(brush, "color"):
+            brush.color = context.scene.relight.paint_color
+        self.report({"INFO"}, f"Painting targets on {obj.name}: painted colour x scale is the wanted radiance")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_fill_targets(bpy.types.Operator):
+    """Set the selected faces (Edit Mode) of the active object as targets of the target colour"""
+    bl_idname = "relight.fill_targets"
+    bl_label = "Fill Selected Faces"
+    bl_options = {"REGISTER", "UNDO"}
+
+    unpaint: BoolProperty(name="Unpaint", default=False, description="Make the selected faces non-targets")
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "EDIT_MESH"
+
+    def execute(self, context):
+        color = tuple(context.scene.relight.paint_color) + (1.0,)
+        count = 0
+        for obj in context.objects_in_mode:
+            mesh = obj.data
+            bm = bmesh.from_edit_mesh(mesh)
+            layer = bm.loops.layers.float_color.get(TARGET) or bm.loops.layers.float_color.new(TARGET)
+            for f in bm.faces:
+                if f.select:
+                    for loop in f.loops:
+                        loop[layer] = (0.0, 0.0, 0.0, 0.0) if self.unpaint else color
+                    count += 1
+            bmesh.update_edit_mesh(mesh)
+        self.report({"INFO"}, f"{'Unpainted' if self.unpaint else 'Painted'} {count} face(s)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_clear_targets(bpy.types.Operator):
+    """Remove the painted targets of the selected objects (all mesh objects if none is selected)"""
+    bl_idname = "relight.clear_targets"
+    bl_label = "Clear Targets"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
+        n = 0
+        for obj in objs:
+            attr = obj.data.attributes.get(TARGET)
+            if attr is not None:
+                obj.data.attributes.remove(attr)
+                n += 1
+        self.report({"INFO"}, f"Cleared targets on {n} object(s)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_select_faces(bpy.types.Operator):
+    """Select the target or the forbidden faces in Edit Mode, to see them against the rest"""
+    bl_idname = "relight.select_faces"
+    bl_label = "Select Faces"
+    bl_options = {"REGISTER", "UNDO"}
+
+    kind: EnumProperty(items=[("TARGET", "Targets", ""), ("FORBIDDEN", "Forbidden", ""),
+                              ("LIGHT", "Lights", "")], default="TARGET")
+
+    @classmethod
+    def poll(cls, context):
+        return context.active_object is not None and context.active_object.type == "MESH"
+
+    def execute(self, context):
+        objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        total = 0
+        for obj in objs:
+            mask = bridge.face_flags(obj, self.kind.lower())
+            obj.data.polygons.foreach_set("select", mask)
+            total += int(mask.sum())
+        bpy.ops.object.mode_set(mode="EDIT")
+        bpy.ops.mesh.select_mode(type="FACE")
+        self.report({"INFO"}, f"Selected {total} {self.kind.lower()} face(s)")
+        return {"FINISHED"}
+
+
+# --- candidates -----------------------------------------------------------------------
+
+class RELIGHT_OT_forbid_faces(bpy.types.Operator):
+    """Forbid (or allow) lights on the selected faces (Edit Mode)"""
+    bl_idname = "relight.forbid_faces"
+    bl_label = "Forbid Selected Faces"
+    bl_options = {"REGISTER", "UNDO"}
+
+    allow: BoolProperty(name="Allow", default=False, description="Allow lights on the selected faces instead")
+
+    @classmethod
+    def poll(cls, context):
+        return context.mode == "EDIT_MESH"
+
+    def execute(self, context):
+        count = 0
+        for obj in context.objects_in_mode:
+            mesh = obj.data
+            bm = bmesh.from_edit_mesh(mesh)
+            layer = bm.faces.layers.bool.get(FORBIDDEN) or bm.faces.layers.bool.new(FORBIDDEN)
+            for f in bm.faces:
+                if f.select:
+                    f[layer] = not self.allow
+                    count += 1
+            bmesh.update_edit_mesh(mesh)
+        verb = "Allowed" if self.allow else "Forbade"
+        self.report({"INFO"}, f"{verb} lights on {count} face(s)")
+        return {"FINISHED"}
+
+
+# --- solve ----------------------------------------------------------------------------
+
+def store_outcome(context, outcome):
+    """Keep the curve in the scene and show the final configuration (main thread)."""
+    settings = context.scene.relight
+    results.store_result(context.scene, outcome)
+    settings.curve.clear()
+    for p in outcome.curve:
+        item = settings.curve.add()
+        item.n_lights = p["n_lights"]
+        item.error = p["error"]
+        item.relative_error = p["relative_error"]
+        item.n_negative = p["n_negative"]
+    set_curve_index(settings, outcome.final_index)
+    results.apply_stored_point(context.scene, outcome.final_index)
+    results.update_chart(context.scene)
+
+
+_QUIET = {"on": False}
+
+
+def set_curve_index(settings, index):
+    """Select a row of the curve without applying it through the update callback."""
+    _QUIET["on"] = True
+    try:
+        settings.curve_index = index
+    finally:
+        _QUIET["on"] = False
+
+
+def apply_curve_point(context, index):
+    if _QUIET["on"]:
+        return
+    try:
+        results.apply_stored_point(context.scene, index)
+        results.update_chart(context.scene)
+    except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale
+        print(f"Relight: cannot apply configuration {index}: {exc}")
+
+
+class RELIGHT_OT_solve(bpy.types.Operator):
+    """Solve the inverse lighting problem for the painted targets and reduce it to a few
+    positive lights. ESC cancels and leaves the scene untouched"""
+    bl_idname = "relight.solve"
+    bl_label = "Solve & Reduce"
+    bl_options = {"REGISTER", "UNDO"}
+
+    _thread = None
+    _timer = None
+
+    def _export(self, context):
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        settings = context.scene.relight
+        options = job_options(settings)
+        faces = bridge.export_faceset(context.evaluated_depsgraph_get(), target_scale=settings.target_scale)
+        jobs.check_solvable(faces)
+        return faces, options
+
+    def execute(self, context):
+        try:
+            faces, options = self._export(context)
+            outcome = jobs.run_solve(faces, options)
+        except (SceneError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        return self._finish(context, outcome)
+
+    def _finish(self, context, outcome):
+        store_outcome(context, outcome)
+        for w in outcome.warnings:
+            self.report({"WARNING"}, w)
+        f = outcome.curve[outcome.final_index]
+        self.report({"INFO"}, f"Relight: {f['n_lights']} light(s), relative error {f['relative_error']:.3g}, "
+                              f"{f['n_negative']} negative(s); {len(outcome.curve)} configurations on the curve")
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if bpy.app.background:
+            return self.execute(context)
+        try:
+            faces, options = self._export(context)
+        except (SceneError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self._cancel = threading.Event()
+        self._progress = [0.0, "starting"]
+        self._result = {}
+
+        def work():
+            try:
+                self._result["outcome"] = jobs.run_solve(
+                    faces, options, progress=self._set_progress, cancel=self._cancel.is_set)
+            except BaseException as exc:  # reported on the main thread
+                self._result["error"] = exc
+
+        self._thread = threading.Thread(target=work, daemon=True)
+        self._thread.start()
+        wm = context.window_manager
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        return {"RUNNING_MODAL"}
+
+    def _set_progress(self, fraction, text=""):
+        self._progress[0] = float(fraction)
+        if text:
+            self._progress[1] = text
+
+    def _end_ui(self, context):
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        if context.workspace is not None:
+            context.workspace.status_text_set(None)
+
+    def modal(self, context, event):
+        if event.type == "ESC":
+            self._cancel.set()
+            self._thread.join()
+            self._end_ui(context)
+            self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
+            return {"CANCELLED"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        frac, text = self._progress
+        context.window_manager.progress_update(int(100 * frac))
+        if context.workspace is not None:
+            context.workspace.status_text_set(f"Relight: {text} ({100 * frac:.0f} %) - ESC to cancel")
+        if self._thread.is_alive():
+            return {"RUNNING_MODAL"}
+        self._end_ui(context)
+        if "error" in self._result:
+            exc = self._result["error"]
+            if isinstance(exc, jobs.Cancelled):
+                self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
+            else:
+                self.report({"ERROR"}, f"Relight: {exc}")
+            return {"CANCELLED"}
+        return self._finish(context, self._result["outcome"])
+
+
+# --- results --------------------------------------------------------------------------
+
+class RELIGHT_OT_apply_configuration(bpy.types.Operator):
+    """Show configuration k of the error curve in the scene"""
+    bl_idname = "relight.apply_configuration"
+    bl_label = "Apply Configuration"
+    bl_options = {"REGISTER", "UNDO"}
+
+    index: IntProperty(name="Configuration", default=-1, min=-1,
+                       description="Row of the curve; -1 = the selected row")
+
+    def execute(self, context):
+        settings = context.scene.relight
+        n = len(settings.curve)
+        if n == 0:
+            self.report({"ERROR"}, "No Relight result in this scene: run Solve & Reduce first")
+            return {"CANCELLED"}
+        k = settings.curve_index if self.index < 0 else self.index
+        if not 0 <= k < n:
+            self.report({"ERROR"}, f"Configuration {k} does not exist (0..{n - 1})")
+            return {"CANCELLED"}
+        try:
+            results.apply_stored_point(context.scene, k)
+        except (ValueError, KeyError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        set_curve_index(settings, k)
+        results.update_chart(context.scene)
+        p = settings.curve[k]
+        self.report({"INFO"}, f"Configuration {k}: {p.n_lights} light(s), relative error {p.relative_error:.3g}")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_clear_results(bpy.types.Operator):
+    """Remove Relight's lights, colour layer and curve: the scene is exactly as before the solve"""
+    bl_idname = "relight.clear_results"
+    bl_label = "Clear Results"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        if context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+        n = results.clear_results(context.scene)
+        settings = context.scene.relight
+        settings.curve.clear()
+        set_curve_index(settings, 0)
+        self.report({"INFO"}, f"Cleared Relight results on {n} object(s)")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_make_area_lights(bpy.types.Operator):
+    """Turn the shown configuration into real Blender area lights (one per light face), in a
+    new collection; the emissive faces are kept, hide them or Clear Results as you like"""
+    bl_idname = "relight.make_area_lights"
+    bl_label = "Make Area Lights"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        try:
+            n = results.make_area_lights(context.scene, context.scene.relight.curve_index)
+        except (ValueError, KeyError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"Created {n} area light(s) in collection 'Relight Lights'")
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_show_radiosity(bpy.types.Operator):
+    """Show the baked relight_radiosity layer: Solid shading with Color: Attribute"""
+    bl_idname = "relight.show_radiosity"
+    bl_label = "Show Radiosity"
+
+    def execute(self, context):
+        space = context.space_data
+        if space is None or space.type != "VIEW_3D":
+            self.report({"ERROR"}, "Run this from a 3D Viewport")
+            return {"CANCELLED"}
+        space.shading.type = "SOLID"
+        space.shading.color_type = "VERTEX"
+        return {"FINISHED"}
+
+
+CLASSES = (
+    RELIGHT_OT_paint_targets,
+    RELIGHT_OT_fill_targets,
+    RELIGHT_OT_clear_targets,
+    RELIGHT_OT_select_faces,
+    RELIGHT_OT_forbid_faces,
+    RELIGHT_OT_solve,
+    RELIGHT_OT_apply_configuration,
+    RELIGHT_OT_clear_results,
+    RELIGHT_OT_make_area_lights,
+    RELIGHT_OT_show_radiosity,
+)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

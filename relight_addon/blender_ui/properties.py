@@ -1,0 +1,87 @@
+"""Scene and object properties of the Relight tab (thin: values only, no logic)."""
+import bpy
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
+                       IntProperty, PointerProperty, StringProperty)
+
+from ..engine import options as engine_options
+
+SOLVERS = [
+    ("reduced", "Reduced (T)", "Minimum-norm solve of b_P = T e_C, T from an LU factorisation of A (fast, exact)"),
+    ("svd", "Paper (SVD)", "The paper's formulation: constraints substituted into A b = e, SVD pseudo-inverse"),
+    ("nnls", "Non-negative (NNLS)", "Non-negative least squares on T: no negative exitances (beyond the paper)"),
+]
+SELECTIONS = [
+    ("exitance-elimination", "Exitance Elimination", "Remove the lowest-power light at each step (the paper's choice)"),
+    ("exitance-construction", "Exitance Construction", "Add lights in decreasing power until the error is acceptable"),
+    ("error-elimination", "Error Elimination", "Remove the light whose removal gives the smallest error"),
+    ("error-construction", "Error Construction", "Add the light whose addition gives the smallest error"),
+    ("nnls-greedy", "NNLS Greedy", "Greedy non-negative sparse selection with NNLS refits (beyond the paper)"),
+]
+DISTRIBUTIONS = [
+    ("distance", "Distance", "Suppressed power goes to nearby lights, weighted by 1/distance (the paper's choice)"),
+    ("local", "Local", "Suppressed power goes to the light(s) with the most similar form-factor row"),
+    ("coplanar", "Coplanar", "Suppressed power is shared by the coplanar lights (uniform if none)"),
+    ("uniform", "Uniform", "Suppressed power is shared by all remaining lights"),
+]
+
+
+def _apply_curve_point(self, context):
+    from . import operators  # late import: operators import this module
+
+    operators.apply_curve_point(context, self.curve_index)
+
+
+class RELIGHT_CurvePoint(bpy.types.PropertyGroup):
+    n_lights: IntProperty(name="Lights")
+    error: FloatProperty(name="Error", description="Eq. 1 error, W/m^2")
+    relative_error: FloatProperty(name="Relative error", subtype="FACTOR")
+    n_negative: IntProperty(name="Negatives")
+
+
+class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
+    target_scale: FloatProperty(
+        name="Target Scale", default=1.0, min=0.0, soft_max=100.0,
+        description="Painted colours are radiance; the target radiosity is pi x colour x this scale (W/m^2)")
+    paint_color: bpy.props.FloatVectorProperty(
+        name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
+        description="Colour used by Fill Targets")
+    rays_per_patch: IntProperty(
+        name="Rays per Patch", default=engine_options.DEFAULT_RAYS_PER_PATCH, min=16, soft_max=20000,
+        description="Form-factor quality: rays cast from every patch")
+    max_patch_size: FloatProperty(
+        name="Max Patch Size", default=0.0, min=0.0, subtype="DISTANCE", unit="LENGTH",
+        description="Faces larger than this are split into patches; 0 = automatic (scene diagonal / 20)")
+    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: results are reproducible")
+    solver: EnumProperty(name="Solver", items=SOLVERS, default=engine_options.DEFAULT_SOLVER)
+    selection: EnumProperty(name="Selection", items=SELECTIONS, default=engine_options.DEFAULT_SELECTION)
+    distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default=engine_options.DEFAULT_DISTRIBUTION)
+    use_max_lights: BoolProperty(name="Max Lights", default=True, description="Stop at this number of lights")
+    max_lights: IntProperty(name="Max Lights", default=engine_options.DEFAULT_MAX_LIGHTS, min=1)
+    use_error_threshold: BoolProperty(name="Error Threshold", default=False,
+                                      description="Stop when the relative error would exceed this")
+    error_threshold: FloatProperty(name="Relative Error", default=0.1, min=0.0, soft_max=1.0, subtype="FACTOR")
+    require_positive: BoolProperty(name="No Negatives", default=True,
+                                   description="The final configuration must have no negative exitance")
+    curve: CollectionProperty(type=RELIGHT_CurvePoint)
+    curve_index: IntProperty(name="Configuration", default=0, update=_apply_curve_point,
+                             description="The configuration shown in the scene")
+    status: StringProperty(name="Status", default="")
+
+
+CLASSES = (RELIGHT_CurvePoint, RELIGHT_SceneSettings)
+
+
+def register():
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.relight = PointerProperty(type=RELIGHT_SceneSettings)
+    bpy.types.Object.relight_no_lights = BoolProperty(
+        name="No Lights on This Object", default=False,
+        description="No face of this object may become a light (it still reflects and occludes)")
+
+
+def unregister():
+    del bpy.types.Object.relight_no_lights
+    del bpy.types.Scene.relight
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

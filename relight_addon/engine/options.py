@@ -1,0 +1,49 @@
+"""Options of a Relight job, with the engine's defaults (shared by the CLI and the add-on)."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+DEFAULT_RAYS_PER_PATCH = 1024
+DEFAULT_SOLVER = "reduced"
+DEFAULT_SELECTION = "exitance-elimination"  # the paper's choice (section 5)
+DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
+DEFAULT_MAX_LIGHTS = 3
+
+SOLVERS = ("svd", "reduced", "nnls")
+SELECTIONS = ("exitance-elimination", "exitance-construction", "error-elimination",
+              "error-construction", "nnls-greedy")
+DISTRIBUTIONS = ("distance", "local", "coplanar", "uniform")
+
+
+@dataclass
+class JobOptions:
+    rays_per_patch: int | None = None  # None: the form-factor module's default
+    max_patch_size: float | None = None  # None: scene diagonal / 20
+    seed: int = 0
+    threads: int | None = None  # None: every core
+    solver: str = DEFAULT_SOLVER
+    selection: str = DEFAULT_SELECTION
+    distribution: str = DEFAULT_DISTRIBUTION
+    max_lights: int | None = DEFAULT_MAX_LIGHTS  # stop criterion: number of lights
+    error_threshold: float | None = None  # stop criterion: relative error (Eq. 1 / ||b_P||)
+    require_positive: bool = True  # stop criterion: no negatives
+
+    def validate(self):
+        if self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
+        if self.selection not in SELECTIONS:
+            raise ValueError(f"unknown selection {self.selection!r}; choose one of {', '.join(SELECTIONS)}")
+        if self.distribution not in DISTRIBUTIONS:
+            raise ValueError(f"unknown distribution {self.distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        if self.rays_per_patch is not None and self.rays_per_patch < 1:
+            raise ValueError("rays per patch must be at least 1")
+        if self.max_patch_size is not None and not self.max_patch_size > 0:
+            raise ValueError("max patch size must be a positive length")
+        if self.max_lights is not None and self.max_lights < 1:
+            raise ValueError("max lights must be at least 1")
+        if self.error_threshold is not None and not self.error_threshold >= 0:
+            raise ValueError("the error threshold must be >= 0")
+        return self
+
+    def to_dict(self):
+        return asdict(self)
