@@ -124,6 +124,11 @@ def stage(manifest_path: Path, wheels: list[Path], staging_dir: Path = STAGING_D
     return staging_dir
 
 
+def bpy_version_dir() -> str:
+    """Blender version of the installed bpy module, e.g. "5.0" (from its data dir, no bpy import)."""
+    return blender_ext_script().parents[4].name
+
+
 def run_blender_ext(*args: str) -> str:
     proc = subprocess.run([sys.executable, str(blender_ext_script()), *args],
                           capture_output=True, text=True)
@@ -138,7 +143,7 @@ def platform_zip_name(manifest: dict, platform: str) -> str:
 
 
 def build_extension(output_dir: Path = OUTPUT_DIR, force: bool = False,
-                    manifest_path: Path = MANIFEST) -> dict[str, Path]:
+                    manifest_path: Path = MANIFEST, staging_dir: Path = STAGING_DIR) -> dict[str, Path]:
     """Build and validate one zip per platform; returns {blender platform: zip path}.
 
     Skips the build when the zips exist and the inputs are unchanged since the last build.
@@ -152,7 +157,7 @@ def build_extension(output_dir: Path = OUTPUT_DIR, force: bool = False,
             and all(z.exists() for z in zips.values())):
         print("extension: up to date:", ", ".join(str(z.relative_to(ROOT)) for z in zips.values()))
         return zips
-    staging = stage(manifest_path, wheels)
+    staging = stage(manifest_path, wheels, staging_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     stamp.unlink(missing_ok=True)
     for z in zips.values():
