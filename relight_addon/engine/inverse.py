@@ -41,6 +41,7 @@ import scipy.optimize as sopt
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .radiosity import radiosity_matrix
 from .scene import SceneError
 
 __all__ = [
@@ -49,7 +50,6 @@ __all__ = [
     "InverseResult",
     "solve_inverse",
     "direct_lighting_problem",
-    "radiosity_matrix",
     "SOLVERS",
 ]
 
@@ -61,17 +61,6 @@ ILL_CONDITIONED = 1e8
 
 class InverseError(SceneError):
     """The inverse problem cannot be set up or solved; the message is for the user."""
-
-
-def radiosity_matrix(F, rho_channel):
-    """``A = I - diag(rho) F`` for one channel (dense ndarray or sparse CSC)."""
-    rho = np.asarray(rho_channel, dtype=np.float64)
-    n = len(rho)
-    if sp.issparse(F):
-        return (sp.identity(n, format="csc") - sp.diags(rho) @ F.astype(np.float64)).tocsc()
-    A = -(rho[:, None] * np.asarray(F, dtype=np.float64))
-    A[np.diag_indices(n)] += 1.0
-    return A
 
 
 def _channel_groups(reflectance):
@@ -163,6 +152,8 @@ class InverseProblem:
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
                  center=None, normal=None):
+        if hasattr(F, "matrix"):  # formfactors.FormFactors
+            F = F.matrix
         if sp.issparse(F):
             F = F.tocsr()
             n = F.shape[0]

@@ -1,0 +1,456 @@
+"""Light-source reduction (the paper's sections 3 and 4).
+
+Starting from a configuration e_x on the candidates of an
+:class:`~.inverse.InverseProblem`, a *selection* procedure picks a subset of
+lights and an *energy conservation* (``XDistribute``) gives the power of the
+suppressed lights to the remaining ones. Every configuration visited is
+recorded as a :class:`CurvePoint` (the paper's error curve, Fig. 11); the final
+configuration is chosen on that curve by the stop criteria.
+
+Selections (``selection=``)
+- ``exitance-elimination`` (the paper's choice): re-sort after every step and
+  remove the lowest light -- lights with a negative channel first (most
+  negative power first), then the weakest positive -- redistributing
+  cumulatively (``e_p <- e'_p``). Runs down to one light.
+- ``exitance-construction``: add lights in DecreasingOrder of e_x; each
+  configuration is e_x on the selected lights plus the original power of every
+  not-yet-selected light distributed over them (not cumulative, as in Fig. 3).
+- ``error-elimination``: remove the light whose removal (after redistribution)
+  gives the smallest error; cumulative. All trials of a step are evaluated at
+  once with matrix products on T.
+- ``error-construction``: add the light whose addition gives the smallest error.
+- ``nnls-greedy`` (beyond the paper): non-negative orthogonal matching pursuit
+  on T -- add the candidate most correlated with the residual, refit all
+  selected lights with NNLS. Every configuration is non-negative; ignores e_x
+  and the distribution.
+
+DecreasingOrder sorts by the power Phi = e * A summed over the channels, signed.
+
+Distributions (``distribution=``), weights w_l summing to 1 over the receiving
+lights, light l gets ``Phi_s[channel] * w_l / A_l`` so the power per channel is
+conserved exactly:
+- ``uniform``: w = 1/p over the p remaining lights.
+- ``coplanar``: w = 1/n over the n remaining lights coplanar with s (same facing
+  normal within ``coplanar_tol`` and in-plane within ``coplanar_tol`` times the
+  candidates' extent); uniform when there is none.
+- ``local``: all weight to the light(s) nearest in form-factor-row distance
+  d_l = ||F_s - F_l||; ties (relative 1e-9) share equally.
+- ``distance``: lights whose centre distance d_l is below the threshold (the
+  mean distance to the remaining lights) get w proportional to 1/d_l. When no
+  light is strictly below the mean -- one light left, or all at the same
+  distance -- every remaining light takes part (weights 1/d). A light at
+  distance 0 (coincident centres) takes everything.
+
+The final configuration is the one with the fewest lights among the curve points
+meeting all the stop criteria given (max_lights, require_positive,
+error_threshold / relative_error_threshold); ties go to the smaller error. The
+paper stops at the first failure; we scan the whole curve, which the UI shows.
+When no point meets them all, the error criterion is relaxed first (smallest
+error among the rest), and the result says so in ``warnings``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.optimize as sopt
+import scipy.sparse as sp
+
+from .inverse import InverseProblem
+
+__all__ = [
+    "SELECTIONS",
+    "DISTRIBUTIONS",
+    "ERROR_ROUTES",
+    "CurvePoint",
+    "ReductionResult",
+    "Distributor",
+    "decreasing_order",
+    "reduce_lights",
+    "select_final",
+]
+
+SELECTIONS = ("exitance-elimination", "exitance-construction", "error-elimination",
+              "error-construction", "nnls-greedy")
+DISTRIBUTIONS = ("uniform", "coplanar", "local", "distance")
+ERROR_ROUTES = ("transfer", "gauss-seidel")
+
+
+@dataclass
+class CurvePoint:
+    """One configuration of the error curve.
+
+    lights: indices into ``problem.candidates`` (ascending); exitance (k, 3) W/m^2
+    aligned with them. changed: the candidate added/removed at this step (-1 at
+    the start). error: Eq. 1 (W/m^2); relative_error = error / ||b_P||.
+    n_negative: lights with at least one negative channel.
+    """
+
+    n_lights: int
+    error: float
+    relative_error: float
+    n_negative: int
+    lights: np.ndarray
+    exitance: np.ndarray
+    changed: int = -1
+
+
+@dataclass
+class ReductionResult:
+    curve: list
+    final_index: int
+    selection: str
+    distribution: str
+    seconds: float
+    cancelled: bool = False
+    gs_iterations: list = None  # Gauss-Seidel sweeps per curve point (sum over channels), warm start
+    gs_cold_iterations: list = None  # the same from a cold start (when compared)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def final(self) -> CurvePoint:
+        return self.curve[self.final_index]
+
+    def patch_exitance(self, problem, index=None):
+        """Full (P, 3) exitance of curve point ``index`` (default: the final one)."""
+        pt = self.curve[self.final_index if index is None else index]
+        e = np.zeros((len(problem.candidates), 3))
+        e[pt.lights] = pt.exitance
+        return problem.patch_exitance(e)
+
+
+def decreasing_order(e, area):
+    """DecreasingOrder: indices sorted by signed power sum_channels(e) * A, largest first (stable)."""
+    power = np.asarray(e, dtype=np.float64).sum(axis=1) * np.asarray(area, dtype=np.float64)
+    return np.argsort(-power, kind="stable")
+
+
+class Distributor:
+    """XDistribute weights between candidates (pairwise data precomputed once, |C| x |C|)."""
+
+    def __init__(self, problem: InverseProblem, kind="distance", coplanar_tol=1e-3):
+        if kind not in DISTRIBUTIONS:
+            raise ValueError(f"unknown distribution {kind!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        self.kind = kind
+        C = problem.candidates
+        self.area = problem.area[C]
+        self.pair = None
+        if kind == "distance":
+            c = problem.center[C]
+            d2 = (c * c).sum(1)
+            self.pair = np.sqrt(np.maximum(d2[:, None] + d2[None, :] - 2.0 * c @ c.T, 0.0))
+        elif kind == "local":
+            FC = problem.F[C]
+            FC = FC.toarray() if sp.issparse(FC) else np.asarray(FC, dtype=np.float64)
+            FC = FC.astype(np.float64)
+            g = (FC * FC).sum(1)
+            self.pair = np.sqrt(np.maximum(g[:, None] + g[None, :] - 2.0 * FC @ FC.T, 0.0))
+        elif kind == "coplanar":
+            n = problem.normal[C]
+            c = problem.center[C]
+            extent = float(np.linalg.norm(np.ptp(c, axis=0))) or 1.0
+            same_facing = n @ n.T > 1.0 - coplanar_tol
+            offset = np.abs(np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :]))
+            self.pair = same_facing & (offset <= coplanar_tol * extent)
+
+    def weights(self, src, lights, valid=None):
+        """W (len(src), len(lights)), rows summing to 1: how each source's power is shared.
+
+        ``valid`` (same shape, bool) excludes receivers (e.g. a light receiving its own power).
+        """
+        src = np.asarray(src, dtype=np.int64)
+        lights = np.asarray(lights, dtype=np.int64)
+        if valid is None:
+            valid = np.ones((len(src), len(lights)), dtype=bool)
+        if self.kind == "uniform":
+            M = valid.astype(np.float64)
+        elif self.kind == "coplanar":
+            co = self.pair[np.ix_(src, lights)] & valid
+            none = ~co.any(axis=1)
+            co[none] = valid[none]
+            M = co.astype(np.float64)
+        elif self.kind == "local":
+            D = np.where(valid, self.pair[np.ix_(src, lights)], np.inf)
+            dmin = D.min(axis=1, keepdims=True)
+            M = (valid & (D <= dmin * (1 + 1e-9) + 1e-300)).astype(np.float64)
+        else:  # distance
+            D = self.pair[np.ix_(src, lights)]
+            cnt = valid.sum(axis=1, keepdims=True)
+            th = np.where(valid, D, 0.0).sum(axis=1, keepdims=True) / np.maximum(cnt, 1)
+            below = valid & (D < th)
+            none = ~below.any(axis=1)
+            below[none] = valid[none]
+            zero = valid & (D <= 0)
+            hasz = zero.any(axis=1)
+            below[hasz] = zero[hasz]
+            M = np.where(below, 1.0 / np.where(D > 0, D, 1.0), 0.0)
+        s = M.sum(axis=1, keepdims=True)
+        return M / np.where(s > 0, s, 1.0)
+
+    def distribute(self, e_lights, lights, src, phi_src):
+        """e' = e + sum over sources of Phi_s w_l / A_l (cumulative into a copy)."""
+        if len(src) == 0:
+            return e_lights.copy()
+        W = self.weights(src, lights)
+        return e_lights + (W.T @ phi_src) / self.area[lights][:, None]
+
+
+class _ErrorEval:
+    """Eq. 1 of configurations through T (exact) or the paper's Gauss-Seidel re-solve."""
+
+    def __init__(self, problem, route, compare_cold=False, gs_tol=1e-8):
+        self.p = problem
+        self.T = problem.transfer
+        self.b = problem.b_target
+        self.route = route
+        self.x = None
+        self.iters = [] if route == "gauss-seidel" else None
+        self.cold = [] if (route == "gauss-seidel" and compare_cold) else None
+        self.gs_tol = gs_tol
+
+    def __call__(self, lights, e):
+        if self.route == "transfer":
+            r = np.stack([self.T[c][:, lights] @ e[:, c] for c in range(3)], axis=1) - self.b
+            return float(np.linalg.norm(r))
+        from .radiosity import solve_radiosity
+
+        full = np.zeros((len(self.p.candidates), 3))
+        full[lights] = e
+        e_full = self.p.patch_exitance(full)
+        B, info = solve_radiosity(self.p.F, self.p.reflectance, e_full, method="gauss-seidel",
+                                  tol=self.gs_tol, max_iter=10000, x0=self.x)
+        self.iters.append(int(sum(info["iterations"])))
+        if self.cold is not None:
+            _, info0 = solve_radiosity(self.p.F, self.p.reflectance, e_full, method="gauss-seidel",
+                                       tol=self.gs_tol, max_iter=10000)
+            self.cold.append(int(sum(info0["iterations"])))
+        self.x = B
+        return float(np.linalg.norm(B[self.p.targets] - self.b))
+
+
+def _neg(e):
+    return int((e < 0).any(axis=1).sum())
+
+
+def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
+                 relative_error_threshold=None, require_positive=True):
+    """Index of the final configuration on the curve under the stop criteria, and warnings."""
+    n = np.array([p.n_lights for p in curve])
+    err = np.array([p.error for p in curve])
+    neg = np.array([p.n_negative for p in curve])
+    ok_struct = np.ones(len(curve), dtype=bool)
+    if max_lights is not None:
+        ok_struct &= n <= max_lights
+    if require_positive:
+        ok_struct &= neg == 0
+    thr = np.inf
+    if error_threshold is not None:
+        thr = min(thr, float(error_threshold))
+    if relative_error_threshold is not None:
+        thr = min(thr, float(relative_error_threshold) * target_norm)
+    ok = ok_struct & (err <= thr)
+    warns = []
+
+    def best(mask, by_lights=True):
+        idx = np.flatnonzero(mask)
+        key = np.lexsort((err[idx], n[idx])) if by_lights else np.lexsort((n[idx], err[idx]))
+        return int(idx[key[0]])
+
+    if ok.any():
+        return best(ok), warns
+    if ok_struct.any():
+        i = best(ok_struct, by_lights=False)
+        warns.append(f"no configuration meets the error threshold under the other criteria; "
+                     f"kept the smallest error {err[i]:.4g} W/m^2 with {n[i]} lights")
+        return i, warns
+    i = int(np.argmin(err))
+    warns.append("no configuration meets the stop criteria (lights/positivity); kept the smallest error")
+    return i, warns
+
+
+def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination", distribution="distance",
+                  max_lights=None, error_threshold=None, relative_error_threshold=None,
+                  require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
+                  gs_compare_cold=False, progress=None, cancel=None):
+    """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
+
+    The whole curve is computed (eliminations down to one light, constructions
+    until every candidate is in or ``max_steps`` steps); the stop criteria only
+    choose the final point. ``error_route``: 'transfer' (exact, one product with
+    T) or 'gauss-seidel' (the paper's ComputeError: forward re-solve warm-started
+    from the previous radiosity; exitance-* selections only). ``progress(done,
+    total)`` is called every step; ``cancel()`` returning True stops the curve
+    where it is (``result.cancelled``). Deterministic: ties go to the lower index.
+    """
+    if selection not in SELECTIONS:
+        raise ValueError(f"unknown selection {selection!r}; choose one of {', '.join(SELECTIONS)}")
+    if error_route not in ERROR_ROUTES:
+        raise ValueError(f"unknown error route {error_route!r}; choose one of {', '.join(ERROR_ROUTES)}")
+    if error_route == "gauss-seidel" and selection not in ("exitance-elimination", "exitance-construction"):
+        raise ValueError("the Gauss-Seidel error route re-solves the scene per configuration; it is only "
+                         "offered for exitance-elimination and exitance-construction (use 'transfer')")
+    for name, v in (("max_lights", max_lights), ("max_steps", max_steps)):
+        if v is not None and int(v) < 1:
+            raise ValueError(f"{name} must be at least 1, got {v}")
+    for name, v in (("error_threshold", error_threshold), ("relative_error_threshold", relative_error_threshold)):
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise ValueError(f"{name} must be a non-negative number, got {v}")
+    k = len(problem.candidates)
+    e_x = np.asarray(e_x, dtype=np.float64)
+    if e_x.shape != (k, 3):
+        raise ValueError(f"e_x must have shape ({k}, 3) (one row per candidate), got {e_x.shape}")
+    if not np.all(np.isfinite(e_x)):
+        raise ValueError("e_x contains NaN or infinite values")
+
+    t0 = time.perf_counter()
+    A = problem.area[problem.candidates]
+    err_fn = _ErrorEval(problem, error_route, compare_cold=gs_compare_cold)
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    curve = []
+    cancelled = False
+
+    def record(lights, e, changed=-1):
+        lights = np.asarray(lights, dtype=np.int64)
+        order = np.argsort(lights)
+        lights, e = lights[order], np.asarray(e, dtype=np.float64)[order]
+        if not np.all(np.isfinite(e)):
+            raise ValueError("the reduction produced non-finite exitances")
+        err = err_fn(lights, e)
+        curve.append(CurvePoint(len(lights), err, err / norm, _neg(e), lights, e.copy(), int(changed)))
+
+    def step_hook(done, total):
+        nonlocal cancelled
+        if progress is not None:
+            progress(done, total)
+        if cancel is not None and cancel():
+            cancelled = True
+        return cancelled
+
+    if selection == "nnls-greedy":
+        _nnls_greedy(problem, record, step_hook, max_steps)
+    else:
+        dist = Distributor(problem, distribution, coplanar_tol)
+        phi_x = e_x * A[:, None]
+        if selection == "exitance-elimination":
+            S = np.arange(k)
+            e = e_x.copy()
+            record(S, e)
+            while len(S) > 1 and not step_hook(k - len(S), k - 1):
+                ph = (e * A[S][:, None])
+                i = int(np.lexsort((ph.sum(1), ~(e < 0).any(1)))[0])
+                s = S[i]
+                keep = np.arange(len(S)) != i
+                S, e = S[keep], dist.distribute(e[keep], S[keep], [s], ph[i:i + 1])
+                record(S, e, s)
+        elif selection == "error-elimination":
+            _error_elimination(problem, e_x, A, dist, record, step_hook)
+        else:
+            order = decreasing_order(e_x, A)
+            steps = k if max_steps is None else min(k, int(max_steps))
+            if selection == "exitance-construction":
+                for p in range(1, steps + 1):
+                    S, Q = order[:p], order[p:]
+                    record(S, dist.distribute(e_x[S], S, Q, phi_x[Q]), order[p - 1])
+                    if step_hook(p, steps):
+                        break
+            else:
+                _error_construction(problem, e_x, phi_x, dist, record, step_hook, steps)
+    if not curve:
+        raise ValueError("the reduction produced no configuration")
+    idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
+                              relative_error_threshold, require_positive)
+    if cancelled:
+        warns.append("cancelled: the curve is incomplete")
+    return ReductionResult(curve=curve, final_index=idx, selection=selection,
+                           distribution=distribution if selection != "nnls-greedy" else "none",
+                           seconds=time.perf_counter() - t0, cancelled=cancelled,
+                           gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns)
+
+
+def _error_elimination(problem, e_x, A, dist, record, step_hook):
+    """ErrorElimination, every trial of a step at once.
+
+    Removing light i from S (exitances e) and giving its power Phi_i to the
+    others with weights W[i, :] changes the targets' radiosity to
+    b - T_S[:, i] e_i + (T_S / A_S) W[i, :]^T Phi_i, so for all trials
+    B_c = b_c 1^T - T_S diag(e_c) + ((T_S / A_S) W^T) diag(Phi_c)  (m x |S|).
+    """
+    T, b = problem.transfer, problem.b_target
+    k = len(e_x)
+    S = np.arange(k)
+    e = e_x.copy()
+    record(S, e)
+    uniq = {}
+    for c in range(3):
+        uniq.setdefault(id(T[c]), []).append(c)
+    while len(S) > 1 and not step_hook(k - len(S), k - 1):
+        n = len(S)
+        W = dist.weights(S, S, valid=~np.eye(n, dtype=bool))
+        phi = e * A[S][:, None]
+        sq = np.zeros(n)
+        for chans in uniq.values():
+            TS = T[chans[0]][:, S]
+            G = (TS / A[S][None, :]) @ W.T  # (m, n)
+            for c in chans:
+                bc = TS @ e[:, c]
+                Bt = (bc - b[:, c])[:, None] - TS * e[None, :, c] + G * phi[None, :, c]
+                sq += np.einsum("ij,ij->j", Bt, Bt)
+        i = int(np.argmin(sq))
+        keep = np.arange(n) != i
+        e = e[keep] + (W[i, keep][:, None] * phi[i][None, :]) / A[S[keep]][:, None]
+        s = S[i]
+        S = S[keep]
+        record(S, e, s)
+
+
+def _error_construction(problem, e_x, phi_x, dist, record, step_hook, steps):
+    """ErrorConstruction: per step, try every remaining light (each trial vectorised over channels)."""
+    T, b = problem.transfer, problem.b_target
+    A = dist.area
+    k = len(e_x)
+    S = np.zeros(0, dtype=np.int64)
+    Q = np.arange(k)
+    for p in range(1, steps + 1):
+        best = (np.inf, -1, None)
+        for t, l in enumerate(Q):
+            S2 = np.append(S, l)
+            Q2 = np.delete(Q, t)
+            e2 = dist.distribute(e_x[S2], S2, Q2, phi_x[Q2])
+            r = np.stack([T[c][:, S2] @ e2[:, c] for c in range(3)], axis=1) - b
+            sq = float(np.einsum("ij,ij->", r, r))
+            if sq < best[0]:
+                best = (sq, t, e2)
+        _, t, e2 = best
+        l = Q[t]
+        S = np.append(S, l)
+        Q = np.delete(Q, t)
+        record(S, e2, l)
+        if step_hook(p, steps):
+            break
+
+
+def _nnls_greedy(problem, record, step_hook, max_steps):
+    """Non-negative orthogonal matching pursuit on T (all channels share the support)."""
+    T, b = problem.transfer, problem.b_target
+    k = len(problem.candidates)
+    colnorm = np.sqrt(sum((t * t).sum(0) for t in T))
+    colnorm = np.where(colnorm > 0, colnorm, np.inf)
+    sel = []
+    r = b.copy()
+    steps = k if max_steps is None else min(k, int(max_steps))
+    e = np.zeros((0, 3))
+    for p in range(1, steps + 1):
+        corr = sum(T[c].T @ r[:, c] for c in range(3)) / colnorm
+        corr[sel] = -np.inf
+        j = int(np.argmax(corr))
+        if not corr[j] > 1e-12 * max(float(np.abs(b).max()), 1e-300):
+            break  # no candidate can lower the residual any more
+        sel.append(j)
+        S = np.asarray(sel)
+        e = np.stack([sopt.nnls(T[c][:, S], b[:, c], maxiter=50 * len(S) + 50)[0] for c in range(3)], axis=1)
+        r = b - np.stack([T[c][:, S] @ e[:, c] for c in range(3)], axis=1)
+        on = e.max(axis=1) > 0
+        record(S[on], e[on], j)
+        if step_hook(p, steps):
+            break
