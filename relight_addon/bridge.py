@@ -1,0 +1,478 @@
+"""Blender <-> engine: export the scene as an engine FaceSet, write results back (bpy).
+
+What is exported
+- Every object of type MESH with ``hide_render`` False that is visible in the view layer
+  (``visible_get()``), evaluated with its modifiers (depsgraph ``evaluated_get`` /
+  ``to_mesh``), in world space (``matrix_world``). A negative-determinant transform
+  (negative scale) reverses the winding so normals keep pointing the same way as in
+  Blender's viewport.
+- One engine face per polygon of the evaluated mesh, triangulated with
+  ``mesh.loop_triangles`` (concave n-gons are fine). ``face_index`` is the polygon index in
+  the object's BASE mesh: without modifiers it is the polygon itself; with modifiers a
+  temporary INT face attribute (``_relight_face_index``) is written on the base mesh,
+  carried through the modifier stack and removed right after (the user's mesh ends as it
+  was). Faces that a modifier creates without that attribute (or of linked, read-only
+  meshes) get ``face_index`` -1 and a warning; they take part in the light transport but
+  are not reported.
+
+Materials (per face, through ``material_index`` and the object's material slots)
+- Principled BSDF connected to the active Material Output: reflectance = Base Color
+  (linear RGB), emitted radiance L_e = Emission Color x Emission Strength.
+- Emission shader: reflectance 0, L_e = Color x Strength.
+- Diffuse BSDF: reflectance = Color, no emission.
+- Anything else (other shaders, linked colour inputs, no node tree): the material's
+  viewport colour ``Material.diffuse_color``, no emission, and a warning.
+- No material: reflectance 0.8 grey.
+- Exitance e = pi * L_e (W/m^2). Reflectance is clamped to [0, MAX_REFLECTANCE] and
+  negative emission to 0, with a warning.
+
+Relight attributes (read from the base mesh)
+- ``relight_target``: FLOAT_COLOR corner attribute; a polygon is a target when the mean
+  alpha of its corners is >= 0.5, its target radiosity = pi x mean RGB x target scale
+  (scene custom property ``relight_target_scale``, default 1).
+- ``relight_forbidden``: BOOLEAN face attribute; ``relight_no_lights`` object custom
+  property (truthy) forbids every face of the object.
+- Scene custom property ``relight_max_patch_size`` (metres): the scene's default patch
+  size when the job does not set one.
+
+Write back: ``write_radiosity`` stores radiance B/pi in a FLOAT_COLOR corner attribute
+``relight_radiosity`` (per-vertex area-weighted mean of the polygons around each vertex),
+made the active and render colour attribute.
+"""
+from __future__ import annotations
+
+import math
+import os
+import warnings as _warnings
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .engine.scene import FaceSet, SceneError
+
+DEFAULT_REFLECTANCE = 0.8
+MAX_REFLECTANCE = 0.99
+RADIOSITY_ATTRIBUTE = "relight_radiosity"
+TARGET_ATTRIBUTE = "relight_target"
+FORBIDDEN_ATTRIBUTE = "relight_forbidden"
+NO_LIGHTS_PROP = "relight_no_lights"
+TARGET_SCALE_PROP = "relight_target_scale"
+MAX_PATCH_SIZE_PROP = "relight_max_patch_size"
+_FACE_INDEX_ATTRIBUTE = "_relight_face_index"
+
+
+class BlendFileError(SceneError):
+    """The .blend file is missing or cannot be read."""
+
+
+# ------------------------------------------------------------------ files
+def open_blend(path: str):
+    """Open ``path`` as the current Blender file (never writes it)."""
+    if not os.path.isfile(path):
+        raise BlendFileError(f"no such .blend file: {path}")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(7)
+    except OSError as exc:
+        raise BlendFileError(f"cannot read {path}: {exc.strerror}") from None
+    # plain files start with BLENDER; compressed ones with the gzip or zstd magic
+    if not (head.startswith(b"BLENDER") or head.startswith(b"\x1f\x8b") or head.startswith(b"\x28\xb5\x2f\xfd")):
+        raise BlendFileError(f"{path} is not a .blend file")
+    try:
+        bpy.ops.wm.open_mainfile(filepath=os.path.abspath(path), load_ui=False)
+    except RuntimeError as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unknown error"
+        raise BlendFileError(f"cannot open {path}: {msg}") from None
+
+
+def save_copy(path: str):
+    """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=False)
+
+
+# ------------------------------------------------------------------ materials
+def _linear_rgb(socket):
+    return np.asarray(socket.default_value[:3], dtype=np.float64)
+
+
+def _surface_node(mat):
+    tree = getattr(mat, "node_tree", None)
+    if tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
+        return None
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    if not outputs:
+        return None
+    active = [n for n in outputs if n.is_active_output] or outputs
+    out = next((n for n in active if n.target in ("ALL", "CYCLES")), active[0])
+    links = out.inputs["Surface"].links
+    return links[0].from_node if links else None
+
+
+def material_properties(mat):
+    """(reflectance (3,), radiance (3,), note or None) of a material (see module docstring)."""
+    if mat is None:
+        return np.full(3, DEFAULT_REFLECTANCE), np.zeros(3), None
+    fallback = np.asarray(mat.diffuse_color[:3], dtype=np.float64)
+    node = _surface_node(mat)
+    kind = node.bl_idname if node is not None else None
+    if kind == "ShaderNodeBsdfPrincipled":
+        base, ec, es = node.inputs["Base Color"], node.inputs["Emission Color"], node.inputs["Emission Strength"]
+        note = None
+        rho = _linear_rgb(base)
+        if base.is_linked:
+            rho, note = fallback, f"material {mat.name!r}: Base Color is linked, using the viewport colour"
+        if ec.is_linked or es.is_linked:
+            note = f"material {mat.name!r}: linked emission inputs are ignored"
+            return rho, np.zeros(3), note
+        return rho, _linear_rgb(ec) * float(es.default_value), note
+    if kind == "ShaderNodeEmission":
+        c, s = node.inputs["Color"], node.inputs["Strength"]
+        if c.is_linked or s.is_linked:
+            return np.zeros(3), np.zeros(3), f"material {mat.name!r}: linked emission inputs are ignored"
+        return np.zeros(3), _linear_rgb(c) * float(s.default_value), None
+    if kind == "ShaderNodeBsdfDiffuse" and not node.inputs["Color"].is_linked:
+        return _linear_rgb(node.inputs["Color"]), np.zeros(3), None
+    if node is None and getattr(mat, "node_tree", None) is None:
+        return fallback, np.zeros(3), None  # a plain (non-node) material: its colour
+    what = kind or "no surface shader"
+    return fallback, np.zeros(3), f"material {mat.name!r}: {what} is not read, using the viewport colour"
+
+
+# ------------------------------------------------------------------ export
+@dataclass
+class ExportedScene:
+    faces: FaceSet
+    objects: list  # the exported bpy objects, in FaceSet.object_names order
+    polygon_counts: dict  # object name -> number of polygons of its base mesh
+    settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
+    seconds: float = 0.0
+
+
+def exported_objects(context=None):
+    context = context or bpy.context
+    view_layer = context.view_layer
+    return [ob for ob in context.scene.objects
+            if ob.type == "MESH" and not ob.hide_render and ob.visible_get(view_layer=view_layer)]
+
+
+def scene_settings(scene):
+    scale = scene.get(TARGET_SCALE_PROP, 1.0)
+    rl = getattr(scene, "relight", None)
+    if rl is not None and hasattr(rl, "target_scale"):
+        scale = rl.target_scale
+    size = scene.get(MAX_PATCH_SIZE_PROP)
+    return {"target_scale": float(scale), "max_patch_size": None if size is None else float(size)}
+
+
+def _get(seq, attr, n, dtype, width=1):
+    a = np.zeros(n * width, dtype=dtype)
+    if n:
+        seq.foreach_get(attr, a)
+    return a.reshape(n, width) if width > 1 else a
+
+
+def _loop_polygon(mesh):
+    n = len(mesh.polygons)
+    starts = _get(mesh.polygons, "loop_start", n, np.int64)
+    totals = _get(mesh.polygons, "loop_total", n, np.int64)
+    return np.repeat(np.arange(n), totals), starts, totals
+
+
+def _base_attributes(ob, target_scale):
+    """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool)."""
+    me = ob.data
+    n = len(me.polygons)
+    target = np.zeros(n, dtype=bool)
+    target_b = np.zeros((n, 3))
+    forbidden = np.zeros(n, dtype=bool)
+    loop_poly, _, totals = _loop_polygon(me)
+    attr = me.attributes.get(TARGET_ATTRIBUTE)
+    if attr is not None and attr.domain == "CORNER" and len(me.loops):
+        col = _get(attr.data, "color", len(me.loops), np.float64, 4)
+        mean = np.stack([np.bincount(loop_poly, weights=col[:, k], minlength=n) for k in range(4)], axis=1)
+        mean /= np.maximum(totals, 1)[:, None]
+        target = mean[:, 3] >= 0.5
+        target_b[target] = math.pi * mean[target, :3] * target_scale
+    attr = me.attributes.get(FORBIDDEN_ATTRIBUTE)
+    if attr is not None and attr.domain == "FACE" and attr.data_type == "BOOLEAN":
+        forbidden = _get(attr.data, "value", n, bool)
+    if bool(ob.get(NO_LIGHTS_PROP, False)):
+        forbidden[:] = True
+    return target, target_b, forbidden
+
+
+def _evaluated_mesh(ob, context):
+    """(evaluated object, mesh, face_index per evaluated polygon or None when identity)."""
+    base = ob.data
+    has_modifiers = any(m.show_viewport for m in ob.modifiers)
+    tagged = False
+    if has_modifiers and base.library is None and _FACE_INDEX_ATTRIBUTE not in base.attributes:
+        a = base.attributes.new(_FACE_INDEX_ATTRIBUTE, "INT", "FACE")
+        a.data.foreach_set("value", np.arange(len(base.polygons), dtype=np.int32))
+        base.update()
+        tagged = True
+    try:
+        depsgraph = context.evaluated_depsgraph_get()
+        ob_eval = ob.evaluated_get(depsgraph)
+        me = ob_eval.to_mesh()
+        n = len(me.polygons)
+        if not has_modifiers:
+            mapping = None
+        else:
+            a = me.attributes.get(_FACE_INDEX_ATTRIBUTE) if tagged else None
+            if a is not None and a.domain == "FACE":
+                mapping = _get(a.data, "value", n, np.int64)
+                mapping[(mapping < 0) | (mapping >= len(base.polygons))] = -1
+            elif n == len(base.polygons):
+                mapping = None  # same polygon count, assume same order
+            else:
+                mapping = np.full(n, -1, dtype=np.int64)
+    finally:
+        if tagged:
+            base.attributes.remove(base.attributes[_FACE_INDEX_ATTRIBUTE])
+            base.update()
+    return ob_eval, me, mapping
+
+
+def export_scene(context=None, target_scale=None) -> ExportedScene:
+    """Export the visible mesh objects of the current scene (see the module docstring).
+
+    ``context``: a bpy context (default ``bpy.context``); a Depsgraph is accepted too (its
+    scene and view layer are used). ``target_scale`` overrides the scene's target scale.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    if context is None or isinstance(context, bpy.types.Depsgraph):
+        context = bpy.context
+    settings = scene_settings(context.scene)
+    if target_scale is not None:
+        settings["target_scale"] = float(target_scale)
+    objs = exported_objects(context)
+    if not objs:
+        raise SceneError("the scene has no visible mesh objects")
+    verts, tris, tri_face, loops = [], [], [], []
+    f_obj, f_idx, rho, e, tgt, tgt_b, forb = [], [], [], [], [], [], []
+    warnings = []
+    counts = {}
+    nf = nv = 0
+    unmapped = 0
+    mat_cache = {}
+    for oi, ob in enumerate(objs):
+        counts[ob.name] = len(ob.data.polygons)
+        target, target_b, forbidden = _base_attributes(ob, settings["target_scale"])
+        ob_eval, me, mapping = _evaluated_mesh(ob, context)
+        try:
+            V = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
+            M = np.array(ob_eval.matrix_world, dtype=np.float64)
+            W = V @ M[:3, :3].T + M[:3, 3]
+            if not np.all(np.isfinite(W)):
+                raise SceneError(f"object {ob.name!r} has NaN or infinite vertex coordinates")
+            flip = np.linalg.det(M[:3, :3]) < 0
+            me.calc_loop_triangles()
+            nt = len(me.loop_triangles)
+            lt = _get(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
+            lt_poly = _get(me.loop_triangles, "polygon_index", nt, np.int64)
+            npoly = len(me.polygons)
+            loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
+            _, starts, totals = _loop_polygon(me)
+            mat_index = _get(me.polygons, "material_index", npoly, np.int64)
+        finally:
+            ob_eval.to_mesh_clear()
+        if flip:
+            lt = lt[:, ::-1]
+        verts.append(W)
+        tris.append(lt + nv)
+        tri_face.append(lt_poly + nf)
+        for s, t in zip(starts, totals):
+            lp = (loop_vert[s:s + t] + nv).tolist()
+            loops.append(lp[::-1] if flip else lp)
+        slots = [s.material for s in ob.material_slots]
+        props = []
+        for mi in range(max(len(slots), 1)):
+            mat = slots[mi] if mi < len(slots) else None
+            key = mat.name if mat is not None else None
+            if key not in mat_cache:
+                mat_cache[key] = material_properties(mat)
+                if mat_cache[key][2]:
+                    warnings.append(mat_cache[key][2])
+            props.append(mat_cache[key])
+        mi = np.clip(mat_index, 0, len(props) - 1)
+        rho.append(np.array([p[0] for p in props])[mi])
+        e.append(math.pi * np.array([p[1] for p in props])[mi])
+        idx = np.arange(npoly) if mapping is None else mapping
+        unmapped += int(np.sum(idx < 0))
+        ok = idx >= 0
+        safe = np.where(ok, idx, 0)
+        tgt.append(target[safe] & ok)
+        tgt_b.append(np.where(ok[:, None], target_b[safe], 0.0))
+        forb.append(np.where(ok, forbidden[safe], bool(ob.get(NO_LIGHTS_PROP, False))))
+        f_obj.append(np.full(npoly, oi))
+        f_idx.append(idx)
+        nf += npoly
+        nv += len(W)
+    if unmapped:
+        warnings.append(f"{unmapped} face(s) created by modifiers could not be mapped to base-mesh polygons "
+                        "and are not reported")
+    rho = np.concatenate(rho)
+    e = np.concatenate(e)
+    if np.any(rho > MAX_REFLECTANCE) or np.any(rho < 0):
+        nbad = int(np.sum(np.any((rho > MAX_REFLECTANCE) | (rho < 0), axis=1)))
+        warnings.append(f"reflectance of {nbad} face(s) clamped to [0, {MAX_REFLECTANCE}] "
+                        "(a reflectance >= 1 would create energy)")
+        rho = np.clip(rho, 0.0, MAX_REFLECTANCE)
+    if not np.all(np.isfinite(e)) or not np.all(np.isfinite(rho)):
+        raise SceneError("a material has a NaN or infinite colour or emission strength")
+    if np.any(e < 0):
+        warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
+        e = np.maximum(e, 0.0)
+    faces = FaceSet(
+        vertices=np.concatenate(verts),
+        triangles=np.concatenate(tris),
+        triangle_face=np.concatenate(tri_face),
+        face_loops=loops,
+        face_object=np.concatenate(f_obj),
+        face_index=np.concatenate(f_idx),
+        object_names=[ob.name for ob in objs],
+        reflectance=rho,
+        exitance=e,
+        target=np.concatenate(tgt),
+        target_radiosity=np.concatenate(tgt_b),
+        forbidden=np.concatenate(forb),
+        warnings=warnings,
+    )
+    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0)
+
+
+def export_faceset(context=None, target_scale=None) -> FaceSet:
+    """The FaceSet of :func:`export_scene`."""
+    return export_scene(context, target_scale=target_scale).faces
+
+
+def face_flags(ob, kind):
+    """Per base-mesh polygon of ``ob``: kind "target", "forbidden" or "candidate" (bool array)."""
+    target, _, forbidden = _base_attributes(ob, 1.0)
+    if kind == "target":
+        return target
+    if kind == "forbidden":
+        return forbidden
+    if kind == "candidate":
+        return ~forbidden
+    raise ValueError(f"unknown face flag {kind!r}; use target, forbidden or candidate")
+
+
+def ensure_target_layer(mesh):
+    """The mesh's ``relight_target`` FLOAT_COLOR corner attribute (created transparent black)."""
+    attr = mesh.attributes.get(TARGET_ATTRIBUTE)
+    if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
+        mesh.attributes.remove(attr)
+        attr = None
+    if attr is None:
+        attr = mesh.color_attributes.new(TARGET_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+        attr.data.foreach_set("color", np.zeros(4 * len(mesh.loops), dtype=np.float32))
+    return attr
+
+
+# ------------------------------------------------------------------ write back
+def _vertex_smoothed_corners(me, poly_values, poly_area):
+    """Corner values: per vertex, the area-weighted mean of its polygons' values."""
+    loop_poly, _, _ = _loop_polygon(me)
+    loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
+    nv = len(me.vertices)
+    w = poly_area[loop_poly]
+    num = np.stack([np.bincount(loop_vert, weights=w * poly_values[loop_poly, k], minlength=nv)
+                    for k in range(3)], axis=1)
+    den = np.bincount(loop_vert, weights=w, minlength=nv)
+    cnt = np.bincount(loop_vert, minlength=nv)
+    plain = np.stack([np.bincount(loop_vert, weights=poly_values[loop_poly, k], minlength=nv)
+                      for k in range(3)], axis=1) / np.maximum(cnt, 1)[:, None]
+    vert = np.where(den[:, None] > 0, num / np.where(den > 0, den, 1.0)[:, None], plain)
+    return vert[loop_vert]
+
+
+def write_radiosity(objects, radiosity, areas):
+    """Write radiance B/pi into ``relight_radiosity`` on each object's mesh.
+
+    ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon; ``areas[name]``: (n_polygons,)
+    weights (m^2). A mesh shared by several exported objects is made single-user first.
+    """
+    written = set()
+    for ob in objects:
+        if ob.name not in radiosity:
+            continue
+        if ob.data.name in written or ob.data.library is not None:
+            ob.data = ob.data.copy()
+        me = ob.data
+        written.add(me.name)
+        vals = np.asarray(radiosity[ob.name], dtype=np.float64).reshape(-1, 3) / math.pi
+        corner = _vertex_smoothed_corners(me, vals, np.asarray(areas[ob.name], dtype=np.float64))
+        if RADIOSITY_ATTRIBUTE in me.attributes:
+            me.attributes.remove(me.attributes[RADIOSITY_ATTRIBUTE])
+        attr = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+        rgba = np.ones((len(me.loops), 4), dtype=np.float32)
+        rgba[:, :3] = corner
+        attr.data.foreach_set("color", rgba.ravel())
+        me.color_attributes.active_color_name = RADIOSITY_ATTRIBUTE
+        me.color_attributes.render_color_index = me.color_attributes.find(RADIOSITY_ATTRIBUTE)
+        me.update()
+
+
+# ------------------------------------------------------------------ render
+def render_radiosity(path, context=None, samples=16, resolution=None):
+    """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
+
+    Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
+    override: Attribute ``relight_radiosity`` -> Emission, strength 1), on a black world,
+    from the scene camera, with the Standard view transform: a face of radiance 1 is white.
+    The scene's materials and world are restored afterwards.
+    """
+    context = context or bpy.context
+    scene = context.scene
+    if scene.camera is None:
+        raise SceneError("the scene has no camera to render from")
+    mat = bpy.data.materials.new("relight_radiosity_view")
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore", DeprecationWarning)
+        if not mat.use_nodes:
+            mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    at = nt.nodes.new("ShaderNodeAttribute")
+    at.attribute_name = RADIOSITY_ATTRIBUTE
+    nt.links.new(at.outputs["Color"], em.inputs["Color"])
+    em.inputs["Strength"].default_value = 1.0
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    world = bpy.data.worlds.new("relight_black")
+    world.color = (0.0, 0.0, 0.0)
+    r = scene.render
+    saved = (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
+             scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure)
+    try:
+        context.view_layer.material_override = mat
+        scene.world = world
+        r.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = int(samples)
+        scene.cycles.use_denoising = False
+        scene.cycles.max_bounces = 0
+        if resolution is not None:
+            r.resolution_x, r.resolution_y = resolution
+        scene.view_settings.view_transform = "Standard"
+        scene.view_settings.look = "None"
+        scene.view_settings.exposure = 0.0
+        r.image_settings.file_format = "PNG"
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        r.filepath = os.path.abspath(path)
+        bpy.ops.render.render(write_still=True)
+    finally:
+        (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
+         scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure) = saved
+        bpy.data.materials.remove(mat)
+        bpy.data.worlds.remove(world)

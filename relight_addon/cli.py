@@ -1,0 +1,150 @@
+"""Relight's command line: ``python -m relight_addon radiosity SCENE.blend --report R.json ...``.
+
+Exit codes: 0 done; 2 bad input or options (ONE line on stderr, no traceback); 130
+cancelled. ``main(argv)`` returns the exit code and can be called from any Python that has
+bpy: the PyPI ``bpy`` module or a Blender binary (``blender -b --python-expr``); see
+README.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+
+PROG = "relight"
+
+
+class UsageError(ValueError):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # one line, exit code 2 (argparse prints the usage too)
+        raise UsageError(message)
+
+
+def _positive_int(text):
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {v}")
+    return v
+
+
+def _positive_length(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a positive length in metres, got {text}")
+    return v
+
+
+def build_parser():
+    p = _Parser(prog=PROG, description="Relight: radiosity and inverse lighting on .blend scenes.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    r = sub.add_parser("radiosity", help="forward radiosity from the scene's own emissive materials")
+    r.add_argument("scene", help="input .blend file (never modified)")
+    r.add_argument("--report", required=True, help="JSON report to write")
+    r.add_argument("--out", help="write a copy of the scene with the relight_radiosity colour attribute")
+    r.add_argument("--rays-per-patch", type=_positive_int, default=None,
+                   help="rays shot per patch for the form factors (default: the engine's)")
+    r.add_argument("--max-patch-size", type=_positive_length, default=None,
+                   help="largest patch edge in metres (default: the scene's relight_max_patch_size, "
+                        "else the bounding-box diagonal / 20)")
+    r.add_argument("--seed", type=int, default=0, help="random seed (results are reproducible)")
+    r.add_argument("--threads", type=_positive_int, default=None, help="worker threads (default: all cores)")
+    r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
+    r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
+    return p
+
+
+def script_argv(argv):
+    """Arguments for ``main`` from a full ``sys.argv`` (Blender's come before ``--``)."""
+    argv = list(argv)
+    if "--" in argv:
+        return argv[argv.index("--") + 1:]
+    return argv[1:]
+
+
+def _write_json(path, data):
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    tmp = path + ".tmp"
+    with open(tmp, "w") as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+    os.replace(tmp, path)
+
+
+def run_radiosity_command(args, progress=None, cancel=None):
+    from . import bridge, jobs
+    from .engine.options import JobOptions
+
+    t0 = time.perf_counter()
+    scene_path = os.path.abspath(args.scene)
+    for name in ("out", "report", "render"):
+        path = getattr(args, name)
+        if path is not None and os.path.abspath(path) == scene_path:
+            raise UsageError(f"--{name} must not be the input file {args.scene}")
+    bridge.open_blend(args.scene)
+    exp = bridge.export_scene()
+    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size,
+                         seed=args.seed, threads=args.threads)
+    report, result = jobs.run_radiosity(exp.faces, options, polygon_counts=exp.polygon_counts,
+                                        default_max_patch_size=exp.settings.get("max_patch_size"),
+                                        progress=progress, cancel=cancel)
+    t1 = time.perf_counter()
+    if args.out or args.render:
+        bridge.write_radiosity(exp.objects, result.polygon_radiosity, result.polygon_area)
+    if args.out:
+        bridge.save_copy(args.out)
+    t_apply = time.perf_counter() - t1
+    timings = report["timings_s"]
+    timings["export"] = exp.seconds
+    timings["apply"] = t_apply
+    if args.render:
+        t2 = time.perf_counter()
+        bridge.render_radiosity(args.render, samples=args.render_samples)
+        timings["render"] = time.perf_counter() - t2
+    timings["total"] = time.perf_counter() - t0
+    report["input"] = scene_path
+    _write_json(args.report, report)
+    return report
+
+
+def main(argv=None) -> int:
+    """Run the CLI on ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    from .engine.formfactors import Cancelled
+    from .engine.scene import SceneError
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        args = build_parser().parse_args(argv)
+        if args.command == "radiosity":
+            report = run_radiosity_command(args)
+            s = report["scene"]
+            print(f"{PROG}: radiosity of {s['objects']} objects, {s['faces']} faces, {s['patches']} patches "
+                  f"in {report['timings_s']['total']:.2f} s; report {args.report}")
+            for w in report["warnings"]:
+                print(f"{PROG}: warning: {w}")
+        return 0
+    except (UsageError, SceneError, ValueError) as exc:
+        print(f"{PROG}: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"{PROG}: error: {exc.filename or ''}: {exc.strerror or exc}".replace(": :", ":"), file=sys.stderr)
+        return 2
+    except Cancelled:
+        print(f"{PROG}: cancelled", file=sys.stderr)
+        return 130
+
+
+def _one_line(exc):
+    text = " ".join(str(exc).split())
+    return text or type(exc).__name__
