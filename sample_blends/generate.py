@@ -16,7 +16,7 @@ Writes, into OUTDIR (default: this folder):
   ceiling at 9 m, two flights of 16 open-rise steps, two landings). ~1500 faces; the
   walls, the ceiling and the landings' undersides (~690 faces) are candidate lights,
   everything else (floors, landing tops and edges, steps) has ``relight_forbidden`` = True.
-  The scene sets ``relight_max_patch_size`` = 1.0 m so the default meshing keeps every
+  The scene sets ``relight_max_patch_size`` = 1.3 m so the default meshing keeps every
   face as one patch.
 - staircase_targets.blend: the same scene with the paper's targets painted into
   ``relight_target`` (bright on the ground floor in front of the stairs and on the middle of
@@ -260,7 +260,7 @@ def _staircase_parts():
     for name, z, y0, y1, front_y, front_dir in (("landing_1", FLOOR_Z[1], 6.0, L, 6.0, -1),
                                                 ("landing_2", FLOOR_Z[2], 0.0, 2.0, 2.0, +1)):
         top = grid((0, y0, z), (W, 0, 0), (0, y1 - y0, 0), 13, 6)
-        under = grid((0, y0, z - SLAB), (0, y1 - y0, 0), (W, 0, 0), 7, 3)
+        under = grid((0, y0, z - SLAB), (0, y1 - y0, 0), (W, 0, 0), 3, 7)
         if front_dir < 0:
             edge = grid((0, front_y, z - SLAB), (W, 0, 0), (0, 0, SLAB), 4, 1)
         else:
@@ -287,7 +287,7 @@ def _staircase_parts():
 
 def make_staircase(outdir, with_targets=False):
     scene = reset()
-    scene["relight_max_patch_size"] = 1.0
+    scene["relight_max_patch_size"] = 1.3
     scene["relight_target_scale"] = 1.0
     mats = {
         "plaster": material("plaster", (0.7, 0.68, 0.65)),
@@ -322,7 +322,7 @@ STAIR_TARGET_RADIANCE = (0.8, 0.8, 0.75)  # painted colour; target radiosity = p
 def paint_staircase_targets(ob):
     """Paint the paper's targets into the FLOAT_COLOR corner attribute ``relight_target``.
 
-    Targets: the ground floor in front of the first flight (x in [0.3, 2.5] m, y in
+    Targets: the ground floor in front of the first flight (x in [0.3, 3.4] m, y in
     [0.2, 1.5] m) and the middle third of the treads of the first four steps.
     """
     me = ob.data
@@ -334,7 +334,7 @@ def paint_staircase_targets(ob):
     me.polygons.foreach_get("normal", normals)
     up = normals.reshape(-1, 3)[:, 2] > 0.9
     if ob.name == "floor_0":
-        sel = (c[:, 0] > 0.3) & (c[:, 0] < 2.5) & (c[:, 1] > 0.2) & (c[:, 1] < 1.5)
+        sel = (c[:, 0] > 0.3) & (c[:, 0] < 3.4) & (c[:, 1] > 0.2) & (c[:, 1] < 1.5)
     elif ob.name == "flight_1":
         first = c[:, 1] < 1.5 + 4 * 0.28125
         middle = (c[:, 0] > 0.4) & (c[:, 0] < 0.8)
