@@ -43,6 +43,12 @@ ENVS = {
 }
 
 
+def add_bpy_env(name: str, bpy_version: str, python_candidates: list[str], numpy: str) -> None:
+    """Declare an environment for a bpy release found on PyPI at run time (e.g. bpy 5.2)."""
+    ENVS[name] = {"dir": ROOT / f".venv-{name}", "python": python_candidates,
+                  "requirements": [f"bpy=={bpy_version}", numpy, *_BUNDLED]}
+
+
 class EnvUnavailable(RuntimeError):
     """The base interpreter for an environment is not installed (a reason to skip)."""
 
