@@ -57,6 +57,8 @@ SOLVERS = ("svd", "reduced", "nnls")
 
 #: condition-number estimate of A above which the problem warns
 ILL_CONDITIONED = 1e8
+#: condition-number estimate treated as singular (about 1 / machine epsilon / 100)
+SINGULAR = 1e14
 
 
 class InverseError(SceneError):
@@ -104,6 +106,10 @@ class _Factor:
             anorm = np.abs(A).sum(axis=0).max()
             rc, _ = sla.lapack.dgecon(self.lu[0], anorm, norm="1")
             self.cond = float(1.0 / rc) if rc > 0 else float("inf")
+        if self.cond > SINGULAR:
+            raise InverseError(
+                f"the radiosity system I - rho F is numerically singular (condition estimate {self.cond:.3g}); "
+                "a closed scene with reflectance 1?")
 
     def solve(self, rhs, trans=False):
         if self.sparse:

@@ -1,0 +1,216 @@
+"""Inverse system: paper SVD formulation, reduced T formulation, NNLS, honest errors.
+
+References: exact 2-D rooms (crossed-strings form factors, tests/flatland.py),
+numpy's dense inverse / pseudo-inverse, and the forward solver radiosity.py.
+"""
+import warnings
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import flatland
+from relight_addon.engine.inverse import (InverseError, InverseProblem, direct_lighting_problem,
+                                          solve_inverse)
+from relight_addon.engine.radiosity import solve_radiosity
+from relight_addon.engine.scene import SceneError
+
+RHO = np.array([0.5, 0.6, 0.7])
+
+
+@pytest.fixture(scope="module")
+def room():
+    return flatland.room(4.0, 3.0, n_per_wall=(12, 9, 12, 9), reflectance=RHO)
+
+
+def make(r, tmask, b, cmask, F=None):
+    return InverseProblem(r["F"] if F is None else F, r["area"], r["reflectance"], tmask, b, cmask,
+                          r["center"], r["normal"])
+
+
+def feasible(r, seed=0, n_lights=3):
+    """Targets on the floor at the radiosity of a few random positive ceiling/wall lights."""
+    rng = np.random.default_rng(seed)
+    P = len(r["area"])
+    floor = r["wall"] == "floor"
+    cand = ~floor
+    e = np.zeros((P, 3))
+    e[rng.choice(np.flatnonzero(cand), n_lights, replace=False)] = rng.uniform(10, 50, (n_lights, 3))
+    B, _ = solve_radiosity(r["F"], r["reflectance"], e, method="direct")
+    return make(r, floor, B * floor[:, None], cand), e, B
+
+
+def test_transfer_is_block_of_inverse(room):
+    r = room
+    prob, _, _ = feasible(r)
+    Ainv = [np.linalg.inv(np.eye(len(r["area"])) - RHO[c] * r["F"]) for c in range(3)]
+    for c in range(3):  # m < |C|: solved through A^T
+        np.testing.assert_allclose(prob.transfer[c], Ainv[c][np.ix_(prob.targets, prob.candidates)],
+                                   rtol=1e-10, atol=1e-13)
+    P = len(r["area"])
+    few = np.zeros(P, bool)
+    few[np.flatnonzero(r["wall"] == "ceiling")[:2]] = True
+    big = make(r, ~few, np.zeros((P, 3)), few)  # m > |C|: solved through A
+    for c in range(3):
+        np.testing.assert_allclose(big.transfer[c], Ainv[c][np.ix_(big.targets, big.candidates)],
+                                   rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("solver", ["svd", "reduced", "nnls"])
+def test_feasible_targets_reproduced(room, solver):
+    prob, _, B = feasible(room)
+    res = solve_inverse(prob, solver)
+    assert res.relative_error < 1e-9
+    # independent check: forward-solve the found configuration
+    Bf, _ = solve_radiosity(room["F"], room["reflectance"], res.patch_exitance(prob), method="direct")
+    np.testing.assert_allclose(Bf[prob.targets], B[prob.targets], rtol=1e-8, atol=1e-8)
+    assert np.isfinite(res.exitance).all() and res.seconds >= 0
+    if solver == "nnls":
+        assert res.exitance.min() >= 0 and res.n_negative == 0
+
+
+def test_minimum_norm_solutions_match_pinv(room):
+    r = room
+    prob, _, _ = feasible(r, seed=3)
+    red = solve_inverse(prob, "reduced")
+    for c in range(3):
+        np.testing.assert_allclose(red.exitance[:, c], np.linalg.pinv(prob.transfer[c]) @ prob.b_target[:, c],
+                                   rtol=1e-7, atol=1e-9)
+    assert red.rank == min(np.linalg.matrix_rank(t) for t in prob.transfer)
+    # paper formulation: [A[:, U] -I[:, C]] x = -A[:, P] b_P, minimum norm
+    svd = solve_inverse(prob, "svd")
+    P = len(r["area"])
+    U = np.flatnonzero(~prob.target_mask)
+    for c in range(3):
+        A = np.eye(P) - RHO[c] * r["F"]
+        M = np.hstack([A[:, U], -np.eye(P)[:, prob.candidates]])
+        x = np.linalg.pinv(M) @ (-(A[:, prob.targets] @ prob.b_target[:, c]))
+        np.testing.assert_allclose(svd.exitance[:, c], x[len(U):], rtol=1e-7, atol=1e-8)
+    explicit = solve_inverse(prob, "svd", svd_driver="svd")
+    np.testing.assert_allclose(explicit.exitance, svd.exitance, rtol=1e-8, atol=1e-8)
+    assert explicit.rank == svd.rank
+    # the two minimum-norm solutions differ (different norms are minimised)
+    assert np.abs(svd.exitance - red.exitance).max() > 1e-3
+
+
+def test_rank_cutoff_is_configurable(room):
+    prob, _, _ = feasible(room)
+    full = solve_inverse(prob, "reduced")
+    cut = solve_inverse(prob, "reduced", rcond=0.05)
+    assert cut.rank < full.rank and cut.rcond == 0.05
+    with pytest.raises(ValueError, match="rcond"):
+        solve_inverse(prob, "reduced", rcond=2.0)
+
+
+def test_sparse_form_factors_match_dense(room):
+    prob, _, _ = feasible(room)
+    b = np.zeros((len(room["area"]), 3))
+    b[prob.targets] = prob.b_target
+    sp_prob = make(room, prob.target_mask, b, prob.candidate_mask, F=sp.csr_matrix(room["F"]))
+    for c in range(3):
+        np.testing.assert_allclose(sp_prob.transfer[c], prob.transfer[c], rtol=1e-9, atol=1e-12)
+
+
+def test_nnls_reports_unreachable_brightness(room):
+    """A bright floor patch beside a black one cannot be made with positive lights."""
+    r = room
+    P = len(r["area"])
+    fl = np.flatnonzero(r["wall"] == "floor")
+    t = np.zeros(P, bool)
+    t[fl[5:7]] = True
+    b = np.zeros((P, 3))
+    b[fl[5]] = 100.0
+    prob = make(r, t, b, r["wall"] != "floor")
+    res = solve_inverse(prob, "nnls")
+    assert res.exitance.min() >= 0 and np.isfinite(res.exitance).all()
+    assert any("residual" in w for w in res.warnings)
+    resid = np.linalg.norm(np.stack([prob.transfer[c] @ res.exitance[:, c] for c in range(3)], 1) - prob.b_target)
+    assert res.error == pytest.approx(resid) and res.relative_error > 0.05
+    assert solve_inverse(prob, "reduced").relative_error < 1e-9  # with negatives it is reachable
+
+
+def test_no_targets_and_no_candidates(room):
+    r = room
+    P = len(r["area"])
+    with pytest.raises(InverseError, match="no target"):
+        make(r, np.zeros(P, bool), np.zeros((P, 3)), np.ones(P, bool))
+    with pytest.raises(InverseError, match="forbidden"):
+        make(r, np.ones(P, bool), np.ones((P, 3)), np.zeros(P, bool))
+    assert issubclass(InverseError, SceneError) and issubclass(InverseError, ValueError)
+
+
+def test_bad_input_messages(room):
+    r = room
+    P = len(r["area"])
+    t = r["wall"] == "floor"
+    with pytest.raises(InverseError, match="NaN"):
+        F = r["F"].copy()
+        F[0, 1] = np.nan
+        make(r, t, np.ones((P, 3)), ~t, F=F)
+    with pytest.raises(InverseError, match="square"):
+        make(r, t, np.ones((P, 3)), ~t, F=r["F"][:, :-1])
+    with pytest.raises(InverseError, match="non-negative"):
+        make(r, t, -np.ones((P, 3)), ~t)
+    prob = make(r, t, np.ones((P, 3)), ~t)
+    with pytest.raises(ValueError, match="unknown inverse solver"):
+        solve_inverse(prob, "magic")
+
+
+def test_unreachable_targets_are_named():
+    """Two rooms that do not see each other: targets in room 2 with lights only in room 1."""
+    r = flatland.room(2.0, 2.0, n_per_wall=(3, 3, 3, 3), reflectance=0.5)
+    n = len(r["area"])
+    F = np.zeros((2 * n, 2 * n))
+    F[:n, :n] = F[n:, n:] = r["F"]
+    area = np.tile(r["area"], 2)
+    rho = np.tile(r["reflectance"], (2, 1))
+    cand = np.zeros(2 * n, bool)
+    cand[np.flatnonzero(r["wall"] == "ceiling")] = True  # room 1 only
+    t = np.zeros(2 * n, bool)
+    t[n + np.flatnonzero(r["wall"] == "floor")] = True  # room 2 floor
+    b = np.where(t[:, None], np.full(3, 5.0), 0.0)
+    with pytest.raises(InverseError, match=r"no candidate light reaches any target.*" + str(n)):
+        solve_inverse(InverseProblem(F, area, rho, t, b, cand), "reduced")
+    t2 = t.copy()
+    t2[np.flatnonzero(r["wall"] == "floor")] = True  # and room 1 floor
+    b2 = np.where(t2[:, None], np.full(3, 5.0), 0.0)
+    res = solve_inverse(InverseProblem(F, area, rho, t2, b2, cand), "reduced")
+    msg = [w for w in res.warnings if "cannot be met" in w]
+    assert msg and str(n + int(np.flatnonzero(r["wall"] == "floor")[0])) in msg[0]
+    assert np.isfinite(res.exitance).all()
+
+
+def test_ill_conditioned_closed_room_warns_and_stays_finite():
+    r = flatland.room(4.0, 3.0, n_per_wall=(6, 4, 6, 4), reflectance=1.0 - 1e-9)
+    P = len(r["area"])
+    t = r["wall"] == "floor"
+    prob = make(r, t, np.where(t[:, None], np.ones(3), 0.0), r["wall"] == "ceiling")
+    res = solve_inverse(prob, "reduced")
+    w = [x for x in res.warnings if "ill-conditioned" in x]
+    assert w and "condition estimate" in w[0]
+    assert prob.condition > 1e8
+    assert np.isfinite(res.exitance).all() and np.isfinite(res.error)
+    singular = flatland.room(4.0, 3.0, n_per_wall=(6, 4, 6, 4), reflectance=1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(InverseError, match="singular"):
+            solve_inverse(make(singular, t, np.where(t[:, None], np.ones(3), 0.0), singular["wall"] == "ceiling"),
+                          "reduced")
+    assert P > 0
+
+
+def test_direct_lighting_problem(room):
+    r = room
+    P = len(r["area"])
+    e = np.zeros((P, 3))
+    lights = np.flatnonzero(r["wall"] == "ceiling")[[2, 7]]
+    e[lights] = [[10, 20, 30], [5, 5, 5]]
+    prob, e_x = direct_lighting_problem(r["F"], r["area"], r["reflectance"], e, r["center"], r["normal"])
+    assert list(prob.candidates) == sorted(lights) and len(prob.targets) == P - 2
+    B, _ = solve_radiosity(r["F"], r["reflectance"], e, method="gauss-seidel", tol=1e-12)
+    np.testing.assert_allclose(prob.b_target, B[prob.targets], rtol=1e-9)
+    assert prob.error(e_x) < 1e-9 * prob.target_norm
+    with pytest.raises(InverseError, match="no light"):
+        direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((P, 3)))
+    with pytest.raises(InverseError, match="non-negative"):
+        direct_lighting_problem(r["F"], r["area"], r["reflectance"], -e)
