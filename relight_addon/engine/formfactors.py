@@ -62,7 +62,7 @@ __all__ = [
 
 #: rays per patch for each quality level; accuracy measured in docs/benchmarks.md
 #: ("Form factors") and checked by tests/test_engine_formfactors.py.
-QUALITY = {"draft": 256, "default": 4096, "high": 65536}
+QUALITY = {"draft": 1024, "default": 16384, "high": 262144}
 DEFAULT_RAYS_PER_PATCH = QUALITY["default"]
 #: dense float32 matrix up to this many patches, scipy.sparse CSR above.
 DENSE_LIMIT = 6000
@@ -200,7 +200,7 @@ class _Tracer:
         t[ok] = e1[ok] / el[ok, None]
         self.v0, self.e1, self.e2 = tv[:, 0], e1, e2
         self.n, self.t, self.b = n, t, np.cross(n, t)
-        self.n32 = n.astype(np.float32)
+        self.n32t = np.ascontiguousarray(n.T, dtype=np.float32)
         pa = np.bincount(self.tri_patch, weights=ta, minlength=P)
         if np.any(pa <= 0):
             raise SceneError("some patches have zero area")
@@ -213,6 +213,8 @@ class _Tracer:
         self.cdf_lo = np.concatenate([[0.0], self.cdf_hi[:-1]])
         self.cdf_lo[start] = 0.0
         self.key = self.tri_patch + self.cdf_hi  # global monotone search key
+        self.cdf_lo32 = self.cdf_lo.astype(np.float32)
+        self.cdf_w32 = np.maximum(self.cdf_hi - self.cdf_lo, 1e-30).astype(np.float32)
         self.single = np.all(np.bincount(self.tri_patch, minlength=P) == 1)
         self.tri_of_patch = start  # valid when single
 
@@ -220,6 +222,9 @@ class _Tracer:
         diag = float(np.linalg.norm(hi - lo))
         self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
 
+        # per triangle, component-major (18, T): origin base (v0 + offset n), e1, e2, t, b, n
+        self.geo = np.ascontiguousarray(
+            np.concatenate([(tv[:, 0] + self.offset * n).T, e1.T, e2.T, t.T, self.b.T, n.T]), dtype=np.float32)
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         # chunks: contiguous patch ranges of ~CHUNK_RAYS rays
@@ -231,19 +236,20 @@ class _Tracer:
             self.sobol = (base * 2.0**32).astype(np.uint64).astype(np.uint32)
 
     def unit_samples(self, ci: int) -> np.ndarray:
-        """(n_patches_in_chunk, N, 4) samples in (0, 1) for chunk ci."""
+        """(n_patches_in_chunk * N, 4) float32 samples in (0, 1) for chunk ci."""
         p0, p1 = self.chunks[ci]
         k, N = p1 - p0, self.N
         rng = np.random.default_rng([self.seed, ci])
         if self.sampling == "sobol":
             shift = rng.integers(0, 2**32, size=(k, 1, 4), dtype=np.uint32)
-            u = (self.sobol[None] ^ shift).astype(np.float64)
-            u += rng.random(u.shape)  # sub-2^-32 jitter; also keeps u strictly inside (0, 1)
-            u *= 2.0**-32
-            return u
+            x = (self.sobol[None] ^ shift) >> np.uint32(8)  # 24 bits: exact in float32
+            u = x.astype(np.float32)
+            u *= np.float32(2.0**-24)
+            u += np.float32(2.0**-25)  # cell midpoints, strictly inside (0, 1)
+            return u.reshape(-1, 4)
         if self.sampling == "random":
-            return rng.random((k, N, 4))
-        # stratified: jittered k x k grids for position and direction, randomly paired
+            return rng.random((k * N, 4), dtype=np.float32)
+        # stratified: jittered g x g grids for position and direction, randomly paired
         g = int(np.sqrt(N))
         u = rng.random((k, N, 4))
         if g >= 2:
@@ -253,39 +259,48 @@ class _Tracer:
             perm = np.argsort(rng.random((k, g * g)), axis=1)
             u[:, : g * g, 2] = (ii[perm] + u[:, : g * g, 2]) / g
             u[:, : g * g, 3] = (jj[perm] + u[:, : g * g, 3]) / g
-        return u
+        return np.clip(u, 2.0**-25, 1 - 2.0**-24).astype(np.float32).reshape(-1, 4)
 
     def rays(self, ci: int):
         """Origins (n,3) f32, directions (n,3) f32 and source patch (n,) of chunk ci."""
         p0, p1 = self.chunks[ci]
-        u = self.unit_samples(ci).reshape(-1, 4)
+        u = self.unit_samples(ci)
         src = np.repeat(np.arange(p0, p1), self.N)
+        u0, u1, u2, u3 = u.T
         if self.single:
             tri = self.tri_of_patch[src]
-            s = u[:, 0]
+            s = u0
         else:
-            tri = np.searchsorted(self.key, src + u[:, 0], side="right")
+            tri = np.searchsorted(self.key, src + u0.astype(np.float64), side="right")
             np.minimum(tri, len(self.key) - 1, out=tri)
-            lo, hi = self.cdf_lo[tri], self.cdf_hi[tri]
-            s = np.clip((u[:, 0] - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0)
+            lo = np.take(self.cdf_lo32, tri)
+            s = np.clip((u0 - lo) / np.take(self.cdf_w32, tri), 0.0, 1.0)
+        g = np.take(self.geo, tri, axis=1)  # (18, n): origin base, e1, e2, t, b, n
         # uniform point in the triangle
         su = np.sqrt(s)
-        b1 = (1.0 - u[:, 1]) * su
-        b2 = u[:, 1] * su
-        n = self.n[tri]
-        org = self.v0[tri] + b1[:, None] * self.e1[tri] + b2[:, None] * self.e2[tri] + self.offset * n
+        b2 = u1 * su
+        b1 = su - b2
+        out = np.empty((2, len(src), 3), dtype=np.float32)
+        ot = out[0].T
+        np.multiply(g[3:6], b1, out=ot)
+        ot += g[0:3]
+        ot += g[6:9] * b2
         # Shirley's concentric map of the unit square to the disk, lifted to the hemisphere
-        a = 2.0 * u[:, 2] - 1.0
-        b = 2.0 * u[:, 3] - 1.0
+        a = 2.0 * u2 - 1.0
+        b = 2.0 * u3 - 1.0
         first = np.abs(a) > np.abs(b)
         r = np.where(first, a, b)
-        safe_a = np.where(a == 0, 1.0, a)
-        safe_b = np.where(b == 0, 1.0, b)
-        phi = np.where(first, (np.pi / 4) * (b / safe_a), (np.pi / 2) - (np.pi / 4) * (a / safe_b))
-        dx, dy = r * np.cos(phi), r * np.sin(phi)
-        dz = np.sqrt(np.maximum(0.0, 1.0 - dx * dx - dy * dy))
-        d = dx[:, None] * self.t[tri] + dy[:, None] * self.b[tri] + dz[:, None] * n
-        return org.astype(np.float32), d.astype(np.float32), src
+        with np.errstate(divide="ignore", invalid="ignore"):
+            phi = np.where(first, np.float32(np.pi / 4) * (b / a), np.float32(np.pi / 2) - np.float32(np.pi / 4) * (a / b))
+        phi[~np.isfinite(phi)] = 0.0  # a = b = 0: r = 0, any angle
+        dx = r * np.cos(phi)
+        dy = r * np.sin(phi)
+        dz = np.sqrt(np.maximum(np.float32(0.0), 1.0 - dx * dx - dy * dy))
+        dt = out[1].T
+        np.multiply(g[9:12], dx, out=dt)
+        dt += g[12:15] * dy
+        dt += g[15:18] * dz
+        return out[0], out[1], src
 
     def trace(self, org, d) -> np.ndarray:
         return self.scene.run(org, d)
@@ -294,10 +309,12 @@ class _Tracer:
         """Trace chunk ci: (source patch, receiving patch) of the rays that hit a front side."""
         org, d, src = self.rays(ci)
         prim = np.asarray(self.trace(org, d))
-        hit = prim >= 0
-        src, prim, d = src[hit], prim[hit], d[hit]
-        front = np.einsum("ij,ij->i", d, self.n32[prim]) < 0
-        return src[front], self.tri_patch[prim[front]]
+        hit = np.flatnonzero(prim >= 0)
+        prim = prim[hit]
+        nh = np.take(self.n32t, prim, axis=1)
+        dh = d[hit].T
+        front = (dh[0] * nh[0] + dh[1] * nh[1] + dh[2] * nh[2]) < 0
+        return src[hit[front]], self.tri_patch[prim[front]]
 
 
 def compute_form_factors(

@@ -1,0 +1,183 @@
+"""Ray-cast form factors against closed forms (Howell) and the laws form factors obey.
+
+Pure engine (no bpy). Scenes come from scene.polygon_faceset + mesh_patches.
+"""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from relight_addon.engine import closed_forms as cf
+from relight_addon.engine.formfactors import (
+    QUALITY,
+    Cancelled,
+    FormFactors,
+    compute_form_factors,
+    symmetrise,
+)
+from relight_addon.engine.scene import mesh_patches, polygon_faceset
+
+# (name, polygons, closed form F_12); several aspect ratios per configuration.
+# Disks: 256-gons of the disks' areas; the polygon changes the area-equivalent
+# form factor by far less than 0.1 % (see closed_forms.coaxial_disks_polygons).
+CONFIGS = [
+    ("parallel 1x1 at 1", cf.parallel_rectangles_polygons(1, 1, 1), cf.parallel_rectangles(1, 1, 1)),
+    ("parallel 2x1 at 0.5", cf.parallel_rectangles_polygons(2, 1, 0.5), cf.parallel_rectangles(2, 1, 0.5)),
+    ("parallel 1x0.25 at 2", cf.parallel_rectangles_polygons(1, 0.25, 2), cf.parallel_rectangles(1, 0.25, 2)),
+    ("perpendicular l1 w1 h1", cf.perpendicular_rectangles_polygons(1, 1, 1), cf.perpendicular_rectangles(1, 1, 1)),
+    ("perpendicular l1 w2 h0.5", cf.perpendicular_rectangles_polygons(1, 2, 0.5), cf.perpendicular_rectangles(1, 2, 0.5)),
+    ("perpendicular l2 w0.5 h1", cf.perpendicular_rectangles_polygons(2, 0.5, 1), cf.perpendicular_rectangles(2, 0.5, 1)),
+    ("disks r1 r1 h1", cf.coaxial_disks_polygons(1, 1, 1), cf.coaxial_disks(1, 1, 1)),
+    ("disks r1 r0.5 h0.5", cf.coaxial_disks_polygons(1, 0.5, 0.5), cf.coaxial_disks(1, 0.5, 0.5)),
+    ("disks r0.5 r1.5 h1", cf.coaxial_disks_polygons(0.5, 1.5, 1), cf.coaxial_disks(0.5, 1.5, 1)),
+]
+
+
+def two_patches(polys):
+    # max_patch_size large: each surface is one patch (one emitter, one receiver)
+    return mesh_patches(polygon_faceset(polys), max_patch_size=1e3)
+
+
+def box(n_per_side, size=(1.0, 1.0, 1.0)):
+    return mesh_patches(polygon_faceset(cf.box_polygons(size)), max_patch_size=max(size) / n_per_side)
+
+
+def test_closed_forms_obey_summation_rule_in_a_cube():
+    # Independent check of the catalogue formulas: from one face of a cube,
+    # 1 opposite face + 4 adjacent faces = the whole enclosure.
+    total = cf.parallel_rectangles(1, 1, 1) + 4 * cf.perpendicular_rectangles(1, 1, 1)
+    assert total == pytest.approx(1.0, abs=1e-9)
+    # and for a 1 x 2 x 3 box, from the 1 x 2 face
+    a = cf.parallel_rectangles(1, 2, 3) + 2 * cf.perpendicular_rectangles(2, 1, 3) + 2 * cf.perpendicular_rectangles(1, 2, 3)
+    assert a == pytest.approx(1.0, abs=1e-9)
+    # disks: r2 -> infinity sees everything
+    assert cf.coaxial_disks(1, 1e4, 1) == pytest.approx(1.0, abs=1e-6)
+
+
+@pytest.mark.parametrize("quality,tol", [("default", 0.02), ("high", 0.005)])
+def test_form_factors_match_closed_forms(quality, tol):
+    errors = {}
+    for name, polys, ref in CONFIGS:
+        ff = compute_form_factors(two_patches(polys), QUALITY[quality], seed=1)
+        errors[name] = float(ff.matrix[0, 1]) / ref - 1
+    worst = max(errors, key=lambda k: abs(errors[k]))
+    assert abs(errors[worst]) < tol, f"{worst}: relative error {errors[worst]:+.4f} ({errors})"
+
+
+def test_reciprocity_two_surfaces_of_different_area():
+    ps = two_patches(cf.perpendicular_rectangles_polygons(1, 2, 0.5))
+    ff = compute_form_factors(ps, QUALITY["default"])
+    a1f12 = ps.area[0] * ff.matrix[0, 1]
+    a2f21 = ps.area[1] * ff.matrix[1, 0]
+    assert a1f12 == pytest.approx(a2f21, rel=0.02)
+    assert ff.reciprocity_error(ps.area, "max") == pytest.approx(abs(a1f12 - a2f21) / (0.5 * (a1f12 + a2f21)))
+
+
+def test_reciprocity_error_in_subdivided_box_shrinks_with_rays():
+    ps = box(4)
+    e_low = compute_form_factors(ps, 256).reciprocity_error(ps.area)
+    e_high = compute_form_factors(ps, 16384).reciprocity_error(ps.area)
+    assert e_high < 0.03
+    assert e_high < e_low / 3
+    # symmetrising enforces reciprocity exactly (up to float32 rounding)
+    ff = compute_form_factors(ps, 256, symmetrise_reciprocity=True)
+    assert ff.reciprocity_error(ps.area) < 1e-6
+
+
+def test_closed_box_row_sums_are_one_and_open_scene_loses_rays():
+    ps = box(5)
+    ff = compute_form_factors(ps, 1024)
+    assert np.abs(ff.row_sums() - 1).max() < 1e-6  # every ray hits a wall
+    assert np.all(ff.to_dense().diagonal() == 0)  # planar patches never see themselves
+    # a patch on a wall sees nothing on its own wall
+    same_wall = ps.face[:, None] == ps.face[None, :]
+    assert ff.to_dense()[same_wall].max() == 0
+    ps2 = two_patches(cf.parallel_rectangles_polygons(1, 1, 1))
+    ff2 = compute_form_factors(ps2, QUALITY["default"])
+    assert np.allclose(ff2.row_sums(), np.diag(ff2.matrix[:, ::-1]))  # only the other patch is hit
+
+
+def test_back_side_hits_absorb():
+    lo, hi = cf.parallel_rectangles_polygons(1, 1, 1)
+    ps = two_patches([lo, hi[::-1]])  # receiver now faces away (+z)
+    ff = compute_form_factors(ps, 4096)
+    assert ff.matrix[0, 1] == 0
+    assert ff.matrix[1, 0] == 0  # the receiver shoots away from the emitter
+
+
+def test_box_matches_closed_form_per_wall():
+    # 1 x 1 x 1 box meshed 3 x 3: the floor -> ceiling factor summed over patches
+    # (area-weighted) is the whole-face closed form.
+    ps = box(3)
+    F = compute_form_factors(ps, 16384).to_dense()
+    floor, ceil = ps.face == 0, ps.face == 1
+    f_fc = (ps.area[floor] @ F[np.ix_(floor, ceil)].sum(axis=1)) / ps.area[floor].sum()
+    assert f_fc == pytest.approx(cf.parallel_rectangles(1, 1, 1), rel=0.01)
+
+
+def test_seed_determinism_and_thread_independence():
+    ps = box(4)
+    a = compute_form_factors(ps, 512, seed=3, threads=1)
+    b = compute_form_factors(ps, 512, seed=3, threads=2)
+    c = compute_form_factors(ps, 512, seed=3, threads=2)
+    d = compute_form_factors(ps, 512, seed=4, threads=2)
+    assert np.array_equal(a.matrix, b.matrix) and np.array_equal(b.matrix, c.matrix)
+    assert not np.array_equal(a.matrix, d.matrix)
+
+
+def test_sparse_storage_equals_dense():
+    ps = box(4)
+    dense = compute_form_factors(ps, 256, seed=2)
+    sparse = compute_form_factors(ps, 256, seed=2, dense_limit=10)
+    assert isinstance(dense.matrix, np.ndarray) and dense.matrix.dtype == np.float32
+    assert sp.isspmatrix_csr(sparse.matrix) and sparse.matrix.dtype == np.float32
+    assert np.allclose(sparse.to_dense(), dense.matrix, atol=1e-6)
+    x = np.random.default_rng(0).random((ps.n_patches, 3))
+    assert np.allclose(sparse.matvec(x), dense.matvec(x), rtol=1e-5)
+    assert np.allclose(sparse.row_sums(), dense.row_sums())
+    assert sparse.reciprocity_error(ps.area) == pytest.approx(dense.reciprocity_error(ps.area), rel=1e-4)
+    assert sparse.reciprocity_error(ps.area, "max") == pytest.approx(dense.reciprocity_error(ps.area, "max"), rel=1e-4)
+    s = symmetrise(sparse.matrix, ps.area)
+    assert np.allclose(s.toarray(), symmetrise(dense.matrix, ps.area), atol=1e-6)
+
+
+def test_samplers_all_unbiased_and_sobol_is_most_accurate():
+    name, polys, ref = CONFIGS[0]
+    ps = two_patches(polys)
+    err = {}
+    for s in ("random", "stratified", "sobol"):
+        e = [compute_form_factors(ps, 4096, seed=k, sampling=s).matrix[0, 1] / ref - 1 for k in range(6)]
+        err[s] = float(np.sqrt(np.mean(np.square(e))))
+        assert abs(np.mean(e)) < 0.03, (s, e)
+    assert err["sobol"] < err["random"], err
+
+
+def test_progress_and_cancel():
+    ps = box(6)
+    seen = []
+    compute_form_factors(ps, 8192, progress=seen.append)
+    assert seen and seen[-1] == 1.0 and all(np.diff(seen) > 0)
+    with pytest.raises(Cancelled):
+        compute_form_factors(ps, 8192, cancel=lambda: True)
+    calls = []
+
+    def cancel_later():
+        calls.append(1)
+        return len(calls) > 1
+
+    with pytest.raises(Cancelled):
+        compute_form_factors(ps, 8192, cancel=cancel_later)
+
+
+def test_bad_input_messages():
+    ps = box(2)
+    with pytest.raises(ValueError, match="rays per patch"):
+        compute_form_factors(ps, 0)
+    with pytest.raises(ValueError, match="sampling"):
+        compute_form_factors(ps, 16, sampling="halton")
+    with pytest.raises(ValueError, match="quality"):
+        compute_form_factors(ps, "ultra")
+    assert compute_form_factors(ps, "draft").rays_per_patch == QUALITY["draft"]
+    ff = compute_form_factors(ps, 16)
+    assert isinstance(ff, FormFactors) and ff.n_rays == 16 * ps.n_patches
+    with pytest.raises(ValueError, match="area"):
+        ff.reciprocity_error(ps.area[:-1])
