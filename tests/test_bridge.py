@@ -1,0 +1,155 @@
+"""Bridge: Blender scene -> FaceSet (geometry, materials, attributes) and write-back."""
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
+from relight_addon import bridge  # noqa: E402
+
+
+def add_mesh(bpy, name, verts, faces, mat=None):
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], faces)
+    me.update()
+    if mat is not None:
+        me.materials.append(mat)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def principled(bpy, name, base, emission=(0, 0, 0), strength=0.0):
+    m = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    p = next(n for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    p.inputs["Base Color"].default_value = (*base, 1)
+    p.inputs["Emission Color"].default_value = (*emission, 1)
+    p.inputs["Emission Strength"].default_value = strength
+    return m
+
+
+QUAD = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+
+
+def tri_normals(faces):
+    v = faces.vertices[faces.triangles]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    return n / np.linalg.norm(n, axis=1)[:, None]
+
+
+def test_negative_scale_keeps_normals(bpy_clean):
+    bpy = bpy_clean
+    ob = add_mesh(bpy, "q", QUAD, [(0, 1, 2, 3)])  # normal +z
+    ob.scale = (-1.0, 1.0, 1.0)  # mirror in x: Blender still shows the normal +z
+    faces = bridge.export_faceset()
+    assert np.allclose(tri_normals(faces), [0, 0, 1])
+    ob.scale = (1.0, 1.0, -2.0)  # mirror in z: the normal becomes -z
+    faces = bridge.export_faceset()
+    assert np.allclose(tri_normals(faces), [0, 0, -1])
+    assert np.allclose(faces.vertices[:, 2], 0.0)
+
+
+def test_concave_ngon_triangulation_covers_its_area(bpy_clean):
+    bpy = bpy_clean
+    # an L-shaped hexagon (concave), area 3
+    L = [(0, 0, 0), (2, 0, 0), (2, 1, 0), (1, 1, 0), (1, 2, 0), (0, 2, 0)]
+    add_mesh(bpy, "L", L, [tuple(range(6))])
+    faces = bridge.export_faceset()
+    v = faces.vertices[faces.triangles]
+    cr = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    assert 0.5 * np.linalg.norm(cr, axis=1).sum() == pytest.approx(3.0)
+    assert np.all(cr[:, 2] > 0)  # no flipped (outside) triangle
+    assert faces.face_loops == [list(range(6))]
+
+
+def test_modifiers_map_to_base_polygons_and_leave_mesh_unchanged(bpy_clean):
+    bpy = bpy_clean
+    ob = add_mesh(bpy, "grid", [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)],
+                  [(0, 1, 4, 3), (1, 2, 5, 4)])
+    mod = ob.modifiers.new("sub", "SUBSURF")
+    mod.subdivision_type = "SIMPLE"
+    mod.levels = 2
+    before = sorted(a.name for a in ob.data.attributes)
+    exp = bridge.export_scene()
+    assert sorted(a.name for a in ob.data.attributes) == before
+    assert exp.faces.n_faces == 32  # 2 polygons x 16
+    assert np.bincount(exp.faces.face_index).tolist() == [16, 16]
+    cx = np.array([exp.faces.vertices[lp].mean(axis=0)[0] for lp in exp.faces.face_loops])
+    assert np.all((cx < 1) == (exp.faces.face_index == 0))
+    assert exp.polygon_counts == {"grid": 2}
+
+
+def test_materials_and_fallbacks(bpy_clean):
+    bpy = bpy_clean
+    add_mesh(bpy, "none", QUAD, [(0, 1, 2, 3)])
+    add_mesh(bpy, "lamp", QUAD, [(0, 1, 2, 3)], principled(bpy, "lamp", (0.2, 0.3, 0.4), (1, 0.5, 0.25), 4.0))
+    hot = add_mesh(bpy, "hot", QUAD, [(0, 1, 2, 3)], principled(bpy, "hot", (1.5, 0.5, 0.5)))
+    em = bpy.data.materials.new("emit")
+    if bpy.app.version < (5, 0, 0):
+        em.use_nodes = True
+    nt = em.node_tree
+    nt.nodes.remove(next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"))
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (1, 1, 1, 1)
+    e.inputs["Strength"].default_value = 2.0
+    nt.links.new(e.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs[0])
+    add_mesh(bpy, "emit", QUAD, [(0, 1, 2, 3)], em)
+    hidden = add_mesh(bpy, "hidden", QUAD, [(0, 1, 2, 3)])
+    hidden.hide_render = True
+    assert hot.name == "hot"
+    f = bridge.export_faceset()
+    names = [f.object_names[i] for i in f.face_object]
+    assert sorted(names) == ["emit", "hot", "lamp", "none"]
+    row = {n: i for i, n in enumerate(names)}
+    assert f.reflectance[row["none"]] == pytest.approx([0.8] * 3)
+    assert f.exitance[row["none"]] == pytest.approx([0, 0, 0])
+    assert f.reflectance[row["lamp"]] == pytest.approx([0.2, 0.3, 0.4])
+    assert f.exitance[row["lamp"]] == pytest.approx(math.pi * 4.0 * np.array([1, 0.5, 0.25]))
+    assert f.exitance[row["emit"]] == pytest.approx([2 * math.pi] * 3)
+    assert f.reflectance[row["emit"]] == pytest.approx([0, 0, 0])
+    assert f.reflectance[row["hot"]] == pytest.approx([bridge.MAX_REFLECTANCE, 0.5, 0.5])
+    assert any("clamped" in w for w in f.warnings)
+
+
+def test_targets_forbidden_and_no_lights(bpy_clean):
+    bpy = bpy_clean
+    bpy.context.scene["relight_target_scale"] = 2.0
+    ob = add_mesh(bpy, "two", [(0, 0, 0), (1, 0, 0), (2, 0, 0), (0, 1, 0), (1, 1, 0), (2, 1, 0)],
+                  [(0, 1, 4, 3), (1, 2, 5, 4)])
+    t = ob.data.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+    col = np.zeros((8, 4), dtype=np.float32)
+    col[0:4] = (0.1, 0.2, 0.3, 1.0)  # polygon 0 painted
+    col[4:8] = (0.9, 0.9, 0.9, 0.25)  # polygon 1: mean alpha < 0.5 -> not a target
+    t.data.foreach_set("color", col.ravel())
+    fb = ob.data.attributes.new("relight_forbidden", "BOOLEAN", "FACE")
+    fb.data.foreach_set("value", [False, True])
+    other = add_mesh(bpy, "other", QUAD, [(0, 1, 2, 3)])
+    other["relight_no_lights"] = True
+    f = bridge.export_faceset()
+    assert f.target.tolist() == [True, False, False]
+    assert f.target_radiosity[0] == pytest.approx(math.pi * 2.0 * np.array([0.1, 0.2, 0.3]), rel=1e-6)
+    assert f.forbidden.tolist() == [False, True, True]
+    assert bridge.face_flags(ob, "candidate").tolist() == [True, False]
+
+
+def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
+    bpy = bpy_clean
+    # two polygons sharing the edge 1-4: areas 1 and 2
+    ob = add_mesh(bpy, "two", [(0, 0, 0), (1, 0, 0), (3, 0, 0), (0, 1, 0), (1, 1, 0), (3, 1, 0)],
+                  [(0, 1, 4, 3), (1, 2, 5, 4)])
+    B = np.array([[math.pi, 0, 0], [4 * math.pi, 0, 0]])
+    bridge.write_radiosity([ob], {"two": B}, {"two": np.array([1.0, 2.0])})
+    me = ob.data
+    a = me.color_attributes["relight_radiosity"]
+    assert a.domain == "CORNER" and a.data_type == "FLOAT_COLOR"
+    assert me.color_attributes.active_color_name == "relight_radiosity"
+    col = np.zeros(len(me.loops) * 4, dtype=np.float32)
+    a.data.foreach_get("color", col)
+    col = col.reshape(-1, 4)
+    lv = [lp.vertex_index for lp in me.loops]
+    shared = (1 * 1 + 4 * 2) / 3  # radiance on the shared vertices 1 and 4
+    expect = {0: 1.0, 3: 1.0, 1: shared, 4: shared, 2: 4.0, 5: 4.0}
+    assert col[:, 0] == pytest.approx([expect[v] for v in lv], rel=1e-6)
+    assert np.all(col[:, 3] == 1.0)
