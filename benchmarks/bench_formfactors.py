@@ -1,9 +1,9 @@
 """Form-factor benchmark: accuracy per ray, speed vs raw embreex, threads, memory.
 
-Run:  .venv/bin/python benchmarks/bench_formfactors.py   (about 1-2 minutes on 2 cores)
+Run:  .venv/bin/python benchmarks/bench_formfactors.py   (about 2 minutes on 2 cores)
 
 1. Accuracy per ray: RMS relative error of F_12 against Howell's closed forms
-   over 6 configurations x 8 seeds, for the three samplers, with and without
+   over 6 configurations x 6 seeds, for the three samplers, with and without
    reciprocity symmetrisation, at 256 / 4096 / 65536 rays per patch.
 2. Speed: rays/s of compute_form_factors (all cores) divided by rays/s of raw
    embreex ``scene.run`` on the very same rays with the same thread pool.
@@ -37,7 +37,7 @@ CONFIGS = [
 ]
 
 
-def accuracy_table(seeds=8):
+def accuracy_table(seeds=6):
     scenes = [(name, mesh_patches(polygon_faceset(p), max_patch_size=1e3), ref) for name, p, ref in CONFIGS]
     rows = []
     for sampling in ("random", "stratified", "sobol"):
@@ -85,11 +85,15 @@ from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors, QUALITY
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
 ps = mesh_patches(polygon_faceset(cf.box_polygons()), max_patch_size=1.0 / 58)
+import tracemalloc
 base = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+tracemalloc.start()
 ff = compute_form_factors(ps, int(sys.argv[2]))
+traced = tracemalloc.get_traced_memory()[1]
+tracemalloc.stop()
 rs = ff.row_sums()
 print(ps.n_patches, ff.n_rays, ff.seconds, type(ff.matrix).__name__, ff.matrix.nnz,
-      base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, float(np.abs(rs - 1).max()))
+      base, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, float(np.abs(rs - 1).max()), traced)
 """
 
 
@@ -97,14 +101,15 @@ def memory(rays_per_patch=QUALITY["draft"]):
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     out = subprocess.run([sys.executable, "-c", CHILD, root, str(rays_per_patch)], check=True,
                          capture_output=True, text=True).stdout.split()
-    P, n, sec, kind, nnz, base, peak, rs = out
+    P, n, sec, kind, nnz, base, peak, rs, traced = out
     return dict(P=int(P), rays=int(n), seconds=float(sec), kind=kind, nnz=int(nnz),
-                base_mb=int(base) / 1024, peak_mb=int(peak) / 1024, rowsum_err=float(rs))
+                base_mb=int(base) / 1024, peak_mb=int(peak) / 1024, rowsum_err=float(rs),
+                traced_mb=int(traced) / 2**20)
 
 
 def main():
     t0 = time.perf_counter()
-    print("## Accuracy per ray (RMS / max relative error of F_12 vs closed forms, 6 configs x 8 seeds)")
+    print("## Accuracy per ray (RMS / max relative error of F_12 vs closed forms, 6 configs x 6 seeds)")
     print("| sampling | symmetrised | rays/patch | RMS rel. error | max rel. error |")
     print("|---|---|---|---|---|")
     for s, sym, n, rms, mx in accuracy_table():
@@ -121,6 +126,7 @@ def main():
     print("\n## Memory (closed box, sparse)")
     print(f"patches {m['P']}, rays {m['rays']}, {m['seconds']:.2f} s, {m['kind']} nnz {m['nnz']}, "
           f"peak RSS {m['peak_mb']:.0f} MB (before the form factors: {m['base_mb']:.0f} MB), "
+          f"peak numpy/Python allocations during compute_form_factors (tracemalloc) {m['traced_mb']:.0f} MB, "
           f"max |row sum - 1| = {m['rowsum_err']:.2e}")
     print(f"\nbenchmark wall time {time.perf_counter() - t0:.1f} s")
 
