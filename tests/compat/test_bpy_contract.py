@@ -15,9 +15,23 @@ bpy = pytest.importorskip("bpy", reason="these tests exercise Blender's bpy modu
 
 @pytest.fixture
 def empty_scene():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    yield bpy.context.scene
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    """The current scene, with everything this test creates removed afterwards and the
+    settings it changes restored (no factory reset: other tests share this bpy session)."""
+    scene = bpy.context.scene
+    before = {attr: set(getattr(bpy.data, attr)) for attr in ("objects", "meshes", "materials")}
+    saved = (scene.render.engine, [o for o in scene.objects if o.select_get()],
+             bpy.context.view_layer.objects.active)
+    for o in scene.objects:
+        o.select_set(False)
+    yield scene
+    for attr in ("objects", "meshes", "materials"):
+        collection = getattr(bpy.data, attr)
+        for block in set(collection) - before[attr]:
+            collection.remove(block)
+    scene.render.engine = saved[0]
+    for o in saved[1]:
+        o.select_set(True)
+    bpy.context.view_layer.objects.active = saved[2]
 
 
 def _plane(name="plane", size=2.0):
@@ -72,8 +86,8 @@ def test_cycles_emit_bake_is_emission_radiance(empty_scene):
     into a FLOAT_COLOR corner attribute: the convention Relight's bake comparison uses."""
     scene = empty_scene
     scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 1
+    samples, device = scene.cycles.samples, scene.cycles.device
+    scene.cycles.device, scene.cycles.samples = "CPU", 1
     obj = _plane()
     colour, strength = (0.8, 0.4, 0.2), 2.5
     mat, _ = _principled("emitter", emission=colour, strength=strength)
@@ -82,7 +96,10 @@ def test_cycles_emit_bake_is_emission_radiance(empty_scene):
     obj.data.color_attributes.active_color = obj.data.color_attributes["bake"]
     bpy.context.view_layer.objects.active = obj
     obj.select_set(True)
-    assert bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS") == {"FINISHED"}
+    try:
+        assert bpy.ops.object.bake(type="EMIT", target="VERTEX_COLORS") == {"FINISHED"}
+    finally:
+        scene.cycles.samples, scene.cycles.device = samples, device
     baked = np.empty(4 * len(obj.data.loops), dtype=np.float32)
     obj.data.color_attributes["bake"].data.foreach_get("color", baked)
     rgb = baked.reshape(-1, 4)[:, :3]
