@@ -20,6 +20,7 @@ import argparse
 import hashlib
 import importlib.util
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -115,8 +116,11 @@ def stage(manifest_path: Path, wheels: list[Path], staging_dir: Path = STAGING_D
     shutil.copytree(PACKAGE_DIR, staging_dir, ignore=IGNORE)
     shutil.copy2(manifest_path, staging_dir / "blender_manifest.toml")
     (staging_dir / "wheels").mkdir()
-    for w in wheels:
-        shutil.copy2(w, staging_dir / "wheels" / w.name)
+    for w in wheels:  # hard links: the wheels are large and read-only here
+        try:
+            os.link(w, staging_dir / "wheels" / w.name)
+        except OSError:
+            shutil.copy2(w, staging_dir / "wheels" / w.name)
     # The manifest's ./wheels/... paths must resolve inside the staged directory.
     for rel in read_manifest(staging_dir / "blender_manifest.toml").get("wheels", []):
         if not (staging_dir / rel).is_file():
