@@ -17,6 +17,7 @@ build is not redone (``--force`` rebuilds).
 from __future__ import annotations
 
 import argparse
+import fcntl
 import hashlib
 import importlib.util
 import json
@@ -141,6 +142,10 @@ def run_blender_ext(*args: str) -> str:
     return proc.stdout
 
 
+def _shown(path: Path) -> str:
+    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
+
+
 def platform_zip_name(manifest: dict, platform: str) -> str:
     """File name blender_ext.py gives a --split-platforms zip."""
     return f"{manifest['id']}-{manifest['version']}-{platform.replace('-', '_')}.zip"
@@ -151,7 +156,15 @@ def build_extension(output_dir: Path = OUTPUT_DIR, force: bool = False,
     """Build and validate one zip per platform; returns {blender platform: zip path}.
 
     Skips the build when the zips exist and the inputs are unchanged since the last build.
+    Concurrent builds into the same output directory wait for each other (file lock).
     """
+    output_dir.mkdir(parents=True, exist_ok=True)
+    with open(output_dir / ".relight-build.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return _build_locked(output_dir, force, manifest_path, staging_dir)
+
+
+def _build_locked(output_dir: Path, force: bool, manifest_path: Path, staging_dir: Path) -> dict[str, Path]:
     manifest = read_manifest(manifest_path)
     wheels = download_wheels(manifest)
     zips = {p: output_dir / platform_zip_name(manifest, p) for p in manifest["platforms"]}
@@ -159,7 +172,7 @@ def build_extension(output_dir: Path = OUTPUT_DIR, force: bool = False,
     fingerprint = input_fingerprint(manifest_path, wheels)
     if (not force and stamp.exists() and stamp.read_text() == fingerprint
             and all(z.exists() for z in zips.values())):
-        print("extension: up to date:", ", ".join(str(z.relative_to(ROOT)) for z in zips.values()))
+        print("extension: up to date:", ", ".join(_shown(z) for z in zips.values()))
         return zips
     staging = stage(manifest_path, wheels, staging_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
@@ -172,7 +185,7 @@ def build_extension(output_dir: Path = OUTPUT_DIR, force: bool = False,
         if not z.exists():
             raise BuildError(f"blender_ext.py build did not write {z} for {platform}")
         run_blender_ext("validate", str(z))
-        print("extension: built and validated", z.relative_to(ROOT) if z.is_relative_to(ROOT) else z)
+        print("extension: built and validated", _shown(z))
     stamp.write_text(fingerprint)
     return zips
 
