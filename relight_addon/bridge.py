@@ -90,7 +90,7 @@ def save_copy(path: str):
     """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
-    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=False)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=True)
 
 
 # ------------------------------------------------------------------ materials

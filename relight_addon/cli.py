@@ -62,6 +62,33 @@ def build_parser():
     r.add_argument("--threads", type=_positive_int, default=None, help="worker threads (default: all cores)")
     r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
     r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
+    from .engine import options as o
+
+    for name, helptext in (("solve", "inverse lighting: lights for the painted targets, then reduction"),
+                           ("reduce", "direct-lighting mode: reduce the scene's own emitters")):
+        s = sub.add_parser(name, help=helptext)
+        s.add_argument("scene", help="input .blend file (never modified)")
+        s.add_argument("--report", required=True, help="JSON report to write")
+        s.add_argument("--out", help="write a copy with the final lights as emissive materials, the "
+                                     "relight_radiosity layer and the whole curve")
+        s.add_argument("--rays-per-patch", type=_positive_int, default=None)
+        s.add_argument("--max-patch-size", type=_positive_length, default=None)
+        s.add_argument("--seed", type=int, default=0)
+        s.add_argument("--threads", type=_positive_int, default=None)
+        if name == "solve":
+            s.add_argument("--solver", choices=o.SOLVERS, default=o.DEFAULT_SOLVER)
+            s.add_argument("--target-scale", type=float, default=None,
+                           help="multiplies the painted target colours (default: the scene's)")
+        s.add_argument("--selection", choices=o.SELECTIONS, default=o.DEFAULT_SELECTION)
+        s.add_argument("--distribution", choices=o.DISTRIBUTIONS, default=o.DEFAULT_DISTRIBUTION)
+        s.add_argument("--max-lights", type=_positive_int, default=o.DEFAULT_MAX_LIGHTS,
+                       help=f"stop criterion: at most this many lights (default {o.DEFAULT_MAX_LIGHTS})")
+        s.add_argument("--error-threshold", type=float, default=None,
+                       help="stop criterion: relative error (Eq. 1 / ||b_P||) at most this")
+        s.add_argument("--allow-negative", action="store_true",
+                       help="do not require the final configuration to be free of negative exitances")
+        s.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
+        s.add_argument("--render-samples", type=_positive_int, default=16)
     return p
 
 
@@ -118,6 +145,49 @@ def run_radiosity_command(args, progress=None, cancel=None):
     return report
 
 
+def run_solve_command(args, progress=None, cancel=None):
+    from . import bridge, jobs, results
+    from .engine.options import JobOptions
+
+    t0 = time.perf_counter()
+    scene_path = os.path.abspath(args.scene)
+    for name in ("out", "report", "render"):
+        path = getattr(args, name)
+        if path is not None and os.path.abspath(path) == scene_path:
+            raise UsageError(f"--{name} must not be the input file {args.scene}")
+    if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
+        raise UsageError("--error-threshold must be a non-negative number")
+    bridge.open_blend(args.scene)
+    exp = bridge.export_scene(target_scale=getattr(args, "target_scale", None))
+    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
+                         threads=args.threads, solver=getattr(args, "solver", "reduced"),
+                         selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
+                         error_threshold=args.error_threshold, require_positive=not args.allow_negative)
+    outcome = jobs.run_solve(exp.faces, options, polygon_counts=exp.polygon_counts,
+                             default_max_patch_size=exp.settings.get("max_patch_size"), progress=progress,
+                             cancel=cancel, mode="inverse" if args.command == "solve" else "direct")
+    report = outcome.report
+    t1 = time.perf_counter()
+    if args.out or args.render:
+        import bpy
+
+        results.store_result(bpy.context.scene, outcome)
+        results.apply_stored_point(bpy.context.scene, outcome.final_index)
+    if args.out:
+        bridge.save_copy(args.out)
+    timings = report["timings_s"]
+    timings["export"] = exp.seconds
+    timings["apply"] = time.perf_counter() - t1
+    if args.render:
+        t2 = time.perf_counter()
+        bridge.render_radiosity(args.render, samples=args.render_samples)
+        timings["render"] = time.perf_counter() - t2
+    timings["total"] = time.perf_counter() - t0
+    report["input"] = scene_path
+    _write_json(args.report, report)
+    return report
+
+
 def main(argv=None) -> int:
     """Run the CLI on ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
     from .engine.formfactors import Cancelled
@@ -131,6 +201,16 @@ def main(argv=None) -> int:
             s = report["scene"]
             print(f"{PROG}: radiosity of {s['objects']} objects, {s['faces']} faces, {s['patches']} patches "
                   f"in {report['timings_s']['total']:.2f} s; report {args.report}")
+            for w in report["warnings"]:
+                print(f"{PROG}: warning: {w}")
+        elif args.command in ("solve", "reduce"):
+            report = run_solve_command(args)
+            inv, fin = report["inverse"], report["final"]
+            print(f"{PROG}: {args.command}: {inv['n_targets']} target patches, {inv['n_candidates']} candidates; "
+                  f"e_x relative error {inv['relative_error']:.3g} with {inv['n_negative']} negative(s); "
+                  f"final {fin['n_lights']} light(s), relative error {fin['relative_error']:.3g}, "
+                  f"{fin['n_negative']} negative(s); {len(report['curve'])} configurations; "
+                  f"{report['timings_s']['total']:.2f} s; report {args.report}")
             for w in report["warnings"]:
                 print(f"{PROG}: warning: {w}")
         return 0

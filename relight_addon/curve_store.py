@@ -7,7 +7,11 @@ scene's custom property ``relight_result``:
 
 - ``objects``: object names; ``light_object``/``light_face``: the candidate faces
   (object index, polygon index), ``light_area`` (m^2);
-- ``n_lights``, ``error``, ``relative_error``, ``n_negative`` per curve point;
+- ``curve_n_lights``, ``curve_error``, ``curve_relative_error``, ``curve_n_negative``: the
+  whole curve (for the chart);
+- the configurations kept re-appliable (``point_index`` into the whole curve: every one up
+  to 32 lights and ~40 log-spaced ones above, e_x and the final one), each with
+  ``n_lights``, ``error``, ``relative_error``, ``n_negative``;
 - ``exitance``: (points, candidate faces, 3) W/m^2 (float32; zero where dark);
 - ``radiosity_object``/``radiosity_face`` and ``radiosity``: (points, faces, 3) W/m^2,
   stored as float16 (3 significant digits: plenty for display, and it halves the

@@ -149,3 +149,254 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     }
     result = RadiosityResult(patches, B, B_face, poly, areas, F)
     return _json_safe(report), result
+
+
+# ---------------------------------------------------------------------------- inverse lighting
+from .engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse  # noqa: E402
+from .engine.reduction import reduce_lights  # noqa: E402
+
+#: configurations kept re-appliable in the .blend: every one up to this many lights, and
+#: about STORE_LOG_POINTS log-spaced ones above (plus e_x and the final one); the chart and
+#: the report keep the whole curve
+STORE_ALL_UP_TO = 32
+STORE_LOG_POINTS = 40
+
+BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed background light; "
+                   "the solve lights what they leave to the targets")
+
+
+@dataclass
+class SolveOutcome:
+    """Everything a solve produced: the JSON report, the curve for the UI and what to store."""
+
+    report: dict
+    curve: list  # rows kept re-appliable: [{"n_lights", "error", "relative_error", "n_negative", "curve_index"}]
+    final_index: int  # row of the final configuration in ``curve``
+    warnings: list
+    stored: dict  # curve_store.pack_curve input: every configuration, re-appliable
+    faces: FaceSet
+    patches: PatchSet
+    problem: object
+    inverse: object
+    reduction: object
+
+
+def check_solvable(faces: FaceSet, mode: str = "inverse"):
+    """Fail early, before any work, on problems the user can fix."""
+    if mode == "inverse":
+        if not np.any(faces.target):
+            raise SceneError("no target: paint a radiosity on at least one face (relight_target, alpha >= 0.5)")
+        if np.all(faces.forbidden):
+            raise SceneError("no candidate light: every face is forbidden")
+    elif not np.any(faces.exitance > 0):
+        raise SceneError("the scene has no emitter to reduce (no material with emission)")
+
+
+def _stage(progress, name, lo, hi):
+    if progress is None:
+        return None
+    return lambda f: progress(name, lo + (hi - lo) * float(f))
+
+
+def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
+              default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse"):
+    """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``.
+
+    inverse: targets are the painted faces; candidates every face not forbidden and not
+    already emitting; the scene's own emitters are fixed background light (subtracted
+    from the targets). The inverse system is solved (``options.solver``), then reduced
+    (``options.selection`` x ``options.distribution``) over the whole curve; the stop
+    criteria pick the final configuration.
+    direct ("reduce"): the candidates are the scene's emitters and every other patch is a
+    target at the radiosity they give it (the paper's direct-lighting mode).
+    ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
+    returning True raises Cancelled. Returns a SolveOutcome.
+    """
+    options = (options or JobOptions()).validate()
+    check_solvable(faces, mode)
+    t0 = time.perf_counter()
+    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+    patches = mesh_patches(faces, size)
+    t_mesh = time.perf_counter() - t0
+    warnings = list(faces.warnings)
+    kw = {} if options.rays_per_patch is None else {"rays_per_patch": int(options.rays_per_patch)}
+    F = compute_form_factors(patches, seed=options.seed, threads=options.threads,
+                             progress=_stage(progress, "form factors", 0.0, 0.7), cancel=cancel, **kw)
+    if cancel is not None and cancel():
+        raise Cancelled("solve cancelled")
+    t1 = time.perf_counter()
+    background = np.zeros_like(patches.exitance)
+    if mode == "inverse":
+        emitting = np.any(patches.exitance > 0, axis=1)
+        problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                                 patches.candidate & ~emitting, patches.center, patches.normal)
+        if emitting.any():
+            background = patches.exitance.copy()
+            B0 = problem.forward_radiosity(background)
+            problem.b_target = problem.b_target - B0[problem.targets]
+            warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
+        inv = solve_inverse(problem, options.solver)
+        e_x = inv.exitance
+    else:
+        problem, e_x = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
+                                               patches.center, patches.normal)
+        inv = None
+    t_inverse = time.perf_counter() - t1
+    if progress is not None:
+        progress("inverse", 0.8)
+    if cancel is not None and cancel():
+        raise Cancelled("solve cancelled")
+    t2 = time.perf_counter()
+    red = reduce_lights(problem, e_x, selection=options.selection, distribution=options.distribution,
+                        max_lights=options.max_lights, relative_error_threshold=options.error_threshold,
+                        require_positive=options.require_positive,
+                        progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
+                        if progress is not None else None, cancel=cancel)
+    if red.cancelled:
+        raise Cancelled("solve cancelled")
+    t_reduce = time.perf_counter() - t2
+    warnings.extend(w for w in problem.warnings + (inv.warnings if inv else []) + red.warnings
+                    if w not in warnings)
+
+    # every configuration of the curve, per base-mesh polygon (area-weighted means of the
+    # patches: power-conserving), and the radiosity each gives: B = B_background + A^-1 e,
+    # one LU solve for all the points at once
+    t3 = time.perf_counter()
+    C = problem.candidates
+    keep = stored_points([p.n_lights for p in red.curve], red.final_index)
+    n_pts = len(keep)
+    P = patches.n_patches
+    E = np.zeros((n_pts, len(C), 3))
+    for k, ci in enumerate(keep):
+        pt = red.curve[ci]
+        E[k, pt.lights] = pt.exitance
+    E_patch = np.zeros((P, n_pts, 3))
+    E_patch[C] = E.transpose(1, 0, 2)
+    facs = problem.factors()
+    Bg = problem.forward_radiosity(background) if np.any(background) else np.zeros((P, 3))
+    B_patch = np.empty((P, n_pts, 3))
+    for c in range(3):
+        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + Bg[:, c:c + 1]
+    if not np.all(np.isfinite(B_patch)):
+        raise SceneError("the solve produced NaN or infinite values")
+    is_cand = np.zeros(P)
+    is_cand[C] = 1.0
+    face_cols = face_mean(patches, np.concatenate([
+        E_patch.reshape(P, -1), B_patch.reshape(P, -1), is_cand[:, None],
+        patches.center * is_cand[:, None], patches.normal * is_cand[:, None]], axis=1))
+    poly, poly_area = per_polygon(faces, face_cols, polygon_counts)
+    w = n_pts * 3
+    light_obj, light_poly, light_area, light_E, light_c, light_n = [], [], [], [], [], []
+    rad_obj, rad_poly, rad_B = [], [], []
+    for oi, name in enumerate(faces.object_names):
+        v = poly[name]
+        npoly = len(v)
+        rad_obj.append(np.full(npoly, oi))
+        rad_poly.append(np.arange(npoly))
+        rad_B.append(v[:, w:2 * w].reshape(npoly, n_pts, 3))
+        cand = np.flatnonzero(v[:, 2 * w] > 0.5)
+        light_obj.append(np.full(len(cand), oi))
+        light_poly.append(cand)
+        light_area.append(poly_area[name][cand])
+        light_E.append(v[cand, :w].reshape(len(cand), n_pts, 3))
+        light_c.append(v[cand, 2 * w + 1:2 * w + 4])
+        light_n.append(v[cand, 2 * w + 4:2 * w + 7])
+    light_obj, light_poly, light_area = map(np.concatenate, (light_obj, light_poly, light_area))
+    light_E = np.concatenate(light_E).transpose(1, 0, 2)  # (points, light polygons, 3)
+    light_c = np.concatenate(light_c)
+    light_n = np.concatenate(light_n)
+    light_n /= np.maximum(np.linalg.norm(light_n, axis=1), 1e-30)[:, None]
+    rad_obj, rad_poly = np.concatenate(rad_obj), np.concatenate(rad_poly)
+    rad_B = np.concatenate(rad_B).transpose(1, 0, 2)  # (points, polygons, 3)
+    t_curve = time.perf_counter() - t3
+
+    fi = int(np.searchsorted(keep, red.final_index))  # row of the final point among the kept ones
+    final = red.curve[red.final_index]
+    lit = np.flatnonzero(np.any(light_E[fi] != 0, axis=1))
+    lights = [{"object": faces.object_names[light_obj[j]], "face": int(light_poly[j]),
+               "exitance": light_E[fi, j], "area": float(light_area[j]), "center": light_c[j]} for j in lit]
+    bg_face = face_mean(patches, background)
+    bg_poly, _ = per_polygon(faces, bg_face, polygon_counts)
+    tgt_face = np.where(faces.target[:, None], faces.target_radiosity, np.nan)
+    poly_t, _ = per_polygon(faces, tgt_face, polygon_counts)
+    objects = {}
+    for oi, name in enumerate(faces.object_names):
+        e_poly = bg_poly[name].copy()
+        sel = light_obj == oi
+        e_poly[light_poly[sel]] += light_E[fi][sel]
+        objects[name] = {"radiosity": poly[name][:, w:2 * w].reshape(-1, n_pts, 3)[:, fi],
+                         "target": _nan_to_none(poly_t[name]), "exitance": e_poly}
+    n_targets_faces = int(np.sum(faces.target)) if mode == "inverse" else None
+    rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
+             "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
+             "curve_index": int(i)} for i in keep]
+    curve = [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
+              "n_negative": p.n_negative} for p in red.curve]
+    n_targets_faces = int(np.sum(faces.target)) if mode == "inverse" else None
+    report = {
+        "command": "solve" if mode == "inverse" else "reduce",
+        "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "length": "m"},
+        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(patches.n_patches)},
+        "timings_s": {"export": 0.0, "meshing": t_mesh, "form_factors": F.seconds, "inverse": t_inverse,
+                      "reduction": t_reduce, "curve": t_curve, "solve": t_inverse + t_reduce, "apply": 0.0,
+                      "total": time.perf_counter() - t0},
+        "options": {**options.to_dict(), "rays_per_patch": int(F.rays_per_patch),
+                    "max_patch_size": float(patches.max_patch_size)},
+        "inverse": {
+            "solver": inv.solver if inv else "direct-lighting",
+            "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
+            "n_candidates": int(len(C)),
+            "rank": inv.rank if inv else None,
+            "rcond": inv.rcond if inv else None,
+            "error": inv.error if inv else 0.0,
+            "relative_error": inv.relative_error if inv else 0.0,
+            "n_negative": inv.n_negative if inv else 0,
+            "seconds": inv.seconds if inv else 0.0,
+            "condition_estimate": float(problem.condition),
+            "target_norm": problem.target_norm,
+        },
+        "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
+                      "final_index": red.final_index},
+        "curve": curve,
+        "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
+                  "n_negative": final.n_negative, "lights": lights},
+        "objects": objects,
+        "warnings": warnings,
+    }
+    stored = {
+        "objects": list(faces.object_names),
+        "light_object": light_obj, "light_face": light_poly, "light_area": light_area,
+        "light_center": light_c, "light_normal": light_n,
+        "curve_n_lights": np.array([p.n_lights for p in red.curve]),
+        "curve_error": np.array([p.error for p in red.curve]),
+        "curve_relative_error": np.array([p.relative_error for p in red.curve]),
+        "curve_n_negative": np.array([p.n_negative for p in red.curve]),
+        "point_index": keep,
+        "n_lights": np.array([red.curve[i].n_lights for i in keep]),
+        "error": np.array([red.curve[i].error for i in keep]),
+        "relative_error": np.array([red.curve[i].relative_error for i in keep]),
+        "n_negative": np.array([red.curve[i].n_negative for i in keep]),
+        "exitance": light_E,
+        "radiosity_object": rad_obj, "radiosity_face": rad_poly, "radiosity": rad_B,
+        "final": np.array(fi),
+        "target_norm": np.array(problem.target_norm),
+        "meta": {"command": report["command"], "options": _json_safe(report["options"])},
+    }
+    return SolveOutcome(_json_safe(report), rows, fi, warnings, stored, faces, patches, problem, inv, red)
+
+
+def stored_points(n_lights, final_index):
+    """Indices of the curve points kept re-appliable (see STORE_ALL_UP_TO), ascending."""
+    n = np.asarray(n_lights)
+    keep = n <= STORE_ALL_UP_TO
+    if len(n) and n.max() > STORE_ALL_UP_TO:
+        wanted = np.unique(np.rint(np.geomspace(STORE_ALL_UP_TO + 1, n.max(), STORE_LOG_POINTS)))
+        for w in wanted:  # the point closest to each wanted count
+            keep[int(np.argmin(np.abs(n - w)))] = True
+    keep[0] = True  # e_x (or the first configuration)
+    keep[final_index] = True
+    return np.flatnonzero(keep)
+
+
+def _nan_to_none(rows):
+    return [None if np.isnan(r).any() else r for r in np.asarray(rows)]

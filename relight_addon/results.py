@@ -55,6 +55,16 @@ def _emissive_variant(source):
     mat["relight_source"] = source.name if source is not None else ""
     _use_nodes(mat)
     nt = mat.node_tree
+    for node in nt.nodes:  # the copy's own emission is replaced by Relight's
+        if node.type == "BSDF_PRINCIPLED" and "Emission Strength" in node.inputs:
+            sock = node.inputs["Emission Strength"]
+            for link in list(sock.links):
+                nt.links.remove(link)
+            sock.default_value = 0.0
+        elif node.type == "EMISSION":
+            for link in list(node.inputs["Strength"].links):
+                nt.links.remove(link)
+            node.inputs["Strength"].default_value = 0.0
     out = next((n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output), None)
     if out is None:
         out = next((n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"), None)
@@ -174,31 +184,6 @@ RADIOSITY_ATTRIBUTE = "relight_radiosity"
 ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
 
 
-def smooth_corner_colors(mesh, face_values) -> np.ndarray:
-    """Corner colours (L, 4) from per-face values (F, 3): each vertex takes the area-weighted
-    mean of the faces around it, so the layer is smooth across shared vertices."""
-    n_poly = len(mesh.polygons)
-    n_vert = len(mesh.vertices)
-    n_loop = len(mesh.loops)
-    face_values = np.asarray(face_values, dtype=np.float64).reshape(n_poly, 3)
-    area = np.empty(n_poly)
-    mesh.polygons.foreach_get("area", area)
-    loop_total = np.empty(n_poly, dtype=np.int64)
-    mesh.polygons.foreach_get("loop_total", loop_total)
-    loop_vert = np.empty(n_loop, dtype=np.int64)
-    mesh.loops.foreach_get("vertex_index", loop_vert)
-    loop_face = np.repeat(np.arange(n_poly), loop_total)
-    w = area[loop_face]
-    acc = np.zeros((n_vert, 3))
-    for k in range(3):
-        acc[:, k] = np.bincount(loop_vert, weights=w * face_values[loop_face, k], minlength=n_vert)
-    wsum = np.bincount(loop_vert, weights=w, minlength=n_vert)
-    vert = acc / np.where(wsum > 0, wsum, 1.0)[:, None]
-    out = np.ones((n_loop, 4), dtype=np.float32)
-    out[:, :3] = vert[loop_vert]
-    return out
-
-
 def write_radiosity_layer(obj, face_radiosity) -> None:
     """Write per-face radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
     holding radiance B/pi (comparable with a Cycles COMBINED bake), and make it the active
@@ -207,7 +192,12 @@ def write_radiosity_layer(obj, face_radiosity) -> None:
     face_radiosity = np.asarray(face_radiosity, dtype=np.float64)
     if not np.all(np.isfinite(face_radiosity)):
         raise ValueError(f"{obj.name}: refusing to write non-finite radiosity")
-    colors = smooth_corner_colors(mesh, face_radiosity / np.pi)
+    from .bridge import _vertex_smoothed_corners
+
+    area = np.empty(len(mesh.polygons))
+    mesh.polygons.foreach_get("area", area)
+    colors = np.ones((len(mesh.loops), 4), dtype=np.float32)
+    colors[:, :3] = _vertex_smoothed_corners(mesh, face_radiosity / np.pi, area)
     attr = mesh.color_attributes.get(RADIOSITY_ATTRIBUTE)
     if attr is None:
         if ORIGINAL_ACTIVE_COLOR_PROP not in mesh.keys():
@@ -279,8 +269,10 @@ def apply_stored_point(scene, index) -> dict:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     names = data["objects"]
     exitance = data["exitance"][index]
-    lit = np.any(exitance != 0, axis=1)
     negative = np.any(exitance < 0, axis=1)
+    # inverse mode: only the lit faces change; direct-lighting mode ("reduce"): every original
+    # emitter is managed, so that suppressed ones stop emitting
+    lit = np.any(exitance != 0, axis=1) | (data["meta"].get("command") == "reduce")
     shown = 0
     for oi, name in enumerate(names):
         obj = scene.objects.get(name)
@@ -290,7 +282,9 @@ def apply_stored_point(scene, index) -> dict:
         faces = data["light_face"][sel]
         if len(faces) and faces.max() >= len(obj.data.polygons):
             raise ValueError(f"{name} has changed since the solve: solve again")
-        shown += apply_configuration(obj, faces, exitance[sel] / np.pi)
+        rad = exitance[sel] / np.pi
+        apply_configuration(obj, faces, rad)
+        shown += int(np.sum(np.any(rad > 0, axis=1)))
         rsel = data["radiosity_object"] == oi
         if np.any(rsel):
             face_b = np.zeros((len(obj.data.polygons), 3))
@@ -367,10 +361,12 @@ def update_chart(scene) -> None:
     from .curve_store import error_chart
 
     settings = scene.relight
-    if len(settings.curve) == 0:
+    if len(settings.curve) == 0 or RESULT_PROP not in scene.keys():
         return
-    pixels = error_chart([p.n_lights for p in settings.curve], [p.relative_error for p in settings.curve],
-                         [p.n_negative for p in settings.curve], current=settings.curve_index)
+    data = load_result(scene)
+    current = int(data["point_index"][settings.curve_index]) if settings.curve_index < len(data["point_index"]) else None
+    pixels = error_chart(data["curve_n_lights"], data["curve_relative_error"], data["curve_n_negative"],
+                         current=current)
     h, w = pixels.shape[:2]
     img = bpy.data.images.get(CHART_IMAGE)
     if img is None or tuple(img.size) != (w, h):

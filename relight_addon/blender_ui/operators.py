@@ -188,6 +188,7 @@ def store_outcome(context, outcome):
         item.error = p["error"]
         item.relative_error = p["relative_error"]
         item.n_negative = p["n_negative"]
+        item.curve_index = p["curve_index"]
     set_curve_index(settings, outcome.final_index)
     results.apply_stored_point(context.scene, outcome.final_index)
     results.update_chart(context.scene)

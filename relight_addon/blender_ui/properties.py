@@ -36,6 +36,7 @@ class RELIGHT_CurvePoint(bpy.types.PropertyGroup):
     error: FloatProperty(name="Error", description="Eq. 1 error, W/m^2")
     relative_error: FloatProperty(name="Relative error", subtype="FACTOR")
     n_negative: IntProperty(name="Negatives")
+    curve_index: IntProperty(name="Curve Index", description="Position of this configuration on the whole curve")
 
 
 class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
