@@ -6,7 +6,8 @@ creation needs PyPI and takes about a minute, later runs reuse it) and a pytest 
 whose result must be a pass.
 
 - bpy 4.2 LTS (bpy 4.2.23, Python 3.11, numpy 1.26.4 as Blender 4.2 ships): tests/compat/
-  (the bpy API the add-on relies on) + tests/test_extension_install.py (build with 4.2's own
+  (the bpy API the add-on relies on; the CLI chain on a scene written by that Blender)
+  + tests/test_extension_install.py (build with 4.2's own
   extension tool, install, enable, load the bundled wheels, uninstall).
 - Python 3.13 + numpy 2.x + the bundled scipy/embreex: the pure engine tests
   (tests/test_engine_*.py), the closest available check of the Blender 5.1+ side.
