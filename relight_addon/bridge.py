@@ -201,9 +201,15 @@ def _base_attributes(ob, target_scale):
     attr = me.attributes.get(FORBIDDEN_ATTRIBUTE)
     if attr is not None and attr.domain == "FACE" and attr.data_type == "BOOLEAN":
         forbidden = _get(attr.data, "value", n, bool)
-    if bool(ob.get(NO_LIGHTS_PROP, False)):
+    if no_lights(ob):
         forbidden[:] = True
     return target, target_b, forbidden
+
+
+def no_lights(ob) -> bool:
+    """The object's "no lights on this object" switch: the add-on's property, or a custom
+    property of the same name (files prepared without the add-on)."""
+    return bool(getattr(ob, NO_LIGHTS_PROP, False) or ob.get(NO_LIGHTS_PROP, False))
 
 
 def _evaluated_mesh(ob, context):
@@ -311,7 +317,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         safe = np.where(ok, idx, 0)
         tgt.append(target[safe] & ok)
         tgt_b.append(np.where(ok[:, None], target_b[safe], 0.0))
-        forb.append(np.where(ok, forbidden[safe], bool(ob.get(NO_LIGHTS_PROP, False))))
+        forb.append(np.where(ok, forbidden[safe], no_lights(ob)))
         f_obj.append(np.full(npoly, oi))
         f_idx.append(idx)
         nf += npoly
@@ -347,6 +353,11 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings=warnings,
     )
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0)
+
+
+def job_inputs(exp: ExportedScene) -> dict:
+    """Keyword arguments of jobs.run_radiosity / jobs.run_solve that come from the scene."""
+    return {"polygon_counts": exp.polygon_counts, "default_max_patch_size": exp.settings.get("max_patch_size")}
 
 
 def export_faceset(context=None, target_scale=None) -> FaceSet:

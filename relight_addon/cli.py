@@ -163,16 +163,14 @@ def run_solve_command(args, progress=None, cancel=None):
                          threads=args.threads, solver=getattr(args, "solver", "reduced"),
                          selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
                          error_threshold=args.error_threshold, require_positive=not args.allow_negative)
-    outcome = jobs.run_solve(exp.faces, options, polygon_counts=exp.polygon_counts,
-                             default_max_patch_size=exp.settings.get("max_patch_size"), progress=progress,
-                             cancel=cancel, mode="inverse" if args.command == "solve" else "direct")
+    outcome = jobs.run_solve(exp.faces, options, progress=progress, cancel=cancel,
+                             mode="inverse" if args.command == "solve" else "direct", **bridge.job_inputs(exp))
     report = outcome.report
     t1 = time.perf_counter()
     if args.out or args.render:
         import bpy
 
-        results.store_result(bpy.context.scene, outcome)
-        results.apply_stored_point(bpy.context.scene, outcome.final_index)
+        results.show_outcome(bpy.context.scene, outcome)
     if args.out:
         bridge.save_copy(args.out)
     timings = report["timings_s"]

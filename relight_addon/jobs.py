@@ -378,7 +378,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         "n_negative": np.array([red.curve[i].n_negative for i in keep]),
         "exitance": light_E,
         "radiosity_object": rad_obj, "radiosity_face": rad_poly, "radiosity": rad_B,
-        "final": np.array(fi),
+        "final": np.array(red.final_index),
         "target_norm": np.array(problem.target_norm),
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},
     }

@@ -127,12 +127,13 @@ def clear_configuration(obj) -> bool:
     return True
 
 
-def apply_configuration(obj, polygon_index, radiance) -> int:
+def apply_configuration(obj, polygon_index, radiance, variants=None) -> int:
     """Make polygons ``polygon_index`` of ``obj`` emit ``radiance`` (k, 3) = exitance/pi.
 
     Any configuration already applied to ``obj`` is cleared first. Returns the number
     of emitting faces. Radiance must be finite and >= 0 (negative exitances cannot be
-    shown by a material; the caller decides what to do with them).
+    shown by a material; the caller decides what to do with them). ``variants``: a dict
+    shared between calls so that objects with the same material share one emissive variant.
     """
     clear_configuration(obj)
     polygon_index = np.asarray(polygon_index, dtype=np.int64).reshape(-1)
@@ -170,7 +171,13 @@ def apply_configuration(obj, polygon_index, radiance) -> int:
         src_slot = int(orig[p]) if n_slots else -1
         if src_slot not in slot_of_source:
             src = mesh.materials[src_slot] if 0 <= src_slot < n_slots else None
-            mesh.materials.append(_emissive_variant(src))
+            key = src.name if src is not None else None
+            variant = (variants or {}).get(key)
+            if variant is None or variant.name not in bpy.data.materials:
+                variant = _emissive_variant(src)
+                if variants is not None:
+                    variants[key] = variant
+            mesh.materials.append(variant)
             slot_of_source[src_slot] = len(mesh.materials) - 1
         new_index[p] = slot_of_source[src_slot]
     mesh.polygons.foreach_set("material_index", new_index)
@@ -246,6 +253,13 @@ def store_result(scene, outcome) -> None:
     _cache.clear()
 
 
+def show_outcome(scene, outcome) -> None:
+    """Replace any previous result by this solve's: store its curve, show its final configuration."""
+    clear_results(scene)
+    store_result(scene, outcome)
+    apply_stored_point(scene, outcome.final_index)
+
+
 def load_result(scene) -> dict:
     from .curve_store import unpack_curve
 
@@ -274,6 +288,7 @@ def apply_stored_point(scene, index) -> dict:
     # emitter is managed, so that suppressed ones stop emitting
     lit = np.any(exitance != 0, axis=1) | (data["meta"].get("command") == "reduce")
     shown = 0
+    variants = {}
     for oi, name in enumerate(names):
         obj = scene.objects.get(name)
         if obj is None or obj.type != "MESH":
@@ -283,7 +298,7 @@ def apply_stored_point(scene, index) -> dict:
         if len(faces) and faces.max() >= len(obj.data.polygons):
             raise ValueError(f"{name} has changed since the solve: solve again")
         rad = exitance[sel] / np.pi
-        apply_configuration(obj, faces, rad)
+        apply_configuration(obj, faces, rad, variants)
         shown += int(np.sum(np.any(rad > 0, axis=1)))
         rsel = data["radiosity_object"] == oi
         if np.any(rsel):

@@ -1,6 +1,7 @@
 """Blender layer of Relight (bpy). Thin: operators and panels call relight_addon.jobs.
 
-For now this registers the add-on preferences only; the UI module extends it.
+Registers the preferences, the scene/object properties, the operators and the sidebar
+panels (whose tab name comes from the preferences).
 The add-on's own package is the parent of this one (``bl_ext.<repo>.relight`` when
 installed as an extension, ``relight_addon`` when used from the repository); it is
 found through ``__package__``, never hard-coded.
@@ -18,6 +19,7 @@ class RelightPreferences(bpy.types.AddonPreferences):
         name="Sidebar Tab Name",
         description="Name of the 3D Viewport sidebar tab that shows the Relight panels",
         default="Relight",
+        update=lambda self, context: self._retab(context),
     )
     threads: bpy.props.IntProperty(
         name="Threads",
@@ -26,6 +28,12 @@ class RelightPreferences(bpy.types.AddonPreferences):
         min=0,
         soft_max=256,
     )
+
+    def _retab(self, context):
+        from . import panels
+
+        panels.unregister()
+        panels.register(self.sidebar_tab or "Relight")
 
     def draw(self, context):
         layout = self.layout
@@ -44,10 +52,36 @@ _classes = (RelightPreferences,)
 
 
 def register():
+    from . import operators, panels, properties
+
     for cls in _classes:
         bpy.utils.register_class(cls)
+    properties.register()
+    operators.register()
+    prefs = preferences()
+    panels.register(prefs.sidebar_tab if prefs is not None and prefs.sidebar_tab else "Relight")
+    bpy.app.handlers.load_post.append(_sync_curve_on_load)
 
 
 def unregister():
+    from . import operators, panels, properties
+
+    if _sync_curve_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_sync_curve_on_load)
+    panels.unregister()
+    operators.unregister()
+    properties.unregister()
     for cls in reversed(_classes):
         bpy.utils.unregister_class(cls)
+
+
+@bpy.app.handlers.persistent
+def _sync_curve_on_load(*_args):
+    """A file saved by the CLI carries the curve but not the UI list: fill it in."""
+    from . import operators
+
+    for scene in bpy.data.scenes:
+        try:
+            operators.sync_curve_list(scene)
+        except (KeyError, ValueError) as exc:
+            print(f"Relight: cannot read the stored result of scene {scene.name!r}: {exc}")

@@ -177,20 +177,35 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
 
 # --- solve ----------------------------------------------------------------------------
 
+def _fill_curve_list(settings, rows, current):
+    settings.curve.clear()
+    for p in rows:
+        item = settings.curve.add()
+        item.n_lights = int(p["n_lights"])
+        item.error = float(p["error"])
+        item.relative_error = float(p["relative_error"])
+        item.n_negative = int(p["n_negative"])
+        item.curve_index = int(p["curve_index"])
+    set_curve_index(settings, current)
+
+
+def sync_curve_list(scene):
+    """Fill the UI list from the stored result when it is missing (files written by the CLI)."""
+    if results.RESULT_PROP not in scene.keys() or len(scene.relight.curve):
+        return
+    data = results.load_result(scene)
+    rows = [{"n_lights": data["n_lights"][k], "error": data["error"][k],
+             "relative_error": data["relative_error"][k], "n_negative": data["n_negative"][k],
+             "curve_index": data["point_index"][k]} for k in range(len(data["n_lights"]))]
+    final = int(np.searchsorted(data["point_index"], int(data["final"])))
+    _fill_curve_list(scene.relight, rows, final)
+    results.update_chart(scene)
+
+
 def store_outcome(context, outcome):
     """Keep the curve in the scene and show the final configuration (main thread)."""
-    settings = context.scene.relight
-    results.store_result(context.scene, outcome)
-    settings.curve.clear()
-    for p in outcome.curve:
-        item = settings.curve.add()
-        item.n_lights = p["n_lights"]
-        item.error = p["error"]
-        item.relative_error = p["relative_error"]
-        item.n_negative = p["n_negative"]
-        item.curve_index = p["curve_index"]
-    set_curve_index(settings, outcome.final_index)
-    results.apply_stored_point(context.scene, outcome.final_index)
+    results.show_outcome(context.scene, outcome)
+    _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
     results.update_chart(context.scene)
 
 
@@ -231,14 +246,14 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         settings = context.scene.relight
         options = job_options(settings)
-        faces = bridge.export_faceset(context.evaluated_depsgraph_get(), target_scale=settings.target_scale)
-        jobs.check_solvable(faces)
-        return faces, options
+        exp = bridge.export_scene(context, target_scale=settings.target_scale)
+        jobs.check_solvable(exp.faces)
+        return exp, options
 
     def execute(self, context):
         try:
-            faces, options = self._export(context)
-            outcome = jobs.run_solve(faces, options)
+            exp, options = self._export(context)
+            outcome = jobs.run_solve(exp.faces, options, **bridge.job_inputs(exp))
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -257,7 +272,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         if bpy.app.background:
             return self.execute(context)
         try:
-            faces, options = self._export(context)
+            exp, options = self._export(context)
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -268,7 +283,8 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         def work():
             try:
                 self._result["outcome"] = jobs.run_solve(
-                    faces, options, progress=self._set_progress, cancel=self._cancel.is_set)
+                    exp.faces, options, progress=self._set_progress, cancel=self._cancel.is_set,
+                    **bridge.job_inputs(exp))
             except BaseException as exc:  # reported on the main thread
                 self._result["error"] = exc
 
@@ -280,10 +296,10 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         wm.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
-    def _set_progress(self, fraction, text=""):
+    def _set_progress(self, stage, fraction):
+        """Called from the worker thread: only plain Python values change here."""
         self._progress[0] = float(fraction)
-        if text:
-            self._progress[1] = text
+        self._progress[1] = str(stage)
 
     def _end_ui(self, context):
         wm = context.window_manager
