@@ -115,6 +115,10 @@ def _surface_node(mat):
 
 def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material (see module docstring)."""
+    if mat is not None and mat.get("relight_generated"):
+        # a Relight emissive variant shown by an earlier solve: the scene's own material is
+        # its source (the variant's emission is Relight's result, not the scene's light)
+        mat = bpy.data.materials.get(mat.get("relight_source", "")) or None
     if mat is None:
         return np.full(3, DEFAULT_REFLECTANCE), np.zeros(3), None
     fallback = np.asarray(mat.diffuse_color[:3], dtype=np.float64)

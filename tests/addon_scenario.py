@@ -1,0 +1,209 @@
+"""Child process of tests/test_addon_workflow.py (not a test module itself).
+
+    python -S addon_scenario.py EXTENSION_ZIP SAMPLES_DIR
+
+Installs the built extension zip into a bpy session whose user directories are temporary
+(set by the parent), then drives the add-on through its operators the way an artist would:
+open a sample scene, paint targets through the attribute, forbid faces with the operator,
+Solve & Reduce, walk the curve, make area lights, clear, solve again after an edit.
+Prints one line ``RESULT {json}`` with what it observed; the parent asserts on it.
+"""
+import json
+import math
+import os
+import sys
+
+import bpy
+import numpy as np
+
+zip_path, samples = sys.argv[1], sys.argv[2]
+R = {}
+
+
+def snapshot():
+    """Everything Clear Results must restore: per mesh, slots, material indices, attributes,
+    active colour; the scene's materials, lights, collections and custom properties."""
+    snap = {"materials": sorted(m.name for m in bpy.data.materials),
+            "lights": sorted(o.name for o in bpy.data.objects if o.type == "LIGHT"),
+            "collections": sorted(c.name for c in bpy.data.collections),
+            "scene_keys": sorted(bpy.context.scene.keys())}
+    for ob in bpy.context.scene.objects:
+        if ob.type != "MESH":
+            continue
+        me = ob.data
+        idx = np.zeros(len(me.polygons), dtype=np.int32)
+        me.polygons.foreach_get("material_index", idx)
+        active = me.color_attributes.active_color
+        snap[ob.name] = {"slots": [m.name if m else None for m in me.materials],
+                         "material_index": idx.tolist(),
+                         "attributes": sorted(a.name for a in me.attributes),
+                         "active_color": active.name if active else None,
+                         "keys": sorted(me.keys())}
+    return snap
+
+
+def op(fn, **kw):
+    try:
+        return sorted(fn(**kw)), None
+    except RuntimeError as exc:  # an operator's ERROR report
+        return ["CANCELLED"], str(exc)
+
+
+ret = bpy.ops.extensions.package_install_files(filepath=zip_path, repo="user_default", enable_on_install=True)
+R["install"] = sorted(ret)
+pkg = "bl_ext.user_default.relight"
+R["enabled"] = pkg in bpy.context.preferences.addons
+mod = sys.modules[pkg]
+results = sys.modules[pkg + ".results"]
+
+# 1. a scene without targets: an error report, nothing changed
+bpy.ops.wm.open_mainfile(filepath=os.path.join(samples, "staircase.blend"))
+before = snapshot()
+R["no_target"] = op(bpy.ops.relight.solve)
+R["no_target_unchanged"] = snapshot() == before
+
+# 2. paint targets through the attribute: the floor of the first storey, bright warm light
+scene = bpy.context.scene
+settings = scene.relight
+settings.rays_per_patch = 512
+settings.target_scale = 1.0
+floor = scene.objects["floor_0"] if "floor_0" in scene.objects else \
+    next(o for o in scene.objects if o.type == "MESH" and o.name.startswith("floor"))
+me = floor.data
+attr = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+col = np.zeros((len(me.loops), 4), dtype=np.float32)
+n_paint = max(4, len(me.polygons) // 4)
+paint = np.arange(n_paint)
+loop_start = np.zeros(len(me.polygons), dtype=np.int64)
+loop_total = np.zeros(len(me.polygons), dtype=np.int64)
+me.polygons.foreach_get("loop_start", loop_start)
+me.polygons.foreach_get("loop_total", loop_total)
+target_radiance = np.array([0.9, 0.8, 0.6])
+for p in paint:
+    col[loop_start[p]:loop_start[p] + loop_total[p]] = (*target_radiance, 1.0)
+attr.data.foreach_set("color", col.ravel())
+R["floor"] = floor.name
+R["painted"] = int(n_paint)
+
+# 3. forbid faces through the operator: the first 10 faces of a wall, in Edit Mode
+wall = next(o for o in scene.objects if o.type == "MESH" and o.name.startswith("wall"))
+bpy.context.view_layer.objects.active = wall
+for o in scene.objects:
+    o.select_set(o == wall)
+bpy.ops.object.mode_set(mode="EDIT")
+bpy.ops.mesh.select_all(action="DESELECT")
+bpy.ops.object.mode_set(mode="OBJECT")
+sel = np.zeros(len(wall.data.polygons), dtype=bool)
+sel[:10] = True
+wall.data.polygons.foreach_set("select", sel)
+bpy.ops.object.mode_set(mode="EDIT")
+R["forbid"] = op(bpy.ops.relight.forbid_faces, allow=False)
+bpy.ops.object.mode_set(mode="OBJECT")
+fb = wall.data.attributes["relight_forbidden"]
+vals = np.zeros(len(wall.data.polygons), dtype=bool)
+fb.data.foreach_get("value", vals)
+R["forbidden_faces"] = np.flatnonzero(vals).tolist()
+R["wall"] = wall.name
+
+# 4. Solve & Reduce (synchronous path: execute(), as in blender -b and scripts)
+before = snapshot()
+R["solve"] = op(bpy.ops.relight.solve)
+data = results.load_result(scene)
+R["curve_rows"] = len(settings.curve)
+R["curve_index"] = settings.curve_index
+R["rows"] = [[c.n_lights, c.relative_error, c.n_negative, c.curve_index] for c in settings.curve]
+R["stored_n_lights"] = data["n_lights"].tolist()
+R["e_x_relative_error"] = float(data["relative_error"][0])
+R["whole_curve_points"] = int(len(data["curve_n_lights"]))
+
+
+def emitting_state():
+    """Faces that emit, per object: (object, polygon, radiance from the relight_emission
+    attribute) and whether their material is a Relight emissive variant."""
+    out = []
+    for ob in scene.objects:
+        if ob.type != "MESH" or "relight_emission" not in ob.data.attributes:
+            continue
+        me = ob.data
+        em = np.zeros(len(me.polygons) * 4, dtype=np.float32)
+        me.attributes["relight_emission"].data.foreach_get("color", em)
+        em = em.reshape(-1, 4)[:, :3]
+        idx = np.zeros(len(me.polygons), dtype=np.int32)
+        me.polygons.foreach_get("material_index", idx)
+        for p in np.flatnonzero(np.any(em > 0, axis=1)):
+            mat = me.materials[idx[p]]
+            out.append([ob.name, int(p), em[p].tolist(), bool(mat is not None and mat.get("relight_generated"))])
+    return out
+
+
+def expected_lights(k):
+    names = data["objects"]
+    e = data["exitance"][k]
+    pos = np.any(e > 0, axis=1) & ~np.any(e < 0, axis=1)
+    return sorted([names[data["light_object"][j]], int(data["light_face"][j]), (e[j] / math.pi).tolist()]
+                  for j in np.flatnonzero(pos))
+
+
+def target_check(k):
+    """Radiosity layer (radiance) on the painted faces vs pi x painted colour, configuration k."""
+    me = floor.data
+    rad = np.zeros(len(me.loops) * 4, dtype=np.float32)
+    me.color_attributes["relight_radiosity"].data.foreach_get("color", rad)
+    rad = rad.reshape(-1, 4)[:, :3]
+    oi = data["objects"].index(floor.name)
+    sel = data["radiosity_object"] == oi
+    face_b = np.zeros((len(me.polygons), 3))
+    face_b[data["radiosity_face"][sel]] = data["radiosity"][k][sel]
+    return {"stored_target_radiance": (face_b[paint] / math.pi).tolist(),
+            "layer_corner_radiance_mean": float(rad.mean())}
+
+
+k_final = settings.curve_index
+R["final_state"] = emitting_state()
+R["final_expected"] = expected_lights(k_final)
+R["final_row"] = [settings.curve[k_final].n_lights, settings.curve[k_final].n_negative]
+R["ex_targets"] = target_check(0)["stored_target_radiance"]
+R["active_color"] = floor.data.color_attributes.active_color.name
+R["target_radiance"] = target_radiance.tolist()
+
+# 5. apply configuration k through the operator and through the list (update callback)
+k = min(3, len(settings.curve) - 1)
+R["apply_k"] = op(bpy.ops.relight.apply_configuration, index=k)
+R["k"] = k
+R["k_state"] = emitting_state()
+R["k_expected"] = expected_lights(k)
+R["k_row"] = [settings.curve[k].n_lights, settings.curve[k].n_negative]
+settings.curve_index = k_final  # clicking a row in the list applies it
+R["back_to_final_state"] = emitting_state()
+
+# 6. area lights, then clear: the scene is exactly as before the solve
+R["area_lights"] = op(bpy.ops.relight.make_area_lights)
+R["n_area_lights"] = len([o for o in scene.objects if o.type == "LIGHT"])
+R["clear"] = op(bpy.ops.relight.clear_results)
+R["clear_restores"] = snapshot() == before
+if not R["clear_restores"]:
+    a, b = snapshot(), before
+    R["clear_diff"] = {k2: [a.get(k2), b.get(k2)] for k2 in set(a) | set(b) if a.get(k2) != b.get(k2)}
+
+# 7. two solves in a row, then an edit (more targets) and a third solve
+R["solve2"] = op(bpy.ops.relight.solve)
+R["solve3"] = op(bpy.ops.relight.solve)
+R["materials_after_two"] = sorted(m.name for m in bpy.data.materials)
+col2 = np.zeros(len(me.loops) * 4, dtype=np.float32)
+attr = me.color_attributes["relight_target"]
+attr.data.foreach_get("color", col2)
+col2 = col2.reshape(-1, 4)
+extra = np.arange(n_paint, min(len(me.polygons), 2 * n_paint))
+for p in extra:
+    col2[loop_start[p]:loop_start[p] + loop_total[p]] = (0.2, 0.2, 0.2, 1.0)
+attr.data.foreach_set("color", col2.ravel())
+R["solve_after_edit"] = op(bpy.ops.relight.solve)
+data2 = results.load_result(scene)
+R["targets_before_edit"] = int(R["painted"])
+R["targets_after_edit"] = int(n_paint + len(extra))
+R["target_norm_before"] = float(data["target_norm"])
+R["target_norm_after"] = float(data2["target_norm"])
+R["clear2"] = op(bpy.ops.relight.clear_results)
+R["clear2_restores"] = snapshot() == before
+
+print("RESULT " + json.dumps(R), flush=True)

@@ -1,0 +1,117 @@
+"""The add-on as users get it: the built zip installed into bpy, driven through its operators.
+
+The scenario (tests/addon_scenario.py) runs in a child process with temporary Blender user
+directories and only bpy + numpy on its path, like a Blender release. References:
+- the painted targets themselves (the inverse solution e_x reproduces feasible targets);
+- the stored curve the solve wrote (what each row must show when applied);
+- a snapshot of the scene before the solve (what Clear Results must give back).
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from test_extension_install import _isolated_pythonpath, linux_zip  # noqa: F401  (fixture)
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = ROOT / "tests" / "addon_scenario.py"
+
+
+@pytest.fixture(scope="module")
+def scenario(linux_zip, tmp_path_factory):  # noqa: F811
+    tmp = tmp_path_factory.mktemp("addon")
+    home = tmp / "home"
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("BLENDER_", "PYTHON"))}
+    env.update(HOME=str(home), BLENDER_USER_RESOURCES=str(home / "blender"),
+               BLENDER_USER_CONFIG=str(home / "blender" / "config"),
+               BLENDER_USER_SCRIPTS=str(home / "blender" / "scripts"),
+               BLENDER_USER_DATAFILES=str(home / "blender" / "datafiles"),
+               BLENDER_USER_EXTENSIONS=str(home / "blender" / "extensions"),
+               PYTHONPATH=str(_isolated_pythonpath(tmp)), PYTHONNOUSERSITE="1")
+    proc = subprocess.run([sys.executable, "-S", str(SCENARIO), str(linux_zip), str(ROOT / "sample_blends")],
+                          env=env, capture_output=True, text=True, timeout=900, cwd=tmp)
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert proc.returncode == 0 and lines, f"scenario failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-4000:]}"
+    return json.loads(lines[-1][len("RESULT "):])
+
+
+def test_installed_and_enabled(scenario):
+    assert scenario["install"] == ["FINISHED"] and scenario["enabled"]
+
+
+def test_scene_without_targets_is_an_error_report_and_changes_nothing(scenario):
+    status, message = scenario["no_target"]
+    assert status == ["CANCELLED"] and message and "no target" in message
+    assert scenario["no_target_unchanged"]
+
+
+def test_forbid_operator_writes_the_face_attribute(scenario):
+    assert scenario["forbid"][0] == ["FINISHED"]
+    assert set(range(10)) <= set(scenario["forbidden_faces"])
+
+
+def test_solve_fills_the_curve_and_ends_as_the_stop_criteria_say(scenario):
+    assert scenario["solve"][0] == ["FINISHED"], scenario["solve"]
+    rows = scenario["rows"]
+    assert scenario["curve_rows"] == len(scenario["stored_n_lights"]) >= 2
+    # first row is e_x, reproducing the (feasible) painted targets
+    assert scenario["e_x_relative_error"] < 1e-6
+    n_final, neg_final = scenario["final_row"]
+    assert neg_final == 0 and 1 <= n_final <= 3  # defaults: no negatives, at most 3 lights
+    assert rows[scenario["curve_index"]][0] == n_final
+    # the list is a subset of the whole curve, in curve order
+    idx = [r[3] for r in rows]
+    assert idx == sorted(idx) and idx[-1] < scenario["whole_curve_points"]
+
+
+def test_e_x_radiosity_on_targets_is_the_painted_radiance(scenario):
+    got = np.array(scenario["ex_targets"])
+    want = np.array(scenario["target_radiance"])
+    # stored as float16 (3 significant digits)
+    assert np.allclose(got, want[None, :], rtol=2e-3, atol=1e-3)
+
+
+def _compare(state, expected):
+    got = sorted([o, p, e] for o, p, e, _ in state)
+    assert [(o, p) for o, p, _ in got] == [(o, p) for o, p, _ in expected]
+    for (_, _, e1), (_, _, e2) in zip(got, expected):
+        assert np.allclose(e1, e2, rtol=1e-5, atol=1e-6)
+    assert all(variant for *_, variant in state)
+
+
+def test_final_configuration_is_shown_as_emissive_variants(scenario):
+    _compare(scenario["final_state"], scenario["final_expected"])
+    assert len(scenario["final_state"]) == scenario["final_row"][0]
+    assert scenario["active_color"] == "relight_radiosity"
+
+
+def test_apply_configuration_k_matches_its_row(scenario):
+    assert scenario["apply_k"][0] == ["FINISHED"]
+    _compare(scenario["k_state"], scenario["k_expected"])
+    n, neg = scenario["k_row"]
+    assert len(scenario["k_state"]) == n - neg  # negative exitances cannot be shown
+    _compare(scenario["back_to_final_state"], scenario["final_expected"])
+
+
+def test_area_lights_and_clear_restore_the_scene_exactly(scenario):
+    assert scenario["area_lights"][0] == ["FINISHED"]
+    assert scenario["n_area_lights"] == scenario["final_row"][0]
+    assert scenario["clear"][0] == ["FINISHED"]
+    assert scenario["clear_restores"], scenario.get("clear_diff")
+
+
+def test_solving_again_and_after_an_edit(scenario):
+    assert scenario["solve2"][0] == ["FINISHED"] and scenario["solve3"][0] == ["FINISHED"]
+    variants = [m for m in scenario["materials_after_two"] if "(Relight)" in m]
+    assert len(variants) <= 3  # one per source material, no pile-up across solves
+    assert scenario["solve_after_edit"][0] == ["FINISHED"]
+    # the extra (dimmer) targets count: ||b_P|| grows by their norm
+    extra = scenario["targets_after_edit"] - scenario["targets_before_edit"]
+    assert extra > 0
+    assert scenario["target_norm_after"] > scenario["target_norm_before"]
+    assert scenario["clear2"][0] == ["FINISHED"] and scenario["clear2_restores"]
