@@ -11,10 +11,15 @@ scene counts for none either, so row sums are < 1 in open scenes and ~1 in
 closed ones.
 
 Sampling (``sampling=``):
-- ``"sobol"`` (default): per patch, the first N points of a 4-D Sobol
-  sequence with a random digital shift (XOR) drawn per patch -- an unbiased
-  randomised quasi-Monte Carlo rule, stratified jointly in the 4 dimensions
-  (2 for the position on the patch, 2 for the direction).
+- ``"sobol"`` (default): randomised quasi-Monte Carlo. The first N points of
+  the 4-D Sobol sequence (2 dimensions for the position on the patch, 2 for
+  the direction) are scrambled once (scipy's linear matrix scramble) and mapped
+  once into a pool of copies (about POOL_RAYS rays' worth), each with its own
+  random digital shift; the patches of a chunk use distinct copies, each patch turned about its normal by its own random angle. Both
+  randomisations keep each patch's estimate unbiased and the point set
+  stratified; reusing the mapped pool makes a ray cost two small matrix
+  products (origin, direction) for patches of one triangle or two triangles
+  of equal area (grid quads), and a per-ray triangle pick for other patches.
 - ``"stratified"``: a jittered k x k grid for the position and another for the
   direction (concentric map), paired by a random permutation; the N - k^2
   leftover rays are uniform random.
@@ -27,9 +32,12 @@ three samplers, with and without reciprocity symmetrisation.
 Storage: ``FormFactors.matrix`` is a dense float32 ndarray (P, P) when
 P <= ``DENSE_LIMIT`` (6000, 144 MB), else a float32 scipy.sparse CSR matrix.
 
-Determinism: rays are generated in fixed chunks of patches, each with its own
-random stream ``np.random.default_rng([seed, chunk])``; the result is the
-same for any thread count.
+Determinism: the Sobol pool is drawn from ``np.random.default_rng([seed, 1])``
+and rays are generated in fixed chunks of patches, each with its own random
+stream ``np.random.default_rng([seed, 0, chunk])``; the result is the same for
+any thread count. Worker threads generate, trace (embree releases the GIL) and
+count hits chunk by chunk, so ray generation of one chunk overlaps tracing of
+another.
 
 Cancellation: ``cancel()`` returning True makes ``compute_form_factors`` raise
 :class:`Cancelled` (defined here).
@@ -69,6 +77,8 @@ DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
 #: target number of rays per chunk (one chunk = a contiguous range of source patches).
 CHUNK_RAYS = 1 << 17
+#: the Sobol point sets are pre-mapped for about this many rays (see _Tracer._sobol_pool).
+POOL_RAYS = 1 << 18
 #: origin offset along the normal, relative to the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-5
 
@@ -161,8 +171,25 @@ def symmetrise(matrix, area):
     return ((G + G.T) * (0.5 / area)[:, None]).astype(np.float32)
 
 
+def _cosine_directions(u2, u3) -> np.ndarray:
+    """(n, 3) float32 cosine-weighted directions about +z from two uniform samples:
+    Shirley's concentric map of the unit square to the disk, lifted to the hemisphere."""
+    a = 2.0 * u2 - 1.0
+    b = 2.0 * u3 - 1.0
+    first = np.abs(a) > np.abs(b)
+    r = np.where(first, a, b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(first, np.float32(np.pi / 4) * (b / a), np.float32(np.pi / 2) - np.float32(np.pi / 4) * (a / b))
+    phi[~np.isfinite(phi)] = 0.0  # a = b = 0: r = 0, any angle
+    out = np.empty((len(a), 3), dtype=np.float32)
+    out[:, 0] = r * np.cos(phi)
+    out[:, 1] = r * np.sin(phi)
+    out[:, 2] = np.sqrt(np.maximum(np.float32(0.0), 1.0 - out[:, 0] ** 2 - out[:, 1] ** 2))
+    return out
+
+
 class _Tracer:
-    """Embree scene + per-triangle sampling data for a PatchSet (internal; the
+    """Embree scene + per-patch sampling data for a PatchSet (internal; the
     benchmark uses it to time raw embreex on the very same rays)."""
 
     def __init__(self, patches: PatchSet, rays_per_patch: int, seed: int, sampling: str):
@@ -180,7 +207,7 @@ class _Tracer:
         if len(tri_patch) != len(tv) or tri_patch.min() < 0 or tri_patch.max() >= P:
             raise SceneError("tri_patch does not match the patches")
         self.P = P
-        self.N = int(rays_per_patch)
+        self.N = N = int(rays_per_patch)
         self.seed = int(seed)
         self.sampling = sampling
 
@@ -198,9 +225,7 @@ class _Tracer:
         t = np.zeros_like(e1)
         el = np.linalg.norm(e1, axis=1)
         t[ok] = e1[ok] / el[ok, None]
-        self.v0, self.e1, self.e2 = tv[:, 0], e1, e2
-        self.n, self.t, self.b = n, t, np.cross(n, t)
-        self.n32t = np.ascontiguousarray(n.T, dtype=np.float32)
+        b = np.cross(n, t)
         pa = np.bincount(self.tri_patch, weights=ta, minlength=P)
         if np.any(pa <= 0):
             raise SceneError("some patches have zero area")
@@ -215,38 +240,84 @@ class _Tracer:
         self.key = self.tri_patch + self.cdf_hi  # global monotone search key
         self.cdf_lo32 = self.cdf_lo.astype(np.float32)
         self.cdf_w32 = np.maximum(self.cdf_hi - self.cdf_lo, 1e-30).astype(np.float32)
-        self.single = np.all(np.bincount(self.tri_patch, minlength=P) == 1)
-        self.tri_of_patch = start  # valid when single
 
         lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
         diag = float(np.linalg.norm(hi - lo))
         self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
+        base = tv[:, 0] + self.offset * n
 
         # per triangle, component-major (18, T): origin base (v0 + offset n), e1, e2, t, b, n
-        self.geo = np.ascontiguousarray(
-            np.concatenate([(tv[:, 0] + self.offset * n).T, e1.T, e2.T, t.T, self.b.T, n.T]), dtype=np.float32)
+        self.geo = np.ascontiguousarray(np.concatenate([base.T, e1.T, e2.T, t.T, b.T, n.T]), dtype=np.float32)
+        # front-side test of a hit: the hit triangle's normal; the extra last row
+        # (all zero, receiving patch P) is what a miss (primID -1) picks up
+        self.n_ext = np.concatenate([n, np.zeros((1, 3))]).astype(np.float32)
+        self.patch_ext = np.concatenate([self.tri_patch, [P]])
+
+        # Fast path (two matrix products per patch) for patches of one triangle, or of two
+        # triangles of equal area, when N is a power of two. The Sobol points are sorted
+        # by u0, so the first N/2 have u0 < 1/2 and the last N/2 u0 >= 1/2 (a (t, m, 4)-net
+        # in base 2): for two equal triangles the halves go to the first and second
+        # triangle, exactly as the per-ray path's pick by area would send them.
+        # Rows of patch p, half h: origin = (1, b1, b2) @ pos[p, h], direction = local @ frame[p, h].
+        ntri = np.bincount(self.tri_patch, minlength=P)
+        kind = np.full(P, 2, dtype=np.int8)  # 0 one triangle, 1 two equal triangles, 2 per-ray path
+        if N >= 2 and N & (N - 1) == 0:
+            kind[ntri == 1] = 0
+            two = np.flatnonzero(ntri == 2)
+            kind[two[np.abs(ta[start[two]] - ta[start[two] + 1]) <= 1e-9 * pa[two]]] = 1
+        second = np.where(kind == 1, start + 1, start)
+        tri2 = np.stack([start, second], axis=1)  # (P, 2) triangle of each half
+        self.kind = kind
+        self.pos2 = np.stack([base[tri2], e1[tri2], e2[tri2]], axis=2).astype(np.float32)  # (P, 2, 3, 3)
+        self.frame2 = np.stack([t[tri2], b[tri2], n[tri2]], axis=2)  # (P, 2, 3, 3) rows t, b, n
+
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         # chunks: contiguous patch ranges of ~CHUNK_RAYS rays
-        per = max(1, CHUNK_RAYS // self.N)
+        per = max(1, CHUNK_RAYS // N)
         self.chunks = [(p0, min(P, p0 + per)) for p0 in range(0, P, per)]
         if sampling == "sobol":
-            m = int(np.ceil(np.log2(self.N))) if self.N > 1 else 0
-            base = qmc.Sobol(d=4, scramble=False).random_base2(m)[: self.N]
-            self.sobol = (base * 2.0**32).astype(np.uint64).astype(np.uint32)
+            self._sobol_pool(per)
 
-    def unit_samples(self, ci: int) -> np.ndarray:
-        """(n_patches_in_chunk * N, 4) float32 samples in (0, 1) for chunk ci."""
+    def _sobol_pool(self, per):
+        """R randomised copies of the first N points of the 4-D Sobol sequence (one
+        linear matrix scramble, scipy's ``qmc.Sobol(scramble=True)``, then an independent
+        random digital shift per copy), each sorted by u0 and already mapped: position coefficients (1, b1, b2)
+        for one triangle (s = u0) and for two equal triangles (s = 2 u0 mod 1), and the
+        cosine-weighted local direction. Each patch of a chunk uses its own copy,
+        turned about its normal by its own random angle."""
+        N = self.N
+        m = int(np.ceil(np.log2(N))) if N > 1 else 0
+        R = max(per, min(self.P, max(1, POOL_RAYS // N)))
+        rng = np.random.default_rng([self.seed, 1])
+        base = qmc.Sobol(d=4, scramble=True, bits=32, seed=rng).random_base2(m)[:N]
+        base = (base * 2.0**32).astype(np.uint64).astype(np.uint32)  # exact: 32-bit points
+        # a base-2 net: exactly half of the points have u0 < 1/2; put those first
+        base = base[np.argsort(base[:, 0] >> np.uint32(31), kind="stable")]
+        shift = rng.integers(0, 2**32, size=(R, 1, 4), dtype=np.uint32)
+        u = ((base[None] ^ shift) >> np.uint32(8)).astype(np.float32)  # 24 bits: exact in float32
+        u *= np.float32(2.0**-24)
+        u += np.float32(2.0**-25)  # cell midpoints, strictly inside (0, 1)
+        flip = np.flatnonzero(shift[:, 0, 0] >> np.uint32(31))  # the shift swapped the halves
+        u[flip] = np.roll(u[flip], N // 2, axis=1)
+        u = u.reshape(-1, 4)
+        self.pool_u = u[:, :2].reshape(R, N, 2)
+
+        def coef(s):
+            su = np.sqrt(s)
+            b2 = su * u[:, 1]
+            return np.stack([np.ones_like(su), su - b2, b2], axis=1).reshape(R, 2, N // 2 if N > 1 else 1, 3)
+
+        if N >= 2 and N & (N - 1) == 0:
+            self.pool_tri = coef(u[:, 0])
+            self.pool_half = coef(np.clip(2 * u[:, 0] - (u[:, 0] >= 0.5), 0.0, 1.0))
+        self.pool_dir = _cosine_directions(u[:, 2], u[:, 3]).reshape(R, N, 3)
+        self.R = R
+
+    def unit_samples(self, ci: int, rng) -> np.ndarray:
+        """(n_patches_in_chunk * N, 4) float32 samples in (0, 1) for chunk ci ("random", "stratified")."""
         p0, p1 = self.chunks[ci]
         k, N = p1 - p0, self.N
-        rng = np.random.default_rng([self.seed, ci])
-        if self.sampling == "sobol":
-            shift = rng.integers(0, 2**32, size=(k, 1, 4), dtype=np.uint32)
-            x = (self.sobol[None] ^ shift) >> np.uint32(8)  # 24 bits: exact in float32
-            u = x.astype(np.float32)
-            u *= np.float32(2.0**-24)
-            u += np.float32(2.0**-25)  # cell midpoints, strictly inside (0, 1)
-            return u.reshape(-1, 4)
         if self.sampling == "random":
             return rng.random((k * N, 4), dtype=np.float32)
         # stratified: jittered g x g grids for position and direction, randomly paired
@@ -261,60 +332,100 @@ class _Tracer:
             u[:, : g * g, 3] = (jj[perm] + u[:, : g * g, 3]) / g
         return np.clip(u, 2.0**-25, 1 - 2.0**-24).astype(np.float32).reshape(-1, 4)
 
-    def rays(self, ci: int):
-        """Origins (n,3) f32, directions (n,3) f32 and source patch (n,) of chunk ci."""
-        p0, p1 = self.chunks[ci]
-        u = self.unit_samples(ci)
-        src = np.repeat(np.arange(p0, p1), self.N)
-        u0, u1, u2, u3 = u.T
-        if self.single:
-            tri = self.tri_of_patch[src]
-            s = u0
-        else:
-            tri = np.searchsorted(self.key, src + u0.astype(np.float64), side="right")
-            np.minimum(tri, len(self.key) - 1, out=tri)
-            lo = np.take(self.cdf_lo32, tri)
-            s = np.clip((u0 - lo) / np.take(self.cdf_w32, tri), 0.0, 1.0)
+    def _general(self, src, u0, u1, dloc, org, d):
+        """Per-ray path (any patch): pick a triangle by area, a uniform point in it,
+        and turn the local direction dloc (n, 3) into the triangle's frame."""
+        tri = np.searchsorted(self.key, src + u0.astype(np.float64), side="right")
+        np.minimum(tri, len(self.key) - 1, out=tri)
+        lo = np.take(self.cdf_lo32, tri)
+        s = np.clip((u0 - lo) / np.take(self.cdf_w32, tri), 0.0, 1.0)
         g = np.take(self.geo, tri, axis=1)  # (18, n): origin base, e1, e2, t, b, n
-        # uniform point in the triangle
         su = np.sqrt(s)
         b2 = u1 * su
         b1 = su - b2
-        out = np.empty((2, len(src), 3), dtype=np.float32)
-        ot = out[0].T
+        ot = org.T
         np.multiply(g[3:6], b1, out=ot)
         ot += g[0:3]
         ot += g[6:9] * b2
-        # Shirley's concentric map of the unit square to the disk, lifted to the hemisphere
-        a = 2.0 * u2 - 1.0
-        b = 2.0 * u3 - 1.0
-        first = np.abs(a) > np.abs(b)
-        r = np.where(first, a, b)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            phi = np.where(first, np.float32(np.pi / 4) * (b / a), np.float32(np.pi / 2) - np.float32(np.pi / 4) * (a / b))
-        phi[~np.isfinite(phi)] = 0.0  # a = b = 0: r = 0, any angle
-        dx = r * np.cos(phi)
-        dy = r * np.sin(phi)
-        dz = np.sqrt(np.maximum(np.float32(0.0), 1.0 - dx * dx - dy * dy))
-        dt = out[1].T
-        np.multiply(g[9:12], dx, out=dt)
-        dt += g[12:15] * dy
-        dt += g[15:18] * dz
-        return out[0], out[1], src
+        dt = d.T
+        np.multiply(g[9:12], dloc[:, 0], out=dt)
+        dt += g[12:15] * dloc[:, 1]
+        dt += g[15:18] * dloc[:, 2]
+
+    def rays(self, ci: int):
+        """Origins (n,3) f32, directions (n,3) f32 and source patch (n,) of chunk ci
+        (rays of patch p0 + j are rows j*N .. (j+1)*N - 1)."""
+        p0, p1 = self.chunks[ci]
+        k, N = p1 - p0, self.N
+        rng = np.random.default_rng([self.seed, 0, ci])
+        org = np.empty((k, N, 3), dtype=np.float32)
+        d = np.empty((k, N, 3), dtype=np.float32)
+        if self.sampling != "sobol":
+            u = self.unit_samples(ci, rng)
+            src = np.repeat(np.arange(p0, p1), N)
+            self._general(src, u[:, 0], u[:, 1], _cosine_directions(u[:, 2], u[:, 3]),
+                          org.reshape(-1, 3), d.reshape(-1, 3))
+            return org.reshape(-1, 3), d.reshape(-1, 3), src
+        # Sobol: patch p0 + j uses pool copy off + j and a random turn about its normal
+        off = int(rng.integers(0, self.R - k + 1))
+        ang = rng.random(k) * (2 * np.pi)
+        c, s = np.cos(ang), np.sin(ang)
+        kind = self.kind[p0:p1]
+        fast = np.flatnonzero(kind < 2)
+        if len(fast):
+            h = N // 2
+            fr = self.frame2[p0:p1]  # (k, 2, 3, 3)
+            cc, ss = c[:, None, None], s[:, None, None]
+            frame = np.stack([cc * fr[:, :, 0] + ss * fr[:, :, 1], cc * fr[:, :, 1] - ss * fr[:, :, 0], fr[:, :, 2]],
+                             axis=2).astype(np.float32)
+            pdir = self.pool_dir[off: off + k].reshape(k, 2, h, 3)
+            ptri, phalf = self.pool_tri[off: off + k], self.pool_half[off: off + k]
+            if kind.max() == 0:
+                coef = ptri
+            elif kind.min() == 1:
+                coef = phalf
+            else:
+                coef = np.where((kind == 1)[:, None, None, None], phalf, ptri)
+            np.matmul(coef, self.pos2[p0:p1], out=org.reshape(k, 2, h, 3))
+            np.matmul(pdir, frame, out=d.reshape(k, 2, h, 3))
+        gen = np.flatnonzero(kind == 2)
+        if len(gen):
+            src = np.repeat(gen + p0, N)
+            u = self.pool_u[off + gen].reshape(-1, 2)
+            # local directions turned by the patch's angle; the per-ray path uses each triangle's frame
+            dl = self.pool_dir[off + gen]
+            cg, sg = c[gen, None].astype(np.float32), s[gen, None].astype(np.float32)
+            dloc = np.empty_like(dl)
+            dloc[..., 0] = cg * dl[..., 0] - sg * dl[..., 1]
+            dloc[..., 1] = sg * dl[..., 0] + cg * dl[..., 1]
+            dloc[..., 2] = dl[..., 2]
+            og = np.empty((len(src), 3), dtype=np.float32)
+            dg = np.empty((len(src), 3), dtype=np.float32)
+            self._general(src, u[:, 0], u[:, 1], dloc.reshape(-1, 3), og, dg)
+            org[gen] = og.reshape(-1, N, 3)
+            d[gen] = dg.reshape(-1, N, 3)
+        return org.reshape(-1, 3), d.reshape(-1, 3), None
 
     def trace(self, org, d) -> np.ndarray:
         return self.scene.run(org, d)
 
-    def hits(self, ci: int):
-        """Trace chunk ci: (source patch, receiving patch) of the rays that hit a front side."""
-        org, d, src = self.rays(ci)
-        prim = np.asarray(self.trace(org, d))
-        hit = np.flatnonzero(prim >= 0)
-        prim = prim[hit]
-        nh = np.take(self.n32t, prim, axis=1)
-        dh = d[hit].T
-        front = (dh[0] * nh[0] + dh[1] * nh[1] + dh[2] * nh[2]) < 0
-        return src[hit[front]], self.tri_patch[prim[front]]
+    def keys(self, ci: int) -> np.ndarray:
+        """Trace chunk ci: per ray j * (P + 1) + receiving patch, for a ray of patch
+        p0 + j; the receiver is P for a miss or a hit on a back side."""
+        p0, p1 = self.chunks[ci]
+        k, N, P = p1 - p0, self.N, self.P
+        org, d, _ = self.rays(ci)
+        prim = np.asarray(self.trace(org, d))  # -1: miss -> the extra zero normal / column P
+        nh = np.take(self.n_ext, prim, axis=0)
+        nh *= d
+        back = nh[:, 0] + nh[:, 1]
+        back += nh[:, 2]
+        back = back >= 0  # a hit on a back side, or a miss
+        dst = np.take(self.patch_ext, prim)
+        dst[back] = P
+        key = np.arange(0, k * (P + 1), P + 1).repeat(N)
+        key += dst
+        return key
 
 
 def compute_form_factors(
@@ -363,15 +474,17 @@ def compute_form_factors(
     def work(ci):
         if stop.is_set():
             return ci
-        src, dst = tr.hits(ci)
+        key = tr.keys(ci)
         p0, p1 = tr.chunks[ci]
         k = p1 - p0
         if dense:
-            counts = np.bincount((src - p0) * P + dst, minlength=k * P)
-            M[p0:p1] = (counts * inv_n).reshape(k, P)
+            counts = np.bincount(key, minlength=k * (P + 1)).reshape(k, P + 1)[:, :P]
+            np.multiply(counts, inv_n, out=M[p0:p1], casting="unsafe")
         else:
-            blk = sp.coo_matrix((np.full(len(src), inv_n, dtype=np.float32), (src - p0, dst)), shape=(k, P))
-            blocks[ci] = blk.tocsr()  # sums duplicates
+            key, cnt = np.unique(key, return_counts=True)
+            row, col = np.divmod(key, P + 1)
+            keep = col < P
+            blocks[ci] = sp.csr_matrix(((cnt[keep] * inv_n).astype(np.float32), (row[keep], col[keep])), shape=(k, P))
         return ci
 
     def check_cancel():
