@@ -188,3 +188,10 @@ def test_bad_input_messages():
     assert isinstance(ff, FormFactors) and ff.n_rays == 16 * ps.n_patches
     with pytest.raises(ValueError, match="area"):
         ff.reciprocity_error(ps.area[:-1])
+
+
+def test_job_options_default_rays_is_the_form_factor_default():
+    # the add-on's "Rays per Patch" default and the CLI's come from options.py
+    from relight_addon.engine import formfactors, options
+
+    assert options.DEFAULT_RAYS_PER_PATCH == formfactors.DEFAULT_RAYS_PER_PATCH == QUALITY["default"]

@@ -78,7 +78,7 @@ SAMPLINGS = ("sobol", "stratified", "random")
 #: target number of rays per chunk (one chunk = a contiguous range of source patches).
 CHUNK_RAYS = 1 << 17
 #: the Sobol point sets are pre-mapped for about this many rays (see _Tracer._sobol_pool).
-POOL_RAYS = 1 << 18
+POOL_RAYS = 1 << 17
 #: origin offset along the normal, relative to the scene's bounding-box diagonal.
 RAY_OFFSET = 1e-5
 

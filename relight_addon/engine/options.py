@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-DEFAULT_RAYS_PER_PATCH = 1024
+DEFAULT_RAYS_PER_PATCH = 16384  # = engine.formfactors.DEFAULT_RAYS_PER_PATCH (tests check it)
 DEFAULT_SOLVER = "reduced"
 DEFAULT_SELECTION = "exitance-elimination"  # the paper's choice (section 5)
 DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
