@@ -15,13 +15,14 @@ $(STAMP): requirements.txt
 	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
 	@rm -f $(VENV)/.installed-* && touch $@
 
-# The main job, headless, on a sample scene: a result .blend, a JSON report and a Cycles picture.
+# The main job, headless, on a sample scene: the paper's experiment (staircase with painted
+# targets) solved and reduced; a result .blend, a JSON report and a Cycles picture.
 demo: setup
 	@mkdir -p $(OUT)/demo
-	$(PY) -m relight_addon radiosity sample_blends/cornell_box.blend \
-	    --report $(OUT)/demo/report.json --out $(OUT)/demo/cornell_radiosity.blend \
-	    --render $(OUT)/demo/cornell_radiosity.png
-	@echo "demo: wrote $(OUT)/demo/report.json, $(OUT)/demo/cornell_radiosity.blend, $(OUT)/demo/cornell_radiosity.png"
+	$(PY) -m relight_addon solve sample_blends/staircase_targets.blend \
+	    --report $(OUT)/demo/report.json --out $(OUT)/demo/staircase_relit.blend \
+	    --render $(OUT)/demo/staircase_relit.png
+	@echo "demo: wrote $(OUT)/demo/report.json, $(OUT)/demo/staircase_relit.blend, $(OUT)/demo/staircase_relit.png"
 
 test: setup
 	$(PY) -m pytest -q tests
