@@ -84,9 +84,16 @@ def test_install_enable_prefs_wheels_uninstall(linux_zip, tmp_path):
     proc = subprocess.run([sys.executable, "-S", str(CHILD), str(linux_zip)], env=env,
                           capture_output=True, text=True, timeout=600, cwd=tmp_path)
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert proc.returncode == 0 and lines, f"child failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    failure = f"child failed (exit {proc.returncode}):\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    assert lines, failure
     r = json.loads(lines[-1][len("RESULT "):])
     detail = json.dumps(r, indent=1)
+    # Blender 4.2 (bpy 4.2.23) segfaults at interpreter exit after *uninstalling* an extension
+    # whose PropertyGroup has a property with an update= callback (reproduced with a 10-line
+    # extension; disabling is fine; bpy 5.0 is fine). That Blender bug is tolerated on 4.2
+    # only, and only after the child reported everything (the RESULT line above).
+    allowed_exits = {0, -11} if r["blender"].startswith("4.2") else {0}
+    assert proc.returncode in allowed_exits, failure
 
     # Installed under the temporary user directory, never the real one.
     assert Path(r["repo_directory"]).is_relative_to(home), detail

@@ -67,9 +67,7 @@ try:
     res = scene.run(origins, dirs, output=1)
     result["embree_prim_ids"] = np.asarray(res["primID"]).tolist()
     result["embree_tfar"] = np.asarray(res["tfar"]).tolist()
-    # Release the Embree scene before uninstalling its wheel: with bpy 4.2.23 a scene still
-    # alive at interpreter exit makes the process segfault on shutdown (not with bpy 5.0).
-    del scene, res
+    del scene, res  # release the Embree scene before its wheel is uninstalled
 except Exception as ex:  # reported to the parent, which fails with this message
     result["wheel_error"] = "%s: %s" % (type(ex).__name__, ex)
 
