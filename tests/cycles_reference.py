@@ -32,6 +32,7 @@ no adaptive sampling, 64 bounces.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -89,7 +90,9 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
     # No world light.
     world = scene.world or bpy.data.worlds.new("relight_black_world")
     scene.world = world
-    world.use_nodes = True
+    with warnings.catch_warnings():  # use_nodes is deprecated (always on) in Blender 5
+        warnings.simplefilter("ignore", DeprecationWarning)
+        world.use_nodes = True
     bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None)
     if bg is not None:
         bg.inputs["Strength"].default_value = 0.0
@@ -241,7 +244,9 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
 
 def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0):
     mat = bpy.data.materials.new(name)
-    mat.use_nodes = True
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)
+        mat.use_nodes = True
     p = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     p.inputs["Base Color"].default_value = (*base_color, 1.0)
     p.inputs["Emission Color"].default_value = (*emission, 1.0)
@@ -379,3 +384,24 @@ def build_cornell_box(n=5, radiance=10.0):
     objs.append(box("ShortBox", 0.13, 0.065, 0.165, 0.165, 0.165))
     objs.append(box("TallBox", 0.29, 0.29, 0.165, 0.165, 0.33))
     return objs
+
+
+def subdivide_quads(obj, cuts: int):
+    """Split every quad of ``obj`` into a (cuts+1) x (cuts+1) grid of quads (bmesh)."""
+    import bmesh
+
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=int(cuts), use_grid_fill=True)
+    bm.to_mesh(obj.data)
+    bm.free()
+    obj.data.update()
+
+
+def face_areas(obj) -> np.ndarray:
+    """(F,) world-space polygon areas (m^2) of a mesh object without shear."""
+    me = obj.data
+    a = np.empty(len(me.polygons))
+    me.polygons.foreach_get("area", a)
+    s = np.abs(np.linalg.det(np.array(obj.matrix_world)[:3, :3])) ** (2.0 / 3.0)
+    return a * s
