@@ -438,7 +438,7 @@ def write_radiosity(objects, radiosity, areas):
 
 
 # ------------------------------------------------------------------ render
-def render_radiosity(path, context=None, samples=16, resolution=None):
+def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):
     """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
 
     Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
@@ -460,7 +460,7 @@ def render_radiosity(path, context=None, samples=16, resolution=None):
     out = nt.nodes.new("ShaderNodeOutputMaterial")
     em = nt.nodes.new("ShaderNodeEmission")
     at = nt.nodes.new("ShaderNodeAttribute")
-    at.attribute_name = RADIOSITY_ATTRIBUTE
+    at.attribute_name = attribute
     nt.links.new(at.outputs["Color"], em.inputs["Color"])
     em.inputs["Strength"].default_value = 1.0
     nt.links.new(em.outputs["Emission"], out.inputs["Surface"])

@@ -194,4 +194,8 @@ def test_job_options_default_rays_is_the_form_factor_default():
     # the add-on's "Rays per Patch" default and the CLI's come from options.py
     from relight_addon.engine import formfactors, options
 
-    assert options.DEFAULT_RAYS_PER_PATCH == formfactors.DEFAULT_RAYS_PER_PATCH == QUALITY["default"]
+    # the job default is the automatic quality, which gives small scenes the tested default
+    assert options.DEFAULT_RAYS_PER_PATCH == 0 and options.JobOptions(rays_per_patch=0).validate().rays_per_patch is None
+    assert formfactors.auto_rays_per_patch(2) == formfactors.DEFAULT_RAYS_PER_PATCH == QUALITY["default"]
+    assert formfactors.auto_rays_per_patch(10 ** 6) == QUALITY["draft"]
+    assert formfactors.auto_rays_per_patch(1451) == 2048

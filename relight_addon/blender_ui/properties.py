@@ -47,8 +47,9 @@ class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
         name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
         description="Colour used by Fill Targets")
     rays_per_patch: IntProperty(
-        name="Rays per Patch", default=engine_options.DEFAULT_RAYS_PER_PATCH, min=16, soft_max=20000,
-        description="Form-factor quality: rays cast from every patch")
+        name="Rays per Patch", default=engine_options.DEFAULT_RAYS_PER_PATCH, min=0, soft_max=65536,
+        description="Form-factor quality: rays cast from every patch; 0 = automatic "
+                    "(about 4 million rays in all, 1024 to 16384 per patch)")
     max_patch_size: FloatProperty(
         name="Max Patch Size", default=0.0, min=0.0, subtype="DISTANCE", unit="LENGTH",
         description="Faces larger than this are split into patches; 0 = automatic (scene diagonal / 20)")

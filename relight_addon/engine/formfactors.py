@@ -65,6 +65,8 @@ __all__ = [
     "Cancelled",
     "FormFactors",
     "compute_form_factors",
+    "auto_rays_per_patch",
+    "RAY_BUDGET",
     "symmetrise",
 ]
 
@@ -72,6 +74,11 @@ __all__ = [
 #: ("Form factors") and checked by tests/test_engine_formfactors.py.
 QUALITY = {"draft": 1024, "default": 16384, "high": 262144}
 DEFAULT_RAYS_PER_PATCH = QUALITY["default"]
+#: total rays of the automatic quality: rays per patch = the power of two nearest to
+#: RAY_BUDGET / patches, within [QUALITY["draft"], QUALITY["default"]]. Small scenes (a few
+#: faces, e.g. the closed-form configurations) get the default 16384; the ~1500-patch
+#: staircase gets 2048 (accuracy against rays per patch: docs/benchmarks.md).
+RAY_BUDGET = 1 << 22
 #: dense float32 matrix up to this many patches, scipy.sparse CSR above.
 DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
@@ -441,9 +448,16 @@ class _Tracer:
         return key
 
 
+def auto_rays_per_patch(n_patches: int) -> int:
+    """Rays per patch of the automatic quality (see RAY_BUDGET)."""
+    want = RAY_BUDGET / max(int(n_patches), 1)
+    k = int(np.rint(np.log2(want)))
+    return int(np.clip(2 ** k, QUALITY["draft"], QUALITY["default"]))
+
+
 def compute_form_factors(
     patches: PatchSet,
-    rays_per_patch: int = DEFAULT_RAYS_PER_PATCH,
+    rays_per_patch: int | str | None = None,
     seed: int = 0,
     threads: int | None = None,
     progress=None,
@@ -454,7 +468,8 @@ def compute_form_factors(
 ) -> FormFactors:
     """Ray-cast form factors of ``patches`` (see the module docstring).
 
-    ``rays_per_patch``: rays shot from every patch (see ``QUALITY``).
+    ``rays_per_patch``: rays shot from every patch, a ``QUALITY`` name, or None for the
+    automatic quality (``auto_rays_per_patch``: a budget of RAY_BUDGET rays in all).
     ``seed``: results are reproducible for a seed, whatever ``threads``.
     ``threads``: worker threads (default ``os.cpu_count()``).
     ``progress(fraction)``: optional callback, called from the calling thread.
@@ -463,6 +478,8 @@ def compute_form_factors(
     (off by default: it no longer guarantees row sums <= 1).
     """
     t0 = time.perf_counter()
+    if rays_per_patch is None:
+        rays_per_patch = auto_rays_per_patch(patches.n_patches)
     if isinstance(rays_per_patch, str):
         if rays_per_patch not in QUALITY:
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-DEFAULT_RAYS_PER_PATCH = 16384  # = engine.formfactors.DEFAULT_RAYS_PER_PATCH (tests check it)
+DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
 DEFAULT_SOLVER = "reduced"
 DEFAULT_SELECTION = "exitance-elimination"  # the paper's choice (section 5)
 DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
@@ -17,7 +17,7 @@ DISTRIBUTIONS = ("distance", "local", "coplanar", "uniform")
 
 @dataclass
 class JobOptions:
-    rays_per_patch: int | None = None  # None: the form-factor module's default
+    rays_per_patch: int | None = None  # None or 0: automatic (formfactors.auto_rays_per_patch)
     max_patch_size: float | None = None  # None: scene diagonal / 20
     seed: int = 0
     threads: int | None = None  # None: every core
@@ -35,8 +35,10 @@ class JobOptions:
             raise ValueError(f"unknown selection {self.selection!r}; choose one of {', '.join(SELECTIONS)}")
         if self.distribution not in DISTRIBUTIONS:
             raise ValueError(f"unknown distribution {self.distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        if self.rays_per_patch == 0:
+            self.rays_per_patch = None
         if self.rays_per_patch is not None and self.rays_per_patch < 1:
-            raise ValueError("rays per patch must be at least 1")
+            raise ValueError("rays per patch must be at least 1 (0 = automatic)")
         if self.max_patch_size is not None and not self.max_patch_size > 0:
             raise ValueError("max patch size must be a positive length")
         if self.max_lights is not None and self.max_lights < 1:

@@ -41,10 +41,15 @@ conserved exactly:
   distance -- every remaining light takes part (weights 1/d). A light at
   distance 0 (coincident centres) takes everything.
 
-The final configuration is the one with the fewest lights among the curve points
-meeting all the stop criteria given (max_lights, require_positive,
-error_threshold / relative_error_threshold); ties go to the smaller error. The
-paper stops at the first failure; we scan the whole curve, which the UI shows.
+The final configuration is chosen on the whole curve (which the UI shows) by the stop
+criteria given (max_lights, require_positive, error_threshold /
+relative_error_threshold):
+- with an error threshold: the fewest lights among the points meeting every criterion
+  (ties: smaller error), the paper's "reduce while the error stays acceptable";
+- with a number of lights and no threshold: the point where the paper's loop would stop,
+  i.e. the most lights not above max_lights among the points meeting the other criteria
+  (ties: smaller error);
+- with neither: the smallest error among the points meeting require_positive.
 When no point meets them all, the error criterion is relaxed first (smallest
 error among the rest), and the result says so in ``warnings``.
 """
@@ -258,7 +263,12 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
         return int(idx[key[0]])
 
     if ok.any():
-        return best(ok), warns
+        if np.isfinite(thr):
+            return best(ok), warns
+        if max_lights is not None:
+            idx = np.flatnonzero(ok)
+            return int(idx[np.lexsort((err[idx], -n[idx]))[0]]), warns
+        return best(ok, by_lights=False), warns
     if ok_struct.any():
         i = best(ok_struct, by_lights=False)
         warns.append(f"no configuration meets the error threshold under the other criteria; "
