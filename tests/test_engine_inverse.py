@@ -214,3 +214,26 @@ def test_direct_lighting_problem(room):
         direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((P, 3)))
     with pytest.raises(InverseError, match="non-negative"):
         direct_lighting_problem(r["F"], r["area"], r["reflectance"], -e)
+
+
+def test_gram_route_is_the_svd_pseudo_inverse_solution():
+    """The default 'auto' driver (Cholesky of M M^T when M has full row rank with margin) gives
+    the SVD pseudo-inverse's minimum-norm solution, and falls back to the SVD when M is
+    rank-deficient (the cut-off then matters)."""
+    import scipy.linalg as sla
+    from relight_addon.engine.inverse import _lstsq_min_norm
+
+    rng = np.random.default_rng(3)
+    M = rng.standard_normal((40, 90))
+    R = rng.standard_normal((40, 2))
+    x_auto, rank_auto = _lstsq_min_norm(M, R, 1e-12, "auto")
+    x_svd, rank_svd = _lstsq_min_norm(M, R, 1e-12, "svd")
+    np.testing.assert_allclose(x_auto, x_svd, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(x_auto, np.linalg.pinv(M) @ R, rtol=1e-9, atol=1e-12)
+    assert rank_auto == rank_svd == 40
+    # rank-deficient: two equal rows; the Gram route refuses, the SVD cut-off gives rank 39
+    M2 = M.copy()
+    M2[1] = M2[0]
+    x2, rank2 = _lstsq_min_norm(M2, R, 1e-10, "auto")
+    assert rank2 == 39
+    np.testing.assert_allclose(x2, sla.pinv(M2, rtol=1e-10) @ R, rtol=1e-8, atol=1e-10)
