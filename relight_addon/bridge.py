@@ -1,9 +1,10 @@
 """Blender <-> engine: export the scene as an engine FaceSet, write results back (bpy).
 
 What is exported
-- Every object of type MESH with ``hide_render`` False that is visible in the view layer
-  (``visible_get()``), evaluated with its modifiers (depsgraph ``evaluated_get`` /
-  ``to_mesh``), in world space (``matrix_world``). A negative-determinant transform
+- Every object of type MESH that is visible in the view layer (``visible_get()``) and not
+  hidden from render (its ``hide_render``, or ``hide_render`` on every collection chain it
+  is linked through), evaluated with its modifiers (depsgraph ``evaluated_get`` /
+  ``to_mesh``), in world space (``matrix_world``, parent chain included). A negative-determinant transform
   (negative scale) reverses the winding so normals keep pointing the same way as in
   Blender's viewport.
 - One engine face per polygon of the evaluated mesh, triangulated with
@@ -14,6 +15,13 @@ What is exported
   was). Faces that a modifier creates without that attribute (or of linked, read-only
   meshes) get ``face_index`` -1 and a warning; they take part in the light transport but
   are not reported.
+- Mesh instances of the evaluated depsgraph (``depsgraph.object_instances`` with
+  ``is_instance``: collection instances, particle and geometry-nodes instances) whose
+  instancer and source object are not hidden from render: geometry only. They occlude,
+  reflect (their material) and emit, but their faces are never targets or candidate lights
+  (``forbidden``) and have ``face_index`` -1 (not reported: one base mesh cannot hold
+  per-instance values). They are grouped in ``object_names`` entries named
+  ``"<instancer>/<object>"`` after the real objects, with ``polygon_counts`` 0.
 
 Materials (per face, through ``material_index`` and the object's material slots)
 - Principled BSDF connected to the active Material Output: reflectance = Base Color
@@ -151,17 +159,39 @@ def material_properties(mat):
 @dataclass
 class ExportedScene:
     faces: FaceSet
-    objects: list  # the exported bpy objects, in FaceSet.object_names order
+    objects: list  # the exported bpy objects: FaceSet.object_names[:len(objects)]; the names after
+    # them are instance groups "<instancer>/<object>" (no bpy object, 0 polygons)
     polygon_counts: dict  # object name -> number of polygons of its base mesh
     settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
     seconds: float = 0.0
 
 
+def render_visible_objects(scene):
+    """Names of the objects that a render would see through the collection tree: every object
+    linked to at least one collection whose chain from the scene collection has no
+    ``hide_render`` (the object's own ``hide_render`` is checked separately)."""
+    seen = set()
+
+    def walk(coll, hidden):
+        hidden = hidden or bool(getattr(coll, "hide_render", False))
+        if not hidden:
+            seen.update(ob.name for ob in coll.objects)
+        for child in coll.children:
+            walk(child, hidden)
+
+    walk(scene.collection, False)
+    return seen
+
+
 def exported_objects(context=None):
+    """The scene's mesh objects that are exported: visible in the view layer, not hidden from
+    render (``hide_render`` of the object or of every collection it is in)."""
     context = context or bpy.context
     view_layer = context.view_layer
+    renderable = render_visible_objects(context.scene)
     return [ob for ob in context.scene.objects
-            if ob.type == "MESH" and not ob.hide_render and ob.visible_get(view_layer=view_layer)]
+            if ob.type == "MESH" and not ob.hide_render and ob.name in renderable
+            and ob.visible_get(view_layer=view_layer)]
 
 
 def scene_settings(scene):
@@ -249,6 +279,96 @@ def _evaluated_mesh(ob, context):
     return ob_eval, me, mapping
 
 
+def _mesh_geometry(ob_eval, me, name):
+    """Local-space arrays of an evaluated mesh: vertices, loop triangles, their polygons,
+    polygon loops (vertex indices) and material indices."""
+    V = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
+    if not np.all(np.isfinite(V)):
+        raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
+    me.calc_loop_triangles()
+    nt = len(me.loop_triangles)
+    lt = _get(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
+    lt_poly = _get(me.loop_triangles, "polygon_index", nt, np.int64)
+    npoly = len(me.polygons)
+    loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
+    _, starts, totals = _loop_polygon(me)
+    mat_index = _get(me.polygons, "material_index", npoly, np.int64)
+    loops = [loop_vert[s:s + t] for s, t in zip(starts, totals)]
+    slots = [getattr(s.material, "original", s.material) for s in ob_eval.material_slots]
+    return {"V": V, "lt": lt, "lt_poly": lt_poly, "loops": loops, "mat_index": mat_index, "slots": slots}
+
+
+class _Builder:
+    """Accumulates world-space faces of several meshes into FaceSet arrays."""
+
+    def __init__(self):
+        self.verts, self.tris, self.tri_face, self.loops = [], [], [], []
+        self.f_obj, self.f_idx, self.rho, self.e, self.tgt, self.tgt_b, self.forb = [], [], [], [], [], [], []
+        self.warnings = []
+        self.mat_cache = {}
+        self.nf = self.nv = 0
+
+    def materials(self, slots, mat_index):
+        props = []
+        for mi in range(max(len(slots), 1)):
+            mat = slots[mi] if mi < len(slots) else None
+            key = mat.name if mat is not None else None
+            if key not in self.mat_cache:
+                self.mat_cache[key] = material_properties(mat)
+                if self.mat_cache[key][2]:
+                    self.warnings.append(self.mat_cache[key][2])
+            props.append(self.mat_cache[key])
+        mi = np.clip(mat_index, 0, len(props) - 1)
+        return np.array([p[0] for p in props])[mi], math.pi * np.array([p[1] for p in props])[mi]
+
+    def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
+        M = np.asarray(matrix, dtype=np.float64)
+        W = geo["V"] @ M[:3, :3].T + M[:3, 3]
+        if not np.all(np.isfinite(W)):
+            raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
+        flip = np.linalg.det(M[:3, :3]) < 0
+        lt = geo["lt"][:, ::-1] if flip else geo["lt"]
+        nv, nf = self.nv, self.nf
+        self.verts.append(W)
+        self.tris.append(lt + nv)
+        self.tri_face.append(geo["lt_poly"] + nf)
+        for lp in geo["loops"]:
+            lp = (lp + nv).tolist()
+            self.loops.append(lp[::-1] if flip else lp)
+        rho, e = self.materials(geo["slots"], geo["mat_index"])
+        npoly = len(geo["loops"])
+        self.rho.append(rho)
+        self.e.append(e)
+        self.f_obj.append(np.full(npoly, oi))
+        self.f_idx.append(face_index)
+        self.tgt.append(target)
+        self.tgt_b.append(target_b)
+        self.forb.append(forbidden)
+        self.nf += npoly
+        self.nv += len(W)
+
+
+def _instances(context, renderable):
+    """(name, evaluated object, world matrix) of every mesh instance of the depsgraph
+    (collection instances, particle and geometry-nodes instances) whose instancer and
+    source object are rendered. Only valid while the depsgraph is not re-evaluated."""
+    depsgraph = context.evaluated_depsgraph_get()
+    for inst in depsgraph.object_instances:
+        if not inst.is_instance:
+            continue
+        ob, parent = inst.object, inst.parent
+        if ob is None or ob.type != "MESH":
+            continue
+        src = ob.original
+        host = parent.original if parent is not None else None
+        if host is not None and (host.hide_render or host.name not in renderable):
+            continue
+        if src is not None and src != host and src.hide_render:
+            continue
+        name = f"{host.name if host is not None else '?'}/{src.name if src is not None else ob.name}"
+        yield name, ob, np.array(inst.matrix_world, dtype=np.float64)
+
+
 def export_scene(context=None, target_scale=None) -> ExportedScene:
     """Export the visible mesh objects of the current scene (see the module docstring).
 
@@ -263,74 +383,59 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     settings = scene_settings(context.scene)
     if target_scale is not None:
         settings["target_scale"] = float(target_scale)
+    renderable = render_visible_objects(context.scene)
     objs = exported_objects(context)
-    if not objs:
-        raise SceneError("the scene has no visible mesh objects")
-    verts, tris, tri_face, loops = [], [], [], []
-    f_obj, f_idx, rho, e, tgt, tgt_b, forb = [], [], [], [], [], [], []
-    warnings = []
+    b = _Builder()
     counts = {}
-    nf = nv = 0
+    names = []
     unmapped = 0
-    mat_cache = {}
     for oi, ob in enumerate(objs):
         counts[ob.name] = len(ob.data.polygons)
+        names.append(ob.name)
         target, target_b, forbidden = _base_attributes(ob, settings["target_scale"])
         ob_eval, me, mapping = _evaluated_mesh(ob, context)
         try:
-            V = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
+            geo = _mesh_geometry(ob_eval, me, ob.name)
             M = np.array(ob_eval.matrix_world, dtype=np.float64)
-            W = V @ M[:3, :3].T + M[:3, 3]
-            if not np.all(np.isfinite(W)):
-                raise SceneError(f"object {ob.name!r} has NaN or infinite vertex coordinates")
-            flip = np.linalg.det(M[:3, :3]) < 0
-            me.calc_loop_triangles()
-            nt = len(me.loop_triangles)
-            lt = _get(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
-            lt_poly = _get(me.loop_triangles, "polygon_index", nt, np.int64)
-            npoly = len(me.polygons)
-            loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
-            _, starts, totals = _loop_polygon(me)
-            mat_index = _get(me.polygons, "material_index", npoly, np.int64)
         finally:
             ob_eval.to_mesh_clear()
-        if flip:
-            lt = lt[:, ::-1]
-        verts.append(W)
-        tris.append(lt + nv)
-        tri_face.append(lt_poly + nf)
-        for s, t in zip(starts, totals):
-            lp = (loop_vert[s:s + t] + nv).tolist()
-            loops.append(lp[::-1] if flip else lp)
-        slots = [s.material for s in ob.material_slots]
-        props = []
-        for mi in range(max(len(slots), 1)):
-            mat = slots[mi] if mi < len(slots) else None
-            key = mat.name if mat is not None else None
-            if key not in mat_cache:
-                mat_cache[key] = material_properties(mat)
-                if mat_cache[key][2]:
-                    warnings.append(mat_cache[key][2])
-            props.append(mat_cache[key])
-        mi = np.clip(mat_index, 0, len(props) - 1)
-        rho.append(np.array([p[0] for p in props])[mi])
-        e.append(math.pi * np.array([p[1] for p in props])[mi])
+        npoly = len(geo["loops"])
         idx = np.arange(npoly) if mapping is None else mapping
         unmapped += int(np.sum(idx < 0))
         ok = idx >= 0
         safe = np.where(ok, idx, 0)
-        tgt.append(target[safe] & ok)
-        tgt_b.append(np.where(ok[:, None], target_b[safe], 0.0))
-        forb.append(np.where(ok, forbidden[safe], no_lights(ob)))
-        f_obj.append(np.full(npoly, oi))
-        f_idx.append(idx)
-        nf += npoly
-        nv += len(W)
+        b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
+              np.where(ok, forbidden[safe], no_lights(ob)))
+    # instances: geometry only (occluders, reflectors and emitters), never targets or lights
+    geo_cache = {}
+    n_inst = 0
+    for name, ob, M in _instances(context, renderable):
+        key = ob.data.as_pointer()
+        if key not in geo_cache:
+            me = ob.to_mesh()
+            try:
+                geo_cache[key] = _mesh_geometry(ob, me, name)
+            finally:
+                ob.to_mesh_clear()
+        geo = geo_cache[key]
+        if name not in counts:
+            counts[name] = 0
+            names.append(name)
+        npoly = len(geo["loops"])
+        b.add(geo, M, name, names.index(name), np.full(npoly, -1), np.zeros(npoly, dtype=bool),
+              np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
+        n_inst += 1
+    if not names:
+        raise SceneError("the scene has no visible mesh objects")
+    warnings = b.warnings
     if unmapped:
         warnings.append(f"{unmapped} face(s) created by modifiers could not be mapped to base-mesh polygons "
                         "and are not reported")
-    rho = np.concatenate(rho)
-    e = np.concatenate(e)
+    if n_inst:
+        warnings.append(f"{n_inst} instanced object(s) (collection or other instances) take part as occluders "
+                        "and reflectors only: their faces cannot be targets or lights and are not reported")
+    rho = np.concatenate(b.rho)
+    e = np.concatenate(b.e)
     if np.any(rho > MAX_REFLECTANCE) or np.any(rho < 0):
         nbad = int(np.sum(np.any((rho > MAX_REFLECTANCE) | (rho < 0), axis=1)))
         warnings.append(f"reflectance of {nbad} face(s) clamped to [0, {MAX_REFLECTANCE}] "
@@ -342,18 +447,18 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
     faces = FaceSet(
-        vertices=np.concatenate(verts),
-        triangles=np.concatenate(tris),
-        triangle_face=np.concatenate(tri_face),
-        face_loops=loops,
-        face_object=np.concatenate(f_obj),
-        face_index=np.concatenate(f_idx),
-        object_names=[ob.name for ob in objs],
+        vertices=np.concatenate(b.verts),
+        triangles=np.concatenate(b.tris),
+        triangle_face=np.concatenate(b.tri_face),
+        face_loops=b.loops,
+        face_object=np.concatenate(b.f_obj),
+        face_index=np.concatenate(b.f_idx),
+        object_names=names,
         reflectance=rho,
         exitance=e,
-        target=np.concatenate(tgt),
-        target_radiosity=np.concatenate(tgt_b),
-        forbidden=np.concatenate(forb),
+        target=np.concatenate(b.tgt),
+        target_radiosity=np.concatenate(b.tgt_b),
+        forbidden=np.concatenate(b.forb),
         warnings=warnings,
     )
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0)
