@@ -26,7 +26,8 @@ COMBINED bake of a diffuse surface is its outgoing radiance, i.e. radiosity/pi.
 The Cycles scene is made Lambertian to match the radiosity model
 (``make_lambertian``): Principled BSDFs get Specular IOR Level, Metallic, Coat,
 Sheen, Transmission and Diffuse Roughness 0 (the Principled diffuse lobe is then
-Lambert with albedo Base Color); world black; no clamping, no glossy filter,
+Lambert with albedo Base Color); Principled emission one-sided
+(``one_sided_emission``); world black; no clamping, no glossy filter,
 no adaptive sampling, 64 bounces.
 """
 from __future__ import annotations
@@ -225,6 +226,7 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     scene = bpy.context.scene
     configure_cycles(scene, samples, seed, threads)
     make_lambertian()
+    one_sided_emission()  # Cycles' mesh emission is two-sided; the radiosity model's is not
     if objects is None:
         objects = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
     # Direct + indirect, diffuse + emission: everything a Lambertian surface sends out.

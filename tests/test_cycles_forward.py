@@ -34,11 +34,10 @@ RAYS_PER_PATCH = 16384  # engine side (default meshing, ~1500 patches)
 CYCLES_SAMPLES = 160
 CELL_PX = 20  # 18 x 18 texels inside each face's UV cell
 NOISE_MEAN_TOL = 0.01  # Cycles' own noise on a face mean, averaged over faces
-MEAN_TOL = 0.03  # mean per-face relative error
-BIAS_TOL = 0.03  # |mean signed relative error|
+MEAN_TOL = 0.02  # mean per-face relative error (issue's aim: 3 %)
+BIAS_TOL = 0.01  # |mean signed relative error|
 MAX_TOL = 0.06  # every face: error <= MAX_TOL + 3 x Cycles' noise on that face
 DARK = 0.02  # faces darker than 2 % of their object's median: compared in absolute terms
-SHADOWED = 20.0  # "faces" brighter than 20 x the median of a non-emitting object: see below
 
 
 def rel_error(ours, ref):
@@ -105,7 +104,7 @@ def test_forward_radiosity_against_cycles(cornell_comparison):
     assert report["units"]["radiosity"] == "W/m^2"
     objects = report["objects"]
     assert set(cycles) == set(objects)
-    errors, signed, noise, lines, shadowed = [], [], [], [], []
+    errors, signed, noise, lines = [], [], [], []
     for name, cyc in cycles.items():
         ours = np.asarray(objects[name]["radiosity"], dtype=np.float64) / np.pi  # B/pi = radiance
         ref = cyc.radiance
@@ -115,14 +114,9 @@ def test_forward_radiosity_against_cycles(cornell_comparison):
         if name == "light":  # emission-dominated: checks the units (B/pi vs Emission Color x Strength)
             assert np.allclose(ours, ref, rtol=0.01), (ours, ref)
             continue
-        # The ceiling faces 0.5 mm behind the floating light: Cycles' bake ray meets the light
-        # first and reports its emission (~136 vs ~0.8); we give them the light's back-side
-        # shadow. A bake cannot measure them; they are counted and excluded.
-        hidden = lum > SHADOWED * med
-        shadowed += [(name, int(f)) for f in np.flatnonzero(hidden)]
         dark = lum < DARK * med  # floor under the blocks
         assert np.all(np.abs(ours[dark] - ref[dark]).sum(axis=1) < DARK * med), name
-        use = ~hidden & ~dark
+        use = ~dark
         e = rel_error(ours[use], ref[use])
         errors.append(e)
         signed.append((ours[use] - ref[use]).sum(axis=1) / lum[use])
@@ -132,10 +126,9 @@ def test_forward_radiosity_against_cycles(cornell_comparison):
     errors, signed, noise = map(np.concatenate, (errors, signed, noise))
     summary = (f"faces {len(errors)}: mean {errors.mean():.4f} max {errors.max():.4f} "
                f"signed {signed.mean():+.4f}; Cycles noise mean {noise.mean():.4f} max {noise.max():.4f}; "
-               f"excluded behind the light {shadowed}\n" + "\n".join(lines))
+               f"max(error - 3 noise) {(errors - 3 * noise).max():.4f}\n" + "\n".join(lines))
     print(summary)
-    assert len(shadowed) <= 4 and all(n == "ceiling" for n, _ in shadowed), summary
-    assert len(errors) >= 300, summary
+    assert len(errors) >= 320, summary
     # The reference must be sharper than what is tested.
     assert noise.mean() < NOISE_MEAN_TOL, summary
     assert errors.mean() <= MEAN_TOL, summary
