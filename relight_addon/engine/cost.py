@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from .formfactors import DENSE_LIMIT
 
-__all__ = ["estimate_cost", "format_bytes", "MEMORY_WARNING_BYTES", "SECONDS_WARNING",
+__all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "MEMORY_WARNING_BYTES", "SECONDS_WARNING",
            "RAYS_PER_SECOND", "FLOPS"]
 
 RAYS_PER_SECOND = 3.0e6
@@ -93,3 +93,23 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         warnings.append(f"this solve may take about {seconds:.0f} s ({P} patches, {N} rays per patch); "
                         "use a larger patch size or fewer rays per patch to speed it up")
     return {"memory_bytes": float(memory), "seconds": float(seconds), "warnings": warnings, "parts": parts}
+
+
+def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", **kw) -> dict:
+    """:func:`estimate_cost` of a meshed PatchSet: candidates = patches not forbidden and not
+    emitting (as jobs.run_solve), targets = target patches; ``rays_per_patch`` None = the
+    automatic quality, or a formfactors.QUALITY name."""
+    import numpy as np
+
+    from .formfactors import QUALITY, auto_rays_per_patch
+
+    P = patches.n_patches
+    if rays_per_patch is None:
+        rays_per_patch = auto_rays_per_patch(P)
+    elif isinstance(rays_per_patch, str):
+        if rays_per_patch not in QUALITY:
+            raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")
+        rays_per_patch = QUALITY[rays_per_patch]
+    emitting = np.any(patches.exitance > 0, axis=1)
+    n_candidates = int(np.sum(patches.candidate & ~emitting))
+    return estimate_cost(P, int(rays_per_patch), n_candidates, int(np.sum(patches.target)), solver=solver, **kw)
