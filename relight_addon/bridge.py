@@ -407,7 +407,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
               np.where(ok, forbidden[safe], no_lights(ob)))
     # instances: geometry only (occluders, reflectors and emitters), never targets or lights
-    geo_cache = {}
+    geo_cache, group = {}, {}
     n_inst = 0
     for name, ob, M in _instances(context, renderable):
         key = ob.data.as_pointer()
@@ -418,11 +418,12 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
             finally:
                 ob.to_mesh_clear()
         geo = geo_cache[key]
-        if name not in counts:
+        if name not in group:
             counts[name] = 0
+            group[name] = len(names)
             names.append(name)
         npoly = len(geo["loops"])
-        b.add(geo, M, name, names.index(name), np.full(npoly, -1), np.zeros(npoly, dtype=bool),
+        b.add(geo, M, name, group[name], np.full(npoly, -1), np.zeros(npoly, dtype=bool),
               np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
         n_inst += 1
     if not names:
