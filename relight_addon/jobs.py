@@ -153,6 +153,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 
 # ---------------------------------------------------------------------------- inverse lighting
 from .engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse  # noqa: E402
+from .engine.cost import estimate_patches_cost  # noqa: E402
 from .engine.reduction import reduce_lights  # noqa: E402
 
 #: configurations kept re-appliable in the .blend: every one up to this many lights, and
@@ -198,8 +199,19 @@ def _stage(progress, name, lo, hi):
     return lambda f: progress(name, lo + (hi - lo) * float(f))
 
 
+def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> PatchSet:
+    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+    return mesh_patches(faces, size)
+
+
+def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
+    """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
+    return estimate_patches_cost(patches, options.rays_per_patch, options.solver)
+
+
 def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
-              default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse"):
+              default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
+              patches: PatchSet | None = None):
     """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``.
 
     inverse: targets are the painted faces; candidates every face not forbidden and not
@@ -210,15 +222,18 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     direct ("reduce"): the candidates are the scene's emitters and every other patch is a
     target at the radiosity they give it (the paper's direct-lighting mode).
     ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
-    returning True raises Cancelled. Returns a SolveOutcome.
+    returning True raises Cancelled. ``patches``: the meshed faces when the caller already
+    has them (the operator meshes first to estimate the cost). Returns a SolveOutcome.
     """
     options = (options or JobOptions()).validate()
     check_solvable(faces, mode)
     t0 = time.perf_counter()
-    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
-    patches = mesh_patches(faces, size)
+    if patches is None:
+        patches = mesh_for_job(faces, options, default_max_patch_size)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
+    cost = solve_cost(patches, options)
+    warnings.extend(cost["warnings"])
     kw = {} if options.rays_per_patch is None else {"rays_per_patch": int(options.rays_per_patch)}
     F = compute_form_factors(patches, seed=options.seed, threads=options.threads,
                              progress=_stage(progress, "form factors", 0.0, 0.7), cancel=cancel, **kw)
@@ -340,6 +355,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         "timings_s": {"export": 0.0, "meshing": t_mesh, "form_factors": F.seconds, "inverse": t_inverse,
                       "reduction": t_reduce, "curve": t_curve, "solve": t_inverse + t_reduce, "apply": 0.0,
                       "total": time.perf_counter() - t0},
+        "estimate": {"memory_bytes": cost["memory_bytes"], "seconds": cost["seconds"]},
         "options": {**options.to_dict(), "rays_per_patch": int(F.rays_per_patch),
                     "max_patch_size": float(patches.max_patch_size)},
         "inverse": {

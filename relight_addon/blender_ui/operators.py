@@ -273,9 +273,19 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             return self.execute(context)
         try:
             exp, options = self._export(context)
+            inputs = bridge.job_inputs(exp)
+            patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
+        cost = jobs.solve_cost(patches, options)
+        if cost["warnings"]:
+            # a large solve: ask first; if the user agrees, execute() runs it (synchronously)
+            return context.window_manager.invoke_confirm(
+                self, event, title="Relight: a large solve", message=" ".join(cost["warnings"]))
+        return self._start(context, exp, options, inputs, patches)
+
+    def _start(self, context, exp, options, inputs, patches):
         self._cancel = threading.Event()
         self._progress = [0.0, "starting"]
         self._result = {}
@@ -284,7 +294,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             try:
                 self._result["outcome"] = jobs.run_solve(
                     exp.faces, options, progress=self._set_progress, cancel=self._cancel.is_set,
-                    **bridge.job_inputs(exp))
+                    patches=patches, **inputs)
             except BaseException as exc:  # reported on the main thread
                 self._result["error"] = exc
 
