@@ -109,68 +109,24 @@ def _write_json(path, data):
     os.replace(tmp, path)
 
 
-def run_radiosity_command(args, progress=None, cancel=None):
-    from . import bridge, jobs
-    from .engine.options import JobOptions
-
-    t0 = time.perf_counter()
+def _check_paths(args):
+    """No output may overwrite the input file."""
     scene_path = os.path.abspath(args.scene)
     for name in ("out", "report", "render"):
         path = getattr(args, name)
         if path is not None and os.path.abspath(path) == scene_path:
             raise UsageError(f"--{name} must not be the input file {args.scene}")
-    bridge.open_blend(args.scene)
-    exp = bridge.export_scene()
-    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size,
-                         seed=args.seed, threads=args.threads)
-    report, result = jobs.run_radiosity(exp.faces, options, polygon_counts=exp.polygon_counts,
-                                        default_max_patch_size=exp.settings.get("max_patch_size"),
-                                        progress=progress, cancel=cancel)
+    return scene_path
+
+
+def _write_outputs(args, report, exp, apply, t0):
+    """Apply the result to the open scene (for --out/--render), save the copy, render, and
+    write the report with the export/apply/render/total timings."""
+    from . import bridge
+
     t1 = time.perf_counter()
     if args.out or args.render:
-        bridge.write_radiosity(exp.objects, result.polygon_radiosity, result.polygon_area)
-    if args.out:
-        bridge.save_copy(args.out)
-    t_apply = time.perf_counter() - t1
-    timings = report["timings_s"]
-    timings["export"] = exp.seconds
-    timings["apply"] = t_apply
-    if args.render:
-        t2 = time.perf_counter()
-        bridge.render_radiosity(args.render, samples=args.render_samples)
-        timings["render"] = time.perf_counter() - t2
-    timings["total"] = time.perf_counter() - t0
-    report["input"] = scene_path
-    _write_json(args.report, report)
-    return report
-
-
-def run_solve_command(args, progress=None, cancel=None):
-    from . import bridge, jobs, results
-    from .engine.options import JobOptions
-
-    t0 = time.perf_counter()
-    scene_path = os.path.abspath(args.scene)
-    for name in ("out", "report", "render"):
-        path = getattr(args, name)
-        if path is not None and os.path.abspath(path) == scene_path:
-            raise UsageError(f"--{name} must not be the input file {args.scene}")
-    if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
-        raise UsageError("--error-threshold must be a non-negative number")
-    bridge.open_blend(args.scene)
-    exp = bridge.export_scene(target_scale=getattr(args, "target_scale", None))
-    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
-                         threads=args.threads, solver=getattr(args, "solver", "reduced"),
-                         selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
-                         error_threshold=args.error_threshold, require_positive=not args.allow_negative)
-    outcome = jobs.run_solve(exp.faces, options, progress=progress, cancel=cancel,
-                             mode="inverse" if args.command == "solve" else "direct", **bridge.job_inputs(exp))
-    report = outcome.report
-    t1 = time.perf_counter()
-    if args.out or args.render:
-        import bpy
-
-        results.show_outcome(bpy.context.scene, outcome)
+        apply()
     if args.out:
         bridge.save_copy(args.out)
     timings = report["timings_s"]
@@ -181,9 +137,50 @@ def run_solve_command(args, progress=None, cancel=None):
         bridge.render_radiosity(args.render, samples=args.render_samples)
         timings["render"] = time.perf_counter() - t2
     timings["total"] = time.perf_counter() - t0
-    report["input"] = scene_path
+    report["input"] = os.path.abspath(args.scene)
     _write_json(args.report, report)
     return report
+
+
+def run_radiosity_command(args, progress=None, cancel=None):
+    from . import bridge, jobs
+    from .engine.options import JobOptions
+
+    t0 = time.perf_counter()
+    _check_paths(args)
+    bridge.open_blend(args.scene)
+    exp = bridge.export_scene()
+    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size,
+                         seed=args.seed, threads=args.threads)
+    report, result = jobs.run_radiosity(exp.faces, options, progress=progress, cancel=cancel,
+                                        **bridge.job_inputs(exp))
+    return _write_outputs(args, report, exp, lambda: bridge.write_radiosity(
+        exp.objects, result.polygon_radiosity, result.polygon_area), t0)
+
+
+def run_solve_command(args, progress=None, cancel=None):
+    from . import bridge, jobs, results
+    from .engine.options import JobOptions
+
+    t0 = time.perf_counter()
+    _check_paths(args)
+    if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
+        raise UsageError("--error-threshold must be a non-negative number")
+    bridge.open_blend(args.scene)
+    exp = bridge.export_scene(target_scale=getattr(args, "target_scale", None))
+    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
+                         threads=args.threads, solver=getattr(args, "solver", "reduced"),
+                         selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
+                         error_threshold=args.error_threshold, require_positive=not args.allow_negative)
+    outcome = jobs.run_solve(exp.faces, options, progress=progress, cancel=cancel,
+                             mode="inverse" if args.command == "solve" else "direct", **bridge.job_inputs(exp))
+
+    def apply():
+        import bpy
+
+        results.show_outcome(bpy.context.scene, outcome)
+
+    return _write_outputs(args, outcome.report, exp, apply, t0)
 
 
 def main(argv=None) -> int:
