@@ -91,3 +91,34 @@ def test_solve_out_file_reopens_with_its_curve(run_cli, tmp_path):
             np.testing.assert_allclose(e, want[(o, p)], rtol=1e-5)
     finally:
         relight_addon.unregister()
+
+
+def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
+    """ESC in the add-on sets the cancel flag the job polls; the job raises Cancelled before
+    anything is written back (the operator only touches the scene after a finished job)."""
+    import pytest
+
+    from relight_addon import bridge, jobs
+    from relight_addon.engine.options import JobOptions
+
+    bridge.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = bridge.export_scene()
+    bpy = bpy_clean
+
+    def state():
+        return sorted((o.name, len(o.data.materials), sorted(a.name for a in o.data.attributes))
+                      for o in bpy.context.scene.objects if o.type == "MESH"), sorted(m.name for m in bpy.data.materials)
+
+    before = state()
+    calls = {"n": 0}
+
+    def cancel_after_a_while():
+        calls["n"] += 1
+        return calls["n"] > 3
+
+    stages = []
+    with pytest.raises(jobs.Cancelled):
+        jobs.run_solve(exp.faces, JobOptions(rays_per_patch=1024), progress=lambda s, f: stages.append((s, f)),
+                       cancel=cancel_after_a_while, **bridge.job_inputs(exp))
+    assert calls["n"] > 3 and stages and all(0.0 <= f <= 1.0 for _, f in stages)
+    assert state() == before
