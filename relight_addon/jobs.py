@@ -270,6 +270,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     if red.cancelled:
         raise Cancelled("solve cancelled")
     t_reduce = time.perf_counter() - t2
+    if mode == "inverse":
+        warnings.extend(_positivity_notes(problem, inv, red.final))
     warnings.extend(w for w in problem.warnings + (inv.warnings if inv else []) + red.warnings
                     if w not in warnings)
 
@@ -399,6 +401,28 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},
     }
     return SolveOutcome(_json_safe(report), rows, fi, warnings, stored, faces, patches, problem, inv, red)
+
+
+#: above this relative error, the final configuration is compared with the best positive one
+POSITIVE_GAP = 0.1
+
+
+def _positivity_notes(problem, inv, final):
+    """Say so when the final configuration misses the targets by much: whether no positive
+    lighting can do better (targets brighter or darker than light can make them) or whether
+    more lights / another selection would. The bound is NNLS on T: the best any set of
+    non-negative lights can do."""
+    if not final.relative_error > POSITIVE_GAP:
+        return []
+    bound = inv if inv is not None and inv.solver == "nnls" else solve_inverse(problem, "nnls")
+    n_pos = int((bound.exitance.max(axis=1) > 0).sum())
+    if bound.relative_error > POSITIVE_GAP:
+        return [f"no positive lighting meets these targets: the best any non-negative lights can do is a "
+                f"relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
+                f"is {final.relative_error:.3g}"]
+    return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
+            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or try the "
+            "nnls-greedy selection"]
 
 
 def stored_points(n_lights, final_index):

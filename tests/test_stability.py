@@ -97,11 +97,9 @@ def test_reflectance_one_is_a_clear_error():
         assert not r["ok"] and "singular" in r["message"], r["message"]
 
 
-@pytest.mark.xfail(strict=True, raises=AttributeError,
-                   reason="engine bug (inverse.py, InverseProblem.factors): after a singular LU raises, "
-                          "self._factors stays a partial [None, None, None] list, so a second solve on the "
-                          "same problem crashes with AttributeError instead of repeating the message")
 def test_reflectance_one_second_solve_repeats_the_message():
+    """After a singular LU raised, a second solve on the same problem says the same thing
+    (it once crashed on a half-filled factor list)."""
     prob = CASES["reflectance 1"][1]()
     for _ in range(2):
         with pytest.raises(InverseError, match="singular"):

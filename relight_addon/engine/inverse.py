@@ -221,11 +221,12 @@ class InverseProblem:
     def factors(self):
         """LU factors of A per channel (channels with identical reflectance share one)."""
         if self._factors is None:
-            self._factors = [None] * 3
+            factors = [None] * 3
             for g in _channel_groups(self.reflectance):
-                fac = _Factor(radiosity_matrix(self.F, self.reflectance[:, g[0]]))
+                fac = _Factor(radiosity_matrix(self.F, self.reflectance[:, g[0]]))  # may raise
                 for c in g:
-                    self._factors[c] = fac
+                    factors[c] = fac
+            self._factors = factors  # only once every channel is factorised
             cond = max(f.cond for f in self._factors)
             if np.isfinite(cond) and cond > ILL_CONDITIONED or np.isinf(cond):
                 self.warnings.append(
