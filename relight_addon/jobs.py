@@ -244,7 +244,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     if mode == "inverse":
         emitting = np.any(patches.exitance > 0, axis=1)
         problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                 patches.candidate & ~emitting, patches.center, patches.normal)
+                                 patches.candidate & ~emitting, patches.center, patches.normal,
+                                 light_groups=patches.face)  # a light is a whole face
         if emitting.any():
             background = patches.exitance.copy()
             B0 = problem.forward_radiosity(background)
@@ -254,7 +255,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         e_x = inv.exitance
     else:
         problem, e_x = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                               patches.center, patches.normal)
+                                               patches.center, patches.normal, light_groups=patches.face)
         inv = None
     t_inverse = time.perf_counter() - t1
     if progress is not None:
@@ -283,12 +284,12 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     keep = stored_points([p.n_lights for p in red.curve], red.final_index)
     n_pts = len(keep)
     P = patches.n_patches
-    E = np.zeros((n_pts, len(C), 3))
+    E = np.zeros((n_pts, problem.n_lights, 3))
     for k, ci in enumerate(keep):
         pt = red.curve[ci]
         E[k, pt.lights] = pt.exitance
     E_patch = np.zeros((P, n_pts, 3))
-    E_patch[C] = E.transpose(1, 0, 2)
+    E_patch[C] = E[:, problem.light_of].transpose(1, 0, 2)  # a light's exitance on all its patches
     facs = problem.factors()
     Bg = problem.forward_radiosity(background) if np.any(background) else np.zeros((P, 3))
     B_patch = np.empty((P, n_pts, 3))
@@ -363,7 +364,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         "inverse": {
             "solver": inv.solver if inv else "direct-lighting",
             "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
-            "n_candidates": int(len(C)),
+            "n_candidates": int(problem.n_lights),  # candidate light faces
+            "n_candidate_patches": int(len(C)),
             "rank": inv.rank if inv else None,
             "rcond": inv.rcond if inv else None,
             "error": inv.error if inv else 0.0,

@@ -62,8 +62,50 @@ before = snapshot()
 R["no_target"] = op(bpy.ops.relight.solve)
 R["no_target_unchanged"] = snapshot() == before
 
-# 2. paint targets through the attribute: the floor of the first storey, bright warm light
+# 2a. the target tools: Paint Targets creates the layer (alpha 0 = unpainted) and enters
+# Vertex Paint; Fill Selected paints selected faces; Select Targets selects them; Clear removes
 scene = bpy.context.scene
+probe = next(o for o in scene.objects if o.type == "MESH" and o.name.startswith("ceiling"))
+bpy.context.view_layer.objects.active = probe
+for o in scene.objects:
+    o.select_set(o == probe)
+R["paint_op"] = op(bpy.ops.relight.paint_targets)
+R["paint_mode"] = bpy.context.mode
+lay = probe.data.color_attributes.get("relight_target")
+R["paint_layer"] = None if lay is None else [lay.domain, lay.data_type, probe.data.color_attributes.active_color.name]
+alpha = np.zeros(len(probe.data.loops) * 4, dtype=np.float32)
+if lay is not None:
+    lay.data.foreach_get("color", alpha)
+R["paint_alpha_max"] = float(alpha.reshape(-1, 4)[:, 3].max())
+import bmesh  # noqa: E402
+
+
+def edit_select(obj, faces):
+    """In Edit Mode, select exactly these faces (face select mode)."""
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_mode(type="FACE")
+    bpy.ops.mesh.select_all(action="DESELECT")
+    bm = bmesh.from_edit_mesh(obj.data)
+    bm.faces.ensure_lookup_table()
+    for f in faces:
+        bm.faces[f].select_set(True)
+    bm.select_flush_mode()
+    bmesh.update_edit_mesh(obj.data)
+
+
+bpy.ops.object.mode_set(mode="OBJECT")
+edit_select(probe, [0, 2])
+R["fill_op"] = op(bpy.ops.relight.fill_targets, unpaint=False)
+bpy.ops.object.mode_set(mode="OBJECT")
+R["select_op"] = op(bpy.ops.relight.select_faces, kind="TARGET")
+bpy.ops.object.mode_set(mode="OBJECT")
+got = np.zeros(len(probe.data.polygons), dtype=bool)
+probe.data.polygons.foreach_get("select", got)
+R["selected_targets"] = np.flatnonzero(got).tolist()
+R["clear_targets_op"] = op(bpy.ops.relight.clear_targets)
+R["target_layer_after_clear"] = "relight_target" in probe.data.attributes
+
+# 2b. paint targets through the attribute: the floor of the first storey, bright warm light
 settings = scene.relight
 settings.rays_per_patch = 512
 settings.target_scale = 1.0
@@ -90,13 +132,12 @@ wall = next(o for o in scene.objects if o.type == "MESH" and o.name.startswith("
 bpy.context.view_layer.objects.active = wall
 for o in scene.objects:
     o.select_set(o == wall)
-bpy.ops.object.mode_set(mode="EDIT")
-bpy.ops.mesh.select_all(action="DESELECT")
-bpy.ops.object.mode_set(mode="OBJECT")
-sel = np.zeros(len(wall.data.polygons), dtype=bool)
-sel[:10] = True
-wall.data.polygons.foreach_set("select", sel)
-bpy.ops.object.mode_set(mode="EDIT")
+fb0 = wall.data.attributes.get("relight_forbidden")
+before_vals = np.zeros(len(wall.data.polygons), dtype=bool)
+if fb0 is not None:
+    fb0.data.foreach_get("value", before_vals)
+R["forbidden_before"] = np.flatnonzero(before_vals).tolist()
+edit_select(wall, range(10))
 R["forbid"] = op(bpy.ops.relight.forbid_faces, allow=False)
 bpy.ops.object.mode_set(mode="OBJECT")
 fb = wall.data.attributes["relight_forbidden"]
@@ -175,6 +216,10 @@ R["k_expected"] = expected_lights(k)
 R["k_row"] = [settings.curve[k].n_lights, settings.curve[k].n_negative]
 settings.curve_index = k_final  # clicking a row in the list applies it
 R["back_to_final_state"] = emitting_state()
+
+# the chart image shown in the Results panel, with the shown configuration marked
+chart = bpy.data.images.get(results.CHART_IMAGE)
+R["chart"] = None if chart is None else list(chart.size)
 
 # 6. area lights, then clear: the scene is exactly as before the solve
 R["area_lights"] = op(bpy.ops.relight.make_area_lights)

@@ -50,9 +50,20 @@ def test_scene_without_targets_is_an_error_report_and_changes_nothing(scenario):
     assert scenario["no_target_unchanged"]
 
 
+def test_target_tools(scenario):
+    assert scenario["paint_op"][0] == ["FINISHED"] and scenario["paint_mode"] == "PAINT_VERTEX"
+    assert scenario["paint_layer"] == ["CORNER", "FLOAT_COLOR", "relight_target"]
+    assert scenario["paint_alpha_max"] == 0.0  # a new layer is all unpainted
+    assert scenario["fill_op"][0] == ["FINISHED"] and scenario["select_op"][0] == ["FINISHED"]
+    assert scenario["selected_targets"] == [0, 2]  # exactly the faces Fill painted
+    assert scenario["clear_targets_op"][0] == ["FINISHED"] and not scenario["target_layer_after_clear"]
+
+
 def test_forbid_operator_writes_the_face_attribute(scenario):
     assert scenario["forbid"][0] == ["FINISHED"]
+    # exactly the 10 selected faces, on top of what the sample already forbade on that wall
     assert set(range(10)) <= set(scenario["forbidden_faces"])
+    assert set(scenario["forbidden_faces"]) - set(range(10)) == set(scenario["forbidden_before"]) - set(range(10))
 
 
 def test_solve_fills_the_curve_and_ends_as_the_stop_criteria_say(scenario):
@@ -88,6 +99,7 @@ def test_final_configuration_is_shown_as_emissive_variants(scenario):
     _compare(scenario["final_state"], scenario["final_expected"])
     assert len(scenario["final_state"]) == scenario["final_row"][0]
     assert scenario["active_color"] == "relight_radiosity"
+    assert scenario["chart"] == [256, 160]
 
 
 def test_apply_configuration_k_matches_its_row(scenario):

@@ -35,21 +35,38 @@ def test_bad_option_values_exit_2(run_cli, tmp_path):
 
 
 def test_reduce_cornell_direct_lighting_mode(run_cli, tmp_path):
-    """Direct-lighting mode: e_x is the scene's own light (error 0, no negatives); reducing it
-    conserves its power per channel at every step, and the final point has <= 3 lights."""
-    scene = os.path.join(SAMPLES, "cornell_box.blend")
+    """Direct-lighting mode on the Cornell box with its light split into 3 x 3 faces: e_x is the
+    scene's own light (error 0, no negatives); every step conserves the light's power per
+    channel (the paper's EnergyConservation), and the final point has <= 3 light faces."""
+    import bmesh
+    import bpy
+
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "cornell_box.blend"))
+    light = bpy.data.objects["light"]
+    bm = bmesh.new()
+    bm.from_mesh(light.data)
+    bmesh.ops.subdivide_edges(bm, edges=bm.edges[:], cuts=2, use_grid_fill=True)
+    bm.to_mesh(light.data)
+    bm.free()
+    scene = tmp_path / "cornell_9_lights.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(scene), copy=True)
+    area = np.array([p.area for p in light.data.polygons])
+    assert len(area) == 9
     code, r, err = run_cli(["reduce", scene, "--report", tmp_path / "r.json", "--rays-per-patch", "1024"])
     assert code == 0, err
-    assert r["command"] == "reduce" and r["curve"][0]["relative_error"] < 1e-10
+    assert r["command"] == "reduce" and r["inverse"]["n_candidates"] == 9
+    assert r["curve"][0]["relative_error"] < 1e-10
     assert all(c["n_negative"] == 0 for c in r["curve"])
-    assert [c["n_lights"] for c in r["curve"]] == list(range(r["curve"][0]["n_lights"], 0, -1))
-    assert r["final"]["n_lights"] <= 3 and r["final"]["n_negative"] == 0
-    # all the light's patches are on one face, so the redistribution moves power inside that
-    # face only: its mean exitance stays pi x the material's radiance (50, 42.5, 30) (Principled
-    # Emission Color x Strength of the sample), whatever patches remain
-    light = np.array(r["objects"]["light"]["exitance"])
-    assert light.shape == (1, 3)
-    np.testing.assert_allclose(light[0], math.pi * np.array([50.0, 42.5, 30.0]), rtol=1e-9)
+    assert [c["n_lights"] for c in r["curve"]] == list(range(9, 0, -1))
+    fin = r["final"]
+    assert fin["n_lights"] <= 3 and fin["n_negative"] == 0 and len(fin["lights"]) == fin["n_lights"]
+    # power conserved: sum of exitance x area over the light faces = pi x radiance (50, 42.5, 30)
+    # of the sample's material x the light's area, per channel (world area = mesh area here)
+    e = np.array(r["objects"]["light"]["exitance"])
+    world_area = np.array([li["area"] for li in fin["lights"]]).sum()
+    np.testing.assert_allclose((e * area[:, None]).sum(axis=0),
+                               math.pi * np.array([50.0, 42.5, 30.0]) * area.sum(), rtol=1e-6)
+    assert world_area < area.sum() + 1e-9
 
 
 def test_solve_out_file_reopens_with_its_curve(run_cli, tmp_path):

@@ -30,12 +30,12 @@ import cycles_reference as cr  # noqa: E402  (tests/ is on sys.path: pytest's ro
 ROOT = Path(__file__).resolve().parents[1]
 
 # Settings and tolerances (measurements: docs/validation.md, "Closed loop: solve -> Cycles").
-RAYS_PER_PATCH = 32768  # engine side
-# One patch per room polygon (0.25 x 0.25 / 0.25 x 0.1875 m faces): a candidate light is then a
-# whole polygon, as --out shows it. With smaller patches the reduction lights single patches and
-# --out spreads their power over the whole polygon, so the prediction is for another light
-# (measured up to 7.6 % off: docs/validation.md).
-MAX_PATCH_SIZE = 0.3
+RAYS_PER_PATCH = 8192  # engine side (x 4 patches per polygon: the same rays as 32768 per polygon)
+# The default meshing (scene diagonal / 20 = 0.16 m) splits every 0.25 m polygon into 2 x 2
+# patches; a light is a whole polygon (all its patches share one exitance), as --out shows it.
+# (Before lights were grouped per polygon, the reduction lit single patches and --out spread
+# their power over the polygon: up to 7.6 % off, docs/validation.md.)
+MAX_PATCH_SIZE = None
 CYCLES_SAMPLES = 256
 CELL_PX = 12  # 10 x 10 texels per face
 TOL = 0.05  # the issue: every target face within 5 % of the prediction
@@ -94,8 +94,9 @@ def build_room(path: Path) -> None:
 
 def run_solve(scene: Path, report: Path, out: Path) -> dict:
     cmd = [sys.executable, "-m", "relight_addon", "solve", str(scene), "--report", str(report),
-           "--out", str(out), "--rays-per-patch", str(RAYS_PER_PATCH),
-           "--max-patch-size", str(MAX_PATCH_SIZE), "--seed", "1"]
+           "--out", str(out), "--rays-per-patch", str(RAYS_PER_PATCH), "--seed", "1"]
+    if MAX_PATCH_SIZE is not None:
+        cmd += ["--max-patch-size", str(MAX_PATCH_SIZE)]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True,
                           env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -61,9 +61,13 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
         bridge.ensure_target_layer(obj.data)
         if context.mode != "PAINT_VERTEX":
             bpy.ops.object.mode_set(mode="VERTEX_PAINT")
-        brush = getattr(context.tool_settings.vertex_paint, "brush", None)
-        if brush is not None and hasattr(brush, "color"):
-            brush.color = context.scene.relight.paint_color
+        color = context.scene.relight.paint_color
+        ups = getattr(context.tool_settings, "unified_paint_settings", None)
+        for holder in (ups, getattr(context.tool_settings.vertex_paint, "brush", None)):
+            try:  # brushes can be read-only assets (Blender 4.3+): the unified colour is enough
+                holder.color = color
+            except (AttributeError, TypeError, RuntimeError):
+                pass
         self.report({"INFO"}, f"Painting targets on {obj.name}: painted colour x scale is the wanted radiance")
         return {"FINISHED"}
 
@@ -137,12 +141,33 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
         total = 0
         for obj in objs:
             mask = bridge.face_flags(obj, self.kind.lower())
-            obj.data.polygons.foreach_set("select", mask)
+            _select_faces(obj.data, mask)
             total += int(mask.sum())
         bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.mesh.select_mode(type="FACE")
         self.report({"INFO"}, f"Selected {total} {self.kind.lower()} face(s)")
         return {"FINISHED"}
+
+
+def _select_faces(mesh, mask):
+    """Select exactly the faces in ``mask`` (Object Mode), with their vertices and edges, so
+    that Edit Mode shows the same selection in any select mode."""
+    mask = np.asarray(mask, dtype=bool)
+    n_loops = len(mesh.loops)
+    loop_vert = np.zeros(n_loops, dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", loop_vert)
+    loop_edge = np.zeros(n_loops, dtype=np.int64)
+    mesh.loops.foreach_get("edge_index", loop_edge)
+    total = np.zeros(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_total", total)
+    loop_sel = np.repeat(mask, total)
+    vsel = np.zeros(len(mesh.vertices), dtype=bool)
+    vsel[loop_vert[loop_sel]] = True
+    esel = np.zeros(len(mesh.edges), dtype=bool)
+    esel[loop_edge[loop_sel]] = True
+    mesh.vertices.foreach_set("select", vsel)
+    mesh.edges.foreach_set("select", esel)
+    mesh.polygons.foreach_set("select", mask)
 
 
 # --- candidates -----------------------------------------------------------------------

@@ -156,10 +156,17 @@ class InverseProblem:
     Patch centres and normals are only used by the reduction's distributions;
     ``exitance`` (P, 3) optionally holds the scene's own emitters (for the
     Gauss-Seidel error route and direct-lighting mode).
+
+    ``light_groups`` (P,) int, optional: candidate patches with the same value form ONE
+    light with one exitance (uniform over its patches), e.g. the patches of one Blender
+    face, since a material makes a whole face emit. The unknowns, T's columns, e_x and the
+    reduction are then per light; radiosity stays per patch. Default: every candidate
+    patch is a light. ``n_lights``, ``light_area``, ``light_center``, ``light_normal`` and
+    ``light_rows()`` describe the lights (area-weighted over their patches).
     """
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
-                 center=None, normal=None):
+                 center=None, normal=None, light_groups=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -208,10 +215,46 @@ class InverseProblem:
             raise InverseError("target radiosities must be non-negative")
         self.target_norm = float(np.linalg.norm(self.b_target))
         self.exitance = np.zeros((n, 3))
+        self._init_lights(light_groups)
         self._factors = None
         self._transfer = None
         self.transfer_seconds = None
         self.warnings = []
+
+    def _init_lights(self, light_groups):
+        C = self.candidates
+        if light_groups is None:
+            self.light_of = np.arange(len(C))
+        else:
+            g = np.asarray(light_groups).reshape(self.n_patches)[C]
+            _, self.light_of = np.unique(g, return_inverse=True)
+            self.light_of = self.light_of.reshape(-1)
+        self.n_lights = int(self.light_of.max()) + 1
+        self.grouped = self.n_lights < len(C)
+        aC = self.area[C]
+        self.light_area = np.bincount(self.light_of, weights=aC, minlength=self.n_lights)
+
+        def mean(v):
+            return np.stack([np.bincount(self.light_of, weights=aC * v[:, k], minlength=self.n_lights)
+                             for k in range(v.shape[1])], axis=1) / self.light_area[:, None]
+
+        self.light_center = mean(self.center[C])
+        nsum = mean(self.normal[C])
+        nlen = np.linalg.norm(nsum, axis=1)
+        self.light_normal = nsum / np.where(nlen > 0, nlen, 1.0)[:, None]
+        self.light_basis = sp.csr_matrix((np.ones(len(C)), (np.arange(len(C)), self.light_of)),
+                                         shape=(len(C), self.n_lights))
+
+    def light_rows(self):
+        """Form-factor rows of the lights (n_lights, P): area-weighted means of their patches'."""
+        FC = self.F[self.candidates]
+        FC = FC.toarray() if sp.issparse(FC) else np.asarray(FC, dtype=np.float64)
+        FC = FC.astype(np.float64)
+        if not self.grouped:
+            return FC
+        W = sp.csr_matrix((self.area[self.candidates], (self.light_of, np.arange(len(self.candidates)))),
+                          shape=(self.n_lights, len(self.candidates)))
+        return (W @ FC) / self.light_area[:, None]
 
     # -- system ---------------------------------------------------------
     @property
@@ -266,6 +309,8 @@ class InverseProblem:
                     rhs[C, np.arange(len(C))] = 1.0
                     X = facs[c].solve(rhs)  # columns C of A^-1
                     T[c] = np.ascontiguousarray(X[P])
+                if self.grouped:  # one column per light: the sum of its patches' columns
+                    T[c] = np.ascontiguousarray((self.light_basis.T @ T[c].T).T)
                 if not np.all(np.isfinite(T[c])):
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[id(facs[c])] = T[c]
@@ -293,8 +338,8 @@ class InverseProblem:
 
     # -- evaluation -----------------------------------------------------
     def target_radiosity_of(self, e_C):
-        """Radiosity (m, 3) on the targets produced by candidate exitances e_C (|C|, 3)."""
-        e_C = np.asarray(e_C, dtype=np.float64).reshape(len(self.candidates), 3)
+        """Radiosity (m, 3) on the targets produced by light exitances e_C (n_lights, 3)."""
+        e_C = np.asarray(e_C, dtype=np.float64).reshape(self.n_lights, 3)
         return np.stack([self.transfer[c] @ e_C[:, c] for c in range(3)], axis=1)
 
     def error(self, e_C):
@@ -305,9 +350,9 @@ class InverseProblem:
         return self.error(e_C) / self.target_norm if self.target_norm > 0 else self.error(e_C)
 
     def patch_exitance(self, e_C):
-        """Full (P, 3) exitance with e_C on the candidates and 0 elsewhere."""
+        """Full (P, 3) exitance with the lights' e_C (n_lights, 3) on their patches, 0 elsewhere."""
         out = np.zeros((self.n_patches, 3))
-        out[self.candidates] = np.asarray(e_C, dtype=np.float64).reshape(-1, 3)
+        out[self.candidates] = np.asarray(e_C, dtype=np.float64).reshape(-1, 3)[self.light_of]
         return out
 
     def forward_radiosity(self, e_full):
@@ -316,13 +361,15 @@ class InverseProblem:
         return np.stack([self.factors()[c].solve(e_full[:, c]) for c in range(3)], axis=1)
 
     @classmethod
-    def from_patches(cls, patches, F):
-        """Problem from a PatchSet (targets, target radiosities, forbidden) and its form factors."""
+    def from_patches(cls, patches, F, lights_per_face=True):
+        """Problem from a PatchSet (targets, target radiosities, forbidden) and its form factors;
+        with ``lights_per_face`` a light is a whole face (all its patches), as Blender shows it."""
         return cls(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                   ~patches.forbidden, patches.center, patches.normal)
+                   ~patches.forbidden, patches.center, patches.normal,
+                   light_groups=patches.face if lights_per_face else None)
 
 
-def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None):
+def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
@@ -341,12 +388,16 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
         raise InverseError("the scene has no light (no patch with a positive exitance)")
     if lights.all():
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
-    prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal)
+    prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal,
+                          light_groups=light_groups)
     B = prob.forward_radiosity(exitance)
     prob.b_target = B[prob.targets].copy()
     prob.target_norm = float(np.linalg.norm(prob.b_target))
     prob.exitance = exitance.copy()
-    return prob, exitance[lights].copy()
+    aC = prob.area[prob.candidates]
+    e_x = np.stack([np.bincount(prob.light_of, weights=aC * exitance[prob.candidates, k], minlength=prob.n_lights)
+                    for k in range(3)], axis=1) / prob.light_area[:, None]  # power-conserving per light
+    return prob, e_x
 
 
 def _lstsq_min_norm(M, R, rcond, driver):
@@ -423,7 +474,7 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
     C, P = problem.candidates, problem.targets
     n = problem.n_patches
     warns = []
-    e = np.zeros((len(C), 3))
+    e = np.zeros((problem.n_lights, 3))
     ranks = []
     used_rcond = None
     if solver == "svd":
@@ -432,9 +483,9 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
             A = radiosity_matrix(problem.F, problem.reflectance[:, g[0]])
             if sp.issparse(A):
                 A = A.toarray()
-            M = np.zeros((n, len(U) + len(C)))
+            M = np.zeros((n, len(U) + problem.n_lights))
             M[:, :len(U)] = A[:, U]
-            M[C, len(U) + np.arange(len(C))] = -1.0
+            M[C, len(U) + problem.light_of] = -1.0
             R = -(A[:, P] @ problem.b_target[:, g])
             used_rcond = rcond if rcond is not None else max(M.shape) * np.finfo(float).eps
             X, rank = _lstsq_min_norm(M, R, used_rcond, svd_driver)

@@ -86,7 +86,8 @@ ERROR_ROUTES = ("transfer", "gauss-seidel")
 class CurvePoint:
     """One configuration of the error curve.
 
-    lights: indices into ``problem.candidates`` (ascending); exitance (k, 3) W/m^2
+    lights: indices of the problem's lights (ascending; a light is a candidate patch, or a
+    group of them, see InverseProblem's light_groups); exitance (k, 3) W/m^2
     aligned with them. changed: the candidate added/removed at this step (-1 at
     the start). error: Eq. 1 (W/m^2); relative_error = error / ||b_P||.
     n_negative: lights with at least one negative channel.
@@ -120,7 +121,7 @@ class ReductionResult:
     def patch_exitance(self, problem, index=None):
         """Full (P, 3) exitance of curve point ``index`` (default: the final one)."""
         pt = self.curve[self.final_index if index is None else index]
-        e = np.zeros((len(problem.candidates), 3))
+        e = np.zeros((problem.n_lights, 3))
         e[pt.lights] = pt.exitance
         return problem.patch_exitance(e)
 
@@ -138,22 +139,19 @@ class Distributor:
         if kind not in DISTRIBUTIONS:
             raise ValueError(f"unknown distribution {kind!r}; choose one of {', '.join(DISTRIBUTIONS)}")
         self.kind = kind
-        C = problem.candidates
-        self.area = problem.area[C]
+        self.area = problem.light_area
         self.pair = None
         if kind == "distance":
-            c = problem.center[C]
+            c = problem.light_center
             d2 = (c * c).sum(1)
             self.pair = np.sqrt(np.maximum(d2[:, None] + d2[None, :] - 2.0 * c @ c.T, 0.0))
         elif kind == "local":
-            FC = problem.F[C]
-            FC = FC.toarray() if sp.issparse(FC) else np.asarray(FC, dtype=np.float64)
-            FC = FC.astype(np.float64)
+            FC = problem.light_rows()
             g = (FC * FC).sum(1)
             self.pair = np.sqrt(np.maximum(g[:, None] + g[None, :] - 2.0 * FC @ FC.T, 0.0))
         elif kind == "coplanar":
-            n = problem.normal[C]
-            c = problem.center[C]
+            n = problem.light_normal
+            c = problem.light_center
             extent = float(np.linalg.norm(np.ptp(c, axis=0))) or 1.0
             same_facing = n @ n.T > 1.0 - coplanar_tol
             offset = np.abs(np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :]))
@@ -220,7 +218,7 @@ class _ErrorEval:
             return float(np.linalg.norm(r))
         from .radiosity import solve_radiosity
 
-        full = np.zeros((len(self.p.candidates), 3))
+        full = np.zeros((self.p.n_lights, 3))
         full[lights] = e
         e_full = self.p.patch_exitance(full)
         B, info = solve_radiosity(self.p.F, self.p.reflectance, e_full, method="gauss-seidel",
@@ -306,7 +304,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     for name, v in (("error_threshold", error_threshold), ("relative_error_threshold", relative_error_threshold)):
         if v is not None and not (np.isfinite(v) and v >= 0):
             raise ValueError(f"{name} must be a non-negative number, got {v}")
-    k = len(problem.candidates)
+    k = problem.n_lights
     e_x = np.asarray(e_x, dtype=np.float64)
     if e_x.shape != (k, 3):
         raise ValueError(f"e_x must have shape ({k}, 3) (one row per candidate), got {e_x.shape}")
@@ -314,7 +312,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         raise ValueError("e_x contains NaN or infinite values")
 
     t0 = time.perf_counter()
-    A = problem.area[problem.candidates]
+    A = problem.light_area
     err_fn = _ErrorEval(problem, error_route, compare_cold=gs_compare_cold)
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     curve = []
@@ -443,7 +441,7 @@ def _error_construction(problem, e_x, phi_x, dist, record, step_hook, steps):
 def _nnls_greedy(problem, record, step_hook, max_steps):
     """Non-negative orthogonal matching pursuit on T (all channels share the support)."""
     T, b = problem.transfer, problem.b_target
-    k = len(problem.candidates)
+    k = problem.n_lights
     colnorm = np.sqrt(sum((t * t).sum(0) for t in T))
     colnorm = np.where(colnorm > 0, colnorm, np.inf)
     sel = []
