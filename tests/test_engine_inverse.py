@@ -237,3 +237,34 @@ def test_gram_route_is_the_svd_pseudo_inverse_solution():
     x2, rank2 = _lstsq_min_norm(M2, R, 1e-10, "auto")
     assert rank2 == 39
     np.testing.assert_allclose(x2, sla.pinv(M2, rtol=1e-10) @ R, rtol=1e-8, atol=1e-10)
+
+
+def test_light_groups_make_a_face_one_light():
+    """Patches grouped into one light share one exitance: T's column of a group is the sum of
+    its patches' columns, e_x reproduces feasible targets, power = exitance x group area; and
+    one patch per group is the ungrouped problem."""
+    r = flatland.room(4.0, 3.0, n_per_wall=(8, 6, 8, 6), reflectance=0.5)
+    P = len(r["area"])
+    floor = (r["wall"] == "floor") & (np.cumsum(r["wall"] == "floor") <= 3)  # 3 targets, 4 lights: feasible
+    cand = r["wall"] == "ceiling"
+    tgt = np.where(floor[:, None], 1.0, 0.0) * np.array([1.0, 0.9, 0.8])
+    groups = np.arange(P) // 2  # pairs of neighbouring patches
+    plain = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"])
+    grouped = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"],
+                             light_groups=groups)
+    assert grouped.n_lights == len(np.unique(groups[cand])) < plain.n_lights
+    for c in range(3):
+        np.testing.assert_allclose(grouped.transfer[c], plain.transfer[c] @ grouped.light_basis.toarray(), atol=1e-14)
+    res = solve_inverse(grouped, "reduced")
+    e_full = grouped.patch_exitance(res.exitance)
+    # every patch of a light has its light's exitance
+    for g in np.unique(groups[cand]):
+        members = np.flatnonzero(cand & (groups == g))
+        np.testing.assert_allclose(e_full[members], e_full[members[:1]].repeat(len(members), axis=0))
+    # the forward solve of that configuration meets the targets (floor reachable from the ceiling)
+    B, _ = solve_radiosity(r["F"], r["reflectance"], e_full, method="direct")
+    np.testing.assert_allclose(B[floor], tgt[floor], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(grouped.light_area, np.bincount(grouped.light_of, weights=r["area"][cand]))
+    alone = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"],
+                           light_groups=np.arange(P))
+    np.testing.assert_allclose(solve_inverse(alone, "reduced").exitance, solve_inverse(plain, "reduced").exitance)
