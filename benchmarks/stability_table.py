@@ -228,8 +228,9 @@ FINDINGS = """## Findings (from this table; see the rows below)
 - **Reflectance 1 - 1e-9 (condition estimate ~2e9)**: the `reduced` and `nnls` solvers and nnls-greedy end
   positive with small errors. The `svd` (paper) formulation's e_x is exact on the targets (rel. 4e-8) but its
   total power is negative in at least one channel, so no selection driven by e_x ends positive: the final
-  configuration is e_x itself, with the warning "no configuration meets the stop criteria", and the errors of
-  its reduced configurations reach 1e3 to 1e6 times the targets' norm. The ill-conditioning warning is always there.
+  configuration is the one with the fewest negatives (within the light count), with the warning "no
+  configuration on this curve is free of negative exitances ... the nnls solver or the nnls-greedy selection
+  give non-negative lights", and the errors of its reduced configurations reach 1e3 to 1e6 times the targets' norm. The ill-conditioning warning is always there.
 - **8 rays per patch**: every row stays finite and exact on its own (noisy) model; the errors are what the
   solver sees, not the error under accurate form factors (tests/test_stability.py checks that the lights stay
   finite under the accurate F).

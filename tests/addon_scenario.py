@@ -26,7 +26,9 @@ def snapshot():
     snap = {"materials": sorted(m.name for m in bpy.data.materials),
             "lights": sorted(o.name for o in bpy.data.objects if o.type == "LIGHT"),
             "collections": sorted(c.name for c in bpy.data.collections),
-            "scene_keys": sorted(bpy.context.scene.keys())}
+            # the add-on's own settings group ("relight") appears in the ID properties of Blender
+            # 4.2 on first access; it holds the panel's settings, not scene content
+            "scene_keys": sorted(k for k in bpy.context.scene.keys() if k != "relight")}
     for ob in bpy.context.scene.objects:
         if ob.type != "MESH":
             continue

@@ -185,16 +185,29 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
         return context.mode == "EDIT_MESH"
 
     def execute(self, context):
+        # the selection is read in Edit Mode, the BOOLEAN face attribute written in Object Mode
+        # (BMesh has no boolean layers before Blender 4.3)
+        objs = list(context.objects_in_mode)
+        bpy.ops.object.mode_set(mode="OBJECT")
         count = 0
-        for obj in context.objects_in_mode:
+        for obj in objs:
             mesh = obj.data
-            bm = bmesh.from_edit_mesh(mesh)
-            layer = bm.faces.layers.bool.get(FORBIDDEN) or bm.faces.layers.bool.new(FORBIDDEN)
-            for f in bm.faces:
-                if f.select:
-                    f[layer] = not self.allow
-                    count += 1
-            bmesh.update_edit_mesh(mesh)
+            n = len(mesh.polygons)
+            sel = np.zeros(n, dtype=bool)
+            mesh.polygons.foreach_get("select", sel)
+            attr = mesh.attributes.get(FORBIDDEN)
+            if attr is not None and (attr.domain != "FACE" or attr.data_type != "BOOLEAN"):
+                mesh.attributes.remove(attr)
+                attr = None
+            if attr is None:
+                attr = mesh.attributes.new(FORBIDDEN, "BOOLEAN", "FACE")
+            vals = np.zeros(n, dtype=bool)
+            attr.data.foreach_get("value", vals)
+            vals[sel] = not self.allow
+            attr.data.foreach_set("value", vals)
+            mesh.update()
+            count += int(sel.sum())
+        bpy.ops.object.mode_set(mode="EDIT")
         verb = "Allowed" if self.allow else "Forbade"
         self.report({"INFO"}, f"{verb} lights on {count} face(s)")
         return {"FINISHED"}

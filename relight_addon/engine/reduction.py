@@ -272,8 +272,17 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
         warns.append(f"no configuration meets the error threshold under the other criteria; "
                      f"kept the smallest error {err[i]:.4g} W/m^2 with {n[i]} lights")
         return i, warns
-    i = int(np.argmin(err))
-    warns.append("no configuration meets the stop criteria (lights/positivity); kept the smallest error")
+    # no point meets the structural criteria: only positivity can fail that way (every curve
+    # reaches a small number of lights), e.g. when a colour channel of e_x has a negative
+    # total power. Keep the point with the fewest negatives within max_lights.
+    within = np.ones(len(curve), dtype=bool) if max_lights is None else n <= max_lights
+    if not within.any():
+        within[:] = True
+    idx = np.flatnonzero(within)
+    i = int(idx[np.lexsort((err[idx], neg[idx]))[0]])
+    warns.append(f"no configuration on this curve is free of negative exitances; kept the one with the fewest "
+                 f"({neg[i]} of {n[i]} lights, error {err[i]:.4g} W/m^2). The nnls solver or the nnls-greedy "
+                 "selection give non-negative lights")
     return i, warns
 
 
