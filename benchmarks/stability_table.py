@@ -236,8 +236,11 @@ FINDINGS = """## Findings (from this table; see the rows below)
   finite under the accurate F).
 - **Infeasible contrast** (one bright target beside black ones): only the `nnls` solver says that no positive
   configuration meets the targets ("residual ... % of the targets' norm"). `svd` and `reduced` reproduce it
-  exactly with negative lights, and the reductions then end positive with a large error and **no message**: a
-  gap (the reduction could warn when its positive end is far above the NNLS bound).
+  exactly with negative lights, and the engine's reductions then end positive with a large error and no
+  message of their own. The job (`relight solve`, the add-on) closes that gap: when the final configuration's
+  relative error is above 0.1 it computes the NNLS bound and says either that no positive lighting meets the
+  targets (with the best possible error) or that more lights / nnls-greedy would get closer
+  (`jobs._positivity_notes`, checked in tests/test_stability.py).
 - **Staircase**: every combination ends positive; error-elimination and error-construction dominate the time.
 - Known engine bug, not visible in this table (each solver gets a fresh problem here): after a singular LU
   raised, a second solve on the *same* InverseProblem crashes with AttributeError (see the xfail test in
