@@ -487,16 +487,25 @@ def face_flags(ob, kind):
     raise ValueError(f"unknown face flag {kind!r}; use target, forbidden or candidate")
 
 
-def ensure_target_layer(mesh):
-    """The mesh's ``relight_target`` FLOAT_COLOR corner attribute (created transparent black)."""
-    attr = mesh.attributes.get(TARGET_ATTRIBUTE)
-    if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
+def ensure_attribute(mesh, name, data_type, domain):
+    """The mesh's attribute ``name`` of that type and domain, created (zeroed: unpainted,
+    allowed) when missing; one of the same name but another type is replaced."""
+    attr = mesh.attributes.get(name)
+    if attr is not None and (attr.domain != domain or attr.data_type != data_type):
         mesh.attributes.remove(attr)
         attr = None
     if attr is None:
-        attr = mesh.color_attributes.new(TARGET_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-        attr.data.foreach_set("color", np.zeros(4 * len(mesh.loops), dtype=np.float32))
+        if data_type in ("FLOAT_COLOR", "BYTE_COLOR"):
+            attr = mesh.color_attributes.new(name, data_type, domain)
+            attr.data.foreach_set("color", np.zeros(4 * len(attr.data), dtype=np.float32))
+        else:
+            attr = mesh.attributes.new(name, data_type, domain)
     return attr
+
+
+def ensure_target_layer(mesh):
+    """The mesh's ``relight_target`` FLOAT_COLOR corner attribute (created transparent black)."""
+    return ensure_attribute(mesh, TARGET_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
 
 
 # ------------------------------------------------------------------ write back

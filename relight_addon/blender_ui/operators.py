@@ -195,12 +195,7 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
             n = len(mesh.polygons)
             sel = np.zeros(n, dtype=bool)
             mesh.polygons.foreach_get("select", sel)
-            attr = mesh.attributes.get(FORBIDDEN)
-            if attr is not None and (attr.domain != "FACE" or attr.data_type != "BOOLEAN"):
-                mesh.attributes.remove(attr)
-                attr = None
-            if attr is None:
-                attr = mesh.attributes.new(FORBIDDEN, "BOOLEAN", "FACE")
+            attr = bridge.ensure_attribute(mesh, FORBIDDEN, "BOOLEAN", "FACE")
             vals = np.zeros(n, dtype=bool)
             attr.data.foreach_get("value", vals)
             vals[sel] = not self.allow
