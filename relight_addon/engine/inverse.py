@@ -407,8 +407,9 @@ def _lstsq_min_norm(M, R, rcond, driver):
     pseudo-inverse is exactly M^T (M M^T)^-1 -- no singular value is cut -- so the same
     minimum-norm solution comes from a Cholesky factorisation of the Gram matrix M M^T
     (rows x rows), tens of times cheaper than an SVD of M. Full row rank is accepted when
-    the factorisation succeeds and M's condition number (estimated by power iterations on
-    M M^T and its inverse) is below GRAM_MAX_COND = 1e5: then no singular value is near the
+    the factorisation succeeds and M's condition number (bounded from above by
+    ||M||_F^2 / lambda_min(M M^T), lambda_min by inverse iteration) is below
+    GRAM_MAX_COND = 1e5: then no singular value is near the
     cut-off and squaring the condition number in the Gram matrix still leaves the solution
     accurate to about 1e-6 relative or better. Otherwise the explicit SVD with the cut-off
     ("gelsd") is used. The staircase's M has a condition number of about 10.
@@ -441,15 +442,12 @@ def _gram_min_norm(M, R, rcond):
         return None
     rng = np.random.default_rng(0)
     x = rng.standard_normal(rows)
-    for _ in range(12):  # inverse iteration: smallest eigenvalue of G (from above)
+    for _ in range(8):  # inverse iteration: smallest eigenvalue of G (from above)
         x = sla.cho_solve((L, lower), x / np.linalg.norm(x), check_finite=False)
     lam_min = 1.0 / np.linalg.norm(x)
-    v = rng.standard_normal(rows)
-    lam_max = 0.0
-    for _ in range(30):  # power iteration: largest eigenvalue of G (from below)
-        v = M @ (M.T @ v)
-        lam_max = float(np.linalg.norm(v))
-        v /= lam_max
+    # largest eigenvalue of G from above: its trace, ||M||_F^2 (at most rows x too large, so the
+    # test below can only be stricter than cond(M) < GRAM_MAX_COND)
+    lam_max = float(np.einsum("ij,ij->", M, M))
     if not (np.isfinite(lam_min) and lam_min > 0 and lam_max / lam_min < GRAM_MAX_COND ** 2):
         return None
     Y = sla.cho_solve((L, lower), R, check_finite=False)
@@ -483,7 +481,7 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
             A = radiosity_matrix(problem.F, problem.reflectance[:, g[0]])
             if sp.issparse(A):
                 A = A.toarray()
-            M = np.zeros((n, len(U) + problem.n_lights))
+            M = np.zeros((n, len(U) + problem.n_lights), order="F")  # Fortran order for BLAS
             M[:, :len(U)] = A[:, U]
             M[C, len(U) + problem.light_of] = -1.0
             R = -(A[:, P] @ problem.b_target[:, g])
