@@ -525,34 +525,77 @@ def _vertex_smoothed_corners(me, poly_values, poly_area):
     return vert[loop_vert]
 
 
-def write_radiosity(objects, radiosity, areas):
-    """Write radiance B/pi into ``relight_radiosity`` on each object's mesh.
+ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
+ORIGINAL_RENDER_COLOR_PROP = "relight_original_render_color"
 
-    ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon; ``areas[name]``: (n_polygons,)
-    weights (m^2). A mesh shared by several exported objects is made single-user first.
-    """
+
+def write_radiosity_layer(ob, poly_radiosity, poly_area=None):
+    """Write per-polygon radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
+    holding radiance B/pi (comparable with a Cycles COMBINED bake; per vertex, the
+    area-weighted mean of its polygons), made the active and render colour. The previous
+    active/render colours are remembered on the mesh for ``remove_radiosity_layer``.
+    ``poly_area``: the weights (default: the mesh's own polygon areas)."""
+    me = ob.data
+    vals = np.asarray(poly_radiosity, dtype=np.float64).reshape(-1, 3) / math.pi
+    if not np.all(np.isfinite(vals)):
+        raise SceneError(f"{ob.name}: refusing to write non-finite radiosity")
+    if poly_area is None:
+        poly_area = _get(me.polygons, "area", len(me.polygons), np.float64)
+    corner = _vertex_smoothed_corners(me, vals, np.asarray(poly_area, dtype=np.float64))
+    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
+        me.color_attributes.remove(attr)
+        attr = None
+    if attr is None:
+        if ORIGINAL_ACTIVE_COLOR_PROP not in me.keys():
+            active = me.color_attributes.active_color
+            me[ORIGINAL_ACTIVE_COLOR_PROP] = active.name if active is not None else ""
+            me[ORIGINAL_RENDER_COLOR_PROP] = me.color_attributes.render_color_index
+        attr = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+    rgba = np.ones((len(me.loops), 4), dtype=np.float32)
+    rgba[:, :3] = corner
+    attr.data.foreach_set("color", rgba.ravel())
+    me.color_attributes.active_color = attr
+    me.color_attributes.render_color_index = me.color_attributes.find(RADIOSITY_ATTRIBUTE)
+    me.update()
+
+
+def remove_radiosity_layer(ob) -> bool:
+    """Remove ``relight_radiosity`` and give back the active and render colours it replaced."""
+    me = ob.data
+    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is None:
+        return False
+    me.color_attributes.remove(attr)
+    name = me.get(ORIGINAL_ACTIVE_COLOR_PROP, "")
+    if name and name in me.color_attributes:
+        me.color_attributes.active_color = me.color_attributes[name]
+    if ORIGINAL_RENDER_COLOR_PROP in me.keys():
+        idx = int(me[ORIGINAL_RENDER_COLOR_PROP])
+        if 0 <= idx < len(me.color_attributes):
+            me.color_attributes.render_color_index = idx
+        del me[ORIGINAL_RENDER_COLOR_PROP]
+    if ORIGINAL_ACTIVE_COLOR_PROP in me.keys():
+        del me[ORIGINAL_ACTIVE_COLOR_PROP]
+    me.update()
+    return True
+
+
+def write_radiosity(objects, radiosity, areas):
+    """Write radiance B/pi into ``relight_radiosity`` on each object's mesh (see
+    ``write_radiosity_layer``). ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon;
+    ``areas[name]``: (n_polygons,) weights (m^2). A mesh shared by several exported objects
+    is made single-user first (each object gets its own values)."""
     written = set()
     for ob in objects:
         if ob.name not in radiosity:
             continue
         if ob.data.name in written or ob.data.library is not None:
             ob.data = ob.data.copy()
-        me = ob.data
-        written.add(me.name)
-        vals = np.asarray(radiosity[ob.name], dtype=np.float64).reshape(-1, 3) / math.pi
-        corner = _vertex_smoothed_corners(me, vals, np.asarray(areas[ob.name], dtype=np.float64))
-        if RADIOSITY_ATTRIBUTE in me.attributes:
-            me.attributes.remove(me.attributes[RADIOSITY_ATTRIBUTE])
-        attr = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-        rgba = np.ones((len(me.loops), 4), dtype=np.float32)
-        rgba[:, :3] = corner
-        attr.data.foreach_set("color", rgba.ravel())
-        me.color_attributes.active_color_name = RADIOSITY_ATTRIBUTE
-        me.color_attributes.render_color_index = me.color_attributes.find(RADIOSITY_ATTRIBUTE)
-        me.update()
+        written.add(ob.data.name)
+        write_radiosity_layer(ob, radiosity[ob.name], areas[ob.name])
 
 
-# ------------------------------------------------------------------ render
 def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):
     """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
 

@@ -24,6 +24,8 @@ import numpy as np
 
 import bpy
 
+from . import bridge
+
 EMISSION_ATTRIBUTE = "relight_emission"
 ORIGINAL_INDEX_ATTRIBUTE = "relight_original_material"
 ORIGINAL_SLOTS_PROP = "relight_original_slots"
@@ -185,59 +187,6 @@ def apply_configuration(obj, polygon_index, radiance, variants=None) -> int:
     return len(polygon_index)
 
 
-# --- the radiosity colour layer -----------------------------------------------------------
-
-RADIOSITY_ATTRIBUTE = "relight_radiosity"
-ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
-
-
-def write_radiosity_layer(obj, face_radiosity) -> None:
-    """Write per-face radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
-    holding radiance B/pi (comparable with a Cycles COMBINED bake), and make it the active
-    and render colour. The previous active colour is remembered for ``remove_radiosity_layer``."""
-    mesh = obj.data
-    face_radiosity = np.asarray(face_radiosity, dtype=np.float64)
-    if not np.all(np.isfinite(face_radiosity)):
-        raise ValueError(f"{obj.name}: refusing to write non-finite radiosity")
-    from .bridge import _vertex_smoothed_corners
-
-    area = np.empty(len(mesh.polygons))
-    mesh.polygons.foreach_get("area", area)
-    colors = np.ones((len(mesh.loops), 4), dtype=np.float32)
-    colors[:, :3] = _vertex_smoothed_corners(mesh, face_radiosity / np.pi, area)
-    attr = mesh.color_attributes.get(RADIOSITY_ATTRIBUTE)
-    if attr is None:
-        if ORIGINAL_ACTIVE_COLOR_PROP not in mesh.keys():
-            active = mesh.color_attributes.active_color
-            mesh[ORIGINAL_ACTIVE_COLOR_PROP] = active.name if active is not None else ""
-            mesh["relight_original_render_color"] = mesh.color_attributes.render_color_index
-        attr = mesh.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-    attr.data.foreach_set("color", colors.ravel())
-    mesh.color_attributes.active_color = attr
-    mesh.color_attributes.render_color_index = mesh.color_attributes.find(RADIOSITY_ATTRIBUTE)
-    mesh.update()
-
-
-def remove_radiosity_layer(obj) -> bool:
-    mesh = obj.data
-    attr = mesh.color_attributes.get(RADIOSITY_ATTRIBUTE)
-    if attr is None:
-        return False
-    mesh.color_attributes.remove(attr)
-    name = mesh.get(ORIGINAL_ACTIVE_COLOR_PROP, "")
-    if name and name in mesh.color_attributes:
-        mesh.color_attributes.active_color = mesh.color_attributes[name]
-    if "relight_original_render_color" in mesh.keys():
-        idx = int(mesh["relight_original_render_color"])
-        if 0 <= idx < len(mesh.color_attributes):
-            mesh.color_attributes.render_color_index = idx
-        del mesh["relight_original_render_color"]
-    if ORIGINAL_ACTIVE_COLOR_PROP in mesh.keys():
-        del mesh[ORIGINAL_ACTIVE_COLOR_PROP]
-    mesh.update()
-    return True
-
-
 # --- the stored curve: store, apply a point, clear ------------------------------------------
 
 RESULT_PROP = "relight_result"
@@ -307,7 +256,7 @@ def apply_stored_point(scene, index) -> dict:
             if idx.max() >= len(face_b):
                 raise ValueError(f"{name} has changed since the solve: solve again")
             face_b[idx] = data["radiosity"][index][rsel]
-            write_radiosity_layer(obj, face_b)
+            bridge.write_radiosity_layer(obj, face_b)
     return {"lights": shown, "negative": int(negative.sum())}
 
 
@@ -318,7 +267,7 @@ def clear_results(scene) -> int:
         if obj.type != "MESH":
             continue
         a = clear_configuration(obj)
-        b = remove_radiosity_layer(obj)
+        b = bridge.remove_radiosity_layer(obj)
         n += int(a or b)
     if RESULT_PROP in scene.keys():
         del scene[RESULT_PROP]
