@@ -188,61 +188,65 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     if not (max_patch_size > 0 and np.isfinite(max_patch_size)):
         raise SceneError(f"max patch size must be a positive length, got {max_patch_size}")
 
-    tri_by_face = [[] for _ in range(faces.n_faces)]
-    for t, f in zip(faces.triangles, faces.triangle_face):
-        tri_by_face[f].append(t)
-
-    tris = []  # list of (n, 3, 3)
-    tri_patch = []
-    patch_face = []
-    degenerate = 0
+    F = faces.n_faces
     scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     min_area = (1e-10 * scale) ** 2
+    T = V[faces.triangles]  # (n, 3, 3)
+    tf = faces.triangle_face
 
-    def add_patch(tri_arr, f):
-        tri_arr = np.asarray(tri_arr, dtype=np.float64).reshape(-1, 3, 3)
-        ar = 0.5 * np.linalg.norm(np.cross(tri_arr[:, 1] - tri_arr[:, 0], tri_arr[:, 2] - tri_arr[:, 0]), axis=1)
-        tri_arr = tri_arr[ar > min_area]
-        if len(tri_arr) == 0:
-            return False
-        pid = len(patch_face)
-        patch_face.append(f)
-        tris.append(tri_arr)
-        tri_patch.append(np.full(len(tri_arr), pid, dtype=np.int64))
-        return True
+    def tri_area(t):
+        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
 
-    for f in range(faces.n_faces):
-        ft = tri_by_face[f]
-        if not ft:
-            degenerate += 1
-            continue
-        ftri = V[np.asarray(ft)]  # (n, 3, 3)
+    ok = tri_area(T) > min_area
+    edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+    face_edge = np.zeros(F)
+    np.maximum.at(face_edge, tf, edge)
+    whole = face_edge <= max_patch_size
+    # faces kept whole (the common case, vectorised): one patch each, its non-degenerate triangles
+    sel = whole[tf] & ok
+    parts_t, parts_f, parts_l = [T[sel]], [tf[sel]], [np.zeros(int(sel.sum()), dtype=np.int64)]
+    made = np.zeros(F, dtype=bool)
+    made[tf[sel]] = True
+    # larger faces: quads into nu x nv grids, other faces' triangles into k x k sub-triangles
+    tri_of = np.argsort(tf, kind="stable")
+    starts = np.searchsorted(tf[tri_of], np.arange(F + 1))
+    for f in np.flatnonzero(~whole):
+        ftri = T[tri_of[starts[f]:starts[f + 1]]]
         loop = faces.face_loops[f]
-        edges = np.linalg.norm(ftri - np.roll(ftri, 1, axis=1), axis=2)
-        made = False
-        if edges.max() <= max_patch_size:
-            made = add_patch(ftri, f)
-        elif len(loop) == 4:
+        if len(loop) == 4:
             p = V[np.asarray(loop)]
             nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / max_patch_size))
             nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / max_patch_size))
-            for sub in _grid_quad(p, max(nu, 1), max(nv, 1)):
-                made |= add_patch(sub, f)
+            sub = _grid_quad(p, max(nu, 1), max(nv, 1))  # (patches, 2, 3, 3)
+            local = np.repeat(np.arange(len(sub)), 2)
+            sub = sub.reshape(-1, 3, 3)
         else:
+            subs = []
             for t in ftri:
                 k = int(np.ceil(np.linalg.norm(t - np.roll(t, 1, axis=0), axis=1).max() / max_patch_size))
-                for sub in _split_triangle(t, max(k, 1)):
-                    made |= add_patch(sub, f)
-        if not made:
-            degenerate += 1
+                subs.append(_split_triangle(t, max(k, 1)))
+            sub = np.concatenate(subs)
+            local = np.arange(len(sub))
+        keep = tri_area(sub) > min_area
+        if keep.any():
+            made[f] = True
+            parts_t.append(sub[keep])
+            parts_f.append(np.full(int(keep.sum()), f, dtype=np.int64))
+            parts_l.append(local[keep])
+    degenerate = int(F - made.sum())
     if degenerate:
         faces.warnings.append(f"{degenerate} zero-area or degenerate face(s) ignored")
-    if not patch_face:
+    if not made.any():
         raise SceneError("the scene has no face with a non-zero area")
-
-    tri_vertices = np.concatenate(tris)
-    tri_patch = np.concatenate(tri_patch)
-    patch_face = np.asarray(patch_face, dtype=np.int64)
+    tri_all = np.concatenate(parts_t)
+    face_all = np.concatenate(parts_f)
+    local_all = np.concatenate(parts_l)
+    key = face_all * (int(local_all.max()) + 1) + local_all
+    order = np.argsort(key, kind="stable")  # patches in face order, triangles contiguous
+    uniq, tri_patch = np.unique(key[order], return_inverse=True)
+    tri_vertices = tri_all[order]
+    tri_patch = tri_patch.reshape(-1).astype(np.int64)
+    patch_face = face_all[order][np.searchsorted(key[order], uniq)]
     P = len(patch_face)
     e1 = tri_vertices[:, 1] - tri_vertices[:, 0]
     e2 = tri_vertices[:, 2] - tri_vertices[:, 0]
