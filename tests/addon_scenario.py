@@ -71,6 +71,9 @@ probe = next(o for o in scene.objects if o.type == "MESH" and o.name.startswith(
 bpy.context.view_layer.objects.active = probe
 for o in scene.objects:
     o.select_set(o == probe)
+# another colour layer first, active: Paint Targets must switch to its own layer
+other = probe.data.color_attributes.new("artist_colors", "BYTE_COLOR", "CORNER")
+probe.data.color_attributes.active_color = other
 R["paint_op"] = op(bpy.ops.relight.paint_targets)
 R["paint_mode"] = bpy.context.mode
 lay = probe.data.color_attributes.get("relight_target")
@@ -106,6 +109,7 @@ probe.data.polygons.foreach_get("select", got)
 R["selected_targets"] = np.flatnonzero(got).tolist()
 R["clear_targets_op"] = op(bpy.ops.relight.clear_targets)
 R["target_layer_after_clear"] = "relight_target" in probe.data.attributes
+probe.data.color_attributes.remove(probe.data.color_attributes["artist_colors"])
 
 # 2b. paint targets through the attribute: the floor of the first storey, bright warm light
 settings = scene.relight

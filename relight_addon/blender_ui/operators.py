@@ -58,7 +58,9 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
 
     def execute(self, context):
         obj = context.active_object
-        bridge.ensure_target_layer(obj.data)
+        layer = bridge.ensure_target_layer(obj.data)
+        colors = obj.data.color_attributes
+        colors.active_color = colors[layer.name]  # vertex paint paints the active colour layer
         if context.mode != "PAINT_VERTEX":
             bpy.ops.object.mode_set(mode="VERTEX_PAINT")
         color = context.scene.relight.paint_color
