@@ -94,6 +94,18 @@ def _emissive_variant(source):
     return mat
 
 
+def light_faces(obj) -> np.ndarray:
+    """Per polygon of ``obj``: does it emit in the configuration shown (bool array)."""
+    mesh = obj.data
+    n = len(mesh.polygons)
+    attr = mesh.attributes.get(EMISSION_ATTRIBUTE)
+    if attr is None:
+        return np.zeros(n, dtype=bool)
+    em = np.zeros(4 * n, dtype=np.float32)
+    attr.data.foreach_get("color", em)
+    return em.reshape(n, 4)[:, :3].max(axis=1) > 0
+
+
 def clear_configuration(obj) -> bool:
     """Restore ``obj``'s mesh exactly as it was before ``apply_configuration``.
 

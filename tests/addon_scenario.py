@@ -207,6 +207,16 @@ def target_check(k):
 
 k_final = settings.curve_index
 R["final_state"] = emitting_state()
+# Select Light Faces selects exactly the emitting faces of the selected objects
+lit_obj = bpy.data.objects[R["final_state"][0][0]] if R["final_state"] else floor
+bpy.context.view_layer.objects.active = lit_obj
+for o in scene.objects:
+    o.select_set(o == lit_obj)
+R["select_lights_op"] = op(bpy.ops.relight.select_faces, kind="LIGHT")
+bpy.ops.object.mode_set(mode="OBJECT")
+got = np.zeros(len(lit_obj.data.polygons), dtype=bool)
+lit_obj.data.polygons.foreach_get("select", got)
+R["selected_lights"] = [lit_obj.name, np.flatnonzero(got).tolist()]
 R["final_expected"] = expected_lights(k_final)
 R["final_row"] = [settings.curve[k_final].n_lights, settings.curve[k_final].n_negative]
 R["ex_targets"] = target_check(0)["stored_target_radiance"]

@@ -112,6 +112,9 @@ def _compare(state, expected):
 def test_final_configuration_is_shown_as_emissive_variants(scenario):
     _compare(scenario["final_state"], scenario["final_expected"])
     assert len(scenario["final_state"]) == scenario["final_row"][0]
+    assert scenario["select_lights_op"][0] == ["FINISHED"]
+    name, selected = scenario["selected_lights"]
+    assert selected == sorted(p for o, p, *_ in scenario["final_state"] if o == name) and selected
     assert scenario["active_color"] == "relight_radiosity"
     assert scenario["chart"] == [256, 160]
 

@@ -137,39 +137,33 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
         return context.active_object is not None and context.active_object.type == "MESH"
 
     def execute(self, context):
-        objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        total = 0
-        for obj in objs:
-            mask = bridge.face_flags(obj, self.kind.lower())
-            _select_faces(obj.data, mask)
-            total += int(mask.sum())
+        objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
+        masks = {o.name: (results.light_faces(o) if self.kind == "LIGHT"
+                          else bridge.face_flags(o, self.kind.lower())) for o in objs}
+        for o in objs:
+            o.select_set(True)
         bpy.ops.object.mode_set(mode="EDIT")
         bpy.ops.mesh.select_mode(type="FACE")
+        total = 0
+        for obj in context.objects_in_mode:
+            mask = masks.get(obj.name)
+            if mask is None:
+                continue
+            bm = bmesh.from_edit_mesh(obj.data)
+            bm.faces.ensure_lookup_table()
+            for v in bm.verts:
+                v.select = False
+            for e in bm.edges:
+                e.select = False
+            for f in bm.faces:
+                f.select = bool(mask[f.index])
+            bm.select_flush_mode()
+            bmesh.update_edit_mesh(obj.data)
+            total += int(mask.sum())
         self.report({"INFO"}, f"Selected {total} {self.kind.lower()} face(s)")
         return {"FINISHED"}
-
-
-def _select_faces(mesh, mask):
-    """Select exactly the faces in ``mask`` (Object Mode), with their vertices and edges, so
-    that Edit Mode shows the same selection in any select mode."""
-    mask = np.asarray(mask, dtype=bool)
-    n_loops = len(mesh.loops)
-    loop_vert = np.zeros(n_loops, dtype=np.int64)
-    mesh.loops.foreach_get("vertex_index", loop_vert)
-    loop_edge = np.zeros(n_loops, dtype=np.int64)
-    mesh.loops.foreach_get("edge_index", loop_edge)
-    total = np.zeros(len(mesh.polygons), dtype=np.int64)
-    mesh.polygons.foreach_get("loop_total", total)
-    loop_sel = np.repeat(mask, total)
-    vsel = np.zeros(len(mesh.vertices), dtype=bool)
-    vsel[loop_vert[loop_sel]] = True
-    esel = np.zeros(len(mesh.edges), dtype=bool)
-    esel[loop_edge[loop_sel]] = True
-    mesh.vertices.foreach_set("select", vsel)
-    mesh.edges.foreach_set("select", esel)
-    mesh.polygons.foreach_set("select", mask)
 
 
 # --- candidates -----------------------------------------------------------------------

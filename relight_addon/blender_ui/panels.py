@@ -126,6 +126,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("relight.apply_configuration", text="Apply", icon="CHECKMARK").index = -1
         row.operator("relight.clear_results", icon="X")
+        layout.operator("relight.select_faces", text="Select Light Faces", icon="RESTRICT_SELECT_OFF").kind = "LIGHT"
         row = layout.row(align=True)
         row.operator("relight.make_area_lights", icon="LIGHT_AREA")
         row.operator("relight.show_radiosity", icon="SHADING_SOLID")
