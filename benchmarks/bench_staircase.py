@@ -101,7 +101,9 @@ def main():
         return InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                               cand, patches.center, patches.normal)
 
-    # 1. the mathematical phase
+    # 1. the mathematical phase. One untimed solve first: the process's first dense solves pay
+    # one-off costs (BLAS thread start-up, first-touch page faults) that are not the method's.
+    solve_inverse(fresh(), "reduced")
     solves = {}
     rows = []
     for solver, drv in (("svd", "auto"), ("svd", "gelsd"), ("reduced", "auto"), ("nnls", "auto")):

@@ -265,6 +265,10 @@ def test_light_groups_make_a_face_one_light():
     B, _ = solve_radiosity(r["F"], r["reflectance"], e_full, method="direct")
     np.testing.assert_allclose(B[floor], tgt[floor], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(grouped.light_area, np.bincount(grouped.light_of, weights=r["area"][cand]))
+    # the paper's formulation with grouped lights: the structured Gram route ('auto') is the
+    # explicit SVD pseudo-inverse's solution
+    np.testing.assert_allclose(solve_inverse(grouped, "svd").exitance,
+                               solve_inverse(grouped, "svd", svd_driver="svd").exitance, rtol=1e-8, atol=1e-10)
     alone = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"],
                            light_groups=np.arange(P))
     np.testing.assert_allclose(solve_inverse(alone, "reduced").exitance, solve_inverse(plain, "reduced").exitance)
