@@ -241,6 +241,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         raise Cancelled("solve cancelled")
     t1 = time.perf_counter()
     background = np.zeros_like(patches.exitance)
+    B_background = np.zeros_like(patches.exitance)  # radiosity of the scene's own emitters
     if mode == "inverse":
         emitting = np.any(patches.exitance > 0, axis=1)
         problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
@@ -248,8 +249,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
                                  light_groups=patches.face)  # a light is a whole face
         if emitting.any():
             background = patches.exitance.copy()
-            B0 = problem.forward_radiosity(background)
-            problem.b_target = problem.b_target - B0[problem.targets]
+            B_background = problem.forward_radiosity(background)
+            problem.b_target = problem.b_target - B_background[problem.targets]
             warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
         inv = solve_inverse(problem, options.solver)
         e_x = inv.exitance
@@ -291,10 +292,9 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     E_patch = np.zeros((P, n_pts, 3))
     E_patch[C] = E[:, problem.light_of].transpose(1, 0, 2)  # a light's exitance on all its patches
     facs = problem.factors()
-    Bg = problem.forward_radiosity(background) if np.any(background) else np.zeros((P, 3))
     B_patch = np.empty((P, n_pts, 3))
     for c in range(3):
-        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + Bg[:, c:c + 1]
+        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + B_background[:, c:c + 1]
     if not np.all(np.isfinite(B_patch)):
         raise SceneError("the solve produced NaN or infinite values")
     is_cand = np.zeros(P)

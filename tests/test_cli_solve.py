@@ -139,3 +139,25 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
                        cancel=cancel_after_a_while, **bridge.job_inputs(exp))
     assert calls["n"] > 3 and stages and all(0.0 <= f <= 1.0 for _, f in stages)
     assert state() == before
+
+
+def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_clean):
+    """Targets painted at exactly the radiosity the Cornell box's own light gives them need no
+    extra light: the solve keeps the scene's emitter as background, so e_x is ~0 and exact."""
+    from relight_addon import bridge, jobs
+    from relight_addon.engine.options import JobOptions
+
+    bridge.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
+    exp = bridge.export_scene()
+    options = JobOptions(rays_per_patch=1024, max_patch_size=1.0, seed=3)  # every face one patch
+    _, forward = jobs.run_radiosity(exp.faces, options, polygon_counts=exp.polygon_counts)
+    faces = exp.faces
+    floor = faces.object_names.index("floor")
+    targets = np.flatnonzero(faces.face_object == floor)[:10]
+    faces.target[targets] = True
+    faces.target_radiosity[targets] = forward.face_radiosity[targets]
+    out = jobs.run_solve(faces, options, polygon_counts=exp.polygon_counts)
+    assert any("fixed background light" in w for w in out.warnings)
+    light_exitance = math.pi * np.array([50.0, 42.5, 30.0])
+    assert out.report["inverse"]["relative_error"] < 1e-9
+    assert np.abs(out.inverse.exitance).max() < 1e-9 * light_exitance.max()
