@@ -19,6 +19,21 @@ def add_mesh(bpy, name, verts, faces, mat=None):
     return ob
 
 
+def emission_material(bpy, strength, name="emit"):
+    """A material whose surface is an Emission shader (white x strength): reflectance 0,
+    exitance pi x strength."""
+    m = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    nt = m.node_tree
+    nt.nodes.remove(next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"))
+    e = nt.nodes.new("ShaderNodeEmission")
+    e.inputs["Color"].default_value = (1, 1, 1, 1)
+    e.inputs["Strength"].default_value = strength
+    nt.links.new(e.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs[0])
+    return m
+
+
 def principled(bpy, name, base, emission=(0, 0, 0), strength=0.0):
     m = bpy.data.materials.new(name)
     if bpy.app.version < (5, 0, 0):
@@ -86,15 +101,7 @@ def test_materials_and_fallbacks(bpy_clean):
     add_mesh(bpy, "none", QUAD, [(0, 1, 2, 3)])
     add_mesh(bpy, "lamp", QUAD, [(0, 1, 2, 3)], principled(bpy, "lamp", (0.2, 0.3, 0.4), (1, 0.5, 0.25), 4.0))
     hot = add_mesh(bpy, "hot", QUAD, [(0, 1, 2, 3)], principled(bpy, "hot", (1.5, 0.5, 0.5)))
-    em = bpy.data.materials.new("emit")
-    if bpy.app.version < (5, 0, 0):
-        em.use_nodes = True
-    nt = em.node_tree
-    nt.nodes.remove(next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"))
-    e = nt.nodes.new("ShaderNodeEmission")
-    e.inputs["Color"].default_value = (1, 1, 1, 1)
-    e.inputs["Strength"].default_value = 2.0
-    nt.links.new(e.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs[0])
+    em = emission_material(bpy, 2.0)
     add_mesh(bpy, "emit", QUAD, [(0, 1, 2, 3)], em)
     hidden = add_mesh(bpy, "hidden", QUAD, [(0, 1, 2, 3)])
     hidden.hide_render = True

@@ -14,6 +14,7 @@ import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 from relight_addon import bridge, jobs  # noqa: E402
+from test_bridge import emission_material  # noqa: E402
 from relight_addon.engine import closed_forms as cf  # noqa: E402
 from relight_addon.engine.cost import estimate_cost, estimate_patches_cost  # noqa: E402
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
@@ -50,16 +51,7 @@ def diffuse(bpy, name, rho):
 
 def emitter(bpy, strength=E_RADIANCE):
     """Emission shader: reflectance 0, exitance pi * strength."""
-    m = bpy.data.materials.new("emit")
-    if bpy.app.version < (5, 0, 0):
-        m.use_nodes = True
-    nt = m.node_tree
-    nt.nodes.remove(next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled"))
-    e = nt.nodes.new("ShaderNodeEmission")
-    e.inputs["Color"].default_value = (1, 1, 1, 1)
-    e.inputs["Strength"].default_value = strength
-    nt.links.new(e.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs[0])
-    return m
+    return emission_material(bpy, strength)
 
 
 def paint_target(ob, polys, rgb=(0.5, 0.5, 0.5)):
