@@ -2,7 +2,7 @@
 
 Run:  .venv/bin/python benchmarks/bench_forward.py   (about 2 minutes on 2 cores)
 
-Scenes, exported from the sample .blend files through the bridge (the real path):
+Scenes, exported from the sample .blend files through export.py (the real path):
 - the Cornell box (its own ceiling light);
 - the staircase, lit by its ceiling (every ceiling face given an exitance of 100 W/m^2 here,
   since the sample has no emitter of its own).
@@ -25,7 +25,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from relight_addon import bridge  # noqa: E402
+from relight_addon import export  # noqa: E402
 from relight_addon.engine.formfactors import auto_rays_per_patch, compute_form_factors  # noqa: E402
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
 from relight_addon.engine.scene import face_mean, mesh_patches  # noqa: E402
@@ -35,8 +35,8 @@ REFERENCE_RAYS = 131072
 
 
 def scene(name):
-    bridge.open_blend(os.path.join(ROOT, "sample_blends", f"{name}.blend"))
-    exp = bridge.export_scene()
+    export.open_blend(os.path.join(ROOT, "sample_blends", f"{name}.blend"))
+    exp = export.export_scene()
     faces = exp.faces
     if name == "staircase":
         ceiling = exp.faces.object_names.index("ceiling")

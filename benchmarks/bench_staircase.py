@@ -47,10 +47,10 @@ def uptime():
 
 def load_staircase(rays=None, seed=0):
     """(patches, F as float64 ndarray, form-factor seconds, rays per patch) of the staircase."""
-    from relight_addon import bridge
+    from relight_addon import export
 
-    bridge.open_blend(str(SCENE))
-    exp = bridge.export_scene()
+    export.open_blend(str(SCENE))
+    exp = export.export_scene()
     patches = mesh_patches(exp.faces, exp.settings.get("max_patch_size"))
     ff = compute_form_factors(patches, rays_per_patch=rays, seed=seed)
     return patches, np.asarray(ff.matrix, dtype=np.float64), ff.seconds, int(ff.rays_per_patch)

@@ -16,7 +16,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-from relight_addon import bridge, jobs, results  # noqa: E402
+from relight_addon import export, jobs, results  # noqa: E402
 from relight_addon.curve_store import error_chart  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 
@@ -24,7 +24,7 @@ IMG = os.path.join(ROOT, "docs", "img")
 os.makedirs(IMG, exist_ok=True)
 SAMPLES = 32
 
-bridge.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
+export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
 scene = bpy.context.scene
 # a figure camera (the file's own looks up the stairwell): from the first landing's corner,
 # down onto the painted ground floor and the first steps
@@ -36,8 +36,8 @@ cam.rotation_mode = "QUATERNION"
 cam.rotation_quaternion = (Vector((1.4, 0.6, 0.2)) - cam.location).to_track_quat("-Z", "Y")
 cam.data.lens = 18
 scene.render.resolution_x, scene.render.resolution_y = 360, 270
-exp = bridge.export_scene()
-outcome = jobs.run_solve(exp.faces, JobOptions(seed=0), **bridge.job_inputs(exp))
+exp = export.export_scene()
+outcome = jobs.run_solve(exp.faces, JobOptions(seed=0), **export.job_inputs(exp))
 
 # 1. targets: relight_target RGB where painted, black elsewhere, into a temporary layer
 for ob in exp.objects:
@@ -51,16 +51,16 @@ for ob in exp.objects:
     col[:, 3] = 1.0
     tmp = me.color_attributes.new("relight_target_view", "FLOAT_COLOR", "CORNER")
     tmp.data.foreach_set("color", col.ravel())
-bridge.render_radiosity(os.path.join(IMG, "targets.png"), samples=SAMPLES, attribute="relight_target_view")
+results.render_radiosity(os.path.join(IMG, "targets.png"), samples=SAMPLES, attribute="relight_target_view")
 for ob in exp.objects:
     ob.data.color_attributes.remove(ob.data.color_attributes["relight_target_view"])
 
 # 2, 3: radiosity of e_x (row 0) and of the final configuration
 results.show_outcome(scene, outcome)
 results.apply_stored_point(scene, 0)
-bridge.render_radiosity(os.path.join(IMG, "e_x.png"), samples=SAMPLES)
+results.render_radiosity(os.path.join(IMG, "e_x.png"), samples=SAMPLES)
 results.apply_stored_point(scene, outcome.final_index)
-bridge.render_radiosity(os.path.join(IMG, "reduced.png"), samples=SAMPLES)
+results.render_radiosity(os.path.join(IMG, "reduced.png"), samples=SAMPLES)
 
 # 4. Cycles path tracing with the emissive faces as the only light
 scene.render.engine = "CYCLES"

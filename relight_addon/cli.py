@@ -122,19 +122,19 @@ def _check_paths(args):
 def _write_outputs(args, report, exp, apply, t0):
     """Apply the result to the open scene (for --out/--render), save the copy, render, and
     write the report with the export/apply/render/total timings."""
-    from . import bridge
+    from . import export, results
 
     t1 = time.perf_counter()
     if args.out or args.render:
         apply()
     if args.out:
-        bridge.save_copy(args.out)
+        results.save_copy(args.out)
     timings = report["timings_s"]
     timings["export"] = exp.seconds
     timings["apply"] = time.perf_counter() - t1
     if args.render:
         t2 = time.perf_counter()
-        bridge.render_radiosity(args.render, samples=args.render_samples)
+        results.render_radiosity(args.render, samples=args.render_samples)
         timings["render"] = time.perf_counter() - t2
     timings["total"] = time.perf_counter() - t0
     report["input"] = os.path.abspath(args.scene)
@@ -143,37 +143,37 @@ def _write_outputs(args, report, exp, apply, t0):
 
 
 def run_radiosity_command(args, progress=None, cancel=None):
-    from . import bridge, jobs
+    from . import export, jobs, results
     from .engine.options import JobOptions
 
     t0 = time.perf_counter()
     _check_paths(args)
-    bridge.open_blend(args.scene)
-    exp = bridge.export_scene()
+    export.open_blend(args.scene)
+    exp = export.export_scene()
     options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size,
                          seed=args.seed, threads=args.threads)
     report, result = jobs.run_radiosity(exp.faces, options, progress=progress, cancel=cancel,
-                                        **bridge.job_inputs(exp))
-    return _write_outputs(args, report, exp, lambda: bridge.write_radiosity(
+                                        **export.job_inputs(exp))
+    return _write_outputs(args, report, exp, lambda: results.write_radiosity(
         exp.objects, result.polygon_radiosity, result.polygon_area), t0)
 
 
 def run_solve_command(args, progress=None, cancel=None):
-    from . import bridge, jobs, results
+    from . import export, jobs, results
     from .engine.options import JobOptions
 
     t0 = time.perf_counter()
     _check_paths(args)
     if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
         raise UsageError("--error-threshold must be a non-negative number")
-    bridge.open_blend(args.scene)
-    exp = bridge.export_scene(target_scale=getattr(args, "target_scale", None))
+    export.open_blend(args.scene)
+    exp = export.export_scene(target_scale=getattr(args, "target_scale", None))
     options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
                          threads=args.threads, solver=getattr(args, "solver", "reduced"),
                          selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
                          error_threshold=args.error_threshold, require_positive=not args.allow_negative)
     outcome = jobs.run_solve(exp.faces, options, progress=progress, cancel=cancel,
-                             mode="inverse" if args.command == "solve" else "direct", **bridge.job_inputs(exp))
+                             mode="inverse" if args.command == "solve" else "direct", **export.job_inputs(exp))
 
     def apply():
         import bpy

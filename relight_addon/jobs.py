@@ -1,6 +1,6 @@
 """Relight jobs: FaceSet -> engine -> report dict. Shared by the CLI and the add-on operators.
 
-No bpy here: the bridge exports the scene and writes results back.
+No bpy here: export.py exports the scene, results.py writes results back.
 
 ``run_radiosity(faces, options)`` is the forward job ("radiosity" command): mesh the faces
 into patches, ray-cast form factors, solve B = e + rho F B for the scene's own emitters,

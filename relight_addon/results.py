@@ -1,4 +1,7 @@
-"""Relight results in the Blender scene: emissive light faces that can be cleared exactly.
+"""Engine -> Blender: Relight's results in the scene, all of them clearable exactly (bpy).
+
+The way in is export.py. Here: the emissive light faces, the stored curve, the
+``relight_radiosity`` colour layer, area lights, the chart, saving a copy and rendering.
 
 How a configuration is shown (bpy layer; the engine never sees this):
 
@@ -20,11 +23,15 @@ generated materials, so the mesh ends exactly as it was before ``apply_configura
 """
 from __future__ import annotations
 
-import numpy as np
+import math
+import os
+import warnings as _warnings
 
 import bpy
+import numpy as np
 
-from . import bridge
+from .engine.scene import SceneError
+from .export import RADIOSITY_ATTRIBUTE, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
 ORIGINAL_INDEX_ATTRIBUTE = "relight_original_material"
@@ -268,7 +275,7 @@ def apply_stored_point(scene, index) -> dict:
             if idx.max() >= len(face_b):
                 raise ValueError(f"{name} has changed since the solve: solve again")
             face_b[idx] = data["radiosity"][index][rsel]
-            bridge.write_radiosity_layer(obj, face_b)
+            write_radiosity_layer(obj, face_b)
     return {"lights": shown, "negative": int(negative.sum())}
 
 
@@ -279,7 +286,7 @@ def clear_results(scene) -> int:
         if obj.type != "MESH":
             continue
         a = clear_configuration(obj)
-        b = bridge.remove_radiosity_layer(obj)
+        b = remove_radiosity_layer(obj)
         n += int(a or b)
     if RESULT_PROP in scene.keys():
         del scene[RESULT_PROP]
@@ -361,3 +368,155 @@ def chart_icon(scene) -> int:
     if img is None or img.preview is None:
         return 0
     return img.preview.icon_id
+
+
+# --- the radiosity colour layer, saving and rendering ----------------------------------
+
+def save_copy(path: str):
+    """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
+    d = os.path.dirname(os.path.abspath(path))
+    os.makedirs(d, exist_ok=True)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=True)
+
+
+
+def _vertex_smoothed_corners(me, poly_values, poly_area):
+    """Corner values: per vertex, the area-weighted mean of its polygons' values."""
+    loop_poly, _, _ = loop_polygons(me)
+    loop_vert = foreach_array(me.loops, "vertex_index", len(me.loops), np.int64)
+    nv = len(me.vertices)
+    w = poly_area[loop_poly]
+    num = np.stack([np.bincount(loop_vert, weights=w * poly_values[loop_poly, k], minlength=nv)
+                    for k in range(3)], axis=1)
+    den = np.bincount(loop_vert, weights=w, minlength=nv)
+    cnt = np.bincount(loop_vert, minlength=nv)
+    plain = np.stack([np.bincount(loop_vert, weights=poly_values[loop_poly, k], minlength=nv)
+                      for k in range(3)], axis=1) / np.maximum(cnt, 1)[:, None]
+    vert = np.where(den[:, None] > 0, num / np.where(den > 0, den, 1.0)[:, None], plain)
+    return vert[loop_vert]
+
+
+ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
+ORIGINAL_RENDER_COLOR_PROP = "relight_original_render_color"
+
+
+def write_radiosity_layer(ob, poly_radiosity, poly_area=None):
+    """Write per-polygon radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
+    holding radiance B/pi (comparable with a Cycles COMBINED bake; per vertex, the
+    area-weighted mean of its polygons), made the active and render colour. The previous
+    active/render colours are remembered on the mesh for ``remove_radiosity_layer``.
+    ``poly_area``: the weights (default: the mesh's own polygon areas)."""
+    me = ob.data
+    vals = np.asarray(poly_radiosity, dtype=np.float64).reshape(-1, 3) / math.pi
+    if not np.all(np.isfinite(vals)):
+        raise SceneError(f"{ob.name}: refusing to write non-finite radiosity")
+    if poly_area is None:
+        poly_area = foreach_array(me.polygons, "area", len(me.polygons), np.float64)
+    corner = _vertex_smoothed_corners(me, vals, np.asarray(poly_area, dtype=np.float64))
+    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
+        me.color_attributes.remove(attr)
+        attr = None
+    if attr is None:
+        if ORIGINAL_ACTIVE_COLOR_PROP not in me.keys():
+            active = me.color_attributes.active_color
+            me[ORIGINAL_ACTIVE_COLOR_PROP] = active.name if active is not None else ""
+            me[ORIGINAL_RENDER_COLOR_PROP] = me.color_attributes.render_color_index
+        attr = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+    rgba = np.ones((len(me.loops), 4), dtype=np.float32)
+    rgba[:, :3] = corner
+    attr.data.foreach_set("color", rgba.ravel())
+    me.color_attributes.active_color = attr
+    me.color_attributes.render_color_index = me.color_attributes.find(RADIOSITY_ATTRIBUTE)
+    me.update()
+
+
+def remove_radiosity_layer(ob) -> bool:
+    """Remove ``relight_radiosity`` and give back the active and render colours it replaced."""
+    me = ob.data
+    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
+    if attr is None:
+        return False
+    me.color_attributes.remove(attr)
+    name = me.get(ORIGINAL_ACTIVE_COLOR_PROP, "")
+    if name and name in me.color_attributes:
+        me.color_attributes.active_color = me.color_attributes[name]
+    if ORIGINAL_RENDER_COLOR_PROP in me.keys():
+        idx = int(me[ORIGINAL_RENDER_COLOR_PROP])
+        if 0 <= idx < len(me.color_attributes):
+            me.color_attributes.render_color_index = idx
+        del me[ORIGINAL_RENDER_COLOR_PROP]
+    if ORIGINAL_ACTIVE_COLOR_PROP in me.keys():
+        del me[ORIGINAL_ACTIVE_COLOR_PROP]
+    me.update()
+    return True
+
+
+def write_radiosity(objects, radiosity, areas):
+    """Write radiance B/pi into ``relight_radiosity`` on each object's mesh (see
+    ``write_radiosity_layer``). ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon;
+    ``areas[name]``: (n_polygons,) weights (m^2). A mesh shared by several exported objects
+    is made single-user first (each object gets its own values)."""
+    written = set()
+    for ob in objects:
+        if ob.name not in radiosity:
+            continue
+        if ob.data.name in written or ob.data.library is not None:
+            ob.data = ob.data.copy()
+        written.add(ob.data.name)
+        write_radiosity_layer(ob, radiosity[ob.name], areas[ob.name])
+
+
+def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):
+    """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
+
+    Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
+    override: Attribute ``relight_radiosity`` -> Emission, strength 1), on a black world,
+    from the scene camera, with the Standard view transform: a face of radiance 1 is white.
+    The scene's materials and world are restored afterwards.
+    """
+    context = context or bpy.context
+    scene = context.scene
+    if scene.camera is None:
+        raise SceneError("the scene has no camera to render from")
+    mat = bpy.data.materials.new("relight_radiosity_view")
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore", DeprecationWarning)
+        if not mat.use_nodes:
+            mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    at = nt.nodes.new("ShaderNodeAttribute")
+    at.attribute_name = attribute
+    nt.links.new(at.outputs["Color"], em.inputs["Color"])
+    em.inputs["Strength"].default_value = 1.0
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    world = bpy.data.worlds.new("relight_black")
+    world.color = (0.0, 0.0, 0.0)
+    r = scene.render
+    saved = (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
+             scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure)
+    try:
+        context.view_layer.material_override = mat
+        scene.world = world
+        r.engine = "CYCLES"
+        scene.cycles.device = "CPU"
+        scene.cycles.samples = int(samples)
+        scene.cycles.use_denoising = False
+        scene.cycles.max_bounces = 0
+        if resolution is not None:
+            r.resolution_x, r.resolution_y = resolution
+        scene.view_settings.view_transform = "Standard"
+        scene.view_settings.look = "None"
+        scene.view_settings.exposure = 0.0
+        r.image_settings.file_format = "PNG"
+        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+        r.filepath = os.path.abspath(path)
+        bpy.ops.render.render(write_still=True)
+    finally:
+        (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
+         scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure) = saved
+        bpy.data.materials.remove(mat)
+        bpy.data.worlds.remove(world)

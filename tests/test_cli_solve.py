@@ -115,11 +115,11 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
     anything is written back (the operator only touches the scene after a finished job)."""
     import pytest
 
-    from relight_addon import bridge, jobs
+    from relight_addon import export, jobs
     from relight_addon.engine.options import JobOptions
 
-    bridge.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = bridge.export_scene()
+    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
     bpy = bpy_clean
 
     def state():
@@ -136,7 +136,7 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
     stages = []
     with pytest.raises(jobs.Cancelled):
         jobs.run_solve(exp.faces, JobOptions(rays_per_patch=1024), progress=lambda s, f: stages.append((s, f)),
-                       cancel=cancel_after_a_while, **bridge.job_inputs(exp))
+                       cancel=cancel_after_a_while, **export.job_inputs(exp))
     assert calls["n"] > 3 and stages and all(0.0 <= f <= 1.0 for _, f in stages)
     assert state() == before
 
@@ -144,11 +144,11 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
 def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_clean):
     """Targets painted at exactly the radiosity the Cornell box's own light gives them need no
     extra light: the solve keeps the scene's emitter as background, so e_x is ~0 and exact."""
-    from relight_addon import bridge, jobs
+    from relight_addon import export, jobs
     from relight_addon.engine.options import JobOptions
 
-    bridge.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
-    exp = bridge.export_scene()
+    export.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
+    exp = export.export_scene()
     options = JobOptions(rays_per_patch=1024, max_patch_size=1.0, seed=3)  # every face one patch
     _, forward = jobs.run_radiosity(exp.faces, options, polygon_counts=exp.polygon_counts)
     faces = exp.faces

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon import bridge, jobs  # noqa: E402
-from test_bridge import emission_material  # noqa: E402
+from relight_addon import export, jobs  # noqa: E402
+from test_export import emission_material  # noqa: E402
 from relight_addon.engine import closed_forms as cf  # noqa: E402
 from relight_addon.engine.cost import estimate_cost, estimate_patches_cost  # noqa: E402
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
@@ -56,7 +56,7 @@ def emitter(bpy, strength=E_RADIANCE):
 
 def paint_target(ob, polys, rgb=(0.5, 0.5, 0.5)):
     me = ob.data
-    a = bridge.ensure_target_layer(me)
+    a = export.ensure_target_layer(me)
     col = np.zeros((len(me.loops), 4), dtype=np.float32)
     for p in polys:
         poly = me.polygons[p]
@@ -79,7 +79,7 @@ def test_subsurf_and_array_map_targets_to_base_polygons(bpy_clean):
     arr = ob.modifiers.new("arr", "ARRAY")
     arr.count = 3  # relative offset 1: copies at x + 2, x + 4
     quad(bpy, "lamp", size=(6, 1), z=1.0, down=True, mat=emitter(bpy))
-    exp = bridge.export_scene()
+    exp = export.export_scene()
     f = exp.faces
     grid = f.face_object == f.object_names.index("grid")
     assert grid.sum() == 2 * 4 * 3  # 2 polygons x 4 (subdivision) x 3 (array)
@@ -94,7 +94,7 @@ def test_subsurf_and_array_map_targets_to_base_polygons(bpy_clean):
     area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
     assert area[grid[f.triangle_face]].sum() == pytest.approx(6.0)  # 3 copies of 2 m^2
     # the report has one row per base polygon, and it is the area-weighted mean of its faces
-    report, res = jobs.run_radiosity(f, JobOptions(rays_per_patch=256, max_patch_size=ONE_PATCH), **bridge.job_inputs(exp))
+    report, res = jobs.run_radiosity(f, JobOptions(rays_per_patch=256, max_patch_size=ONE_PATCH), **export.job_inputs(exp))
     rows = np.array(report["objects"]["grid"]["radiosity"])
     assert rows.shape == (2, 3)
     for p in (0, 1):
@@ -126,7 +126,7 @@ def test_parented_rotated_scaled_plates_match_closed_form(bpy_clean):
         ob.rotation_euler = (flip, 0.0, 0.0)  # hi faces lo
         ob.scale = (a, b, 1.0)  # 2 x (a, b) local -> (a, b) in world
     bpy.context.view_layer.update()
-    f = bridge.export_faceset()
+    f = export.export_faceset()
     v = f.vertices[f.triangles]
     area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
     assert np.bincount(f.triangle_face, weights=area) == pytest.approx([a * b, a * b])
@@ -207,7 +207,7 @@ def test_instance_faces_are_forbidden_non_targets(bpy_clean):
     bpy = bpy_clean
     plates_scene(bpy, "instance")
     paint_target(bpy.data.objects["occ"], [0])  # painted on the source: not per instance
-    f = bridge.export_faceset()
+    f = export.export_faceset()
     assert f.object_names == ["A", "B", "holder/occ"]
     inst = f.face_object == 2
     assert inst.sum() == 1
@@ -223,7 +223,7 @@ def test_hidden_from_render_is_ignored(bpy_clean):
     bpy = bpy_clean
     plates_scene(bpy, "real")
     bpy.data.objects["occ"].hide_render = True
-    assert bridge.export_faceset().object_names == ["A", "B"]
+    assert export.export_faceset().object_names == ["A", "B"]
     # hidden through its collection
     bpy.data.objects["occ"].hide_render = False
     coll = bpy.data.collections.new("hidden")
@@ -231,14 +231,14 @@ def test_hidden_from_render_is_ignored(bpy_clean):
     coll.objects.link(bpy.data.objects["occ"])
     bpy.context.scene.collection.objects.unlink(bpy.data.objects["occ"])
     coll.hide_render = True
-    assert bridge.export_faceset().object_names == ["A", "B"]
+    assert export.export_faceset().object_names == ["A", "B"]
     coll.hide_render = False
-    assert bridge.export_faceset().object_names == ["A", "B", "occ"]
+    assert export.export_faceset().object_names == ["A", "B", "occ"]
     # an instancer hidden from render instances nothing
     bpy.ops.wm.read_factory_settings(use_empty=True)
     plates_scene(bpy, "instance")
     bpy.data.objects["holder"].hide_render = True
-    assert bridge.export_faceset().object_names == ["A", "B"]
+    assert export.export_faceset().object_names == ["A", "B"]
 
 
 # ---------------------------------------------------------------- untargeted reflectors
@@ -252,13 +252,13 @@ def test_wall_without_targets_reflects_onto_a_target(bpy_clean):
     t = quad(bpy, "T", offset=(1.0, 0.0), mat=diffuse(bpy, "t", rho_t))
     paint_target(t, [0])
     opts = JobOptions(rays_per_patch=RAYS, max_patch_size=ONE_PATCH, seed=2)
-    exp = bridge.export_scene()
-    rep0, _ = jobs.run_radiosity(exp.faces, opts, **bridge.job_inputs(exp))
+    exp = export.export_scene()
+    rep0, _ = jobs.run_radiosity(exp.faces, opts, **export.job_inputs(exp))
     assert rep0["objects"]["T"]["radiosity"][0] == [0.0, 0.0, 0.0]
     quad(bpy, "W", size=(2, 1), z=1.0, down=True, mat=diffuse(bpy, "w", rho_w))
-    exp = bridge.export_scene()
+    exp = export.export_scene()
     assert not exp.faces.target[exp.faces.face_object == exp.faces.object_names.index("W")].any()
-    rep1, _ = jobs.run_radiosity(exp.faces, opts, **bridge.job_inputs(exp))
+    rep1, _ = jobs.run_radiosity(exp.faces, opts, **export.job_inputs(exp))
     e = math.pi * E_RADIANCE
     f = cf.parallel_rectangles(2, 1, 1)
     # B_T = rho_T f rho_W (e f + B_T f) / 2

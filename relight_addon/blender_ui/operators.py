@@ -1,4 +1,4 @@
-"""Operators of the Relight tab. Thin: Blender data in and out through the bridge, the
+"""Operators of the Relight tab. Thin: Blender data in and out through export.py and results.py, the
 work in ``jobs`` (the same code path as the CLI)."""
 from __future__ import annotations
 
@@ -9,12 +9,12 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import bridge, jobs, results
+from .. import export, jobs, results
 from ..engine.options import JobOptions
 from ..engine.scene import SceneError
 
-TARGET = bridge.TARGET_ATTRIBUTE
-FORBIDDEN = bridge.FORBIDDEN_ATTRIBUTE
+TARGET = export.TARGET_ATTRIBUTE
+FORBIDDEN = export.FORBIDDEN_ATTRIBUTE
 
 
 def job_options(settings) -> JobOptions:
@@ -58,7 +58,7 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
 
     def execute(self, context):
         obj = context.active_object
-        layer = bridge.ensure_target_layer(obj.data)
+        layer = export.ensure_target_layer(obj.data)
         colors = obj.data.color_attributes
         colors.active_color = colors[layer.name]  # vertex paint paints the active colour layer
         if context.mode != "PAINT_VERTEX":
@@ -141,7 +141,7 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
         masks = {o.name: (results.light_faces(o) if self.kind == "LIGHT"
-                          else bridge.face_flags(o, self.kind.lower())) for o in objs}
+                          else export.face_flags(o, self.kind.lower())) for o in objs}
         for o in objs:
             o.select_set(True)
         bpy.ops.object.mode_set(mode="EDIT")
@@ -191,7 +191,7 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
             n = len(mesh.polygons)
             sel = np.zeros(n, dtype=bool)
             mesh.polygons.foreach_get("select", sel)
-            attr = bridge.ensure_attribute(mesh, FORBIDDEN, "BOOLEAN", "FACE")
+            attr = export.ensure_attribute(mesh, FORBIDDEN, "BOOLEAN", "FACE")
             vals = np.zeros(n, dtype=bool)
             attr.data.foreach_get("value", vals)
             vals[sel] = not self.allow
@@ -275,14 +275,14 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         settings = context.scene.relight
         options = job_options(settings)
-        exp = bridge.export_scene(context, target_scale=settings.target_scale)
+        exp = export.export_scene(context, target_scale=settings.target_scale)
         jobs.check_solvable(exp.faces)
         return exp, options
 
     def execute(self, context):
         try:
             exp, options = self._export(context)
-            outcome = jobs.run_solve(exp.faces, options, **bridge.job_inputs(exp))
+            outcome = jobs.run_solve(exp.faces, options, **export.job_inputs(exp))
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -302,7 +302,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             return self.execute(context)
         try:
             exp, options = self._export(context)
-            inputs = bridge.job_inputs(exp)
+            inputs = export.job_inputs(exp)
             patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))

@@ -1,7 +1,7 @@
 """The "Relight" sidebar tab of the 3D View: Targets, Light Candidates, Solve, Results."""
 import bpy
 
-from .. import bridge, results
+from .. import export, results
 
 
 def _counts(context):
@@ -12,8 +12,8 @@ def _counts(context):
             continue
         n = len(obj.data.polygons)
         faces += n
-        targets += int(bridge.face_flags(obj, "target").sum())
-        candidates += int(bridge.face_flags(obj, "candidate").sum())
+        targets += int(export.face_flags(obj, "target").sum())
+        candidates += int(export.face_flags(obj, "candidate").sum())
     return targets, candidates, faces
 
 

@@ -1,6 +1,6 @@
 """Scene data model of the radiosity engine: faces in, patches out.
 
-No bpy here. The bridge builds a :class:`FaceSet` from Blender meshes; the
+No bpy here. export.py builds a :class:`FaceSet` from Blender meshes; the
 engine meshes it into a :class:`PatchSet` (``mesh_patches``), computes form
 factors on the patches and solves; per-face results are area-weighted means of
 the face's patches (``face_mean``).
@@ -31,7 +31,7 @@ class SceneError(ValueError):
 
 @dataclass
 class FaceSet:
-    """World-space polygons with per-face attributes (what the bridge exports).
+    """World-space polygons with per-face attributes (what export.py exports).
 
     ``triangles`` is a triangulation of every face (Blender's loop triangles
     handle concave n-gons); ``triangle_face`` names the face of each triangle.

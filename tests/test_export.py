@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon import bridge  # noqa: E402
+from relight_addon import export, results  # noqa: E402
 
 
 def add_mesh(bpy, name, verts, faces, mat=None):
@@ -58,10 +58,10 @@ def test_negative_scale_keeps_normals(bpy_clean):
     bpy = bpy_clean
     ob = add_mesh(bpy, "q", QUAD, [(0, 1, 2, 3)])  # normal +z
     ob.scale = (-1.0, 1.0, 1.0)  # mirror in x: Blender still shows the normal +z
-    faces = bridge.export_faceset()
+    faces = export.export_faceset()
     assert np.allclose(tri_normals(faces), [0, 0, 1])
     ob.scale = (1.0, 1.0, -2.0)  # mirror in z: the normal becomes -z
-    faces = bridge.export_faceset()
+    faces = export.export_faceset()
     assert np.allclose(tri_normals(faces), [0, 0, -1])
     assert np.allclose(faces.vertices[:, 2], 0.0)
 
@@ -71,7 +71,7 @@ def test_concave_ngon_triangulation_covers_its_area(bpy_clean):
     # an L-shaped hexagon (concave), area 3
     L = [(0, 0, 0), (2, 0, 0), (2, 1, 0), (1, 1, 0), (1, 2, 0), (0, 2, 0)]
     add_mesh(bpy, "L", L, [tuple(range(6))])
-    faces = bridge.export_faceset()
+    faces = export.export_faceset()
     v = faces.vertices[faces.triangles]
     cr = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     assert 0.5 * np.linalg.norm(cr, axis=1).sum() == pytest.approx(3.0)
@@ -87,7 +87,7 @@ def test_modifiers_map_to_base_polygons_and_leave_mesh_unchanged(bpy_clean):
     mod.subdivision_type = "SIMPLE"
     mod.levels = 2
     before = sorted(a.name for a in ob.data.attributes)
-    exp = bridge.export_scene()
+    exp = export.export_scene()
     assert sorted(a.name for a in ob.data.attributes) == before
     assert exp.faces.n_faces == 32  # 2 polygons x 16
     assert np.bincount(exp.faces.face_index).tolist() == [16, 16]
@@ -106,7 +106,7 @@ def test_materials_and_fallbacks(bpy_clean):
     hidden = add_mesh(bpy, "hidden", QUAD, [(0, 1, 2, 3)])
     hidden.hide_render = True
     assert hot.name == "hot"
-    f = bridge.export_faceset()
+    f = export.export_faceset()
     names = [f.object_names[i] for i in f.face_object]
     assert sorted(names) == ["emit", "hot", "lamp", "none"]
     row = {n: i for i, n in enumerate(names)}
@@ -116,7 +116,7 @@ def test_materials_and_fallbacks(bpy_clean):
     assert f.exitance[row["lamp"]] == pytest.approx(math.pi * 4.0 * np.array([1, 0.5, 0.25]))
     assert f.exitance[row["emit"]] == pytest.approx([2 * math.pi] * 3)
     assert f.reflectance[row["emit"]] == pytest.approx([0, 0, 0])
-    assert f.reflectance[row["hot"]] == pytest.approx([bridge.MAX_REFLECTANCE, 0.5, 0.5])
+    assert f.reflectance[row["hot"]] == pytest.approx([export.MAX_REFLECTANCE, 0.5, 0.5])
     assert any("clamped" in w for w in f.warnings)
 
 
@@ -134,11 +134,11 @@ def test_targets_forbidden_and_no_lights(bpy_clean):
     fb.data.foreach_set("value", [False, True])
     other = add_mesh(bpy, "other", QUAD, [(0, 1, 2, 3)])
     other["relight_no_lights"] = True
-    f = bridge.export_faceset()
+    f = export.export_faceset()
     assert f.target.tolist() == [True, False, False]
     assert f.target_radiosity[0] == pytest.approx(math.pi * 2.0 * np.array([0.1, 0.2, 0.3]), rel=1e-6)
     assert f.forbidden.tolist() == [False, True, True]
-    assert bridge.face_flags(ob, "candidate").tolist() == [True, False]
+    assert export.face_flags(ob, "candidate").tolist() == [True, False]
 
 
 def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
@@ -147,7 +147,7 @@ def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
     ob = add_mesh(bpy, "two", [(0, 0, 0), (1, 0, 0), (3, 0, 0), (0, 1, 0), (1, 1, 0), (3, 1, 0)],
                   [(0, 1, 4, 3), (1, 2, 5, 4)])
     B = np.array([[math.pi, 0, 0], [4 * math.pi, 0, 0]])
-    bridge.write_radiosity([ob], {"two": B}, {"two": np.array([1.0, 2.0])})
+    results.write_radiosity([ob], {"two": B}, {"two": np.array([1.0, 2.0])})
     me = ob.data
     a = me.color_attributes["relight_radiosity"]
     assert a.domain == "CORNER" and a.data_type == "FLOAT_COLOR"

@@ -1,4 +1,4 @@
-"""Blender <-> engine: export the scene as an engine FaceSet, write results back (bpy).
+"""Blender -> engine: export the scene as an engine FaceSet (bpy). The way back is results.py.
 
 What is exported
 - Every object of type MESH that is visible in the view layer (``visible_get()``) and not
@@ -43,9 +43,6 @@ Relight attributes (read from the base mesh)
 - Scene custom property ``relight_max_patch_size`` (metres): the scene's default patch
   size when the job does not set one.
 
-Write back: ``write_radiosity`` stores radiance B/pi in a FLOAT_COLOR corner attribute
-``relight_radiosity`` (per-vertex area-weighted mean of the polygons around each vertex),
-made the active and render colour attribute.
 """
 from __future__ import annotations
 
@@ -92,13 +89,6 @@ def open_blend(path: str):
     except RuntimeError as exc:
         msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else "unknown error"
         raise BlendFileError(f"cannot open {path}: {msg}") from None
-
-
-def save_copy(path: str):
-    """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
-    d = os.path.dirname(os.path.abspath(path))
-    os.makedirs(d, exist_ok=True)
-    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=True)
 
 
 # ------------------------------------------------------------------ materials
@@ -203,17 +193,19 @@ def scene_settings(scene):
     return {"target_scale": float(scale), "max_patch_size": None if size is None else float(size)}
 
 
-def _get(seq, attr, n, dtype, width=1):
+def foreach_array(seq, attr, n, dtype, width=1):
+    """``seq.foreach_get(attr)`` into a new (n,) or (n, width) array."""
     a = np.zeros(n * width, dtype=dtype)
     if n:
         seq.foreach_get(attr, a)
     return a.reshape(n, width) if width > 1 else a
 
 
-def _loop_polygon(mesh):
+def loop_polygons(mesh):
+    """(polygon of each loop, loop_start, loop_total) of a mesh."""
     n = len(mesh.polygons)
-    starts = _get(mesh.polygons, "loop_start", n, np.int64)
-    totals = _get(mesh.polygons, "loop_total", n, np.int64)
+    starts = foreach_array(mesh.polygons, "loop_start", n, np.int64)
+    totals = foreach_array(mesh.polygons, "loop_total", n, np.int64)
     return np.repeat(np.arange(n), totals), starts, totals
 
 
@@ -224,17 +216,17 @@ def _base_attributes(ob, target_scale):
     target = np.zeros(n, dtype=bool)
     target_b = np.zeros((n, 3))
     forbidden = np.zeros(n, dtype=bool)
-    loop_poly, _, totals = _loop_polygon(me)
+    loop_poly, _, totals = loop_polygons(me)
     attr = me.attributes.get(TARGET_ATTRIBUTE)
     if attr is not None and attr.domain == "CORNER" and len(me.loops):
-        col = _get(attr.data, "color", len(me.loops), np.float64, 4)
+        col = foreach_array(attr.data, "color", len(me.loops), np.float64, 4)
         mean = np.stack([np.bincount(loop_poly, weights=col[:, k], minlength=n) for k in range(4)], axis=1)
         mean /= np.maximum(totals, 1)[:, None]
         target = mean[:, 3] >= 0.5
         target_b[target] = math.pi * mean[target, :3] * target_scale
     attr = me.attributes.get(FORBIDDEN_ATTRIBUTE)
     if attr is not None and attr.domain == "FACE" and attr.data_type == "BOOLEAN":
-        forbidden = _get(attr.data, "value", n, bool)
+        forbidden = foreach_array(attr.data, "value", n, bool)
     if no_lights(ob):
         forbidden[:] = True
     return target, target_b, forbidden
@@ -266,7 +258,7 @@ def _evaluated_mesh(ob, context):
         else:
             a = me.attributes.get(_FACE_INDEX_ATTRIBUTE) if tagged else None
             if a is not None and a.domain == "FACE":
-                mapping = _get(a.data, "value", n, np.int64)
+                mapping = foreach_array(a.data, "value", n, np.int64)
                 mapping[(mapping < 0) | (mapping >= len(base.polygons))] = -1
             elif n == len(base.polygons):
                 mapping = None  # same polygon count, assume same order
@@ -282,17 +274,17 @@ def _evaluated_mesh(ob, context):
 def _mesh_geometry(ob_eval, me, name):
     """Local-space arrays of an evaluated mesh: vertices, loop triangles, their polygons,
     polygon loops (vertex indices) and material indices."""
-    V = _get(me.vertices, "co", len(me.vertices), np.float64, 3)
+    V = foreach_array(me.vertices, "co", len(me.vertices), np.float64, 3)
     if not np.all(np.isfinite(V)):
         raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
     me.calc_loop_triangles()
     nt = len(me.loop_triangles)
-    lt = _get(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
-    lt_poly = _get(me.loop_triangles, "polygon_index", nt, np.int64)
+    lt = foreach_array(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
+    lt_poly = foreach_array(me.loop_triangles, "polygon_index", nt, np.int64)
     npoly = len(me.polygons)
-    loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
-    _, starts, totals = _loop_polygon(me)
-    mat_index = _get(me.polygons, "material_index", npoly, np.int64)
+    loop_vert = foreach_array(me.loops, "vertex_index", len(me.loops), np.int64)
+    _, starts, totals = loop_polygons(me)
+    mat_index = foreach_array(me.polygons, "material_index", npoly, np.int64)
     loops = [loop_vert[s:s + t] for s, t in zip(starts, totals)]
     slots = [getattr(s.material, "original", s.material) for s in ob_eval.material_slots]
     return {"V": V, "lt": lt, "lt_poly": lt_poly, "loops": loops, "mat_index": mat_index, "slots": slots}
@@ -506,146 +498,3 @@ def ensure_attribute(mesh, name, data_type, domain):
 def ensure_target_layer(mesh):
     """The mesh's ``relight_target`` FLOAT_COLOR corner attribute (created transparent black)."""
     return ensure_attribute(mesh, TARGET_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-
-
-# ------------------------------------------------------------------ write back
-def _vertex_smoothed_corners(me, poly_values, poly_area):
-    """Corner values: per vertex, the area-weighted mean of its polygons' values."""
-    loop_poly, _, _ = _loop_polygon(me)
-    loop_vert = _get(me.loops, "vertex_index", len(me.loops), np.int64)
-    nv = len(me.vertices)
-    w = poly_area[loop_poly]
-    num = np.stack([np.bincount(loop_vert, weights=w * poly_values[loop_poly, k], minlength=nv)
-                    for k in range(3)], axis=1)
-    den = np.bincount(loop_vert, weights=w, minlength=nv)
-    cnt = np.bincount(loop_vert, minlength=nv)
-    plain = np.stack([np.bincount(loop_vert, weights=poly_values[loop_poly, k], minlength=nv)
-                      for k in range(3)], axis=1) / np.maximum(cnt, 1)[:, None]
-    vert = np.where(den[:, None] > 0, num / np.where(den > 0, den, 1.0)[:, None], plain)
-    return vert[loop_vert]
-
-
-ORIGINAL_ACTIVE_COLOR_PROP = "relight_original_active_color"
-ORIGINAL_RENDER_COLOR_PROP = "relight_original_render_color"
-
-
-def write_radiosity_layer(ob, poly_radiosity, poly_area=None):
-    """Write per-polygon radiosity B (W/m^2) as the corner colour layer ``relight_radiosity``
-    holding radiance B/pi (comparable with a Cycles COMBINED bake; per vertex, the
-    area-weighted mean of its polygons), made the active and render colour. The previous
-    active/render colours are remembered on the mesh for ``remove_radiosity_layer``.
-    ``poly_area``: the weights (default: the mesh's own polygon areas)."""
-    me = ob.data
-    vals = np.asarray(poly_radiosity, dtype=np.float64).reshape(-1, 3) / math.pi
-    if not np.all(np.isfinite(vals)):
-        raise SceneError(f"{ob.name}: refusing to write non-finite radiosity")
-    if poly_area is None:
-        poly_area = _get(me.polygons, "area", len(me.polygons), np.float64)
-    corner = _vertex_smoothed_corners(me, vals, np.asarray(poly_area, dtype=np.float64))
-    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
-    if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
-        me.color_attributes.remove(attr)
-        attr = None
-    if attr is None:
-        if ORIGINAL_ACTIVE_COLOR_PROP not in me.keys():
-            active = me.color_attributes.active_color
-            me[ORIGINAL_ACTIVE_COLOR_PROP] = active.name if active is not None else ""
-            me[ORIGINAL_RENDER_COLOR_PROP] = me.color_attributes.render_color_index
-        attr = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-    rgba = np.ones((len(me.loops), 4), dtype=np.float32)
-    rgba[:, :3] = corner
-    attr.data.foreach_set("color", rgba.ravel())
-    me.color_attributes.active_color = attr
-    me.color_attributes.render_color_index = me.color_attributes.find(RADIOSITY_ATTRIBUTE)
-    me.update()
-
-
-def remove_radiosity_layer(ob) -> bool:
-    """Remove ``relight_radiosity`` and give back the active and render colours it replaced."""
-    me = ob.data
-    attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
-    if attr is None:
-        return False
-    me.color_attributes.remove(attr)
-    name = me.get(ORIGINAL_ACTIVE_COLOR_PROP, "")
-    if name and name in me.color_attributes:
-        me.color_attributes.active_color = me.color_attributes[name]
-    if ORIGINAL_RENDER_COLOR_PROP in me.keys():
-        idx = int(me[ORIGINAL_RENDER_COLOR_PROP])
-        if 0 <= idx < len(me.color_attributes):
-            me.color_attributes.render_color_index = idx
-        del me[ORIGINAL_RENDER_COLOR_PROP]
-    if ORIGINAL_ACTIVE_COLOR_PROP in me.keys():
-        del me[ORIGINAL_ACTIVE_COLOR_PROP]
-    me.update()
-    return True
-
-
-def write_radiosity(objects, radiosity, areas):
-    """Write radiance B/pi into ``relight_radiosity`` on each object's mesh (see
-    ``write_radiosity_layer``). ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon;
-    ``areas[name]``: (n_polygons,) weights (m^2). A mesh shared by several exported objects
-    is made single-user first (each object gets its own values)."""
-    written = set()
-    for ob in objects:
-        if ob.name not in radiosity:
-            continue
-        if ob.data.name in written or ob.data.library is not None:
-            ob.data = ob.data.copy()
-        written.add(ob.data.name)
-        write_radiosity_layer(ob, radiosity[ob.name], areas[ob.name])
-
-
-def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):
-    """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
-
-    Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
-    override: Attribute ``relight_radiosity`` -> Emission, strength 1), on a black world,
-    from the scene camera, with the Standard view transform: a face of radiance 1 is white.
-    The scene's materials and world are restored afterwards.
-    """
-    context = context or bpy.context
-    scene = context.scene
-    if scene.camera is None:
-        raise SceneError("the scene has no camera to render from")
-    mat = bpy.data.materials.new("relight_radiosity_view")
-    with _warnings.catch_warnings():
-        _warnings.simplefilter("ignore", DeprecationWarning)
-        if not mat.use_nodes:
-            mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    em = nt.nodes.new("ShaderNodeEmission")
-    at = nt.nodes.new("ShaderNodeAttribute")
-    at.attribute_name = attribute
-    nt.links.new(at.outputs["Color"], em.inputs["Color"])
-    em.inputs["Strength"].default_value = 1.0
-    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
-    world = bpy.data.worlds.new("relight_black")
-    world.color = (0.0, 0.0, 0.0)
-    r = scene.render
-    saved = (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
-             scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure)
-    try:
-        context.view_layer.material_override = mat
-        scene.world = world
-        r.engine = "CYCLES"
-        scene.cycles.device = "CPU"
-        scene.cycles.samples = int(samples)
-        scene.cycles.use_denoising = False
-        scene.cycles.max_bounces = 0
-        if resolution is not None:
-            r.resolution_x, r.resolution_y = resolution
-        scene.view_settings.view_transform = "Standard"
-        scene.view_settings.look = "None"
-        scene.view_settings.exposure = 0.0
-        r.image_settings.file_format = "PNG"
-        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-        r.filepath = os.path.abspath(path)
-        bpy.ops.render.render(write_still=True)
-    finally:
-        (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
-         scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure) = saved
-        bpy.data.materials.remove(mat)
-        bpy.data.worlds.remove(world)
