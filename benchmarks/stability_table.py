@@ -28,9 +28,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
-from relight_addon.engine.inverse import SOLVERS, InverseProblem, solve_inverse  # noqa: E402
+from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
-from relight_addon.engine.reduction import DISTRIBUTIONS, SELECTIONS, reduce_lights  # noqa: E402
+from relight_addon.engine.reduction import reduce_lights  # noqa: E402
+from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS  # noqa: E402
 from relight_addon.engine.scene import SceneError, mesh_patches, polygon_faceset  # noqa: E402
 
 ROOM = (4.0, 3.0, 2.5)
@@ -214,9 +215,9 @@ def run_row(prob, solver, selection, distribution, ec_steps=10, solves=None):
 
 
 def combos():
-    for solver in SOLVERS:
-        for sel in SELECTIONS:
-            for dist in (DISTRIBUTIONS if sel != "nnls-greedy" else ("distance",)):
+    for solver in SOLVERS.names():
+        for sel in SELECTIONS.names():
+            for dist in (DISTRIBUTIONS.names() if SELECTIONS[sel].get("distributes", True) else ("distance",)):
                 yield solver, sel, dist
 
 
@@ -265,7 +266,7 @@ def main():
     summary = []
     for name, (desc, build) in cases.items():
         rows = []
-        for solver in SOLVERS:  # a fresh problem per solver (as every solve in the add-on)
+        for solver in SOLVERS.names():  # a fresh problem per solver (as every solve in the add-on)
             t = time.perf_counter()
             prob, err = build_case(build)
             if prob is None:  # fails at set-up, whatever the solver and selection: one row

@@ -63,6 +63,7 @@ def build_parser():
     r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
     r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
     from .engine import options as o
+    from .engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS
 
     for name, helptext in (("solve", "inverse lighting: lights for the painted targets, then reduction"),
                            ("reduce", "direct-lighting mode: reduce the scene's own emitters")):
@@ -76,11 +77,11 @@ def build_parser():
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--threads", type=_positive_int, default=None)
         if name == "solve":
-            s.add_argument("--solver", choices=o.SOLVERS, default=o.DEFAULT_SOLVER)
+            s.add_argument("--solver", choices=SOLVERS.names(), default=o.DEFAULT_SOLVER)
             s.add_argument("--target-scale", type=float, default=None,
                            help="multiplies the painted target colours (default: the scene's)")
-        s.add_argument("--selection", choices=o.SELECTIONS, default=o.DEFAULT_SELECTION)
-        s.add_argument("--distribution", choices=o.DISTRIBUTIONS, default=o.DEFAULT_DISTRIBUTION)
+        s.add_argument("--selection", choices=SELECTIONS.names(), default=o.DEFAULT_SELECTION)
+        s.add_argument("--distribution", choices=DISTRIBUTIONS.names(), default=o.DEFAULT_DISTRIBUTION)
         s.add_argument("--max-lights", type=_positive_int, default=o.DEFAULT_MAX_LIGHTS,
                        help=f"stop criterion: at most this many lights (default {o.DEFAULT_MAX_LIGHTS})")
         s.add_argument("--error-threshold", type=float, default=None,

@@ -16,10 +16,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .engine.formfactors import Cancelled, compute_form_factors
+from .engine.cost import estimate_patches_cost
+from .engine.formfactors import Cancelled
+from .engine.geometry import group_mean, group_sum, triangle_areas
+from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
+from .engine.lights import LightSet, candidate_mask
 from .engine.options import JobOptions
 from .engine.radiosity import solve_radiosity
-from .engine.scene import FaceSet, PatchSet, SceneError, face_mean, mesh_patches
+from .engine.reduction import ReductionResult, reduce_lights
+from .engine.registry import ESTIMATORS, PATCH_MODELS
+from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "per_polygon", "JobOptions"]
 
@@ -36,10 +42,9 @@ class RadiosityResult:
     form_factors: object = None
 
 
-def _face_areas(faces: FaceSet) -> np.ndarray:
-    v = faces.vertices[faces.triangles]
-    a = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
-    return np.bincount(faces.triangle_face, weights=a, minlength=faces.n_faces)
+def face_areas(faces: FaceSet) -> np.ndarray:
+    """(F,) world-space area of every FaceSet face (m^2)."""
+    return group_sum(faces.triangle_face, triangle_areas(faces.vertices[faces.triangles]), faces.n_faces)
 
 
 def per_polygon(faces: FaceSet, face_values: np.ndarray, polygon_counts: dict | None = None):
@@ -49,23 +54,20 @@ def per_polygon(faces: FaceSet, face_values: np.ndarray, polygon_counts: dict | 
     ``face_index`` -1 are left out. Returns (values dict, areas dict).
     """
     vals = np.asarray(face_values, dtype=np.float64).reshape(faces.n_faces, -1)
-    area = _face_areas(faces)
-    out, areas = {}, {}
+    counts = []
     for oi, name in enumerate(faces.object_names):
-        sel = (faces.face_object == oi) & (faces.face_index >= 0)
-        idx = faces.face_index[sel]
         n = polygon_counts.get(name) if polygon_counts else None
         if n is None:
+            idx = faces.face_index[(faces.face_object == oi) & (faces.face_index >= 0)]
             n = int(idx.max()) + 1 if len(idx) else 0
-        a = np.bincount(idx, weights=area[sel], minlength=n)
-        s = np.stack([np.bincount(idx, weights=area[sel] * vals[sel, k], minlength=n)
-                      for k in range(vals.shape[1])], axis=1)
-        # faces mapped to a zero-area polygon: plain mean
-        cnt = np.bincount(idx, minlength=n)
-        plain = np.stack([np.bincount(idx, weights=vals[sel, k], minlength=n)
-                          for k in range(vals.shape[1])], axis=1) / np.maximum(cnt, 1)[:, None]
-        out[name] = np.where(a[:, None] > 0, s / np.where(a > 0, a, 1.0)[:, None], plain)
-        areas[name] = a
+        counts.append(n)
+    offset = np.concatenate([[0], np.cumsum(counts)])
+    pid = np.where(faces.face_index >= 0, offset[faces.face_object] + faces.face_index, -1)
+    area = face_areas(faces)
+    mean = group_mean(pid, vals, int(offset[-1]), area)  # zero-area polygons: plain mean
+    tot = group_sum(pid, area, int(offset[-1]))
+    out = {name: mean[offset[k]:offset[k + 1]] for k, name in enumerate(faces.object_names)}
+    areas = {name: tot[offset[k]:offset[k + 1]] for k, name in enumerate(faces.object_names)}
     return out, areas
 
 
@@ -100,8 +102,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     """
     options = (options or JobOptions()).validate()
     t0 = time.perf_counter()
-    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
-    patches = mesh_patches(faces, size)
+    patches = mesh_for_job(faces, options, default_max_patch_size)
     t_mesh = time.perf_counter() - t0
     if cancel is not None and cancel():
         raise Cancelled("radiosity cancelled")
@@ -114,12 +115,8 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         warnings.append(NO_EMITTER_WARNING)
         B = np.zeros((P, 3))
     else:
-        kw = {}
-        if options.rays_per_patch is not None:
-            kw["rays_per_patch"] = int(options.rays_per_patch)
         ff_progress = (lambda f: progress("form_factors", f)) if progress is not None else None
-        F = compute_form_factors(patches, seed=options.seed, threads=options.threads,
-                                 progress=ff_progress, cancel=cancel, **kw)
+        F = ESTIMATORS[options.estimator](patches, options, progress=ff_progress, cancel=cancel)
         t_ff = F.seconds
         if cancel is not None and cancel():
             raise Cancelled("radiosity cancelled")
@@ -152,9 +149,6 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 
 
 # ---------------------------------------------------------------------------- inverse lighting
-from .engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse  # noqa: E402
-from .engine.cost import estimate_patches_cost  # noqa: E402
-from .engine.reduction import reduce_lights  # noqa: E402
 
 #: configurations kept re-appliable in the .blend: every one up to this many lights, and
 #: about STORE_LOG_POINTS log-spaced ones above (plus e_x and the final one); the chart and
@@ -164,22 +158,6 @@ STORE_LOG_POINTS = 40
 
 BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed background light; "
                    "the solve lights what they leave to the targets")
-
-
-@dataclass
-class SolveOutcome:
-    """Everything a solve produced: the JSON report, the curve for the UI and what to store."""
-
-    report: dict
-    curve: list  # rows kept re-appliable: [{"n_lights", "error", "relative_error", "n_negative", "curve_index"}]
-    final_index: int  # row of the final configuration in ``curve``
-    warnings: list
-    stored: dict  # curve_store.pack_curve input: every configuration, re-appliable
-    faces: FaceSet
-    patches: PatchSet
-    problem: object
-    inverse: object
-    reduction: object
 
 
 def check_solvable(faces: FaceSet, mode: str = "inverse"):
@@ -199,9 +177,13 @@ def _stage(progress, name, lo, hi):
     return lambda f: progress(name, lo + (hi - lo) * float(f))
 
 
+def patch_model(options: JobOptions, default_max_patch_size=None):
+    """The job's patch model (engine/patch_models/), built from its options."""
+    return PATCH_MODELS[options.patch_model].impl(options, default_max_patch_size)
+
+
 def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> PatchSet:
-    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
-    return mesh_patches(faces, size)
+    return patch_model(options, default_max_patch_size).mesh(faces)
 
 
 def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -209,78 +191,127 @@ def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
     return estimate_patches_cost(patches, options.rays_per_patch, options.solver)
 
 
-def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
-              default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
-              patches: PatchSet | None = None):
-    """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``.
+@dataclass
+class Model:
+    """Stage 1, the problem: patches, lights, form factors and the inverse problem."""
 
-    inverse: targets are the painted faces; candidates every face not forbidden and not
-    already emitting; the scene's own emitters are fixed background light (subtracted
-    from the targets). The inverse system is solved (``options.solver``), then reduced
-    (``options.selection`` x ``options.distribution``) over the whole curve; the stop
-    criteria pick the final configuration.
-    direct ("reduce"): the candidates are the scene's emitters and every other patch is a
-    target at the radiosity they give it (the paper's direct-lighting mode).
-    ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
-    returning True raises Cancelled. ``patches``: the meshed faces when the caller already
-    has them (the operator meshes first to estimate the cost). Returns a SolveOutcome.
-    """
-    options = (options or JobOptions()).validate()
-    check_solvable(faces, mode)
+    mode: str  # "inverse" (solve) or "direct" (reduce)
+    faces: FaceSet
+    patches: PatchSet
+    lights: LightSet
+    form_factors: object
+    problem: InverseProblem
+    background: np.ndarray  # (P, 3) W/m^2 the scene's own emitters (inverse mode), fixed
+    background_radiosity: np.ndarray  # (P, 3) W/m^2 the radiosity they give
+    e_start: np.ndarray | None  # direct mode: the emitters' exitance per light
+    warnings: list
+    cost: dict
+    seconds: dict
+
+
+@dataclass
+class Curve:
+    """Stage 4, the curve assembled per base-mesh polygon: the configurations kept re-appliable
+    (``keep``: indices into the reduction's curve) and everything needed to show them."""
+
+    keep: np.ndarray
+    final_row: int  # row of the final configuration among ``keep``
+    light_object: np.ndarray  # per light polygon: object index
+    light_face: np.ndarray  # ... base-mesh polygon index
+    light_area: np.ndarray
+    light_center: np.ndarray
+    light_normal: np.ndarray
+    light_exitance: np.ndarray  # (kept points, light polygons, 3) W/m^2
+    radiosity_object: np.ndarray  # per polygon: object index
+    radiosity_face: np.ndarray
+    radiosity: np.ndarray  # (kept points, polygons, 3) W/m^2
+    polygon_radiosity: dict  # object -> (n_polygons, kept points * 3)
+    seconds: float
+
+
+@dataclass
+class SolveOutcome:
+    """Everything a solve produced: the JSON report, the curve for the UI and what to store."""
+
+    report: dict
+    curve: list  # rows kept re-appliable: [{"n_lights", "error", "relative_error", "n_negative", "curve_index"}]
+    final_index: int  # row of the final configuration in ``curve``
+    warnings: list
+    stored: dict  # curve_store.pack_curve input: every configuration, re-appliable
+    faces: FaceSet
+    patches: PatchSet
+    problem: object
+    inverse: object
+    reduction: object
+
+
+def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
+                progress=None, cancel=None, patches: PatchSet | None = None) -> Model:
+    """Stage 1: mesh the faces (the patch model), choose the candidate lights, estimate the form
+    factors and set up the inverse problem (inverse: the painted targets, with the scene's own
+    emitters as fixed background; direct: the paper's direct-lighting mode)."""
     t0 = time.perf_counter()
+    pm = patch_model(options, default_max_patch_size)
     if patches is None:
-        patches = mesh_for_job(faces, options, default_max_patch_size)
+        patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
     cost = solve_cost(patches, options)
     warnings.extend(cost["warnings"])
-    kw = {} if options.rays_per_patch is None else {"rays_per_patch": int(options.rays_per_patch)}
-    F = compute_form_factors(patches, seed=options.seed, threads=options.threads,
-                             progress=_stage(progress, "form factors", 0.0, 0.7), cancel=cancel, **kw)
+    mask = candidate_mask(patches, mode)
+    lights = pm.lights(patches, mask)
+    pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
+    F = ESTIMATORS[options.estimator](patches, options, progress=_stage(progress, "form factors", 0.0, 0.7),
+                                      cancel=cancel, pairs=pairs)
     if cancel is not None and cancel():
         raise Cancelled("solve cancelled")
     t1 = time.perf_counter()
     background = np.zeros_like(patches.exitance)
-    B_background = np.zeros_like(patches.exitance)  # radiosity of the scene's own emitters
+    B_background = np.zeros_like(patches.exitance)
+    e_start = None
     if mode == "inverse":
-        emitting = np.any(patches.exitance > 0, axis=1)
         problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                 patches.candidate & ~emitting, patches.center, patches.normal,
-                                 light_groups=patches.face)  # a light is a whole face
+                                 mask, patches.center, patches.normal, light_basis=lights.basis)
+        emitting = np.any(patches.exitance > 0, axis=1)
         if emitting.any():
             background = patches.exitance.copy()
             B_background = problem.forward_radiosity(background)
             problem.b_target = problem.b_target - B_background[problem.targets]
             warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
-        inv = solve_inverse(problem, options.solver)
-        e_x = inv.exitance
     else:
-        problem, e_x = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                               patches.center, patches.normal, light_groups=patches.face)
-        inv = None
-    t_inverse = time.perf_counter() - t1
-    if progress is not None:
-        progress("inverse", 0.8)
-    if cancel is not None and cancel():
-        raise Cancelled("solve cancelled")
-    t2 = time.perf_counter()
-    red = reduce_lights(problem, e_x, selection=options.selection, distribution=options.distribution,
+        problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
+                                                   patches.center, patches.normal, light_basis=lights.basis)
+    return Model(mode, faces, patches, lights, F, problem, background, B_background, e_start, warnings, cost,
+                 {"meshing": t_mesh, "form_factors": F.seconds, "problem": time.perf_counter() - t1})
+
+
+def solve_stage(model: Model, options: JobOptions) -> tuple:
+    """Stage 2: the configuration the reduction starts from, e_x (n_lights, 3), and the inverse
+    result (None in direct mode, where e_x is the scene's emitters)."""
+    if model.mode != "inverse":
+        return model.e_start, None
+    inv = solve_inverse(model.problem, options.solver)
+    return inv.exitance, inv
+
+
+def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None) -> ReductionResult:
+    """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the final point."""
+    red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
                         max_lights=options.max_lights, relative_error_threshold=options.error_threshold,
                         require_positive=options.require_positive,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
         raise Cancelled("solve cancelled")
-    t_reduce = time.perf_counter() - t2
-    if mode == "inverse":
-        warnings.extend(_positivity_notes(problem, inv, red.final))
-    warnings.extend(w for w in problem.warnings + (inv.warnings if inv else []) + red.warnings
-                    if w not in warnings)
+    return red
 
-    # every configuration of the curve, per base-mesh polygon (area-weighted means of the
-    # patches: power-conserving), and the radiosity each gives: B = B_background + A^-1 e,
-    # one LU solve for all the points at once
-    t3 = time.perf_counter()
+
+def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
+    """Stage 4: every kept configuration of the curve per base-mesh polygon (area-weighted means
+    of the patches: power-conserving) and the radiosity each gives: B = B_background + A^-1 e,
+    one LU solve for all the points at once."""
+    t0 = time.perf_counter()
+    problem, patches, faces = model.problem, model.patches, model.faces
     C = problem.candidates
     keep = stored_points([p.n_lights for p in red.curve], red.final_index)
     n_pts = len(keep)
@@ -290,11 +321,12 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         pt = red.curve[ci]
         E[k, pt.lights] = pt.exitance
     E_patch = np.zeros((P, n_pts, 3))
-    E_patch[C] = E[:, problem.light_of].transpose(1, 0, 2)  # a light's exitance on all its patches
+    for k in range(n_pts):  # a light's exitance on all its patches
+        E_patch[C, k] = problem.light_basis @ E[k]
     facs = problem.factors()
     B_patch = np.empty((P, n_pts, 3))
     for c in range(3):
-        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + B_background[:, c:c + 1]
+        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + model.background_radiosity[:, c:c + 1]
     if not np.all(np.isfinite(B_patch)):
         raise SceneError("the solve produced NaN or infinite values")
     is_cand = np.zeros(P)
@@ -304,68 +336,67 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         patches.center * is_cand[:, None], patches.normal * is_cand[:, None]], axis=1))
     poly, poly_area = per_polygon(faces, face_cols, polygon_counts)
     w = n_pts * 3
-    light_obj, light_poly, light_area, light_E, light_c, light_n = [], [], [], [], [], []
-    rad_obj, rad_poly, rad_B = [], [], []
+    l_obj, l_poly, l_area, l_E, l_c, l_n, r_obj, r_poly, r_B = ([] for _ in range(9))
     for oi, name in enumerate(faces.object_names):
         v = poly[name]
         npoly = len(v)
-        rad_obj.append(np.full(npoly, oi))
-        rad_poly.append(np.arange(npoly))
-        rad_B.append(v[:, w:2 * w].reshape(npoly, n_pts, 3))
+        r_obj.append(np.full(npoly, oi))
+        r_poly.append(np.arange(npoly))
+        r_B.append(v[:, w:2 * w].reshape(npoly, n_pts, 3))
         cand = np.flatnonzero(v[:, 2 * w] > 0.5)
-        light_obj.append(np.full(len(cand), oi))
-        light_poly.append(cand)
-        light_area.append(poly_area[name][cand])
-        light_E.append(v[cand, :w].reshape(len(cand), n_pts, 3))
-        light_c.append(v[cand, 2 * w + 1:2 * w + 4])
-        light_n.append(v[cand, 2 * w + 4:2 * w + 7])
-    light_obj, light_poly, light_area = map(np.concatenate, (light_obj, light_poly, light_area))
-    light_E = np.concatenate(light_E).transpose(1, 0, 2)  # (points, light polygons, 3)
-    light_c = np.concatenate(light_c)
-    light_n = np.concatenate(light_n)
-    light_n /= np.maximum(np.linalg.norm(light_n, axis=1), 1e-30)[:, None]
-    rad_obj, rad_poly = np.concatenate(rad_obj), np.concatenate(rad_poly)
-    rad_B = np.concatenate(rad_B).transpose(1, 0, 2)  # (points, polygons, 3)
-    t_curve = time.perf_counter() - t3
+        l_obj.append(np.full(len(cand), oi))
+        l_poly.append(cand)
+        l_area.append(poly_area[name][cand])
+        l_E.append(v[cand, :w].reshape(len(cand), n_pts, 3))
+        l_c.append(v[cand, 2 * w + 1:2 * w + 4])
+        l_n.append(v[cand, 2 * w + 4:2 * w + 7])
+    normal = np.concatenate(l_n)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-30)[:, None]
+    return Curve(keep=keep, final_row=int(np.searchsorted(keep, red.final_index)),
+                 light_object=np.concatenate(l_obj), light_face=np.concatenate(l_poly),
+                 light_area=np.concatenate(l_area), light_center=np.concatenate(l_c), light_normal=normal,
+                 light_exitance=np.concatenate(l_E).transpose(1, 0, 2),
+                 radiosity_object=np.concatenate(r_obj), radiosity_face=np.concatenate(r_poly),
+                 radiosity=np.concatenate(r_B).transpose(1, 0, 2),
+                 polygon_radiosity={name: poly[name][:, w:2 * w] for name in faces.object_names},
+                 seconds=time.perf_counter() - t0)
 
-    fi = int(np.searchsorted(keep, red.final_index))  # row of the final point among the kept ones
+
+def make_report(model: Model, options: JobOptions, inv: InverseResult | None, red: ReductionResult,
+                curve: Curve, warnings: list, timings: dict, polygon_counts=None) -> dict:
+    """Stage 5: the JSON report (see README.md)."""
+    faces, patches, problem = model.faces, model.patches, model.problem
+    fi = curve.final_row
     final = red.curve[red.final_index]
-    lit = np.flatnonzero(np.any(light_E[fi] != 0, axis=1))
-    lights = [{"object": faces.object_names[light_obj[j]], "face": int(light_poly[j]),
-               "exitance": light_E[fi, j], "area": float(light_area[j]), "center": light_c[j]} for j in lit]
-    bg_face = face_mean(patches, background)
-    bg_poly, _ = per_polygon(faces, bg_face, polygon_counts)
+    n_pts = len(curve.keep)
+    lit = np.flatnonzero(np.any(curve.light_exitance[fi] != 0, axis=1))
+    lights = [{"object": faces.object_names[curve.light_object[j]], "face": int(curve.light_face[j]),
+               "exitance": curve.light_exitance[fi, j], "area": float(curve.light_area[j]),
+               "center": curve.light_center[j]} for j in lit]
+    bg_poly, _ = per_polygon(faces, face_mean(patches, model.background), polygon_counts)
     tgt_face = np.where(faces.target[:, None], faces.target_radiosity, np.nan)
     poly_t, _ = per_polygon(faces, tgt_face, polygon_counts)
     objects = {}
     for oi, name in enumerate(faces.object_names):
         e_poly = bg_poly[name].copy()
-        sel = light_obj == oi
-        e_poly[light_poly[sel]] += light_E[fi][sel]
-        objects[name] = {"radiosity": poly[name][:, w:2 * w].reshape(-1, n_pts, 3)[:, fi],
+        sel = curve.light_object == oi
+        e_poly[curve.light_face[sel]] += curve.light_exitance[fi][sel]
+        objects[name] = {"radiosity": curve.polygon_radiosity[name].reshape(-1, n_pts, 3)[:, fi],
                          "target": _nan_to_none(poly_t[name]), "exitance": e_poly}
-    n_targets_faces = int(np.sum(faces.target)) if mode == "inverse" else None
-    rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
-             "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
-             "curve_index": int(i)} for i in keep]
-    curve = [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-              "n_negative": p.n_negative} for p in red.curve]
-    n_targets_faces = int(np.sum(faces.target)) if mode == "inverse" else None
-    report = {
-        "command": "solve" if mode == "inverse" else "reduce",
+    n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
+    return {
+        "command": "solve" if model.mode == "inverse" else "reduce",
         "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "length": "m"},
         "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(patches.n_patches)},
-        "timings_s": {"export": 0.0, "meshing": t_mesh, "form_factors": F.seconds, "inverse": t_inverse,
-                      "reduction": t_reduce, "curve": t_curve, "solve": t_inverse + t_reduce, "apply": 0.0,
-                      "total": time.perf_counter() - t0},
-        "estimate": {"memory_bytes": cost["memory_bytes"], "seconds": cost["seconds"]},
-        "options": {**options.to_dict(), "rays_per_patch": int(F.rays_per_patch),
+        "timings_s": timings,
+        "estimate": {"memory_bytes": model.cost["memory_bytes"], "seconds": model.cost["seconds"]},
+        "options": {**options.to_dict(), "rays_per_patch": int(model.form_factors.rays_per_patch),
                     "max_patch_size": float(patches.max_patch_size)},
         "inverse": {
             "solver": inv.solver if inv else "direct-lighting",
             "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
-            "n_candidates": int(problem.n_lights),  # candidate light faces
-            "n_candidate_patches": int(len(C)),
+            "n_candidates": int(problem.n_lights),  # candidate lights
+            "n_candidate_patches": int(len(problem.candidates)),
             "rank": inv.rank if inv else None,
             "rcond": inv.rcond if inv else None,
             "error": inv.error if inv else 0.0,
@@ -377,32 +408,87 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
         },
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
-        "curve": curve,
+        "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
+                   "n_negative": p.n_negative} for p in red.curve],
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
                   "n_negative": final.n_negative, "lights": lights},
         "objects": objects,
         "warnings": warnings,
     }
-    stored = {
-        "objects": list(faces.object_names),
-        "light_object": light_obj, "light_face": light_poly, "light_area": light_area,
-        "light_center": light_c, "light_normal": light_n,
-        "curve_n_lights": np.array([p.n_lights for p in red.curve]),
-        "curve_error": np.array([p.error for p in red.curve]),
-        "curve_relative_error": np.array([p.relative_error for p in red.curve]),
-        "curve_n_negative": np.array([p.n_negative for p in red.curve]),
+
+
+def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:
+    """What the .blend keeps (curve_store.pack_curve): the whole curve and the kept configurations."""
+    keep = curve.keep
+    pts = red.curve
+    return {
+        "objects": list(model.faces.object_names),
+        "light_object": curve.light_object, "light_face": curve.light_face, "light_area": curve.light_area,
+        "light_center": curve.light_center, "light_normal": curve.light_normal,
+        "curve_n_lights": np.array([p.n_lights for p in pts]),
+        "curve_error": np.array([p.error for p in pts]),
+        "curve_relative_error": np.array([p.relative_error for p in pts]),
+        "curve_n_negative": np.array([p.n_negative for p in pts]),
         "point_index": keep,
-        "n_lights": np.array([red.curve[i].n_lights for i in keep]),
-        "error": np.array([red.curve[i].error for i in keep]),
-        "relative_error": np.array([red.curve[i].relative_error for i in keep]),
-        "n_negative": np.array([red.curve[i].n_negative for i in keep]),
-        "exitance": light_E,
-        "radiosity_object": rad_obj, "radiosity_face": rad_poly, "radiosity": rad_B,
+        "n_lights": np.array([pts[i].n_lights for i in keep]),
+        "error": np.array([pts[i].error for i in keep]),
+        "relative_error": np.array([pts[i].relative_error for i in keep]),
+        "n_negative": np.array([pts[i].n_negative for i in keep]),
+        "exitance": curve.light_exitance,
+        "radiosity_object": curve.radiosity_object, "radiosity_face": curve.radiosity_face,
+        "radiosity": curve.radiosity,
         "final": np.array(red.final_index),
-        "target_norm": np.array(problem.target_norm),
+        "target_norm": np.array(model.problem.target_norm),
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},
     }
-    return SolveOutcome(_json_safe(report), rows, fi, warnings, stored, faces, patches, problem, inv, red)
+
+
+def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
+              default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
+              patches: PatchSet | None = None):
+    """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``:
+    build_model -> solve_stage -> reduce_stage -> assemble_curve -> make_report.
+
+    inverse: targets are the painted faces; candidates as ``engine.lights.candidate_mask``;
+    the scene's own emitters are fixed background light (subtracted from the targets). The
+    inverse system is solved (``options.solver``), then reduced (``options.selection`` x
+    ``options.distribution``) over the whole curve; the stop criteria pick the final
+    configuration. direct ("reduce"): the candidates are the scene's emitters and every other
+    patch is a target at the radiosity they give it (the paper's direct-lighting mode).
+    ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
+    returning True raises Cancelled. ``patches``: the meshed faces when the caller already
+    has them (the operator meshes first to estimate the cost). Returns a SolveOutcome.
+    """
+    options = (options or JobOptions()).validate()
+    check_solvable(faces, mode)
+    t0 = time.perf_counter()
+    model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches)
+    t1 = time.perf_counter()
+    e_x, inv = solve_stage(model, options)
+    t_inverse = time.perf_counter() - t1 + model.seconds["problem"]
+    if progress is not None:
+        progress("inverse", 0.8)
+    if cancel is not None and cancel():
+        raise Cancelled("solve cancelled")
+    t2 = time.perf_counter()
+    red = reduce_stage(model, e_x, options, progress, cancel)
+    t_reduce = time.perf_counter() - t2
+    warnings = list(model.warnings)
+    if mode == "inverse":
+        warnings.extend(_positivity_notes(model.problem, inv, red.final))
+    warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
+                    if w not in warnings)
+    curve = assemble_curve(model, red, polygon_counts)
+    timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
+               "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
+               "apply": 0.0, "total": time.perf_counter() - t0}
+    report = make_report(model, options, inv, red, curve, warnings, timings, polygon_counts)
+    rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
+             "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
+             "curve_index": int(i)} for i in curve.keep]
+    stored = stored_result(model, red, curve, report)
+    return SolveOutcome(_json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
+                        model.problem, inv, red)
 
 
 #: above this relative error, the final configuration is compared with the best positive one

@@ -5,7 +5,8 @@ import pytest
 import flatland
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
 from relight_addon.engine.radiosity import solve_radiosity
-from relight_addon.engine.reduction import (DISTRIBUTIONS, SELECTIONS, Distributor, reduce_lights)
+from relight_addon.engine.reduction import Distributor, reduce_lights
+from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS
 
 RHO = np.array([0.5, 0.6, 0.7])
 
@@ -28,8 +29,8 @@ def case():
     return feasible(0)
 
 
-@pytest.mark.parametrize("selection", [s for s in SELECTIONS if s != "nnls-greedy"])
-@pytest.mark.parametrize("distribution", DISTRIBUTIONS)
+@pytest.mark.parametrize("selection", [s.name for s in SELECTIONS if s.get("distributes", True)])
+@pytest.mark.parametrize("distribution", DISTRIBUTIONS.names())
 def test_power_conserved_and_errors_exact(case, selection, distribution):
     prob, e_x = case
     A = prob.area[prob.candidates]

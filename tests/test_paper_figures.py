@@ -10,7 +10,8 @@ import pytest
 
 import flatland
 from relight_addon.engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse
-from relight_addon.engine.reduction import DISTRIBUTIONS, Distributor, reduce_lights
+from relight_addon.engine.reduction import Distributor, reduce_lights
+from relight_addon.engine.registry import DISTRIBUTIONS
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +110,7 @@ def _distribute_error(r, kept, suppressed):
     Q = np.array([col[i] for i in suppressed])
     A = r["area"][prob.candidates]
     out = {}
-    for d in DISTRIBUTIONS:
+    for d in DISTRIBUTIONS.names():
         e2 = Distributor(prob, d).distribute(e_x[S], S, Q, e_x[Q] * A[Q, None])
         assert (e2 * A[S, None]).sum(0) == pytest.approx((e_x * A[:, None]).sum(0))
         full = np.zeros_like(e_x)

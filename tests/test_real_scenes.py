@@ -17,6 +17,7 @@ from relight_addon import export, jobs  # noqa: E402
 from test_export import emission_material  # noqa: E402
 from relight_addon.engine import closed_forms as cf  # noqa: E402
 from relight_addon.engine.cost import estimate_cost, estimate_patches_cost  # noqa: E402
+from relight_addon.engine.lights import candidate_mask  # noqa: E402
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.engine.scene import mesh_patches  # noqa: E402
@@ -302,7 +303,7 @@ def test_cost_estimate_matches_a_measured_solve():
     patches = mesh_patches(faces, 0.25)
     P = patches.n_patches
     assert 700 < P < 1500
-    est = estimate_cost(P, 1024, int(patches.candidate.sum()), int(patches.target.sum()))
+    est = estimate_cost(P, 1024, int(candidate_mask(patches).sum()), int(patches.target.sum()))
     assert estimate_patches_cost(patches, 1024) == est
     tracemalloc.start()
     t0 = time.perf_counter()

@@ -4,25 +4,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        IntProperty, PointerProperty, StringProperty)
 
 from ..engine import options as engine_options
-
-SOLVERS = [
-    ("reduced", "Reduced (T)", "Minimum-norm solve of b_P = T e_C, T from an LU factorisation of A (fast, exact)"),
-    ("svd", "Paper (SVD)", "The paper's formulation: constraints substituted into A b = e, SVD pseudo-inverse"),
-    ("nnls", "Non-negative (NNLS)", "Non-negative least squares on T: no negative exitances (beyond the paper)"),
-]
-SELECTIONS = [
-    ("exitance-elimination", "Exitance Elimination", "Remove the lowest-power light at each step (the paper's choice)"),
-    ("exitance-construction", "Exitance Construction", "Add lights in decreasing power until the error is acceptable"),
-    ("error-elimination", "Error Elimination", "Remove the light whose removal gives the smallest error"),
-    ("error-construction", "Error Construction", "Add the light whose addition gives the smallest error"),
-    ("nnls-greedy", "NNLS Greedy", "Greedy non-negative sparse selection with NNLS refits (beyond the paper)"),
-]
-DISTRIBUTIONS = [
-    ("distance", "Distance", "Suppressed power goes to nearby lights, weighted by 1/distance (the paper's choice)"),
-    ("local", "Local", "Suppressed power goes to the light(s) with the most similar form-factor row"),
-    ("coplanar", "Coplanar", "Suppressed power is shared by the coplanar lights (uniform if none)"),
-    ("uniform", "Uniform", "Suppressed power is shared by all remaining lights"),
-]
+from ..engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS  # the enum items derive from them
 
 
 def _apply_curve_point(self, context):
@@ -54,9 +36,10 @@ class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
         name="Max Patch Size", default=0.0, min=0.0, subtype="DISTANCE", unit="LENGTH",
         description="Faces larger than this are split into patches; 0 = automatic (scene diagonal / 20)")
     seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: results are reproducible")
-    solver: EnumProperty(name="Solver", items=SOLVERS, default=engine_options.DEFAULT_SOLVER)
-    selection: EnumProperty(name="Selection", items=SELECTIONS, default=engine_options.DEFAULT_SELECTION)
-    distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS, default=engine_options.DEFAULT_DISTRIBUTION)
+    solver: EnumProperty(name="Solver", items=SOLVERS.enum_items(), default=engine_options.DEFAULT_SOLVER)
+    selection: EnumProperty(name="Selection", items=SELECTIONS.enum_items(), default=engine_options.DEFAULT_SELECTION)
+    distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS.enum_items(),
+                               default=engine_options.DEFAULT_DISTRIBUTION)
     use_max_lights: BoolProperty(name="Max Lights", default=True, description="Stop at this number of lights")
     max_lights: IntProperty(name="Max Lights", default=engine_options.DEFAULT_MAX_LIGHTS, min=1)
     use_error_threshold: BoolProperty(name="Error Threshold", default=False,

@@ -10,10 +10,10 @@ terms of a solve (jobs.run_solve) from the sizes alone:
   factors (scipy lu_factor / splu; sparse F gives nearly dense LU factors once filled in,
   so both are counted dense): 3 x 8 P^2 bytes kept (the three factorisations) plus one
   8 P^2 working copy; 3 x 2/3 P^3 flops.
-- the transfer matrix T (rows P, columns C of A^-1, solver "reduced"/"nnls"): 3 x 8 m C
+- the transfer matrix T (rows P, columns C of A^-1; solvers registered with cost="transfer"): 3 x 8 m C
   bytes, 3 x 2 P^2 min(m, C) flops of triangular solves, and its minimum-norm solve (Gram
   matrix m x m: m^2 C + m^3/3 flops per channel).
-- solver "svd" (the paper's formulation) instead builds M = [A_U | -I_C] (P x (P - m + C))
+- the paper's formulation (a solver registered with cost="paper": "svd") instead builds M = [A_U | -I_C] (P x (P - m + C))
   and its Gram matrix P x P: 8 P (P - m + C) + 8 P^2 bytes, P^2 (P - m + C) + P^3/3 flops
   per channel.
 The reduction (selection x distribution) and the curve are not counted: they scale with the
@@ -27,6 +27,7 @@ Thresholds: MEMORY_WARNING_BYTES (4 GB) and SECONDS_WARNING (60 s) give a warnin
 from __future__ import annotations
 
 from .formfactors import DENSE_LIMIT
+from .registry import SOLVERS
 
 __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "MEMORY_WARNING_BYTES", "SECONDS_WARNING",
            "RAYS_PER_SECOND", "FLOPS"]
@@ -67,8 +68,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     N = _count("rays_per_patch", rays_per_patch)
     C = _count("n_candidates", n_candidates)
     m = _count("n_targets", n_targets)
-    if solver not in ("svd", "reduced", "nnls"):
-        raise ValueError(f"unknown solver {solver!r}; use svd, reduced or nnls")
+    kind = SOLVERS[solver].get("cost", "transfer")  # ValueError for an unknown solver
     if not (rays_per_second > 0 and flops > 0):
         raise ValueError("rays_per_second and flops must be positive")
     P2 = float(P) * P
@@ -77,7 +77,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     parts["form_factors"] = (ff_bytes, float(P) * N / rays_per_second)
     parts["lu"] = (3 * 8.0 * P2 + 8.0 * P2, 3 * (2.0 / 3.0) * P2 * P / flops)
     k = min(m, C)
-    if solver == "svd":
+    if kind == "paper":
         cols = P - m + C
         parts["inverse"] = (8.0 * P * cols + 8.0 * P2, 3 * (P2 * cols + P2 * P / 3.0) / flops)
     else:
@@ -97,11 +97,12 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
 
 def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", **kw) -> dict:
     """:func:`estimate_cost` of a meshed PatchSet: candidates = patches not forbidden and not
-    emitting (as jobs.run_solve), targets = target patches; ``rays_per_patch`` None = the
+    emitting (engine.lights.candidate_mask), targets = target patches; ``rays_per_patch`` None = the
     automatic quality, or a formfactors.QUALITY name."""
     import numpy as np
 
     from .formfactors import QUALITY, auto_rays_per_patch
+    from .lights import candidate_mask
 
     P = patches.n_patches
     if rays_per_patch is None:
@@ -110,6 +111,5 @@ def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced",
         if rays_per_patch not in QUALITY:
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")
         rays_per_patch = QUALITY[rays_per_patch]
-    emitting = np.any(patches.exitance > 0, axis=1)
-    n_candidates = int(np.sum(patches.candidate & ~emitting))
+    n_candidates = int(np.sum(candidate_mask(patches, "inverse")))
     return estimate_cost(P, int(rays_per_patch), n_candidates, int(np.sum(patches.target)), solver=solver, **kw)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["triangle_areas", "triangle_cross", "group_sum", "group_mean", "unit"]
+__all__ = ["triangle_areas", "triangle_cross", "group_sum", "group_mean", "group_mean_basis", "unit"]
 
 
 def triangle_cross(tv) -> np.ndarray:
@@ -62,3 +62,13 @@ def group_mean(index, values, n, weights=None, empty=0.0) -> np.ndarray:
     if empty != 0.0:
         out[cnt == 0] = empty
     return out
+
+
+def group_mean_basis(basis, values, weights) -> np.ndarray:
+    """Per column l of a 0/1 membership matrix ``basis`` (items x groups, scipy.sparse), the
+    ``weights``-weighted mean of the member items' ``values`` (items, k)."""
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    values = np.asarray(values, dtype=np.float64)
+    num = np.asarray(basis.T @ (w[:, None] * values.reshape(len(w), -1)))
+    den = np.asarray(basis.T @ w).reshape(-1)
+    return num / np.where(den > 0, den, 1.0)[:, None]

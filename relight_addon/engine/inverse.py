@@ -6,7 +6,8 @@ The user paints radiosities ``b_P`` on a set P of m patches (targets) and
 allows lights on a set C of candidates (every patch that is not forbidden);
 forbidden patches have e = 0.
 
-Two formulations of the same inverse problem, plus a physical one:
+Two formulations of the same inverse problem, plus a physical one (each a registered
+solver in ``engine/solvers/``; see engine.registry):
 
 ``solver="svd"`` (the paper, [Conte02])
     Substitute the knowns into ``A b - e = 0``: the unknowns are b on the
@@ -37,11 +38,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.optimize as sopt
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .geometry import group_mean_basis, unit
 from .radiosity import radiosity_matrix
+from .registry import SOLVERS
 from .scene import SceneError
 
 __all__ = [
@@ -50,10 +52,9 @@ __all__ = [
     "InverseResult",
     "solve_inverse",
     "direct_lighting_problem",
-    "SOLVERS",
+    "SolverOutput",
 ]
 
-SOLVERS = ("svd", "reduced", "nnls")
 
 #: the Gram-matrix route of the pseudo-inverse is used below this condition number of M
 GRAM_MAX_COND = 1e5
@@ -166,7 +167,7 @@ class InverseProblem:
     """
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
-                 center=None, normal=None, light_groups=None):
+                 center=None, normal=None, light_groups=None, light_basis=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -215,35 +216,46 @@ class InverseProblem:
             raise InverseError("target radiosities must be non-negative")
         self.target_norm = float(np.linalg.norm(self.b_target))
         self.exitance = np.zeros((n, 3))
-        self._init_lights(light_groups)
+        self._init_lights(light_groups, light_basis)
         self._factors = None
         self._transfer = None
         self.transfer_seconds = None
         self.warnings = []
 
-    def _init_lights(self, light_groups):
+    def _init_lights(self, light_groups, light_basis):
         C = self.candidates
-        if light_groups is None:
-            self.light_of = np.arange(len(C))
+        nC = len(C)
+        if light_basis is not None:
+            B = sp.csr_matrix(light_basis, dtype=np.float64)
+            if B.shape[0] != nC:
+                raise InverseError(f"the light basis has {B.shape[0]} rows for {nC} candidate patches")
+            B.data[:] = 1.0
+            if B.shape[1] == 0 or np.any(np.diff(B.tocsc().indptr) == 0):
+                raise InverseError("every light must cover at least one candidate patch")
         else:
-            g = np.asarray(light_groups).reshape(self.n_patches)[C]
-            _, self.light_of = np.unique(g, return_inverse=True)
-            self.light_of = self.light_of.reshape(-1)
-        self.n_lights = int(self.light_of.max()) + 1
-        self.grouped = self.n_lights < len(C)
+            if light_groups is None:
+                light_of = np.arange(nC)
+            else:
+                g = np.asarray(light_groups).reshape(self.n_patches)[C]
+                _, light_of = np.unique(g, return_inverse=True)
+                light_of = light_of.reshape(-1)
+            B = sp.csr_matrix((np.ones(nC), (np.arange(nC), light_of)), shape=(nC, int(light_of.max()) + 1))
+        self.light_basis = B  # (|C|, n_lights): patch c belongs to light l
+        self.n_lights = int(B.shape[1])
+        self.grouped = not (self.n_lights == nC and B.nnz == nC and np.array_equal(B.indices, np.arange(nC)))
+        self.overlapping = bool(np.any(np.diff(B.indptr) > 1))  # a patch in several lights (multi-scale)
         aC = self.area[C]
-        self.light_area = np.bincount(self.light_of, weights=aC, minlength=self.n_lights)
+        self.light_area = np.asarray(B.T @ aC).reshape(-1)
+        self.light_center = group_mean_basis(B, self.center[C], aC)
+        self.light_normal = unit(group_mean_basis(B, self.normal[C], aC))
 
-        def mean(v):
-            return np.stack([np.bincount(self.light_of, weights=aC * v[:, k], minlength=self.n_lights)
-                             for k in range(v.shape[1])], axis=1) / self.light_area[:, None]
-
-        self.light_center = mean(self.center[C])
-        nsum = mean(self.normal[C])
-        nlen = np.linalg.norm(nsum, axis=1)
-        self.light_normal = nsum / np.where(nlen > 0, nlen, 1.0)[:, None]
-        self.light_basis = sp.csr_matrix((np.ones(len(C)), (np.arange(len(C)), self.light_of)),
-                                         shape=(len(C), self.n_lights))
+    @property
+    def light_of(self):
+        """Light of each candidate patch, when the lights partition the candidates (else ValueError)."""
+        B = self.light_basis
+        if self.overlapping or B.nnz != B.shape[0]:
+            raise ValueError("the lights overlap (multi-scale candidates): a patch has no single light")
+        return B.indices.astype(np.int64)
 
     def light_rows(self):
         """Form-factor rows of the lights (n_lights, P): area-weighted means of their patches'."""
@@ -252,9 +264,8 @@ class InverseProblem:
         FC = FC.astype(np.float64)
         if not self.grouped:
             return FC
-        W = sp.csr_matrix((self.area[self.candidates], (self.light_of, np.arange(len(self.candidates)))),
-                          shape=(self.n_lights, len(self.candidates)))
-        return (W @ FC) / self.light_area[:, None]
+        W = (self.light_basis.multiply(self.area[self.candidates][:, None])).T.tocsr()
+        return np.asarray(W @ FC) / self.light_area[:, None]
 
     # -- system ---------------------------------------------------------
     @property
@@ -310,7 +321,7 @@ class InverseProblem:
                     X = facs[c].solve(rhs)  # columns C of A^-1
                     T[c] = np.ascontiguousarray(X[P])
                 if self.grouped:  # one column per light: the sum of its patches' columns
-                    T[c] = np.ascontiguousarray((self.light_basis.T @ T[c].T).T)
+                    T[c] = np.ascontiguousarray(np.asarray(self.light_basis.T @ T[c].T).T)
                 if not np.all(np.isfinite(T[c])):
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[id(facs[c])] = T[c]
@@ -352,7 +363,7 @@ class InverseProblem:
     def patch_exitance(self, e_C):
         """Full (P, 3) exitance with the lights' e_C (n_lights, 3) on their patches, 0 elsewhere."""
         out = np.zeros((self.n_patches, 3))
-        out[self.candidates] = np.asarray(e_C, dtype=np.float64).reshape(-1, 3)[self.light_of]
+        out[self.candidates] = self.light_basis @ np.asarray(e_C, dtype=np.float64).reshape(-1, 3)
         return out
 
     def forward_radiosity(self, e_full):
@@ -362,14 +373,18 @@ class InverseProblem:
 
     @classmethod
     def from_patches(cls, patches, F, lights_per_face=True):
-        """Problem from a PatchSet (targets, target radiosities, forbidden) and its form factors;
-        with ``lights_per_face`` a light is a whole face (all its patches), as Blender shows it."""
+        """Problem from a PatchSet (targets, target radiosities, candidates as
+        ``lights.candidate_mask``) and its form factors; with ``lights_per_face`` a light is a
+        whole face (all its patches), as Blender shows it."""
+        from .lights import candidate_mask
+
         return cls(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                   ~patches.forbidden, patches.center, patches.normal,
+                   candidate_mask(patches), patches.center, patches.normal,
                    light_groups=patches.face if lights_per_face else None)
 
 
-def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None):
+def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None,
+                            light_basis=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
@@ -389,14 +404,13 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
     if lights.all():
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
     prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal,
-                          light_groups=light_groups)
+                          light_groups=light_groups, light_basis=light_basis)
     B = prob.forward_radiosity(exitance)
     prob.b_target = B[prob.targets].copy()
     prob.target_norm = float(np.linalg.norm(prob.b_target))
     prob.exitance = exitance.copy()
-    aC = prob.area[prob.candidates]
-    e_x = np.stack([np.bincount(prob.light_of, weights=aC * exitance[prob.candidates, k], minlength=prob.n_lights)
-                    for k in range(3)], axis=1) / prob.light_area[:, None]  # power-conserving per light
+    # power-conserving per light (the lights of direct-lighting mode partition the emitters)
+    e_x = group_mean_basis(prob.light_basis, exitance[prob.candidates], prob.area[prob.candidates])
     return prob, e_x
 
 
@@ -454,131 +468,49 @@ def _gram_min_norm(M, R, rcond):
     return M.T @ Y
 
 
-class _PaperGram:
-    """The paper's system M x = r with M = [A[:, U], -S] (S: candidate patches -> lights),
-    solved as x = M^T (M M^T)^-1 r without forming M. Per channel with reflectance rho,
-
-        M M^T = diag(u) - T1 - T1^T + (rho rho^T) o K + S S^T,   K = F[:, U] F[:, U]^T,
-
-    where u marks the unpainted patches and T1[U, :] = (F[:, U] o rho).T. K does not depend
-    on rho, so one symmetric product serves the three channels; then x = M^T y is
-    [y_U - F[:, U]^T (rho y); -S^T y]. The same minimum-norm solution as the SVD
-    pseudo-inverse whenever M has full row rank with margin (checked as in _gram_min_norm);
-    otherwise ``solve`` returns None and the caller uses the explicit M.
-    """
-
-    def __init__(self, problem, U):
-        F = problem.F.toarray() if sp.issparse(problem.F) else np.asarray(problem.F)
-        self.F = np.asarray(F, dtype=np.float64)
-        self.U = U
-        self.p = problem
-        FU = np.asfortranarray(self.F[:, U])
-        K = sla.blas.dsyrk(1.0, FU, lower=1)
-        self.K = K + np.tril(K, -1).T
-        n = problem.n_patches
-        self.same_light = problem.light_of[:, None] == problem.light_of[None, :]  # S S^T on C x C
-        self.u = np.zeros(n)
-        self.u[U] = 1.0
-
-    def solve(self, rho, b_target):
-        p, F, U = self.p, self.F, self.U
-        n = p.n_patches
-        G = self.K * np.outer(rho, rho)
-        T1 = np.zeros((n, n))
-        T1[U, :] = (F[:, U] * rho[:, None]).T
-        G -= T1
-        G -= T1.T
-        G[np.diag_indices(n)] += self.u
-        C = p.candidates
-        G[np.ix_(C, C)] += self.same_light
-        # right-hand side: r = -A[:, P] b_P with A = I - diag(rho) F
-        P = p.targets
-        R = rho[:, None] * (F[:, P] @ b_target)
-        R[P] -= b_target
-        try:
-            L, lower = sla.cho_factor(G, lower=True, check_finite=False)
-        except np.linalg.LinAlgError:
-            return None
-        x = np.random.default_rng(0).standard_normal(n)
-        for _ in range(8):
-            x = sla.cho_solve((L, lower), x / np.linalg.norm(x), check_finite=False)
-        lam_min = 1.0 / np.linalg.norm(x)
-        lam_max = float(np.trace(G))  # >= the largest eigenvalue
-        if not (np.isfinite(lam_min) and lam_min > 0 and lam_max / lam_min < GRAM_MAX_COND ** 2):
-            return None
-        Y = sla.cho_solve((L, lower), R, check_finite=False)
-        # e = -S^T y: per light, minus the sum of y over its patches
-        e = np.zeros((p.n_lights, Y.shape[1]))
-        for k in range(Y.shape[1]):
-            e[:, k] = -np.bincount(p.light_of, weights=Y[p.candidates, k], minlength=p.n_lights)
-        return e
-
-
-def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver="auto"):
-    """Solve the inverse problem; see the module docstring for the formulations.
+def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver="auto", **kw):
+    """Solve the inverse problem with a registered solver (``engine.solvers``: see the module
+    docstring for the paper's, the reduced and the NNLS formulations).
 
     rcond: relative singular-value cut-off of the pseudo-inverse (default
     ``max(rows, cols) * machine eps``, as numpy's matrix_rank). svd_driver: 'auto' (the
-    default: Cholesky of the Gram matrix when M has full row rank with margin, which is the
-    same pseudo-inverse solution, else 'gelsd'),
-    'gelsd' (LAPACK divide-and-conquer least squares) or 'svd' (explicit SVD
-    pseudo-inverse); both give the same minimum-norm solution.
+    default: Cholesky of the Gram matrix when the system has full row rank with margin, which
+    is the same pseudo-inverse solution, else 'gelsd'), 'gelsd' (LAPACK divide-and-conquer
+    least squares) or 'svd' (explicit SVD pseudo-inverse); both give the same minimum-norm
+    solution. Other keywords go to the solver.
     """
-    if solver not in SOLVERS:
-        raise ValueError(f"unknown inverse solver {solver!r}; choose one of {', '.join(SOLVERS)}")
+    method = SOLVERS[solver]
     if rcond is not None and not (np.isfinite(rcond) and 0 <= rcond < 1):
         raise ValueError(f"rcond must be in [0, 1), got {rcond}")
     t0 = time.perf_counter()
-    C, P = problem.candidates, problem.targets
-    n = problem.n_patches
-    warns = []
-    e = np.zeros((problem.n_lights, 3))
-    ranks = []
-    used_rcond = None
-    if solver == "svd":
-        U = np.flatnonzero(~problem.target_mask)
-        structured = _PaperGram(problem, U) if svd_driver == "auto" else None
-        for g in _channel_groups(problem.reflectance):
-            if structured is not None:
-                used_rcond = rcond if rcond is not None else max(n, len(U) + problem.n_lights) * np.finfo(float).eps
-                e_g = structured.solve(problem.reflectance[:, g[0]], problem.b_target[:, g])
-                if e_g is not None:
-                    e[:, g] = e_g
-                    ranks.append(n)
-                    continue
-            A = radiosity_matrix(problem.F, problem.reflectance[:, g[0]])
-            if sp.issparse(A):
-                A = A.toarray()
-            M = np.zeros((n, len(U) + problem.n_lights), order="F")  # Fortran order for BLAS
-            M[:, :len(U)] = A[:, U]
-            M[C, len(U) + problem.light_of] = -1.0
-            R = -(A[:, P] @ problem.b_target[:, g])
-            used_rcond = rcond if rcond is not None else max(M.shape) * np.finfo(float).eps
-            X, rank = _lstsq_min_norm(M, R, used_rcond, svd_driver)
-            e[:, g] = X[len(U):]
-            ranks.append(rank)
-        seconds = time.perf_counter() - t0
-    else:
-        T = problem.transfer
-        for c in range(3):
-            if solver == "reduced":
-                used_rcond = rcond if rcond is not None else max(T[c].shape) * np.finfo(float).eps
-                X, rank = _lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used_rcond, svd_driver)
-                e[:, c] = X[:, 0]
-                ranks.append(rank)
-            else:
-                e[:, c], _ = sopt.nnls(T[c], problem.b_target[:, c], maxiter=50 * T[c].shape[1])
-        if solver == "nnls":
-            ranks.append(int((e.max(axis=1) > 0).sum()))
-        seconds = time.perf_counter() - t0
+    out = method(problem, rcond=rcond, svd_driver=svd_driver, **kw)
+    seconds = time.perf_counter() - t0
+    e = out.exitance
     if not np.all(np.isfinite(e)):
         raise InverseError("the inverse solve produced non-finite exitances (ill-posed system)")
     err = problem.error(e)
     rel = err / problem.target_norm if problem.target_norm > 0 else err
-    warns.extend(problem.warnings)
-    if solver == "nnls" and rel > 1e-3:
+    warns = list(problem.warnings)
+    if method.get("nonnegative") and rel > 1e-3:
         warns.append(f"no non-negative configuration meets the targets: residual {err:.4g} W/m^2 "
                      f"({100 * rel:.3g}% of the targets' norm)")
-    return InverseResult(solver=solver, exitance=e, rank=int(min(ranks)), error=err, relative_error=rel,
+    warns.extend(w for w in out.warnings if w not in warns)
+    return InverseResult(solver=solver, exitance=e, rank=int(out.rank), error=err, relative_error=rel,
                          n_negative=int((e < 0).any(axis=1).sum()), seconds=seconds,
-                         rcond=used_rcond, warnings=warns)
+                         rcond=out.rcond, warnings=warns)
+
+
+@dataclass
+class SolverOutput:
+    """What a registered solver returns: exitance (n_lights, 3) W/m^2, the rank used, the
+    cut-off used (None when not applicable) and its own warnings."""
+
+    exitance: np.ndarray
+    rank: int
+    rcond: float | None = None
+    warnings: list = field(default_factory=list)
+
+
+def default_rcond(rcond, shape):
+    """The pseudo-inverse cut-off: ``rcond`` when given, else max(rows, cols) * machine eps."""
+    return rcond if rcond is not None else max(shape) * np.finfo(float).eps

@@ -3,16 +3,15 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS
+
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
 DEFAULT_SOLVER = "reduced"
 DEFAULT_SELECTION = "exitance-elimination"  # the paper's choice (section 5)
 DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
-
-SOLVERS = ("svd", "reduced", "nnls")
-SELECTIONS = ("exitance-elimination", "exitance-construction", "error-elimination",
-              "error-construction", "nnls-greedy")
-DISTRIBUTIONS = ("distance", "local", "coplanar", "uniform")
+DEFAULT_PATCH_MODEL = "polygon"
+DEFAULT_ESTIMATOR = "raycast"
 
 
 @dataclass
@@ -27,14 +26,13 @@ class JobOptions:
     max_lights: int | None = DEFAULT_MAX_LIGHTS  # stop criterion: number of lights
     error_threshold: float | None = None  # stop criterion: relative error (Eq. 1 / ||b_P||)
     require_positive: bool = True  # stop criterion: no negatives
+    patch_model: str = DEFAULT_PATCH_MODEL
+    estimator: str = DEFAULT_ESTIMATOR
 
     def validate(self):
-        if self.solver not in SOLVERS:
-            raise ValueError(f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
-        if self.selection not in SELECTIONS:
-            raise ValueError(f"unknown selection {self.selection!r}; choose one of {', '.join(SELECTIONS)}")
-        if self.distribution not in DISTRIBUTIONS:
-            raise ValueError(f"unknown distribution {self.distribution!r}; choose one of {', '.join(DISTRIBUTIONS)}")
+        for registry, name in ((SOLVERS, self.solver), (SELECTIONS, self.selection), (DISTRIBUTIONS, self.distribution),
+                               (PATCH_MODELS, self.patch_model), (ESTIMATORS, self.estimator)):
+            registry[name]  # ValueError naming the known methods
         if self.rays_per_patch == 0:
             self.rays_per_patch = None
         if self.rays_per_patch is not None and self.rays_per_patch < 1:

@@ -59,14 +59,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.optimize as sopt
-import scipy.sparse as sp
 
 from .inverse import InverseProblem
+from .registry import DISTRIBUTIONS, SELECTIONS
 
 __all__ = [
     "SELECTIONS",
     "DISTRIBUTIONS",
+    "Selection",
     "ERROR_ROUTES",
     "CurvePoint",
     "ReductionResult",
@@ -76,9 +76,6 @@ __all__ = [
     "select_final",
 ]
 
-SELECTIONS = ("exitance-elimination", "exitance-construction", "error-elimination",
-              "error-construction", "nnls-greedy")
-DISTRIBUTIONS = ("uniform", "coplanar", "local", "distance")
 ERROR_ROUTES = ("transfer", "gauss-seidel")
 
 
@@ -133,29 +130,18 @@ def decreasing_order(e, area):
 
 
 class Distributor:
-    """XDistribute weights between candidates (pairwise data precomputed once, |C| x |C|)."""
+    """XDistribute weights between lights: the registered rule ``kind`` (engine/distributions/),
+    its pairwise data precomputed once, rows normalised to 1 (power conserved per channel)."""
 
     def __init__(self, problem: InverseProblem, kind="distance", coplanar_tol=1e-3):
-        if kind not in DISTRIBUTIONS:
-            raise ValueError(f"unknown distribution {kind!r}; choose one of {', '.join(DISTRIBUTIONS)}")
         self.kind = kind
+        self.rule = DISTRIBUTIONS[kind].impl(problem, coplanar_tol=coplanar_tol)
         self.area = problem.light_area
-        self.pair = None
-        if kind == "distance":
-            c = problem.light_center
-            d2 = (c * c).sum(1)
-            self.pair = np.sqrt(np.maximum(d2[:, None] + d2[None, :] - 2.0 * c @ c.T, 0.0))
-        elif kind == "local":
-            FC = problem.light_rows()
-            g = (FC * FC).sum(1)
-            self.pair = np.sqrt(np.maximum(g[:, None] + g[None, :] - 2.0 * FC @ FC.T, 0.0))
-        elif kind == "coplanar":
-            n = problem.light_normal
-            c = problem.light_center
-            extent = float(np.linalg.norm(np.ptp(c, axis=0))) or 1.0
-            same_facing = n @ n.T > 1.0 - coplanar_tol
-            offset = np.abs(np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :]))
-            self.pair = same_facing & (offset <= coplanar_tol * extent)
+
+    @property
+    def pair(self):
+        """The rule's pairwise data between lights (distances, or the coplanarity matrix)."""
+        return getattr(self.rule, "pair", None)
 
     def weights(self, src, lights, valid=None):
         """W (len(src), len(lights)), rows summing to 1: how each source's power is shared.
@@ -166,28 +152,7 @@ class Distributor:
         lights = np.asarray(lights, dtype=np.int64)
         if valid is None:
             valid = np.ones((len(src), len(lights)), dtype=bool)
-        if self.kind == "uniform":
-            M = valid.astype(np.float64)
-        elif self.kind == "coplanar":
-            co = self.pair[np.ix_(src, lights)] & valid
-            none = ~co.any(axis=1)
-            co[none] = valid[none]
-            M = co.astype(np.float64)
-        elif self.kind == "local":
-            D = np.where(valid, self.pair[np.ix_(src, lights)], np.inf)
-            dmin = D.min(axis=1, keepdims=True)
-            M = (valid & (D <= dmin * (1 + 1e-9) + 1e-300)).astype(np.float64)
-        else:  # distance
-            D = self.pair[np.ix_(src, lights)]
-            cnt = valid.sum(axis=1, keepdims=True)
-            th = np.where(valid, D, 0.0).sum(axis=1, keepdims=True) / np.maximum(cnt, 1)
-            below = valid & (D < th)
-            none = ~below.any(axis=1)
-            below[none] = valid[none]
-            zero = valid & (D <= 0)
-            hasz = zero.any(axis=1)
-            below[hasz] = zero[hasz]
-            M = np.where(below, 1.0 / np.where(D > 0, D, 1.0), 0.0)
+        M = self.rule.raw(src, lights, valid)
         s = M.sum(axis=1, keepdims=True)
         return M / np.where(s > 0, s, 1.0)
 
@@ -197,6 +162,21 @@ class Distributor:
             return e_lights.copy()
         W = self.weights(src, lights)
         return e_lights + (W.T @ phi_src) / self.area[lights][:, None]
+
+
+@dataclass
+class Selection:
+    """What a registered selection works with (engine/selections/): the problem, the starting
+    configuration e_x (n_lights, 3), the distributor (None for selections that do not
+    redistribute), ``record(lights, exitance, changed)`` to add a configuration to the curve,
+    ``step(done, total)`` returning True when cancelled, and ``max_steps`` for constructions."""
+
+    problem: InverseProblem
+    e_x: np.ndarray
+    dist: Distributor | None
+    record: object
+    step: object
+    max_steps: int | None = None
 
 
 class _ErrorEval:
@@ -300,11 +280,10 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     total)`` is called every step; ``cancel()`` returning True stops the curve
     where it is (``result.cancelled``). Deterministic: ties go to the lower index.
     """
-    if selection not in SELECTIONS:
-        raise ValueError(f"unknown selection {selection!r}; choose one of {', '.join(SELECTIONS)}")
+    method = SELECTIONS[selection]
     if error_route not in ERROR_ROUTES:
         raise ValueError(f"unknown error route {error_route!r}; choose one of {', '.join(ERROR_ROUTES)}")
-    if error_route == "gauss-seidel" and selection not in ("exitance-elimination", "exitance-construction"):
+    if error_route == "gauss-seidel" and not method.get("gauss_seidel"):
         raise ValueError("the Gauss-Seidel error route re-solves the scene per configuration; it is only "
                          "offered for exitance-elimination and exitance-construction (use 'transfer')")
     for name, v in (("max_lights", max_lights), ("max_steps", max_steps)):
@@ -321,7 +300,6 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         raise ValueError("e_x contains NaN or infinite values")
 
     t0 = time.perf_counter()
-    A = problem.light_area
     err_fn = _ErrorEval(problem, error_route, compare_cold=gs_compare_cold)
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     curve = []
@@ -344,35 +322,8 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
             cancelled = True
         return cancelled
 
-    if selection == "nnls-greedy":
-        _nnls_greedy(problem, record, step_hook, max_steps)
-    else:
-        dist = Distributor(problem, distribution, coplanar_tol)
-        phi_x = e_x * A[:, None]
-        if selection == "exitance-elimination":
-            S = np.arange(k)
-            e = e_x.copy()
-            record(S, e)
-            while len(S) > 1 and not step_hook(k - len(S), k - 1):
-                ph = (e * A[S][:, None])
-                i = int(np.lexsort((ph.sum(1), ~(e < 0).any(1)))[0])
-                s = S[i]
-                keep = np.arange(len(S)) != i
-                S, e = S[keep], dist.distribute(e[keep], S[keep], [s], ph[i:i + 1])
-                record(S, e, s)
-        elif selection == "error-elimination":
-            _error_elimination(problem, e_x, A, dist, record, step_hook)
-        else:
-            order = decreasing_order(e_x, A)
-            steps = k if max_steps is None else min(k, int(max_steps))
-            if selection == "exitance-construction":
-                for p in range(1, steps + 1):
-                    S, Q = order[:p], order[p:]
-                    record(S, dist.distribute(e_x[S], S, Q, phi_x[Q]), order[p - 1])
-                    if step_hook(p, steps):
-                        break
-            else:
-                _error_construction(problem, e_x, phi_x, dist, record, step_hook, steps)
+    dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
+    method(Selection(problem, e_x, dist, record, step_hook, max_steps))
     if not curve:
         raise ValueError("the reduction produced no configuration")
     idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
@@ -380,94 +331,6 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     if cancelled:
         warns.append("cancelled: the curve is incomplete")
     return ReductionResult(curve=curve, final_index=idx, selection=selection,
-                           distribution=distribution if selection != "nnls-greedy" else "none",
+                           distribution=distribution if dist is not None else "none",
                            seconds=time.perf_counter() - t0, cancelled=cancelled,
                            gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns)
-
-
-def _error_elimination(problem, e_x, A, dist, record, step_hook):
-    """ErrorElimination, every trial of a step at once.
-
-    Removing light i from S (exitances e) and giving its power Phi_i to the
-    others with weights W[i, :] changes the targets' radiosity to
-    b - T_S[:, i] e_i + (T_S / A_S) W[i, :]^T Phi_i, so for all trials
-    B_c = b_c 1^T - T_S diag(e_c) + ((T_S / A_S) W^T) diag(Phi_c)  (m x |S|).
-    """
-    T, b = problem.transfer, problem.b_target
-    k = len(e_x)
-    S = np.arange(k)
-    e = e_x.copy()
-    record(S, e)
-    uniq = {}
-    for c in range(3):
-        uniq.setdefault(id(T[c]), []).append(c)
-    while len(S) > 1 and not step_hook(k - len(S), k - 1):
-        n = len(S)
-        W = dist.weights(S, S, valid=~np.eye(n, dtype=bool))
-        phi = e * A[S][:, None]
-        sq = np.zeros(n)
-        for chans in uniq.values():
-            TS = T[chans[0]][:, S]
-            G = (TS / A[S][None, :]) @ W.T  # (m, n)
-            for c in chans:
-                bc = TS @ e[:, c]
-                Bt = (bc - b[:, c])[:, None] - TS * e[None, :, c] + G * phi[None, :, c]
-                sq += np.einsum("ij,ij->j", Bt, Bt)
-        i = int(np.argmin(sq))
-        keep = np.arange(n) != i
-        e = e[keep] + (W[i, keep][:, None] * phi[i][None, :]) / A[S[keep]][:, None]
-        s = S[i]
-        S = S[keep]
-        record(S, e, s)
-
-
-def _error_construction(problem, e_x, phi_x, dist, record, step_hook, steps):
-    """ErrorConstruction: per step, try every remaining light (each trial vectorised over channels)."""
-    T, b = problem.transfer, problem.b_target
-    A = dist.area
-    k = len(e_x)
-    S = np.zeros(0, dtype=np.int64)
-    Q = np.arange(k)
-    for p in range(1, steps + 1):
-        best = (np.inf, -1, None)
-        for t, l in enumerate(Q):
-            S2 = np.append(S, l)
-            Q2 = np.delete(Q, t)
-            e2 = dist.distribute(e_x[S2], S2, Q2, phi_x[Q2])
-            r = np.stack([T[c][:, S2] @ e2[:, c] for c in range(3)], axis=1) - b
-            sq = float(np.einsum("ij,ij->", r, r))
-            if sq < best[0]:
-                best = (sq, t, e2)
-        _, t, e2 = best
-        l = Q[t]
-        S = np.append(S, l)
-        Q = np.delete(Q, t)
-        record(S, e2, l)
-        if step_hook(p, steps):
-            break
-
-
-def _nnls_greedy(problem, record, step_hook, max_steps):
-    """Non-negative orthogonal matching pursuit on T (all channels share the support)."""
-    T, b = problem.transfer, problem.b_target
-    k = problem.n_lights
-    colnorm = np.sqrt(sum((t * t).sum(0) for t in T))
-    colnorm = np.where(colnorm > 0, colnorm, np.inf)
-    sel = []
-    r = b.copy()
-    steps = k if max_steps is None else min(k, int(max_steps))
-    e = np.zeros((0, 3))
-    for p in range(1, steps + 1):
-        corr = sum(T[c].T @ r[:, c] for c in range(3)) / colnorm
-        corr[sel] = -np.inf
-        j = int(np.argmax(corr))
-        if not corr[j] > 1e-12 * max(float(np.abs(b).max()), 1e-300):
-            break  # no candidate can lower the residual any more
-        sel.append(j)
-        S = np.asarray(sel)
-        e = np.stack([sopt.nnls(T[c][:, S], b[:, c], maxiter=50 * len(S) + 50)[0] for c in range(3)], axis=1)
-        r = b - np.stack([T[c][:, S] @ e[:, c] for c in range(3)], axis=1)
-        on = e.max(axis=1) > 0
-        record(S[on], e[on], j)
-        if step_hook(p, steps):
-            break

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .geometry import group_mean, group_sum, triangle_areas, triangle_cross, unit
+
 __all__ = [
     "FaceSet",
     "PatchSet",
@@ -86,10 +88,11 @@ class PatchSet:
 
     tri_vertices: np.ndarray  # (T, 3, 3) float64 world-space triangles
     tri_patch: np.ndarray  # (T,) int64 patch of each triangle
+    tri_face: np.ndarray  # (T,) int64 FaceSet face each triangle lies on
     area: np.ndarray  # (P,) m^2
     normal: np.ndarray  # (P, 3) unit normal (area-weighted over the patch's triangles)
     center: np.ndarray  # (P, 3) area-weighted centroid
-    face: np.ndarray  # (P,) int64 index into the FaceSet's faces
+    face: np.ndarray  # (P,) int64 the FaceSet face of the patch (of its largest area when it spans several)
     reflectance: np.ndarray  # (P, 3)
     exitance: np.ndarray  # (P, 3) W/m^2
     target: np.ndarray  # (P,) bool
@@ -103,14 +106,8 @@ class PatchSet:
         return len(self.area)
 
     @property
-    def candidate(self) -> np.ndarray:
-        """Candidate lights: every patch that is not forbidden."""
-        return ~self.forbidden
-
-    @property
     def tri_area(self) -> np.ndarray:
-        v = self.tri_vertices
-        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        return triangle_areas(self.tri_vertices)
 
     def bounds(self):
         v = self.tri_vertices.reshape(-1, 3)
@@ -194,10 +191,7 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     T = V[faces.triangles]  # (n, 3, 3)
     tf = faces.triangle_face
 
-    def tri_area(t):
-        return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-
-    ok = tri_area(T) > min_area
+    ok = triangle_areas(T) > min_area
     edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
     face_edge = np.zeros(F)
     np.maximum.at(face_edge, tf, edge)
@@ -227,7 +221,7 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
                 subs.append(_split_triangle(t, max(k, 1)))
             sub = np.concatenate(subs)
             local = np.arange(len(sub))
-        keep = tri_area(sub) > min_area
+        keep = triangle_areas(sub) > min_area
         if keep.any():
             made[f] = True
             parts_t.append(sub[keep])
@@ -248,20 +242,11 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     tri_patch = tri_patch.reshape(-1).astype(np.int64)
     patch_face = face_all[order][np.searchsorted(key[order], uniq)]
     P = len(patch_face)
-    e1 = tri_vertices[:, 1] - tri_vertices[:, 0]
-    e2 = tri_vertices[:, 2] - tri_vertices[:, 0]
-    cr = np.cross(e1, e2)
-    ta = 0.5 * np.linalg.norm(cr, axis=1)
-    area = np.bincount(tri_patch, weights=ta, minlength=P)
-    nsum = np.stack([np.bincount(tri_patch, weights=cr[:, k], minlength=P) for k in range(3)], axis=1)
-    nlen = np.linalg.norm(nsum, axis=1)
-    normal = nsum / np.where(nlen > 0, nlen, 1.0)[:, None]
-    tc = tri_vertices.mean(axis=1)
-    center = np.stack([np.bincount(tri_patch, weights=tc[:, k] * ta, minlength=P) for k in range(3)], axis=1)
-    center /= area[:, None]
+    area, normal, center = patch_geometry(tri_vertices, tri_patch, P)
     return PatchSet(
         tri_vertices=tri_vertices,
         tri_patch=tri_patch,
+        tri_face=face_all[order],
         area=area,
         normal=normal,
         center=center,
@@ -276,20 +261,24 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     )
 
 
+def patch_geometry(tri_vertices, tri_patch, n_patches):
+    """Per patch: area (m^2), unit normal (area-weighted over its triangles) and centroid."""
+    cr = triangle_cross(tri_vertices)
+    ta = 0.5 * np.linalg.norm(cr, axis=1)
+    area = group_sum(tri_patch, ta, n_patches)
+    normal = unit(group_sum(tri_patch, cr, n_patches))
+    center = group_sum(tri_patch, tri_vertices.mean(axis=1), n_patches, ta) / area[:, None]
+    return area, normal, center
+
+
 def face_mean(patches: PatchSet, values: np.ndarray) -> np.ndarray:
-    """Area-weighted mean of per-patch ``values`` (P,) or (P, k) over each face.
+    """Area-weighted mean of per-patch ``values`` (P,) or (P, k) over each face, through the
+    triangles (a face may span several patches, a patch several faces).
 
     Faces with no patch (degenerate) get 0.
     """
     values = np.asarray(values, dtype=np.float64)
-    squeeze = values.ndim == 1
-    vals = values.reshape(len(patches.area), -1)
-    F = patches.n_faces
-    a = np.bincount(patches.face, weights=patches.area, minlength=F)
-    out = np.stack([np.bincount(patches.face, weights=vals[:, k] * patches.area, minlength=F)
-                    for k in range(vals.shape[1])], axis=1)
-    out /= np.where(a > 0, a, 1.0)[:, None]
-    return out[:, 0] if squeeze else out
+    return group_mean(patches.tri_face, values[patches.tri_patch], patches.n_faces, patches.tri_area)
 
 
 def polygon_faceset(polygons, reflectance=0.5, exitance=0.0, object_names=None, face_object=None):

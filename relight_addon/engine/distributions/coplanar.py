@@ -1,0 +1,25 @@
+"""CoplanarDistribute: w = 1/n over the n remaining lights coplanar with the suppressed one
+(same facing normal within ``coplanar_tol`` and in-plane within ``coplanar_tol`` times the
+lights' extent); uniform when there is none."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..registry import DISTRIBUTIONS
+
+
+@DISTRIBUTIONS.register("coplanar", "Coplanar", "Suppressed power is shared by the coplanar lights (uniform if none)")
+class Coplanar:
+    def __init__(self, problem, coplanar_tol=1e-3, **_):
+        n = problem.light_normal
+        c = problem.light_center
+        extent = float(np.linalg.norm(np.ptp(c, axis=0))) or 1.0
+        same_facing = n @ n.T > 1.0 - coplanar_tol
+        offset = np.abs(np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :]))
+        self.pair = same_facing & (offset <= coplanar_tol * extent)
+
+    def raw(self, src, lights, valid):
+        co = self.pair[np.ix_(src, lights)] & valid
+        none = ~co.any(axis=1)
+        co[none] = valid[none]
+        return co.astype(np.float64)
