@@ -283,22 +283,23 @@ def _mesh_geometry(ob_eval, me, name):
     lt_poly = foreach_array(me.loop_triangles, "polygon_index", nt, np.int64)
     npoly = len(me.polygons)
     loop_vert = foreach_array(me.loops, "vertex_index", len(me.loops), np.int64)
-    _, starts, totals = loop_polygons(me)
+    loop_poly, starts, totals = loop_polygons(me)
     mat_index = foreach_array(me.polygons, "material_index", npoly, np.int64)
-    loops = [loop_vert[s:s + t] for s, t in zip(starts, totals)]
     slots = [getattr(s.material, "original", s.material) for s in ob_eval.material_slots]
-    return {"V": V, "lt": lt, "lt_poly": lt_poly, "loops": loops, "mat_index": mat_index, "slots": slots}
+    return {"V": V, "lt": lt, "lt_poly": lt_poly, "loop_vert": loop_vert, "loop_poly": loop_poly,
+            "loop_start": starts, "loop_total": totals, "mat_index": mat_index, "slots": slots}
 
 
 class _Builder:
     """Accumulates world-space faces of several meshes into FaceSet arrays."""
 
     def __init__(self):
-        self.verts, self.tris, self.tri_face, self.loops = [], [], [], []
+        self.verts, self.tris, self.tri_face = [], [], []
+        self.loop_vert, self.loop_start, self.loop_total = [], [], []
         self.f_obj, self.f_idx, self.rho, self.e, self.tgt, self.tgt_b, self.forb = [], [], [], [], [], [], []
         self.warnings = []
         self.mat_cache = {}
-        self.nf = self.nv = 0
+        self.nf = self.nv = self.nl = 0
 
     def materials(self, slots, mat_index):
         props = []
@@ -324,11 +325,16 @@ class _Builder:
         self.verts.append(W)
         self.tris.append(lt + nv)
         self.tri_face.append(geo["lt_poly"] + nf)
-        for lp in geo["loops"]:
-            lp = (lp + nv).tolist()
-            self.loops.append(lp[::-1] if flip else lp)
+        lv, lpoly, ls, lt_ = geo["loop_vert"], geo["loop_poly"], geo["loop_start"], geo["loop_total"]
+        if flip:  # each polygon's loop reversed
+            pos = np.arange(len(lv))
+            lv = lv[ls[lpoly] + lt_[lpoly] - 1 - (pos - ls[lpoly])]
+        self.loop_vert.append(lv + nv)
+        self.loop_start.append(ls + self.nl)
+        self.loop_total.append(lt_)
+        self.nl += len(lv)
         rho, e = self.materials(geo["slots"], geo["mat_index"])
-        npoly = len(geo["loops"])
+        npoly = len(ls)
         self.rho.append(rho)
         self.e.append(e)
         self.f_obj.append(np.full(npoly, oi))
@@ -391,7 +397,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
             M = np.array(ob_eval.matrix_world, dtype=np.float64)
         finally:
             ob_eval.to_mesh_clear()
-        npoly = len(geo["loops"])
+        npoly = len(geo["loop_start"])
         idx = np.arange(npoly) if mapping is None else mapping
         unmapped += int(np.sum(idx < 0))
         ok = idx >= 0
@@ -414,7 +420,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
             counts[name] = 0
             group[name] = len(names)
             names.append(name)
-        npoly = len(geo["loops"])
+        npoly = len(geo["loop_start"])
         b.add(geo, M, name, group[name], np.full(npoly, -1), np.zeros(npoly, dtype=bool),
               np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
         n_inst += 1
@@ -443,7 +449,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         vertices=np.concatenate(b.verts),
         triangles=np.concatenate(b.tris),
         triangle_face=np.concatenate(b.tri_face),
-        face_loops=b.loops,
+        loop_vertices=np.concatenate(b.loop_vert),
+        loop_start=np.concatenate(b.loop_start),
+        loop_total=np.concatenate(b.loop_total),
         face_object=np.concatenate(b.f_obj),
         face_index=np.concatenate(b.f_idx),
         object_names=names,

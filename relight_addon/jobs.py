@@ -15,19 +15,20 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.optimize as sopt
+import scipy.sparse as sp
 
 from .engine.cost import estimate_patches_cost
 from .engine.formfactors import Cancelled
-from .engine.geometry import group_mean, group_sum, triangle_areas
 from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
-from .engine.lights import LightSet, candidate_mask
+from .engine.lights import KINDS, LightSet, candidate_mask
 from .engine.options import JobOptions
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
 from .engine.registry import ESTIMATORS, PATCH_MODELS
 from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
 
-__all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "per_polygon", "JobOptions"]
+__all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]
 
 NO_EMITTER_WARNING = "the scene has no emitter (no material with emission): every radiosity is 0"
 
@@ -42,33 +43,47 @@ class RadiosityResult:
     form_factors: object = None
 
 
-def face_areas(faces: FaceSet) -> np.ndarray:
-    """(F,) world-space area of every FaceSet face (m^2)."""
-    return group_sum(faces.triangle_face, triangle_areas(faces.vertices[faces.triangles]), faces.n_faces)
+class PolygonMap:
+    """Patches -> base-mesh polygons: the reports' and the scene's rows.
 
-
-def per_polygon(faces: FaceSet, face_values: np.ndarray, polygon_counts: dict | None = None):
-    """Per object, the area-weighted mean of ``face_values`` (F, k) over each base polygon.
-
-    Several FaceSet faces can come from one base polygon (modifiers); faces with
-    ``face_index`` -1 are left out. Returns (values dict, areas dict).
+    Every exported object's polygons are numbered globally (``offset[object] + polygon``);
+    ``weights`` (n_polygons, P) CSR holds, per polygon, the area fractions of the patches its
+    triangles lie on, so ``weights @ v`` is the area-weighted (power-conserving) mean of
+    per-patch values over each polygon. Faces without a base polygon (face_index -1: made by a
+    modifier, or instances) are left out; a polygon without area gets 0.
     """
-    vals = np.asarray(face_values, dtype=np.float64).reshape(faces.n_faces, -1)
-    counts = []
-    for oi, name in enumerate(faces.object_names):
-        n = polygon_counts.get(name) if polygon_counts else None
-        if n is None:
-            idx = faces.face_index[(faces.face_object == oi) & (faces.face_index >= 0)]
-            n = int(idx.max()) + 1 if len(idx) else 0
-        counts.append(n)
-    offset = np.concatenate([[0], np.cumsum(counts)])
-    pid = np.where(faces.face_index >= 0, offset[faces.face_object] + faces.face_index, -1)
-    area = face_areas(faces)
-    mean = group_mean(pid, vals, int(offset[-1]), area)  # zero-area polygons: plain mean
-    tot = group_sum(pid, area, int(offset[-1]))
-    out = {name: mean[offset[k]:offset[k + 1]] for k, name in enumerate(faces.object_names)}
-    areas = {name: tot[offset[k]:offset[k + 1]] for k, name in enumerate(faces.object_names)}
-    return out, areas
+
+    def __init__(self, faces: FaceSet, patches: PatchSet, polygon_counts: dict | None = None):
+        counts = []
+        for oi, name in enumerate(faces.object_names):
+            n = polygon_counts.get(name) if polygon_counts else None
+            if n is None:
+                idx = faces.face_index[(faces.face_object == oi) & (faces.face_index >= 0)]
+                n = int(idx.max()) + 1 if len(idx) else 0
+            counts.append(int(n))
+        self.names = list(faces.object_names)
+        self.offset = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.n = int(self.offset[-1])
+        face_pid = np.where(faces.face_index >= 0, self.offset[faces.face_object] + faces.face_index, -1)
+        pid = face_pid[patches.tri_face]
+        ok = pid >= 0
+        ta = patches.tri_area[ok]
+        A = sp.csr_matrix((ta, (pid[ok], patches.tri_patch[ok])), shape=(self.n, patches.n_patches))
+        A.sum_duplicates()
+        self.area = np.asarray(A.sum(axis=1)).reshape(-1)
+        self.weights = (sp.diags(1.0 / np.where(self.area > 0, self.area, 1.0)) @ A).tocsr()
+        self.pairs = A  # polygon x patch areas (m^2)
+
+    def mean(self, patch_values) -> np.ndarray:
+        """(n_polygons, k) area-weighted means of per-patch values (P, k)."""
+        return np.asarray(self.weights @ np.asarray(patch_values, dtype=np.float64))
+
+    def split(self, rows) -> dict:
+        """Global polygon rows -> {object name: its rows}."""
+        return {name: rows[self.offset[k]:self.offset[k + 1]] for k, name in enumerate(self.names)}
+
+    def object_of(self, pid) -> np.ndarray:
+        return np.searchsorted(self.offset, np.asarray(pid), side="right") - 1
 
 
 def _json_safe(x):
@@ -131,7 +146,8 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     if progress is not None:
         progress("solve", 1.0)
     B_face = face_mean(patches, B)
-    poly, areas = per_polygon(faces, B_face, polygon_counts)
+    pmap = PolygonMap(faces, patches, polygon_counts)
+    poly, areas = pmap.split(pmap.mean(B)), pmap.split(pmap.area)
     report = {
         "command": "radiosity",
         "units": {"radiosity": "W/m^2", "length": "m"},
@@ -207,26 +223,58 @@ class Model:
     warnings: list
     cost: dict
     seconds: dict
+    refinement: dict = None  # adaptive model: passes made and the target change after each
+
+
+def refinement_measure(problem: InverseProblem, B_background, history: list):
+    """Importance of every patch for the targets and the change of the predicted target
+    radiosity since the previous model.
+
+    The reference configuration is the best non-negative one (NNLS on T) of the first model;
+    its lights keep their indices across refinements (the patch model's canonical light order),
+    so ``T e`` on each new model says how much the targets' prediction moved: the relative change
+    is returned (None on the first model). Importance psi solves A^T psi = w, w the targets'
+    area fractions, and weights the power each patch sends: psi_j A_j B_j (summed over the
+    channels), with B the radiosity of the reference configuration.
+    """
+    if not history:
+        e_ref = np.stack([sopt.nnls(problem.transfer[c], problem.b_target[:, c],
+                                    maxiter=50 * problem.n_lights)[0] for c in range(3)], axis=1)
+    else:
+        e_ref = history[0][0]
+    pred = problem.target_radiosity_of(e_ref)
+    change = None
+    if history:
+        prev = history[-1][1]
+        change = float(np.linalg.norm(pred - prev) / max(np.linalg.norm(prev), 1e-300))
+    history.append((e_ref, pred, change))
+    facs = problem.factors()
+    w = np.zeros(problem.n_patches)
+    w[problem.targets] = problem.area[problem.targets] / problem.area[problem.targets].sum()
+    B = problem.forward_radiosity(problem.patch_exitance(e_ref)) + B_background
+    importance = np.zeros(problem.n_patches)
+    for c in range(3):
+        psi = facs[c].solve(w, trans=True)
+        importance += psi * problem.area * B[:, c]
+    return change, importance
 
 
 @dataclass
 class Curve:
-    """Stage 4, the curve assembled per base-mesh polygon: the configurations kept re-appliable
-    (``keep``: indices into the reduction's curve) and everything needed to show them."""
+    """Stage 4, the curve assembled for the scene: the configurations kept re-appliable (``keep``:
+    indices into the reduction's curve), each light's exitance and every patch's radiosity per
+    kept configuration, and the map to base-mesh polygons."""
 
     keep: np.ndarray
     final_row: int  # row of the final configuration among ``keep``
-    light_object: np.ndarray  # per light polygon: object index
-    light_face: np.ndarray  # ... base-mesh polygon index
-    light_area: np.ndarray
-    light_center: np.ndarray
-    light_normal: np.ndarray
-    light_exitance: np.ndarray  # (kept points, light polygons, 3) W/m^2
-    radiosity_object: np.ndarray  # per polygon: object index
-    radiosity_face: np.ndarray
-    radiosity: np.ndarray  # (kept points, polygons, 3) W/m^2
-    polygon_radiosity: dict  # object -> (n_polygons, kept points * 3)
+    exitance: np.ndarray  # (kept points, n_lights, 3) W/m^2
+    radiosity: np.ndarray  # (kept points, P, 3) W/m^2, background included
+    polygons: PolygonMap
+    light_polygons: sp.csr_matrix  # (n_lights, n_polygons): the polygons each light lies on
     seconds: float
+
+    def final_polygon_radiosity(self):
+        return self.polygons.mean(self.radiosity[self.final_row])
 
 
 @dataclass
@@ -258,31 +306,53 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     warnings = list(faces.warnings)
     cost = solve_cost(patches, options)
     warnings.extend(cost["warnings"])
-    mask = candidate_mask(patches, mode)
-    lights = pm.lights(patches, mask)
-    pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
-    F = ESTIMATORS[options.estimator](patches, options, progress=_stage(progress, "form factors", 0.0, 0.7),
-                                      cancel=cancel, pairs=pairs)
-    if cancel is not None and cancel():
-        raise Cancelled("solve cancelled")
-    t1 = time.perf_counter()
-    background = np.zeros_like(patches.exitance)
-    B_background = np.zeros_like(patches.exitance)
-    e_start = None
-    if mode == "inverse":
-        problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                 mask, patches.center, patches.normal, light_basis=lights.basis)
+    passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
+    t_ff = t_problem = 0.0
+    history = []
+    for p in range(passes + 1):
+        mask = candidate_mask(patches, mode)
+        lights = pm.lights(patches, mask)
+        pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
+        lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
+        F = ESTIMATORS[options.estimator](patches, options, progress=_stage(progress, "form factors", lo, hi),
+                                          cancel=cancel, pairs=pairs)
+        t_ff += F.seconds
+        if cancel is not None and cancel():
+            raise Cancelled("solve cancelled")
+        t1 = time.perf_counter()
+        background = np.zeros_like(patches.exitance)
+        B_background = np.zeros_like(patches.exitance)
+        e_start = None
+        if mode == "inverse":
+            problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                                     mask, patches.center, patches.normal, light_basis=lights.basis)
+            emitting = np.any(patches.exitance > 0, axis=1)
+            if emitting.any():
+                background = patches.exitance.copy()
+                B_background = problem.forward_radiosity(background)
+                problem.b_target = problem.b_target - B_background[problem.targets]
+        else:
+            problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
+                                                       patches.center, patches.normal, light_basis=lights.basis)
+        t_problem += time.perf_counter() - t1
+        if p == passes:
+            break
+        t2 = time.perf_counter()
+        change, importance = refinement_measure(problem, B_background, history)
+        t_problem += time.perf_counter() - t2
+        if change is not None and change < options.refine_tolerance:
+            break
+        t3 = time.perf_counter()
+        if not pm.refine(faces, patches, importance):
+            break
+        patches = pm.mesh(faces)
+        t_mesh += time.perf_counter() - t3
+    if mode == "inverse" and np.any(background > 0):
         emitting = np.any(patches.exitance > 0, axis=1)
-        if emitting.any():
-            background = patches.exitance.copy()
-            B_background = problem.forward_radiosity(background)
-            problem.b_target = problem.b_target - B_background[problem.targets]
-            warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
-    else:
-        problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                                   patches.center, patches.normal, light_basis=lights.basis)
+        warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
+    refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, B_background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": F.seconds, "problem": time.perf_counter() - t1})
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement)
 
 
 def solve_stage(model: Model, options: JobOptions) -> tuple:
@@ -307,95 +377,84 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
 
 
 def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
-    """Stage 4: every kept configuration of the curve per base-mesh polygon (area-weighted means
-    of the patches: power-conserving) and the radiosity each gives: B = B_background + A^-1 e,
-    one LU solve for all the points at once."""
+    """Stage 4: the kept configurations and the radiosity each gives, B = B_background + A^-1 e
+    (one LU solve for all the points at once), and the patches -> polygons map."""
     t0 = time.perf_counter()
-    problem, patches, faces = model.problem, model.patches, model.faces
+    problem, patches = model.problem, model.patches
     C = problem.candidates
     keep = stored_points([p.n_lights for p in red.curve], red.final_index)
-    n_pts = len(keep)
-    P = patches.n_patches
+    n_pts, P = len(keep), patches.n_patches
     E = np.zeros((n_pts, problem.n_lights, 3))
     for k, ci in enumerate(keep):
         pt = red.curve[ci]
         E[k, pt.lights] = pt.exitance
     E_patch = np.zeros((P, n_pts, 3))
-    for k in range(n_pts):  # a light's exitance on all its patches
+    for k in range(n_pts):  # the lights' exitance on their patches
         E_patch[C, k] = problem.light_basis @ E[k]
     facs = problem.factors()
-    B_patch = np.empty((P, n_pts, 3))
+    B = np.empty((n_pts, P, 3))
     for c in range(3):
-        B_patch[:, :, c] = facs[c].solve(E_patch[:, :, c]) + model.background_radiosity[:, c:c + 1]
-    if not np.all(np.isfinite(B_patch)):
+        B[:, :, c] = (facs[c].solve(E_patch[:, :, c]) + model.background_radiosity[:, c:c + 1]).T
+    if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
-    is_cand = np.zeros(P)
-    is_cand[C] = 1.0
-    face_cols = face_mean(patches, np.concatenate([
-        E_patch.reshape(P, -1), B_patch.reshape(P, -1), is_cand[:, None],
-        patches.center * is_cand[:, None], patches.normal * is_cand[:, None]], axis=1))
-    poly, poly_area = per_polygon(faces, face_cols, polygon_counts)
-    w = n_pts * 3
-    l_obj, l_poly, l_area, l_E, l_c, l_n, r_obj, r_poly, r_B = ([] for _ in range(9))
-    for oi, name in enumerate(faces.object_names):
-        v = poly[name]
-        npoly = len(v)
-        r_obj.append(np.full(npoly, oi))
-        r_poly.append(np.arange(npoly))
-        r_B.append(v[:, w:2 * w].reshape(npoly, n_pts, 3))
-        cand = np.flatnonzero(v[:, 2 * w] > 0.5)
-        l_obj.append(np.full(len(cand), oi))
-        l_poly.append(cand)
-        l_area.append(poly_area[name][cand])
-        l_E.append(v[cand, :w].reshape(len(cand), n_pts, 3))
-        l_c.append(v[cand, 2 * w + 1:2 * w + 4])
-        l_n.append(v[cand, 2 * w + 4:2 * w + 7])
-    normal = np.concatenate(l_n)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-30)[:, None]
-    return Curve(keep=keep, final_row=int(np.searchsorted(keep, red.final_index)),
-                 light_object=np.concatenate(l_obj), light_face=np.concatenate(l_poly),
-                 light_area=np.concatenate(l_area), light_center=np.concatenate(l_c), light_normal=normal,
-                 light_exitance=np.concatenate(l_E).transpose(1, 0, 2),
-                 radiosity_object=np.concatenate(r_obj), radiosity_face=np.concatenate(r_poly),
-                 radiosity=np.concatenate(r_B).transpose(1, 0, 2),
-                 polygon_radiosity={name: poly[name][:, w:2 * w] for name in faces.object_names},
-                 seconds=time.perf_counter() - t0)
+    pmap = PolygonMap(model.faces, patches, polygon_counts)
+    cells = (pmap.pairs[:, C] > 0).astype(np.float64)  # polygons x candidate patches
+    light_polygons = (cells @ problem.light_basis).T.tocsr()
+    light_polygons.data[:] = 1.0
+    return Curve(keep, int(np.searchsorted(keep, red.final_index)), E, B, pmap, light_polygons,
+                 time.perf_counter() - t0)
+
+
+def light_records(model: Model, curve: Curve, row: int) -> list:
+    """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
+    them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
+    exitance [r, g, b] (W/m^2) and power (W)."""
+    lights = model.lights
+    e = curve.exitance[row]
+    out = []
+    for j in np.flatnonzero(np.any(e != 0, axis=1)):
+        pids = curve.light_polygons[j].indices
+        obj = model.patches.object[lights.members(j)[0]]
+        out.append({"object": model.faces.object_names[obj],
+                    "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
+                    "kind": KINDS[lights.kind[j]],
+                    "center": lights.center[j], "normal": lights.normal[j], "area": float(lights.area[j]),
+                    "exitance": e[j], "power": float(e[j].sum() * lights.area[j])})
+    return out
 
 
 def make_report(model: Model, options: JobOptions, inv: InverseResult | None, red: ReductionResult,
-                curve: Curve, warnings: list, timings: dict, polygon_counts=None) -> dict:
+                curve: Curve, warnings: list, timings: dict) -> dict:
     """Stage 5: the JSON report (see README.md)."""
     faces, patches, problem = model.faces, model.patches, model.problem
     fi = curve.final_row
     final = red.curve[red.final_index]
-    n_pts = len(curve.keep)
-    lit = np.flatnonzero(np.any(curve.light_exitance[fi] != 0, axis=1))
-    lights = [{"object": faces.object_names[curve.light_object[j]], "face": int(curve.light_face[j]),
-               "exitance": curve.light_exitance[fi, j], "area": float(curve.light_area[j]),
-               "center": curve.light_center[j]} for j in lit]
-    bg_poly, _ = per_polygon(faces, face_mean(patches, model.background), polygon_counts)
-    tgt_face = np.where(faces.target[:, None], faces.target_radiosity, np.nan)
-    poly_t, _ = per_polygon(faces, tgt_face, polygon_counts)
-    objects = {}
-    for oi, name in enumerate(faces.object_names):
-        e_poly = bg_poly[name].copy()
-        sel = curve.light_object == oi
-        e_poly[curve.light_face[sel]] += curve.light_exitance[fi][sel]
-        objects[name] = {"radiosity": curve.polygon_radiosity[name].reshape(-1, n_pts, 3)[:, fi],
-                         "target": _nan_to_none(poly_t[name]), "exitance": e_poly}
+    pmap = curve.polygons
+    E_patch = model.lights.patch_exitance(curve.exitance[fi], patches.n_patches) + model.background
+    radiosity = pmap.split(curve.final_polygon_radiosity())
+    exitance = pmap.split(pmap.mean(E_patch))
+    target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
+                                 pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
+    objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
+               for name in faces.object_names}
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
-        "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "length": "m"},
-        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(patches.n_patches)},
+        "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
+        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces),
+                  "triangles": int(len(faces.triangles)), "patches": int(patches.n_patches)},
         "timings_s": timings,
         "estimate": {"memory_bytes": model.cost["memory_bytes"], "seconds": model.cost["seconds"]},
         "options": {**options.to_dict(), "rays_per_patch": int(model.form_factors.rays_per_patch),
-                    "max_patch_size": float(patches.max_patch_size)},
+                    "max_patch_size": float(patches.max_patch_size),
+                    "light_size": None if patches.light_size is None else float(patches.light_size)},
+        "model": {"patch_model": options.patch_model, "estimator": options.estimator,
+                  "lights_by_kind": {k: int(np.sum(model.lights.kind == i)) for i, k in enumerate(KINDS)},
+                  "refinement": model.refinement},
         "inverse": {
             "solver": inv.solver if inv else "direct-lighting",
             "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
-            "n_candidates": int(problem.n_lights),  # candidate lights
+            "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
             "n_candidate_patches": int(len(problem.candidates)),
             "rank": inv.rank if inv else None,
             "rcond": inv.rcond if inv else None,
@@ -409,22 +468,41 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-                   "n_negative": p.n_negative} for p in red.curve],
+                   "n_negative": p.n_negative, "power": float(np.sum(p.exitance.sum(axis=1)
+                                                                     * problem.light_area[p.lights]))}
+                  for p in red.curve],
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
-                  "n_negative": final.n_negative, "lights": lights},
+                  "n_negative": final.n_negative, "lights": light_records(model, curve, fi)},
         "objects": objects,
         "warnings": warnings,
     }
 
 
 def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:
-    """What the .blend keeps (curve_store.pack_curve): the whole curve and the kept configurations."""
-    keep = curve.keep
-    pts = red.curve
+    """What the .blend keeps (curve_store.pack_curve): the whole curve, and per kept configuration
+    the lights' exitance and the patches' radiosity, with what is needed to show them without the
+    engine: the cells' triangles and reflectance, the light basis, the patches -> polygons map."""
+    keep, pts = curve.keep, red.curve
+    lights, patches, pmap = model.lights, model.patches, curve.polygons
+    C = lights.patches
+    in_c = np.full(patches.n_patches, -1)
+    in_c[C] = np.arange(len(C))
+    cell_of_tri = in_c[patches.tri_patch]
+    sel = np.flatnonzero(cell_of_tri >= 0)
+    sel = sel[np.argsort(cell_of_tri[sel], kind="stable")]
+    W = pmap.weights.tocsr()
+    lp = curve.light_polygons
     return {
         "objects": list(model.faces.object_names),
-        "light_object": curve.light_object, "light_face": curve.light_face, "light_area": curve.light_area,
-        "light_center": curve.light_center, "light_normal": curve.light_normal,
+        "polygon_offset": pmap.offset,
+        "light_object": model.patches.object[C[lights.basis.tocsc().indices[lights.basis.tocsc().indptr[:-1]]]],
+        "light_kind": lights.kind, "light_area": lights.area, "light_center": lights.center,
+        "light_normal": lights.normal, "light_polygons_indptr": lp.indptr, "light_polygons": lp.indices,
+        "basis_indptr": lights.basis.indptr, "basis_indices": lights.basis.indices,
+        "cell_triangles": patches.tri_vertices[sel].astype(np.float32),
+        "cell_triangle_cell": cell_of_tri[sel], "cell_normal": patches.normal[C],
+        "cell_reflectance": patches.reflectance[C],
+        "polygon_weights_indptr": W.indptr, "polygon_weights_patch": W.indices, "polygon_weights": W.data,
         "curve_n_lights": np.array([p.n_lights for p in pts]),
         "curve_error": np.array([p.error for p in pts]),
         "curve_relative_error": np.array([p.relative_error for p in pts]),
@@ -434,9 +512,9 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "error": np.array([pts[i].error for i in keep]),
         "relative_error": np.array([pts[i].relative_error for i in keep]),
         "n_negative": np.array([pts[i].n_negative for i in keep]),
-        "exitance": curve.light_exitance,
-        "radiosity_object": curve.radiosity_object, "radiosity_face": curve.radiosity_face,
+        "exitance": curve.exitance,
         "radiosity": curve.radiosity,
+        "background": model.background[C],
         "final": np.array(red.final_index),
         "target_norm": np.array(model.problem.target_norm),
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},
@@ -482,7 +560,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
-    report = make_report(model, options, inv, red, curve, warnings, timings, polygon_counts)
+    report = make_report(model, options, inv, red, curve, warnings, timings)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]

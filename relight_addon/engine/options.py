@@ -27,6 +27,9 @@ class JobOptions:
     error_threshold: float | None = None  # stop criterion: relative error (Eq. 1 / ||b_P||)
     require_positive: bool = True  # stop criterion: no negatives
     patch_model: str = DEFAULT_PATCH_MODEL
+    light_size: float | None = None  # None: the patch size (adaptive model's light cells)
+    refine_passes: int = 2  # adaptive model: refinement passes after the first solve (0 = none)
+    refine_tolerance: float = 0.02  # ... stop when the predicted target radiosity moves less than this (relative)
     estimator: str = DEFAULT_ESTIMATOR
 
     def validate(self):
@@ -39,6 +42,10 @@ class JobOptions:
             raise ValueError("rays per patch must be at least 1 (0 = automatic)")
         if self.max_patch_size is not None and not self.max_patch_size > 0:
             raise ValueError("max patch size must be a positive length")
+        if self.light_size is not None and not self.light_size > 0:
+            raise ValueError("light size must be a positive length")
+        if self.refine_passes < 0:
+            raise ValueError("refine passes must be >= 0")
         if self.max_lights is not None and self.max_lights < 1:
             raise ValueError("max lights must be at least 1")
         if self.error_threshold is not None and not self.error_threshold >= 0:

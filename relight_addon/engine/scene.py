@@ -23,6 +23,7 @@ __all__ = [
     "face_mean",
     "default_max_patch_size",
     "polygon_faceset",
+    "loops_csr",
     "SceneError",
 ]
 
@@ -37,14 +38,17 @@ class FaceSet:
 
     ``triangles`` is a triangulation of every face (Blender's loop triangles
     handle concave n-gons); ``triangle_face`` names the face of each triangle.
-    ``face_loops`` holds, per face, the ordered vertex indices of its polygon
-    (used to grid-split quads).
+    The polygons' vertex loops, in polygon order (used to grid-split quads), are
+    ``loop_vertices[loop_start[f]:loop_start[f] + loop_total[f]]`` (``face_loops``:
+    the same as a list of lists).
     """
 
     vertices: np.ndarray  # (V, 3) float64
     triangles: np.ndarray  # (T, 3) int64 vertex indices
     triangle_face: np.ndarray  # (T,) int64
-    face_loops: list  # F lists of vertex indices, polygon order
+    loop_vertices: np.ndarray  # (L,) int64
+    loop_start: np.ndarray  # (F,) int64
+    loop_total: np.ndarray  # (F,) int64
     face_object: np.ndarray  # (F,) int64 index into object_names
     face_index: np.ndarray  # (F,) int64 polygon index in the object's base mesh
     object_names: list
@@ -56,12 +60,16 @@ class FaceSet:
     warnings: list = field(default_factory=list)
 
     def __post_init__(self):
-        F = len(self.face_loops)
+        self.loop_vertices = np.asarray(self.loop_vertices, dtype=np.int64).reshape(-1)
+        self.loop_start = np.asarray(self.loop_start, dtype=np.int64).reshape(-1)
+        self.loop_total = np.asarray(self.loop_total, dtype=np.int64).reshape(-1)
+        F = len(self.loop_start)
         self.vertices = np.asarray(self.vertices, dtype=np.float64).reshape(-1, 3)
         self.triangles = np.asarray(self.triangles, dtype=np.int64).reshape(-1, 3)
         self.triangle_face = np.asarray(self.triangle_face, dtype=np.int64).reshape(-1)
         self.face_object = np.asarray(self.face_object, dtype=np.int64).reshape(F)
         self.face_index = np.asarray(self.face_index, dtype=np.int64).reshape(F)
+        self.object_names = list(self.object_names)
         self.reflectance = np.asarray(self.reflectance, dtype=np.float64).reshape(F, 3)
         self.exitance = np.asarray(self.exitance, dtype=np.float64).reshape(F, 3)
         if self.target is None:
@@ -76,7 +84,20 @@ class FaceSet:
 
     @property
     def n_faces(self) -> int:
-        return len(self.face_loops)
+        return len(self.loop_start)
+
+    @property
+    def face_loops(self) -> list:
+        """Per face, its vertex indices in polygon order (a list of lists; prefer the arrays)."""
+        lv = self.loop_vertices
+        return [lv[s:s + n].tolist() for s, n in zip(self.loop_start, self.loop_total)]
+
+
+def loops_csr(loops):
+    """(loop_vertices, loop_start, loop_total) arrays from a list of vertex-index lists."""
+    total = np.array([len(lp) for lp in loops], dtype=np.int64)
+    verts = np.concatenate([np.asarray(lp, dtype=np.int64) for lp in loops]) if len(loops) else np.zeros(0, np.int64)
+    return verts, np.concatenate([[0], np.cumsum(total)[:-1]]).astype(np.int64), total
 
 
 @dataclass
@@ -92,7 +113,8 @@ class PatchSet:
     area: np.ndarray  # (P,) m^2
     normal: np.ndarray  # (P, 3) unit normal (area-weighted over the patch's triangles)
     center: np.ndarray  # (P, 3) area-weighted centroid
-    face: np.ndarray  # (P,) int64 the FaceSet face of the patch (of its largest area when it spans several)
+    face: np.ndarray  # (P,) int64 the FaceSet face of the patch (of its first triangle when it spans several)
+    object: np.ndarray  # (P,) int64 index into the FaceSet's object_names
     reflectance: np.ndarray  # (P, 3)
     exitance: np.ndarray  # (P, 3) W/m^2
     target: np.ndarray  # (P,) bool
@@ -100,6 +122,8 @@ class PatchSet:
     forbidden: np.ndarray  # (P,) bool
     n_faces: int
     max_patch_size: float
+    light_size: float | None = None  # the adaptive model's light-cell size (m)
+    level: np.ndarray = None  # (P,) int, the adaptive model's refinement level of each patch
 
     @property
     def n_patches(self) -> int:
@@ -164,8 +188,109 @@ def _split_triangle(t, k):
     return np.asarray(out)
 
 
+def scene_scale(faces: FaceSet) -> float:
+    """The bounding-box diagonal of the faces (m), after checking there is geometry to mesh."""
+    V = faces.vertices
+    if not np.all(np.isfinite(V)):
+        raise SceneError("the scene has NaN or infinite vertex coordinates")
+    if faces.n_faces == 0 or len(faces.triangles) == 0:
+        raise SceneError("the scene has no faces")
+    return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
+def check_size(size, what="max patch size"):
+    size = float(size)
+    if not (size > 0 and np.isfinite(size)):
+        raise SceneError(f"{what} must be a positive length, got {size}")
+    return size
+
+
+def face_triangles(faces: FaceSet):
+    """World-space triangles (T, 3, 3), the non-degenerate ones (T,) bool, and per face its
+    longest triangle edge (F,) m."""
+    T = faces.vertices[faces.triangles]
+    ok = triangle_areas(T) > (1e-10 * scene_scale(faces)) ** 2
+    edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+    face_edge = np.zeros(faces.n_faces)
+    np.maximum.at(face_edge, faces.triangle_face, edge)
+    return T, ok, face_edge
+
+
+def split_faces(faces: FaceSet, T, fids, size):
+    """Split faces ``fids`` into sub-patches no larger than ``size[f]`` (m): a quad into an
+    nu x nv grid of bilinear sub-quads (two triangles each), any other face's triangles into
+    k x k sub-triangles. Returns (triangles (n, 3, 3), face (n,), local sub-patch index (n,));
+    degenerate sub-triangles are dropped."""
+    V = faces.vertices
+    tf = faces.triangle_face
+    min_area = (1e-10 * scene_scale(faces)) ** 2
+    tri_of = np.argsort(tf, kind="stable")
+    starts = np.searchsorted(tf[tri_of], np.arange(faces.n_faces + 1))
+    parts_t, parts_f, parts_l = [np.zeros((0, 3, 3))], [np.zeros(0, np.int64)], [np.zeros(0, np.int64)]
+    for f in fids:
+        s = float(size[f])
+        if faces.loop_total[f] == 4:
+            p = V[faces.loop_vertices[faces.loop_start[f]:faces.loop_start[f] + 4]]
+            nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / s))
+            nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / s))
+            sub = _grid_quad(p, max(nu, 1), max(nv, 1))  # (patches, 2, 3, 3)
+            local = np.repeat(np.arange(len(sub)), 2)
+            sub = sub.reshape(-1, 3, 3)
+        else:
+            subs = []
+            for t in T[tri_of[starts[f]:starts[f + 1]]]:
+                k = int(np.ceil(np.linalg.norm(t - np.roll(t, 1, axis=0), axis=1).max() / s))
+                subs.append(_split_triangle(t, max(k, 1)))
+            sub = np.concatenate(subs)
+            local = np.arange(len(sub))
+        keep = triangle_areas(sub) > min_area
+        parts_t.append(sub[keep])
+        parts_f.append(np.full(int(keep.sum()), f, dtype=np.int64))
+        parts_l.append(local[keep])
+    return np.concatenate(parts_t), np.concatenate(parts_f), np.concatenate(parts_l)
+
+
+def build_patches(faces: FaceSet, tri, tri_face, key, max_patch_size, **extra) -> PatchSet:
+    """A PatchSet from triangles (n, 3, 3) on faces ``tri_face`` (n,), one patch per distinct
+    ``key`` (n,) int64, patches in key order. Per-patch attributes come from the face of the
+    patch's first triangle: the patch model keeps faces that differ in them apart. Faces that
+    got no triangle are counted in a warning."""
+    made = np.zeros(faces.n_faces, dtype=bool)
+    made[tri_face] = True
+    degenerate = int(faces.n_faces - made.sum())
+    if degenerate:
+        faces.warnings.append(f"{degenerate} zero-area or degenerate face(s) ignored")
+    if not made.any():
+        raise SceneError("the scene has no face with a non-zero area")
+    order = np.argsort(key, kind="stable")  # patches in key order, triangles contiguous
+    uniq, first, tri_patch = np.unique(key[order], return_index=True, return_inverse=True)
+    tri_vertices = tri[order]
+    tri_patch = tri_patch.reshape(-1).astype(np.int64)
+    tri_face = tri_face[order]
+    patch_face = tri_face[first]
+    area, normal, center = patch_geometry(tri_vertices, tri_patch, len(uniq))
+    return PatchSet(
+        tri_vertices=tri_vertices,
+        tri_patch=tri_patch,
+        tri_face=tri_face,
+        area=area,
+        normal=normal,
+        center=center,
+        face=patch_face,
+        object=faces.face_object[patch_face].copy(),
+        reflectance=faces.reflectance[patch_face].copy(),
+        exitance=faces.exitance[patch_face].copy(),
+        target=faces.target[patch_face].copy(),
+        target_radiosity=faces.target_radiosity[patch_face].copy(),
+        forbidden=faces.forbidden[patch_face].copy(),
+        n_faces=faces.n_faces,
+        max_patch_size=max_patch_size,
+        **extra,
+    )
+
+
 def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSet:
-    """Mesh faces into patches no larger than ``max_patch_size`` (metres).
+    """Mesh faces into patches no larger than ``max_patch_size`` (metres): the polygon model.
 
     - A face whose edges are all <= max_patch_size is one patch (its triangles).
     - A larger quad is split into an nu x nv grid of bilinear sub-quads.
@@ -174,91 +299,19 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     Degenerate (zero-area) triangles are dropped; a face with no area left
     produces no patch and a warning in ``faces.warnings``.
     """
-    V = faces.vertices
-    if not np.all(np.isfinite(V)):
-        raise SceneError("the scene has NaN or infinite vertex coordinates")
-    if faces.n_faces == 0 or len(faces.triangles) == 0:
-        raise SceneError("the scene has no faces")
+    scene_scale(faces)
     if max_patch_size is None:
-        max_patch_size = default_max_patch_size(V)
-    max_patch_size = float(max_patch_size)
-    if not (max_patch_size > 0 and np.isfinite(max_patch_size)):
-        raise SceneError(f"max patch size must be a positive length, got {max_patch_size}")
-
-    F = faces.n_faces
-    scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-    min_area = (1e-10 * scale) ** 2
-    T = V[faces.triangles]  # (n, 3, 3)
+        max_patch_size = default_max_patch_size(faces.vertices)
+    max_patch_size = check_size(max_patch_size)
+    T, ok, face_edge = face_triangles(faces)
     tf = faces.triangle_face
-
-    ok = triangle_areas(T) > min_area
-    edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
-    face_edge = np.zeros(F)
-    np.maximum.at(face_edge, tf, edge)
     whole = face_edge <= max_patch_size
-    # faces kept whole (the common case, vectorised): one patch each, its non-degenerate triangles
-    sel = whole[tf] & ok
-    parts_t, parts_f, parts_l = [T[sel]], [tf[sel]], [np.zeros(int(sel.sum()), dtype=np.int64)]
-    made = np.zeros(F, dtype=bool)
-    made[tf[sel]] = True
-    # larger faces: quads into nu x nv grids, other faces' triangles into k x k sub-triangles
-    tri_of = np.argsort(tf, kind="stable")
-    starts = np.searchsorted(tf[tri_of], np.arange(F + 1))
-    for f in np.flatnonzero(~whole):
-        ftri = T[tri_of[starts[f]:starts[f + 1]]]
-        loop = faces.face_loops[f]
-        if len(loop) == 4:
-            p = V[np.asarray(loop)]
-            nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / max_patch_size))
-            nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / max_patch_size))
-            sub = _grid_quad(p, max(nu, 1), max(nv, 1))  # (patches, 2, 3, 3)
-            local = np.repeat(np.arange(len(sub)), 2)
-            sub = sub.reshape(-1, 3, 3)
-        else:
-            subs = []
-            for t in ftri:
-                k = int(np.ceil(np.linalg.norm(t - np.roll(t, 1, axis=0), axis=1).max() / max_patch_size))
-                subs.append(_split_triangle(t, max(k, 1)))
-            sub = np.concatenate(subs)
-            local = np.arange(len(sub))
-        keep = triangle_areas(sub) > min_area
-        if keep.any():
-            made[f] = True
-            parts_t.append(sub[keep])
-            parts_f.append(np.full(int(keep.sum()), f, dtype=np.int64))
-            parts_l.append(local[keep])
-    degenerate = int(F - made.sum())
-    if degenerate:
-        faces.warnings.append(f"{degenerate} zero-area or degenerate face(s) ignored")
-    if not made.any():
-        raise SceneError("the scene has no face with a non-zero area")
-    tri_all = np.concatenate(parts_t)
-    face_all = np.concatenate(parts_f)
-    local_all = np.concatenate(parts_l)
-    key = face_all * (int(local_all.max()) + 1) + local_all
-    order = np.argsort(key, kind="stable")  # patches in face order, triangles contiguous
-    uniq, tri_patch = np.unique(key[order], return_inverse=True)
-    tri_vertices = tri_all[order]
-    tri_patch = tri_patch.reshape(-1).astype(np.int64)
-    patch_face = face_all[order][np.searchsorted(key[order], uniq)]
-    P = len(patch_face)
-    area, normal, center = patch_geometry(tri_vertices, tri_patch, P)
-    return PatchSet(
-        tri_vertices=tri_vertices,
-        tri_patch=tri_patch,
-        tri_face=face_all[order],
-        area=area,
-        normal=normal,
-        center=center,
-        face=patch_face,
-        reflectance=faces.reflectance[patch_face].copy(),
-        exitance=faces.exitance[patch_face].copy(),
-        target=faces.target[patch_face].copy(),
-        target_radiosity=faces.target_radiosity[patch_face].copy(),
-        forbidden=faces.forbidden[patch_face].copy(),
-        n_faces=faces.n_faces,
-        max_patch_size=max_patch_size,
-    )
+    sel = whole[tf] & ok  # faces kept whole (the common case, vectorised): one patch each
+    st, sf, sl = split_faces(faces, T, np.flatnonzero(~whole), np.full(faces.n_faces, max_patch_size))
+    tri = np.concatenate([T[sel], st])
+    face = np.concatenate([tf[sel], sf])
+    local = np.concatenate([np.zeros(int(sel.sum()), dtype=np.int64), sl])
+    return build_patches(faces, tri, face, face * (int(local.max(initial=0)) + 1) + local, max_patch_size)
 
 
 def patch_geometry(tri_vertices, tri_patch, n_patches):
@@ -322,7 +375,7 @@ def polygon_faceset(polygons, reflectance=0.5, exitance=0.0, object_names=None, 
         vertices=np.concatenate(verts) if verts else np.zeros((0, 3)),
         triangles=np.asarray(tris, dtype=np.int64).reshape(-1, 3),
         triangle_face=np.asarray(tri_face, dtype=np.int64),
-        face_loops=loops,
+        **dict(zip(("loop_vertices", "loop_start", "loop_total"), loops_csr(loops))),
         face_object=face_object,
         face_index=np.arange(F),
         object_names=list(object_names),

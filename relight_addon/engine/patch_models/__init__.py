@@ -5,4 +5,4 @@ and candidate lights. Each module registers one class in PATCH_MODELS with
     patches = model.mesh(faces)                # PatchSet
     lights = model.lights(patches, mask)       # LightSet over the candidate patches ``mask``
 """
-from . import polygon  # noqa: F401
+from . import adaptive, polygon  # noqa: F401  (registration order = UI order)

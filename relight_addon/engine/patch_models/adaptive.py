@@ -1,0 +1,220 @@
+"""The adaptive model: patches and lights that follow what the solve needs, not the topology.
+
+Per face, a size (m):
+- candidate faces (may emit): the *light size* ``light_size`` (default: the patch size);
+- painted targets and the scene's emitters: the patch size;
+- everything else (reflectors, occluders): the patch size x 2^(1 - level), level 0 at first
+  (twice the patch size: coarse), raised by ``refine`` where the targets need it.
+
+A face larger than its size is split (quads into grids of bilinear sub-quads, other faces'
+triangles into sub-triangles): each piece is a patch. Faces no larger than their size are
+*clustered*: the faces of one object that share a key -- candidate / forbidden / target /
+emitter status, reflectance, exitance, painted value, size, normal bucket (the nearest of 26
+directions: a normal cone of about 30 degrees) and voxel of that size -- and are connected
+through shared (welded) vertices form one patch. So a dense prop becomes a handful of patches,
+and a patch never mixes painted with unpainted faces, different painted values, or candidate
+with forbidden faces.
+
+Lights (multi-scale candidates, ``scales``): every candidate patch is a light cell; cells of
+one object whose centres fall in one voxel of twice the light size and share a normal bucket
+form a group (about 2 x 2 cells); all the cells of one polygon form a polygon light. Groups and
+polygon lights of a single cell, and duplicates, are dropped. A group's transfer is the sum of
+its cells' (InverseProblem's light basis).
+
+Refinement (``refine``): the importance psi of every patch for the targets, the adjoint
+solution A^T psi = w (w: the targets' area fractions; Smits, Arvo & Salesin 1992), times the
+power it sends, A_j B_j, ranks the reflector patches; the highest are split (their faces go one
+level finer) until they cover ``REFINE_SHARE`` of the total. Merging is the coarse start: a
+reflector stays at twice the patch size unless the targets need it finer.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..geometry import group_sum, triangle_cross, unit
+from ..lights import KINDS, LightSet
+from ..registry import PATCH_MODELS
+from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
+
+__all__ = ["AdaptiveModel", "DIRECTIONS", "normal_bucket"]
+
+_d = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1) if (a, b, c) != (0, 0, 0)],
+              dtype=np.float64)
+#: the 26 directions of the normal buckets (cube faces, edges and corners)
+DIRECTIONS = _d / np.linalg.norm(_d, axis=1, keepdims=True)
+#: reflector levels: 0 (twice the patch size) .. MAX_LEVEL (half the patch size)
+MAX_LEVEL = 2
+#: a refinement pass splits the most important reflector patches until they hold this share of
+#: the total importance-weighted power of the splittable ones
+REFINE_SHARE = 0.5
+#: welding tolerance of vertices, relative to the scene's diagonal
+WELD = 1e-7
+
+
+def normal_bucket(normals) -> np.ndarray:
+    """Index of the nearest of the 26 DIRECTIONS of each normal (N, 3)."""
+    return np.argmax(np.asarray(normals, dtype=np.float64) @ DIRECTIONS.T, axis=1)
+
+
+def _ids(rows) -> np.ndarray:
+    """A dense id per distinct row of ``rows`` (N, k), in sorted-row order (floats compared by
+    their exact value). A lexicographic sort of the columns: much faster than np.unique(axis=0)."""
+    rows = np.asarray(rows)
+    rows = rows.reshape(len(rows), -1)
+    if len(rows) == 0:
+        return np.zeros(0, dtype=np.int64)
+    if rows.dtype.kind == "f":
+        rows = np.ascontiguousarray(rows + 0.0, dtype=np.float64).view(np.int64)  # +0.0: no -0.0
+    order = np.lexsort(rows.T[::-1])
+    s = rows[order]
+    gid = np.concatenate([[0], np.cumsum(np.any(s[1:] != s[:-1], axis=1))])
+    out = np.empty(len(rows), dtype=np.int64)
+    out[order] = gid
+    return out
+
+
+@PATCH_MODELS.register("adaptive", "Adaptive",
+                       "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
+                       "whole polygons), reflectors refined where the targets need it")
+class AdaptiveModel:
+    scales = ("cell", "group", "polygon")
+
+    def __init__(self, options, default_max_patch_size=None):
+        self.patch_size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+        self.light_size = getattr(options, "light_size", None)
+        self.level = None  # per face, reflectors' refinement level (set on the first mesh)
+
+    # -- patches -------------------------------------------------------------------------
+    def _sizes(self, faces):
+        if self.patch_size is None:
+            self.patch_size = default_max_patch_size(faces.vertices)
+        self.patch_size = check_size(self.patch_size)
+        if self.light_size is None:
+            self.light_size = self.patch_size
+        self.light_size = check_size(self.light_size, "light size")
+        emit = np.any(faces.exitance > 0, axis=1)
+        cand = ~faces.forbidden & ~emit
+        if self.level is None:
+            self.level = np.zeros(faces.n_faces, dtype=np.int64)
+        reflector = ~cand & ~faces.target & ~emit
+        size = np.where(cand, self.light_size, self.patch_size)
+        size = np.where(reflector, self.patch_size * 2.0 ** (1 - self.level), size)
+        return size, cand, emit, reflector
+
+    def mesh(self, faces):
+        size, cand, emit, reflector = self._sizes(faces)
+        T, ok, face_edge = face_triangles(faces)
+        tf = faces.triangle_face
+        small = face_edge <= size
+        # per face: area-weighted normal and centroid
+        cr = triangle_cross(T)
+        ta = 0.5 * np.linalg.norm(cr, axis=1)
+        fa = group_sum(tf, ta, faces.n_faces)
+        normal = unit(group_sum(tf, cr, faces.n_faces))
+        centroid = group_sum(tf, T.mean(axis=1), faces.n_faces, ta) / np.where(fa > 0, fa, 1.0)[:, None]
+        lo = faces.vertices.min(axis=0)
+        voxel = np.floor((centroid - lo) / size[:, None]).astype(np.int64)
+        key = np.column_stack([
+            faces.face_object, cand, faces.target, emit, faces.forbidden,
+            _ids(faces.reflectance), _ids(faces.exitance), _ids(np.where(faces.target[:, None],
+                                                                         faces.target_radiosity, 0.0)),
+            _ids(size[:, None]), normal_bucket(normal), voxel])
+        kid = _ids(key[small])
+        # connected components among the small faces of one key, through welded vertices
+        scale = float(np.linalg.norm(faces.vertices.max(axis=0) - lo))
+        weld = _ids(np.rint((faces.vertices - lo) / (WELD * max(scale, 1e-300))).astype(np.int64))
+        small_id = np.full(faces.n_faces, -1, dtype=np.int64)
+        small_id[small] = np.arange(int(small.sum()))
+        corner_tri = np.flatnonzero(small[tf] & ok)
+        cf = small_id[tf[corner_tri]].repeat(3)
+        cv = weld[faces.triangles[corner_tri].reshape(-1)]
+        node = _ids(np.column_stack([kid[cf], cv]))
+        ns, nn = int(small.sum()), int(node.max(initial=-1)) + 1
+        G = sp.csr_matrix((np.ones(len(cf)), (cf, ns + node)), shape=(ns + nn, ns + nn))
+        _, label = connected_components(G, directed=False)
+        cluster = label[:ns]
+        # triangles: small faces whole (one patch per cluster), large faces split at their size
+        sel = small[tf] & ok
+        st, sf, sl = split_faces(faces, T, np.flatnonzero(~small), size)
+        tri = np.concatenate([T[sel], st])
+        face = np.concatenate([tf[sel], sf])
+        n_cl = int(cluster.max(initial=-1)) + 1
+        pkey = np.concatenate([cluster[small_id[tf[sel]]], n_cl + face[len(T[sel]):] * (int(sl.max(initial=0)) + 1) + sl])
+        patches = build_patches(faces, tri, face, pkey, self.patch_size, light_size=self.light_size)
+        patches.level = np.where(reflector[patches.face], self.level[patches.face], -1)
+        return patches
+
+    # -- lights --------------------------------------------------------------------------
+    def lights(self, patches, mask, scales=None):
+        scales = self.scales if scales is None else tuple(scales)
+        for s in scales:
+            if s not in KINDS:
+                raise ValueError(f"unknown light scale {s!r}; use {', '.join(KINDS)}")
+        C = np.flatnonzero(mask)
+        nC = len(C)
+        if not nC:
+            raise SceneError("no candidate light: every face is forbidden")
+        parts = []  # (member rows into C, light id within the part, kind)
+        if "cell" in scales:
+            parts.append((np.arange(nC), np.arange(nC), "cell"))
+        group = None
+        if "group" in scales:
+            size = 2.0 * (patches.light_size or patches.max_patch_size)
+            vox = np.floor((patches.center[C] - patches.center.min(axis=0)) / size).astype(np.int64)
+            group = _ids(np.column_stack([patches.object[C], normal_bucket(patches.normal[C]), vox]))
+            gsize = np.bincount(group)
+            keep = gsize[group] >= 2 if "cell" in scales else np.ones(nC, bool)
+            parts.append((np.flatnonzero(keep), _ids(group[keep][:, None]), "group"))
+        if "polygon" in scales:
+            poly = _ids(patches.face[C][:, None])
+            psize = np.bincount(poly)
+            keep = psize[poly] >= 2 if "cell" in scales else np.ones(nC, bool)
+            if group is not None:  # a polygon that is exactly one group is already a light
+                gmin = np.full(len(psize), np.iinfo(np.int64).max)
+                gmax = np.full(len(psize), -1)
+                np.minimum.at(gmin, poly, group)
+                np.maximum.at(gmax, poly, group)
+                same = (gmin == gmax) & (np.bincount(group, minlength=gmax.max() + 1)[np.maximum(gmax, 0)] == psize)
+                keep &= ~same[poly]
+            parts.append((np.flatnonzero(keep), _ids(poly[keep][:, None]), "polygon"))
+        rows, cols, kinds = [], [], []
+        n = 0
+        for members, lid, kind in parts:
+            if not len(members):
+                continue
+            rows.append(members)
+            cols.append(n + lid)
+            k = int(lid.max()) + 1
+            kinds.append(np.full(k, KINDS.index(kind), dtype=np.int8))
+            n += k
+        basis = sp.csr_matrix((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
+                              shape=(nC, n))
+        lights = LightSet(C, basis, np.concatenate(kinds)).with_geometry(patches)
+        # a canonical order (kind, then position): the same lights get the same indices after a
+        # refinement of the reflectors
+        q = np.rint(lights.center / (1e-6 * max(float(np.ptp(patches.center, axis=0).max()), 1e-300)))
+        order = np.lexsort((lights.area, q[:, 2], q[:, 1], q[:, 0], lights.kind))
+        return LightSet(C, basis[:, order].tocsr(), lights.kind[order], lights.area[order], lights.center[order],
+                        lights.normal[order])
+
+    # -- refinement ----------------------------------------------------------------------
+    def refine(self, faces, patches, importance) -> bool:
+        """Split the reflector patches of highest ``importance`` (P,) (psi_j A_j B_j): their
+        faces go one level finer. Returns False when nothing could be split."""
+        can = (patches.level >= 0) & (patches.level < MAX_LEVEL)
+        eta = np.where(can, np.maximum(importance, 0.0), 0.0)
+        total = eta.sum()
+        if not total > 0:
+            return False
+        order = np.argsort(-eta, kind="stable")
+        n = int(np.searchsorted(np.cumsum(eta[order]), REFINE_SHARE * total)) + 1
+        split = order[:n]
+        split = split[eta[split] > 0]
+        if not len(split):
+            return False
+        faces_of = np.unique(patches.tri_face[np.isin(patches.tri_patch, split)])
+        before = self.level.copy()
+        self.level[faces_of] = np.minimum(self.level[faces_of] + 1, MAX_LEVEL)
+        return bool(np.any(self.level != before))
