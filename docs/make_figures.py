@@ -56,7 +56,7 @@ for ob in exp.objects:
     ob.data.color_attributes.remove(ob.data.color_attributes["relight_target_view"])
 
 # 2, 3: radiosity of e_x (row 0) and of the final configuration
-results.show_outcome(scene, outcome)
+results.show_outcome(scene, outcome, exp.fingerprints)
 results.apply_stored_point(scene, 0)
 results.render_radiosity(os.path.join(IMG, "e_x.png"), samples=SAMPLES)
 results.apply_stored_point(scene, outcome.final_index)

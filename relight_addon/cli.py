@@ -63,7 +63,7 @@ def build_parser():
     r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
     r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
     from .engine import options as o
-    from .engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS
+    from .engine.registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS
 
     for name, helptext in (("solve", "inverse lighting: lights for the painted targets, then reduction"),
                            ("reduce", "direct-lighting mode: reduce the scene's own emitters")):
@@ -74,6 +74,14 @@ def build_parser():
                                      "relight_radiosity layer and the whole curve")
         s.add_argument("--rays-per-patch", type=_positive_int, default=None)
         s.add_argument("--max-patch-size", type=_positive_length, default=None)
+        s.add_argument("--patch-model", choices=PATCH_MODELS.names(), default=o.DEFAULT_PATCH_MODEL,
+                       help="how the scene becomes patches and candidate lights (default %(default)s)")
+        s.add_argument("--light-size", type=_positive_length, default=None,
+                       help="adaptive model: size of the light cells in metres (default: the patch size)")
+        s.add_argument("--refine-passes", type=int, default=o.JobOptions.refine_passes,
+                       help="adaptive model: importance-driven refinement passes (default %(default)s, 0 = none)")
+        s.add_argument("--estimator", choices=ESTIMATORS.names(), default=o.DEFAULT_ESTIMATOR,
+                       help="form-factor estimator (default %(default)s)")
         s.add_argument("--seed", type=int, default=0)
         s.add_argument("--threads", type=_positive_int, default=None)
         if name == "solve":
@@ -172,14 +180,17 @@ def run_solve_command(args, progress=None, cancel=None):
     options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
                          threads=args.threads, solver=getattr(args, "solver", "reduced"),
                          selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
-                         error_threshold=args.error_threshold, require_positive=not args.allow_negative)
+                         error_threshold=args.error_threshold, require_positive=not args.allow_negative,
+                         patch_model=args.patch_model, light_size=args.light_size,
+                         refine_passes=args.refine_passes, estimator=args.estimator)
     outcome = jobs.run_solve(exp.faces, options, progress=progress, cancel=cancel,
                              mode="inverse" if args.command == "solve" else "direct", **export.job_inputs(exp))
 
     def apply():
         import bpy
 
-        results.show_outcome(bpy.context.scene, outcome)
+        shown = results.show_outcome(bpy.context.scene, outcome, exp.fingerprints)
+        outcome.report["warnings"].extend(shown["skipped"])
 
     return _write_outputs(args, outcome.report, exp, apply, t0)
 

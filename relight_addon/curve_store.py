@@ -1,23 +1,14 @@
 """The error curve as stored in a .blend, and its chart. No bpy here.
 
 A solve produces a sequence of configurations (the error curve, paper Fig. 11).
-Everything needed to re-apply any of them later, without recomputing form
-factors, is packed into one string (zlib-compressed npz, base64) kept in the
-scene's custom property ``relight_result``:
-
-- ``objects``: object names; ``light_object``/``light_face``: the candidate faces
-  (object index, polygon index), ``light_area`` (m^2);
-- ``curve_n_lights``, ``curve_error``, ``curve_relative_error``, ``curve_n_negative``: the
-  whole curve (for the chart);
-- the configurations kept re-appliable (``point_index`` into the whole curve: every one up
-  to 32 lights and ~40 log-spaced ones above, e_x and the final one), each with
-  ``n_lights``, ``error``, ``relative_error``, ``n_negative``;
-- ``exitance``: (points, candidate faces, 3) W/m^2 (float32; zero where dark);
-- ``radiosity_object``/``radiosity_face`` and ``radiosity``: (points, faces, 3) W/m^2,
-  stored as float16 (3 significant digits: plenty for display, and it halves the
-  file size; the JSON report keeps full precision);
-- ``final``: the index of the configuration chosen by the stop criteria;
-- ``target_norm``: ||b_P|| in W/m^2.
+Everything needed to re-apply any of them later, without the engine, is packed into one
+string (zlib-compressed npz, base64) kept in the scene's custom property ``relight_result``
+(jobs.stored_result lists the arrays): the whole curve (for the chart), and for the
+configurations kept re-appliable (every one up to 32 lights, ~40 log-spaced above, e_x and the
+final one) each light's exitance and every patch's radiosity; the lights (object, kind, area,
+centre, normal, polygons), their cells' triangles and reflectance, and the patches -> polygons
+weights. Floating-point arrays are stored as float32: no loss of range (float16 overflowed
+above 65,504 W/m^2), 7 significant digits. Non-finite values are refused when packing.
 """
 from __future__ import annotations
 
@@ -28,7 +19,7 @@ import zlib
 
 import numpy as np
 
-FORMAT = 1
+FORMAT = 2
 
 
 def pack_curve(data: dict) -> str:
@@ -36,11 +27,15 @@ def pack_curve(data: dict) -> str:
     arrays = {k: np.asarray(v) for k, v in data.items() if k not in ("objects", "meta")}
     arrays["objects_json"] = np.frombuffer(json.dumps(list(data["objects"])).encode(), dtype=np.uint8)
     arrays["meta_json"] = np.frombuffer(json.dumps(data.get("meta", {})).encode(), dtype=np.uint8)
+    for k, a in arrays.items():
+        if a.dtype.kind == "f":
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"refusing to store non-finite values ({k})")
+            a32 = a.astype(np.float32)
+            if not np.all(np.isfinite(a32)):
+                raise ValueError(f"values of {k} exceed the float32 range")
+            arrays[k] = a32
     arrays["format"] = np.array(FORMAT)
-    if "radiosity" in arrays:
-        arrays["radiosity"] = arrays["radiosity"].astype(np.float16)
-    if "exitance" in arrays:
-        arrays["exitance"] = arrays["exitance"].astype(np.float32)
     np.savez(buf, **arrays)
     return base64.b64encode(zlib.compress(buf.getvalue(), 6)).decode("ascii")
 
@@ -53,8 +48,6 @@ def unpack_curve(text: str) -> dict:
         raise ValueError("this file's Relight result was written by an incompatible version")
     out["objects"] = json.loads(out.pop("objects_json").tobytes().decode())
     out["meta"] = json.loads(out.pop("meta_json").tobytes().decode())
-    if "radiosity" in out:
-        out["radiosity"] = out["radiosity"].astype(np.float32)
     return out
 
 

@@ -65,6 +65,7 @@ NO_LIGHTS_PROP = "relight_no_lights"
 TARGET_SCALE_PROP = "relight_target_scale"
 MAX_PATCH_SIZE_PROP = "relight_max_patch_size"
 _FACE_INDEX_ATTRIBUTE = "_relight_face_index"
+RELIGHT_OWNER_PROP = "relight_owner"  # on everything Relight creates (results.py)
 
 
 class BlendFileError(SceneError):
@@ -154,6 +155,51 @@ class ExportedScene:
     polygon_counts: dict  # object name -> number of polygons of its base mesh
     settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
     seconds: float = 0.0
+    fingerprints: dict = field(default_factory=dict)  # object name -> mesh_fingerprint (stale-result check)
+
+
+#: positions are compared within this fraction of the object's size (times sqrt(vertices))
+FINGERPRINT_TOLERANCE = 1e-6
+
+
+def _vertex_weights(n):
+    """Two fixed pseudo-random weights in [-0.5, 0.5) per vertex index (a Weyl sequence)."""
+    i = np.arange(n, dtype=np.float64)
+    return np.stack([(i * 0.6180339887498949) % 1.0, (i * 0.7548776662466927 + 0.5) % 1.0], axis=1) - 0.5
+
+
+def mesh_fingerprint(ob) -> dict:
+    """What a stored result must still match: the base mesh's topology (exact: a hash of its
+    polygons' vertex loops) and its world-space vertex positions (two weighted sums per axis and
+    the bounding box, compared within a tolerance)."""
+    import hashlib
+
+    me = ob.data
+    nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+    lv = foreach_array(me.loops, "vertex_index", nl, np.int64)
+    lt = foreach_array(me.polygons, "loop_total", npoly, np.int64)
+    topo = hashlib.blake2b(np.concatenate([[nv, nl, npoly], lt, lv]).astype(np.int64).tobytes(), digest_size=16)
+    co = foreach_array(me.vertices, "co", nv, np.float64, 3).reshape(nv, 3)
+    M = np.array(ob.matrix_world, dtype=np.float64)
+    W = co @ M[:3, :3].T + M[:3, 3]
+    sig = (_vertex_weights(nv).T @ W).ravel() if nv else np.zeros(6)
+    box = np.concatenate([W.min(axis=0), W.max(axis=0)]) if nv else np.zeros(6)
+    return {"topology": topo.hexdigest(), "vertices": nv, "signature": sig.tolist(), "box": box.tolist()}
+
+
+def fingerprint_change(ob, fp) -> str | None:
+    """None when ``ob`` still matches fingerprint ``fp``, else what changed (for the message)."""
+    now = mesh_fingerprint(ob)
+    if now["topology"] != fp.get("topology"):
+        return "its polygons or their vertex order changed"
+    box = np.asarray(fp["box"])
+    size = float(np.max(box[3:] - box[:3])) if len(box) == 6 else 1.0
+    tol = FINGERPRINT_TOLERANCE * max(size, 1e-6) * (1.0 + np.sqrt(now["vertices"]))
+    d = max(np.max(np.abs(np.asarray(now["signature"]) - np.asarray(fp["signature"])), initial=0.0),
+            np.max(np.abs(np.asarray(now["box"]) - box), initial=0.0))
+    if d > tol:
+        return "it moved or its vertices moved"
+    return None
 
 
 def render_visible_objects(scene):
@@ -175,13 +221,14 @@ def render_visible_objects(scene):
 
 def exported_objects(context=None):
     """The scene's mesh objects that are exported: visible in the view layer, not hidden from
-    render (``hide_render`` of the object or of every collection it is in)."""
+    render (``hide_render`` of the object or of every collection it is in), and not made by
+    Relight (its emitters object shows a result: a new solve does not count it as scene light)."""
     context = context or bpy.context
     view_layer = context.view_layer
     renderable = render_visible_objects(context.scene)
     return [ob for ob in context.scene.objects
             if ob.type == "MESH" and not ob.hide_render and ob.name in renderable
-            and ob.visible_get(view_layer=view_layer)]
+            and ob.visible_get(view_layer=view_layer) and ob.get(RELIGHT_OWNER_PROP) is None]
 
 
 def scene_settings(scene):
@@ -462,7 +509,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         forbidden=np.concatenate(b.forb),
         warnings=warnings,
     )
-    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0)
+    fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
+    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints)
 
 
 def job_inputs(exp: ExportedScene) -> dict:

@@ -12,20 +12,20 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
 from .engine.cost import estimate_patches_cost
-from .engine.formfactors import Cancelled
+from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
 from .engine.options import JobOptions
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
-from .engine.registry import ESTIMATORS, PATCH_MODELS
+from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
 from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]
@@ -172,6 +172,9 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 STORE_ALL_UP_TO = 32
 STORE_LOG_POINTS = 40
 
+#: intermediate (to-be-refined) models get this fraction of the rays
+REFINE_RAY_FRACTION = 4
+
 BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed background light; "
                    "the solve lights what they leave to the targets")
 
@@ -309,12 +312,17 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
     t_ff = t_problem = 0.0
     history = []
+    # the paper's heuristics redistribute between lights that partition the candidates: single-scale
+    scales = None if SELECTIONS[options.selection].get("multiscale") else ("cell",)
     for p in range(passes + 1):
         mask = candidate_mask(patches, mode)
-        lights = pm.lights(patches, mask)
+        lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
         pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
         lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
-        F = ESTIMATORS[options.estimator](patches, options, progress=_stage(progress, "form factors", lo, hi),
+        # a model that will be refined only ranks patches by importance: a quarter of the rays
+        rays = options.rays_per_patch or auto_rays_per_patch(patches.n_patches)
+        opts = options if p == passes else replace(options, rays_per_patch=max(64, rays // REFINE_RAY_FRACTION))
+        F = ESTIMATORS[options.estimator](patches, opts, progress=_stage(progress, "form factors", lo, hi),
                                           cancel=cancel, pairs=pairs)
         t_ff += F.seconds
         if cancel is not None and cancel():
@@ -500,7 +508,7 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "light_normal": lights.normal, "light_polygons_indptr": lp.indptr, "light_polygons": lp.indices,
         "basis_indptr": lights.basis.indptr, "basis_indices": lights.basis.indices,
         "cell_triangles": patches.tri_vertices[sel].astype(np.float32),
-        "cell_triangle_cell": cell_of_tri[sel], "cell_normal": patches.normal[C],
+        "cell_triangle_cell": cell_of_tri[sel], "cell_normal": patches.normal[C], "cell_patch": C,
         "cell_reflectance": patches.reflectance[C],
         "polygon_weights_indptr": W.indptr, "polygon_weights_patch": W.indices, "polygon_weights": W.data,
         "curve_n_lights": np.array([p.n_lights for p in pts]),
@@ -514,7 +522,6 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "n_negative": np.array([pts[i].n_negative for i in keep]),
         "exitance": curve.exitance,
         "radiosity": curve.radiosity,
-        "background": model.background[C],
         "final": np.array(red.final_index),
         "target_norm": np.array(model.problem.target_norm),
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},

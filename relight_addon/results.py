@@ -1,44 +1,64 @@
 """Engine -> Blender: Relight's results in the scene, all of them clearable exactly (bpy).
 
-The way in is export.py. Here: the emissive light faces, the stored curve, the
-``relight_radiosity`` colour layer, area lights, the chart, saving a copy and rendering.
+The way in is export.py. A solve's result is shown, never by cutting or re-materialising the
+artist's faces, as:
 
-How a configuration is shown (bpy layer; the engine never sees this):
+- **the emitters object** ("Relight Emitters"): a new mesh object holding, for every light
+  cell that emits in the configuration shown, a copy of the cell's triangles set off by
+  ``OVERLAY_OFFSET`` in front of the surface it lies on. One material ("Relight Emitter"): a
+  Lambertian surface of the cell's reflectance (face attribute ``relight_reflectance``, so it
+  reflects as the engine modelled it) plus a one-sided emission of radiance exitance/pi (face
+  attribute ``relight_emission``). So the result lights exactly the cells the report lists,
+  whatever their size against the artist's polygons.
+- **the radiosity layer** ``relight_radiosity`` on the artist's meshes (radiance B/pi per
+  corner; the previous active and render colours are remembered and given back);
+- in direct-lighting mode ("reduce"), the scene's own emitter faces switched to an emission-free
+  copy of their material (``suppress_emission``; restored exactly by ``clear_suppression``);
+- the stored curve (scene property ``relight_result``) and the chart image.
 
-- Each mesh with light faces gets a FACE-domain FLOAT_COLOR attribute ``relight_emission``
-  holding the face's emitted *radiance* exitance/pi (W/m^2/sr), zero elsewhere.
-- For every original material used by a light face, an emissive variant is created:
-  a copy of that material whose surface is ``original surface + Emission``, the Emission
-  colour read from ``relight_emission`` with strength 1 on the front side and 0 on the
-  back (one-sided emitters, as in the radiosity model). The original surface shader is
-  untouched, so the face keeps its base colour and hence its reflectance.
-  Emission strength x colour = exitance / pi.
-- Light faces point to the variant through new material slots appended after the
-  original slots; the original material index of every face is saved in the INT face
-  attribute ``relight_original_material`` and the original slot count in the mesh's
-  ``relight_original_slots`` custom property.
+Everything Relight creates carries ``relight_owner`` = the result's id (scene property
+``relight_result_id``): Clear Results removes exactly that, by identity, never by name. Area
+lights made by Make Area Lights are the artist's to keep (Clear leaves them).
 
-``clear_configuration`` undoes all of it: material indices, slots, attributes, and the
-generated materials, so the mesh ends exactly as it was before ``apply_configuration``.
+Before writing anything, ``apply_stored_point`` checks the whole configuration: the stored
+result decodes, every object it names exists and is unchanged since the solve (its mesh
+fingerprint: topology and world-space positions within tolerance); on any failure nothing is
+written and the message names the object.
 """
 from __future__ import annotations
 
 import math
 import os
+import uuid
 import warnings as _warnings
 
 import bpy
 import numpy as np
 
+from .engine.geometry import group_mean
 from .engine.scene import SceneError
-from .export import RADIOSITY_ATTRIBUTE, foreach_array, loop_polygons
+from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
+REFLECTANCE_ATTRIBUTE = "relight_reflectance"
 ORIGINAL_INDEX_ATTRIBUTE = "relight_original_material"
 ORIGINAL_SLOTS_PROP = "relight_original_slots"
 HAD_INDEX_PROP = "relight_had_material_index"
 GENERATED_PROP = "relight_generated"
-DEFAULT_REFLECTANCE = 0.8
+OWNER_PROP = RELIGHT_OWNER_PROP
+AREA_LIGHTS_PROP = "relight_area_lights"
+RESULT_PROP = "relight_result"
+RESULT_ID_PROP = "relight_result_id"
+EMITTERS_NAME = "Relight Emitters"
+EMITTER_MATERIAL = "Relight Emitter"
+#: the emitters object is set off the surface by this fraction of the scene's size (at least 1 mm):
+#: far enough for the viewport's depth buffer, negligible for the light transport
+OVERLAY_OFFSET = 2e-4
+CHART_IMAGE = ".relight_error_curve"
+
+
+class StaleResult(SceneError):
+    """The stored result no longer matches the scene; nothing was written."""
 
 
 def _use_nodes(mat):
@@ -47,24 +67,222 @@ def _use_nodes(mat):
         mat.use_nodes = True
 
 
-def _emissive_variant(source):
-    """A copy of material ``source`` (or a grey default for None) that adds a one-sided
-    emission read from the ``relight_emission`` face attribute."""
-    if source is None:
-        mat = bpy.data.materials.new("Relight emitter")
-        _use_nodes(mat)
-        bsdf = next((n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
-        if bsdf is not None:
-            bsdf.inputs["Base Color"].default_value = (DEFAULT_REFLECTANCE,) * 3 + (1.0,)
-        mat.diffuse_color = (DEFAULT_REFLECTANCE,) * 3 + (1.0,)
-    else:
-        mat = source.copy()
-        mat.name = f"{source.name} (Relight)"
-    mat[GENERATED_PROP] = True
-    mat["relight_source"] = source.name if source is not None else ""
+def _owned(idblock, rid) -> bool:
+    return idblock.get(OWNER_PROP) == rid
+
+
+# --- the stored curve ----------------------------------------------------------------------
+
+_cache = {}
+
+
+def result_id(scene):
+    return scene.get(RESULT_ID_PROP)
+
+
+def load_result(scene) -> dict:
+    from .curve_store import unpack_curve
+
+    text = scene.get(RESULT_PROP)
+    if not text:
+        raise KeyError("no Relight result in this scene: run Solve & Reduce first")
+    key = (scene.name, hash(text))
+    if key not in _cache:
+        _cache.clear()
+        try:
+            _cache[key] = unpack_curve(text)
+        except Exception as exc:  # zlib, base64, npz or format errors: one clear line
+            raise SceneError(f"the stored Relight result of scene {scene.name!r} cannot be read "
+                             f"({type(exc).__name__}); run Solve & Reduce again") from None
+    return _cache[key]
+
+
+def store_result(scene, outcome, fingerprints=None) -> str:
+    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied;
+    returns the result's new id."""
+    from .curve_store import pack_curve
+
+    data = dict(outcome.stored)
+    data["meta"] = dict(data.get("meta", {}), fingerprints=fingerprints or {})
+    text = pack_curve(data)
+    rid = uuid.uuid4().hex
+    scene[RESULT_PROP] = text
+    scene[RESULT_ID_PROP] = rid
+    _cache.clear()
+    return rid
+
+
+def show_outcome(scene, outcome, fingerprints=None) -> dict:
+    """Replace any previous result by this solve's: store its curve, show its final configuration.
+    All-or-nothing: when showing fails, the previous state is cleared and the error raised."""
+    clear_results(scene)
+    store_result(scene, outcome, fingerprints)
+    try:
+        return apply_stored_point(scene, outcome.final_index)
+    except BaseException:
+        clear_results(scene)
+        raise
+
+
+# --- checking before writing -----------------------------------------------------------------
+
+def _objects_of(scene, data):
+    """{object index: bpy object} of the stored objects present in the scene (real objects only:
+    instance groups have no polygons)."""
+    out = {}
+    off = data["polygon_offset"]
+    for oi, name in enumerate(data["objects"]):
+        if off[oi + 1] == off[oi]:
+            continue
+        ob = scene.objects.get(name)
+        if ob is None or ob.type != "MESH":
+            raise StaleResult(f"object {name!r} of the stored result is no longer in the scene: solve again")
+        out[oi] = ob
+    return out
+
+
+def check_stored(scene, data):
+    """Validate the stored result against the scene: every object present and unchanged."""
+    objs = _objects_of(scene, data)
+    fps = data["meta"].get("fingerprints", {})
+    for oi, ob in objs.items():
+        fp = fps.get(ob.name)
+        n = int(data["polygon_offset"][oi + 1] - data["polygon_offset"][oi])
+        if len(ob.data.polygons) != n:
+            raise StaleResult(f"{ob.name} has changed since the solve ({len(ob.data.polygons)} polygons, "
+                              f"{n} when solved): nothing applied; solve again")
+        if fp is not None:
+            why = fingerprint_change(ob, fp)
+            if why:
+                raise StaleResult(f"{ob.name} has changed since the solve ({why}): nothing applied; solve again")
+    return objs
+
+
+# --- the emitters object -----------------------------------------------------------------------
+
+def _emitter_material(rid):
+    mat = bpy.data.materials.new(EMITTER_MATERIAL)
+    mat[OWNER_PROP] = rid
     _use_nodes(mat)
     nt = mat.node_tree
-    for node in nt.nodes:  # the copy's own emission is replaced by Relight's
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    for name, value in (("Roughness", 1.0), ("Specular IOR Level", 0.0), ("Emission Strength", 1.0)):
+        if name in bsdf.inputs:
+            bsdf.inputs[name].default_value = value
+    refl = nt.nodes.new("ShaderNodeAttribute")
+    refl.attribute_type = "GEOMETRY"
+    refl.attribute_name = REFLECTANCE_ATTRIBUTE
+    emit = nt.nodes.new("ShaderNodeAttribute")
+    emit.attribute_type = "GEOMETRY"
+    emit.attribute_name = EMISSION_ATTRIBUTE
+    geo = nt.nodes.new("ShaderNodeNewGeometry")
+    front = nt.nodes.new("ShaderNodeMath")
+    front.operation = "SUBTRACT"
+    front.inputs[0].default_value = 1.0
+    nt.links.new(geo.outputs["Backfacing"], front.inputs[1])
+    nt.links.new(refl.outputs["Color"], bsdf.inputs["Base Color"])
+    nt.links.new(emit.outputs["Color"], bsdf.inputs["Emission Color"])
+    nt.links.new(front.outputs["Value"], bsdf.inputs["Emission Strength"])
+    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    for k, node in enumerate((refl, emit, geo, front)):
+        node.location = (-600, 300 - 160 * k)
+    out.location = (300, 0)
+    mat.diffuse_color = (1.0, 0.9, 0.5, 1.0)
+    return mat
+
+
+def _emitter_mesh_data(data, exitance, scale):
+    """Triangles (n, 3, 3), per-triangle radiance, reflectance and cell of the cells that emit
+    in configuration ``exitance`` (n_lights, 3); cells with a negative net exitance are not shown."""
+    import scipy.sparse as sp
+
+    nC = len(data["cell_normal"])
+    basis = sp.csr_matrix((np.ones(len(data["basis_indices"])), data["basis_indices"], data["basis_indptr"]),
+                          shape=(nC, len(data["light_area"])))
+    cell_e = basis @ exitance
+    lit = np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1)
+    tc = data["cell_triangle_cell"]
+    sel = lit[tc]
+    tri = data["cell_triangles"][sel].astype(np.float64)
+    cell = tc[sel]
+    offset = max(1e-3, OVERLAY_OFFSET * scale)
+    tri = tri + offset * data["cell_normal"][cell][:, None, :]
+    return tri, cell_e[cell] / math.pi, data["cell_reflectance"][cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
+
+
+def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
+    """The emitters object: one triangle per row of ``tri`` (face attribute ``relight_cell``: the
+    light cell it belongs to); returns the object (None if empty)."""
+    if not len(tri):
+        return None
+    n = len(tri)
+    me = bpy.data.meshes.new(EMITTERS_NAME)
+    me[OWNER_PROP] = rid
+    me.vertices.add(3 * n)
+    me.vertices.foreach_set("co", tri.reshape(-1).astype(np.float32))
+    me.loops.add(3 * n)
+    me.loops.foreach_set("vertex_index", np.arange(3 * n, dtype=np.int32))
+    me.polygons.add(n)
+    me.polygons.foreach_set("loop_start", np.arange(0, 3 * n, 3, dtype=np.int32))
+    if hasattr(me.polygons[0], "loop_total") and bpy.app.version < (4, 0, 0):
+        me.polygons.foreach_set("loop_total", np.full(n, 3, dtype=np.int32))
+    me.update(calc_edges=True)
+    for name, values in ((EMISSION_ATTRIBUTE, radiance), (REFLECTANCE_ATTRIBUTE, reflectance)):
+        a = me.attributes.new(name, "FLOAT_COLOR", "FACE")
+        rgba = np.ones((n, 4), dtype=np.float32)
+        rgba[:, :3] = values
+        a.data.foreach_set("color", rgba.ravel())
+    me.attributes.new("relight_cell", "INT", "FACE").data.foreach_set("value", np.asarray(cell, dtype=np.int32))
+    rad = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+    rgba = np.ones((3 * n, 4), dtype=np.float32)
+    rgba[:, :3] = np.repeat(radiosity / math.pi, 3, axis=0)
+    rad.data.foreach_set("color", rgba.ravel())
+    me.color_attributes.active_color = rad
+    me.materials.append(_emitter_material(rid))
+    me.update()
+    ob = bpy.data.objects.new(EMITTERS_NAME, me)
+    ob[OWNER_PROP] = rid
+    ob.hide_select = False
+    scene.collection.objects.link(ob)
+    return ob
+
+
+def _remove_emitters(rid):
+    for ob in [o for o in bpy.data.objects if o.get(OWNER_PROP) == rid and o.type == "MESH"]:
+        me = ob.data
+        mats = [m for m in me.materials if m is not None and _owned(m, rid)]
+        bpy.data.objects.remove(ob)
+        if me.users == 0:
+            bpy.data.meshes.remove(me)
+        for m in mats:
+            if m.users == 0:
+                bpy.data.materials.remove(m)
+    for m in [m for m in bpy.data.materials if _owned(m, rid) and m.users == 0]:
+        bpy.data.materials.remove(m)
+
+
+def emitters_object(scene):
+    rid = result_id(scene)
+    if rid is None:
+        return None
+    return next((o for o in scene.objects if o.get(OWNER_PROP) == rid and o.type == "MESH"), None)
+
+
+# --- direct-lighting mode: the scene's own emitters switched off --------------------------------
+
+def _dark_variant(source, rid):
+    """A copy of material ``source`` with its own emission set to 0 (direct-lighting mode: the
+    scene's emitter faces stop emitting; the emitters object shows what the reduction kept)."""
+    mat = source.copy()
+    mat.name = f"{source.name} (Relight, off)"
+    mat[GENERATED_PROP] = True
+    mat[OWNER_PROP] = rid
+    mat["relight_source"] = source.name
+    _use_nodes(mat)
+    nt = mat.node_tree
+    for node in nt.nodes:
         if node.type == "BSDF_PRINCIPLED" and "Emission Strength" in node.inputs:
             sock = node.inputs["Emission Strength"]
             for link in list(sock.links):
@@ -74,50 +292,45 @@ def _emissive_variant(source):
             for link in list(node.inputs["Strength"].links):
                 nt.links.remove(link)
             node.inputs["Strength"].default_value = 0.0
-    out = next((n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output), None)
-    if out is None:
-        out = next((n for n in nt.nodes if n.type == "OUTPUT_MATERIAL"), None)
-    if out is None:
-        out = nt.nodes.new("ShaderNodeOutputMaterial")
-    attr = nt.nodes.new("ShaderNodeAttribute")
-    attr.attribute_type = "GEOMETRY"
-    attr.attribute_name = EMISSION_ATTRIBUTE
-    geo = nt.nodes.new("ShaderNodeNewGeometry")
-    front = nt.nodes.new("ShaderNodeMath")
-    front.operation = "SUBTRACT"
-    front.inputs[0].default_value = 1.0
-    nt.links.new(geo.outputs["Backfacing"], front.inputs[1])
-    emit = nt.nodes.new("ShaderNodeEmission")
-    nt.links.new(attr.outputs["Color"], emit.inputs["Color"])
-    nt.links.new(front.outputs["Value"], emit.inputs["Strength"])
-    add = nt.nodes.new("ShaderNodeAddShader")
-    surface = out.inputs["Surface"]
-    if surface.is_linked:
-        nt.links.new(surface.links[0].from_socket, add.inputs[0])
-    nt.links.new(emit.outputs["Emission"], add.inputs[1])
-    nt.links.new(add.outputs["Shader"], surface)
-    for k, node in enumerate((attr, geo, front, emit, add)):
-        node.location = (out.location.x - 600 + 120 * k, out.location.y - 300)
     return mat
 
 
-def light_faces(obj) -> np.ndarray:
-    """Per polygon of ``obj``: does it emit in the configuration shown (bool array)."""
+def suppress_emission(obj, polygons, rid, variants) -> int:
+    """Switch polygons ``polygons`` of ``obj`` to emission-free copies of their materials, keeping
+    everything needed to restore them (``clear_suppression``)."""
+    polygons = np.unique(np.asarray(polygons, dtype=np.int64))
     mesh = obj.data
-    n = len(mesh.polygons)
-    attr = mesh.attributes.get(EMISSION_ATTRIBUTE)
-    if attr is None:
-        return np.zeros(n, dtype=bool)
-    em = np.zeros(4 * n, dtype=np.float32)
-    attr.data.foreach_get("color", em)
-    return em.reshape(n, 4)[:, :3].max(axis=1) > 0
+    if not len(polygons) or mesh.library is not None:
+        return 0
+    n_poly = len(mesh.polygons)
+    orig = foreach_array(mesh.polygons, "material_index", n_poly, np.int32)
+    n_slots = len(mesh.materials)
+    if n_slots == 0:
+        return 0  # no material: nothing emits
+    mesh[ORIGINAL_SLOTS_PROP] = n_slots
+    mesh[HAD_INDEX_PROP] = "material_index" in mesh.attributes
+    keep = mesh.attributes.new(ORIGINAL_INDEX_ATTRIBUTE, "INT", "FACE")
+    keep.data.foreach_set("value", orig)
+    new_index = orig.copy()
+    slot_of = {}
+    for p in polygons:
+        s = int(orig[p])
+        src = mesh.materials[s] if 0 <= s < n_slots else None
+        if src is None:
+            continue
+        if s not in slot_of:
+            if src.name not in variants:
+                variants[src.name] = _dark_variant(src, rid)
+            mesh.materials.append(variants[src.name])
+            slot_of[s] = len(mesh.materials) - 1
+        new_index[p] = slot_of[s]
+    mesh.polygons.foreach_set("material_index", new_index)
+    mesh.update()
+    return len(polygons)
 
 
-def clear_configuration(obj) -> bool:
-    """Restore ``obj``'s mesh exactly as it was before ``apply_configuration``.
-
-    Returns True if there was something to clear.
-    """
+def clear_suppression(obj) -> bool:
+    """Restore ``obj``'s mesh exactly as it was before ``suppress_emission``."""
     mesh = obj.data
     if ORIGINAL_SLOTS_PROP not in mesh.keys():
         return False
@@ -135,9 +348,6 @@ def clear_configuration(obj) -> bool:
         mat = mesh.materials.pop(index=len(mesh.materials) - 1)
         if mat is not None and mat.get(GENERATED_PROP):
             generated.append(mat)
-    emission = mesh.attributes.get(EMISSION_ATTRIBUTE)
-    if emission is not None:
-        mesh.attributes.remove(emission)
     del mesh[ORIGINAL_SLOTS_PROP]
     if HAD_INDEX_PROP in mesh.keys():
         del mesh[HAD_INDEX_PROP]
@@ -148,156 +358,103 @@ def clear_configuration(obj) -> bool:
     return True
 
 
-def apply_configuration(obj, polygon_index, radiance, variants=None) -> int:
-    """Make polygons ``polygon_index`` of ``obj`` emit ``radiance`` (k, 3) = exitance/pi.
+# --- apply, clear ------------------------------------------------------------------------------
 
-    Any configuration already applied to ``obj`` is cleared first. Returns the number
-    of emitting faces. Radiance must be finite and >= 0 (negative exitances cannot be
-    shown by a material; the caller decides what to do with them). ``variants``: a dict
-    shared between calls so that objects with the same material share one emissive variant.
-    """
-    clear_configuration(obj)
-    polygon_index = np.asarray(polygon_index, dtype=np.int64).reshape(-1)
-    radiance = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
-    if not np.all(np.isfinite(radiance)):
-        raise ValueError("refusing to apply non-finite emission")
-    mesh = obj.data
-    n_poly = len(mesh.polygons)
-    if len(polygon_index) == 0:
-        return 0
-    if polygon_index.min() < 0 or polygon_index.max() >= n_poly:
-        raise ValueError(f"{obj.name}: light face index out of range")
+def polygon_rows(data, values):
+    """Per-patch ``values`` (P, 3) -> per global polygon (n_polygons, 3), the stored area weights."""
+    import scipy.sparse as sp
 
-    orig = np.empty(n_poly, dtype=np.int32)
-    mesh.polygons.foreach_get("material_index", orig)
-    n_slots = len(mesh.materials)
-    mesh[ORIGINAL_SLOTS_PROP] = n_slots
-    mesh[HAD_INDEX_PROP] = "material_index" in mesh.attributes
-    keep = mesh.attributes.new(ORIGINAL_INDEX_ATTRIBUTE, "INT", "FACE")
-    keep.data.foreach_set("value", orig)
-    if n_slots == 0:
-        # faces without a material render with the default; keep it that way with an
-        # empty slot 0 so that the appended emissive slots are used only by light faces
-        mesh.materials.append(None)
-
-    emission = np.zeros((n_poly, 4), dtype=np.float32)
-    emission[:, 3] = 1.0
-    emission[polygon_index, :3] = np.clip(radiance, 0.0, None)
-    attr = mesh.attributes.new(EMISSION_ATTRIBUTE, "FLOAT_COLOR", "FACE")
-    attr.data.foreach_set("color", emission.ravel())
-
-    new_index = orig.copy()
-    slot_of_source = {}
-    for p in polygon_index:
-        src_slot = int(orig[p]) if n_slots else -1
-        if src_slot not in slot_of_source:
-            src = mesh.materials[src_slot] if 0 <= src_slot < n_slots else None
-            key = src.name if src is not None else None
-            variant = (variants or {}).get(key)
-            if variant is None or variant.name not in bpy.data.materials:
-                variant = _emissive_variant(src)
-                if variants is not None:
-                    variants[key] = variant
-            mesh.materials.append(variant)
-            slot_of_source[src_slot] = len(mesh.materials) - 1
-        new_index[p] = slot_of_source[src_slot]
-    mesh.polygons.foreach_set("material_index", new_index)
-    mesh.update()
-    return len(polygon_index)
-
-
-# --- the stored curve: store, apply a point, clear ------------------------------------------
-
-RESULT_PROP = "relight_result"
-_cache = {}
-
-
-def store_result(scene, outcome) -> None:
-    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied."""
-    from .curve_store import pack_curve
-
-    text = pack_curve(outcome.stored)
-    scene[RESULT_PROP] = text
-    _cache.clear()
-
-
-def show_outcome(scene, outcome) -> None:
-    """Replace any previous result by this solve's: store its curve, show its final configuration."""
-    clear_results(scene)
-    store_result(scene, outcome)
-    apply_stored_point(scene, outcome.final_index)
-
-
-def load_result(scene) -> dict:
-    from .curve_store import unpack_curve
-
-    text = scene.get(RESULT_PROP)
-    if not text:
-        raise KeyError("no Relight result in this scene: run Solve & Reduce first")
-    key = (scene.name, hash(text))
-    if key not in _cache:
-        _cache.clear()
-        _cache[key] = unpack_curve(text)
-    return _cache[key]
+    off = data["polygon_offset"]
+    W = sp.csr_matrix((data["polygon_weights"], data["polygon_weights_patch"], data["polygon_weights_indptr"]),
+                      shape=(int(off[-1]), values.shape[0]))
+    return np.asarray(W @ values)
 
 
 def apply_stored_point(scene, index) -> dict:
-    """Show configuration ``index`` of the stored curve: emissive light faces (positive
-    exitances only: a material cannot emit negative light) and the radiosity layer.
-    Returns {"lights": n shown, "negative": n not shown}."""
+    """Show configuration ``index`` of the stored curve: the emitters object (cells with a positive
+    exitance: a material cannot emit negative light), the radiosity layer, and in direct-lighting
+    mode the scene's emitters switched off. Everything is checked before anything is written.
+    Returns {"lights": lights shown, "negative": lights with a negative exitance, not shown,
+    "skipped": [messages about objects that could not take the radiosity layer]}."""
     data = load_result(scene)
+    rid = result_id(scene) or uuid.uuid4().hex
     n_points = len(data["n_lights"])
-    if not 0 <= index < n_points:
+    if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
-    names = data["objects"]
-    exitance = data["exitance"][index]
-    negative = np.any(exitance < 0, axis=1)
-    # inverse mode: only the lit faces change; direct-lighting mode ("reduce"): every original
-    # emitter is managed, so that suppressed ones stop emitting
-    lit = np.any(exitance != 0, axis=1) | (data["meta"].get("command") == "reduce")
-    shown = 0
-    variants = {}
-    for oi, name in enumerate(names):
-        obj = scene.objects.get(name)
-        if obj is None or obj.type != "MESH":
+    index = int(index)
+    objs = check_stored(scene, data)
+    exitance = data["exitance"][index].astype(np.float64)
+    if not (np.all(np.isfinite(exitance)) and np.all(np.isfinite(data["radiosity"][index]))):
+        raise SceneError("the stored result holds non-finite values: solve again")
+    # everything computed before anything is written
+    scale = float(np.ptp(data["cell_triangles"].reshape(-1, 3), axis=0).max()) if len(data["cell_triangles"]) else 1.0
+    tri, radiance, reflectance, cell, n_neg_cells = _emitter_mesh_data(data, exitance, scale)
+    patch_b = data["radiosity"][index].astype(np.float64)
+    cell_b = patch_b[data["cell_patch"]][cell]
+    poly_b = polygon_rows(data, patch_b)
+    off = data["polygon_offset"]
+    layers, skipped, seen_mesh = [], [], {}
+    for oi, ob in objs.items():
+        if ob.data.library is not None:
+            skipped.append(f"{ob.name}: its mesh is linked from {ob.data.library.filepath} (read-only), so the "
+                           "radiosity layer is not written; make it local (Object > Relations > Make Local) to see it")
             continue
-        sel = (data["light_object"] == oi) & lit & ~negative
-        faces = data["light_face"][sel]
-        if len(faces) and faces.max() >= len(obj.data.polygons):
-            raise ValueError(f"{name} has changed since the solve: solve again")
-        rad = exitance[sel] / np.pi
-        apply_configuration(obj, faces, rad, variants)
-        shown += int(np.sum(np.any(rad > 0, axis=1)))
-        rsel = data["radiosity_object"] == oi
-        if np.any(rsel):
-            face_b = np.zeros((len(obj.data.polygons), 3))
-            idx = data["radiosity_face"][rsel]
-            if idx.max() >= len(face_b):
-                raise ValueError(f"{name} has changed since the solve: solve again")
-            face_b[idx] = data["radiosity"][index][rsel]
-            write_radiosity_layer(obj, face_b)
-    return {"lights": shown, "negative": int(negative.sum())}
+        if ob.data.name in seen_mesh:
+            skipped.append(f"{ob.name} shares its mesh with {seen_mesh[ob.data.name]}: the radiosity layer shows "
+                           f"{seen_mesh[ob.data.name]}'s values")
+            continue
+        seen_mesh[ob.data.name] = ob.name
+        layers.append((ob, poly_b[off[oi]:off[oi + 1]]))
+    suppress = []
+    if data["meta"].get("command") == "reduce":
+        lp_ptr, lp = data["light_polygons_indptr"], data["light_polygons"]
+        for oi, ob in objs.items():
+            sel = np.flatnonzero(data["light_object"] == oi)
+            polys = np.concatenate([lp[lp_ptr[j]:lp_ptr[j + 1]] for j in sel]) if len(sel) else np.zeros(0, int)
+            if len(polys):
+                suppress.append((ob, polys - off[oi]))
+    # write
+    clear_shown(scene)
+    if rid != result_id(scene):
+        scene[RESULT_ID_PROP] = rid
+    _build_emitters(scene, rid, tri, radiance, reflectance, cell_b, cell)
+    for ob, values in layers:
+        write_radiosity_layer(ob, values)
+    variants = {}
+    for ob, polys in suppress:
+        suppress_emission(ob, polys, rid, variants)
+    scene["relight_shown"] = index
+    neg = np.any(exitance < 0, axis=1)
+    lit = np.any(exitance > 0, axis=1) & ~neg
+    return {"lights": int(lit.sum()), "negative": int(neg.sum()), "negative_cells": n_neg_cells, "skipped": skipped}
+
+
+def clear_shown(scene) -> int:
+    """Remove what shows a configuration (emitters object, radiosity layers, suppressed
+    emitters), keeping the stored curve. Returns the number of objects cleaned."""
+    rid = result_id(scene)
+    n = 0
+    if rid is not None:
+        n += int(emitters_object(scene) is not None)
+        _remove_emitters(rid)
+    for obj in scene.objects:
+        if obj.type != "MESH" or obj.data is None or obj.data.library is not None:
+            continue
+        a = clear_suppression(obj)
+        b = remove_radiosity_layer(obj)
+        n += int(a or b)
+    if "relight_shown" in scene.keys():
+        del scene["relight_shown"]
+    return n
 
 
 def clear_results(scene) -> int:
-    """Remove every trace of Relight's results from the scene's meshes and the stored curve."""
-    n = 0
-    for obj in scene.objects:
-        if obj.type != "MESH":
-            continue
-        a = clear_configuration(obj)
-        b = remove_radiosity_layer(obj)
-        n += int(a or b)
-    if RESULT_PROP in scene.keys():
-        del scene[RESULT_PROP]
-    coll = bpy.data.collections.get("Relight Lights")
-    if coll is not None:
-        for o in list(coll.objects):
-            data = o.data
-            bpy.data.objects.remove(o)
-            if data is not None and data.users == 0:
-                bpy.data.lights.remove(data)
-        bpy.data.collections.remove(coll)
+    """Remove every trace of Relight's results (by identity): what shows a configuration, the
+    stored curve and the chart. Area lights made by Make Area Lights stay (they are the artist's)."""
+    n = clear_shown(scene)
+    for key in (RESULT_PROP, RESULT_ID_PROP):
+        if key in scene.keys():
+            del scene[key]
     img = bpy.data.images.get(CHART_IMAGE)
     if img is not None:
         bpy.data.images.remove(img)
@@ -305,39 +462,89 @@ def clear_results(scene) -> int:
     return n
 
 
+def shown_light_polygons(scene, obj) -> np.ndarray:
+    """(n_polygons,) bool: the polygons of ``obj`` under a light of the configuration shown."""
+    n = len(obj.data.polygons)
+    out = np.zeros(n, dtype=bool)
+    if RESULT_PROP not in scene.keys() or "relight_shown" not in scene.keys():
+        return out
+    data = load_result(scene)
+    if obj.name not in data["objects"]:
+        return out
+    oi = data["objects"].index(obj.name)
+    e = data["exitance"][int(scene["relight_shown"])]
+    lit = np.flatnonzero(np.any(e > 0, axis=1) & (data["light_object"] == oi))
+    ptr, lp = data["light_polygons_indptr"], data["light_polygons"]
+    off = data["polygon_offset"][oi]
+    for j in lit:
+        p = lp[ptr[j]:ptr[j + 1]] - off
+        out[p[(p >= 0) & (p < n)]] = True
+    return out
+
+
 def make_area_lights(scene, index) -> int:
-    """Real Blender area lights for configuration ``index``: a square light of the face's
-    area at its centre, facing along its normal, with power = exitance x area (W)."""
-    from mathutils import Vector
+    """Real Blender area lights for configuration ``index``: one per light cell that emits, a
+    one-sided area light of the cell's area at its centre (set off like the emitters object),
+    facing along its normal, power = exitance x area (W), in a new collection. Rectangular cells
+    (grid cells of quads) get a rectangle of their sides; others a square of their area."""
+    from mathutils import Matrix, Vector
+    import scipy.sparse as sp
 
     data = load_result(scene)
-    exitance = data["exitance"][index]
-    power = exitance * data["light_area"][:, None]
-    sel = np.flatnonzero(np.any(exitance > 0, axis=1) & ~np.any(exitance < 0, axis=1))
-    coll = bpy.data.collections.get("Relight Lights")
-    if coll is None:
-        coll = bpy.data.collections.new("Relight Lights")
-        scene.collection.children.link(coll)
-    for o in list(coll.objects):
-        bpy.data.objects.remove(o)
-    for k in sel:
-        total = float(power[k].sum())
-        light = bpy.data.lights.new(f"Relight light {k}", "AREA")
-        light.shape = "SQUARE"
-        light.size = float(np.sqrt(data["light_area"][k]))
-        light.energy = total  # Blender's area-light power is in W (radiant flux)
-        light.color = tuple(float(c) for c in power[k] / max(power[k].max(), 1e-30))
+    rid = result_id(scene)
+    check_stored(scene, data)
+    exitance = data["exitance"][int(index)].astype(np.float64)
+    nC = len(data["cell_normal"])
+    basis = sp.csr_matrix((np.ones(len(data["basis_indices"])), data["basis_indices"], data["basis_indptr"]),
+                          shape=(nC, len(data["light_area"])))
+    cell_e = basis @ exitance
+    cells = np.flatnonzero(np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1))
+    tc = data["cell_triangle_cell"]
+    tri_all = data["cell_triangles"].astype(np.float64)
+    old = [c for c in bpy.data.collections if c.get(AREA_LIGHTS_PROP) == rid]
+    for coll in old:  # Make Area Lights again replaces its own lights of this result
+        for o in list(coll.objects):
+            d = o.data
+            bpy.data.objects.remove(o)
+            if d is not None and d.users == 0:
+                bpy.data.lights.remove(d)
+        bpy.data.collections.remove(coll)
+    coll = bpy.data.collections.new("Relight Lights")
+    coll[AREA_LIGHTS_PROP] = rid or ""
+    scene.collection.children.link(coll)
+    scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
+    offset = max(1e-3, OVERLAY_OFFSET * scale)
+    for c in cells:
+        tri = tri_all[tc == c]
+        a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        area = float(a.sum())
+        center = (tri.mean(axis=1) * a[:, None]).sum(axis=0) / area
+        n = data["cell_normal"][c]
+        power = cell_e[c] * area
+        light = bpy.data.lights.new(f"Relight light {c}", "AREA")
+        # the cell's own frame: its longest edge and the side across it
+        pts = tri.reshape(-1, 3)
+        e1 = tri[0, 1] - tri[0, 0]
+        u = e1 - n * (e1 @ n)
+        u /= max(np.linalg.norm(u), 1e-30)
+        v = np.cross(n, u)
+        su, sv = np.ptp(pts @ u), np.ptp(pts @ v)
+        if len(tri) == 2 and abs(su * sv - area) <= 1e-3 * area:  # a rectangle
+            light.shape = "RECTANGLE"
+            light.size, light.size_y = float(sv), float(su)
+        else:
+            light.shape = "SQUARE"
+            light.size = float(np.sqrt(area))
+        light.energy = float(power.sum())  # Blender's area-light power is radiant flux (W)
+        light.color = tuple(float(x) for x in power / max(power.max(), 1e-30))
         obj = bpy.data.objects.new(light.name, light)
-        obj.location = Vector(data["light_center"][k])
-        obj.rotation_mode = "QUATERNION"
-        obj.rotation_quaternion = Vector((0, 0, -1)).rotation_difference(Vector(data["light_normal"][k]))
+        rot = Matrix(np.column_stack([v, u, -n]).tolist())  # a rotation; the light shines along its local -Z
+        obj.matrix_world = Matrix.Translation(Vector(center + offset * n)) @ rot.to_4x4()
         coll.objects.link(obj)
-    return len(sel)
+    return len(cells)
 
 
-CHART_IMAGE = ".relight_error_curve"
-
-
+# --- the chart ---------------------------------------------------------------------------------
 def update_chart(scene) -> None:
     """Redraw the error-curve chart image, marking the shown configuration. Call it after a
     solve or a change of configuration, never from a panel's draw (no ID writes there)."""
@@ -372,6 +579,10 @@ def chart_icon(scene) -> int:
 
 # --- the radiosity colour layer, saving and rendering ----------------------------------
 
+
+
+# --- the radiosity colour layer, saving and rendering ----------------------------------
+
 def save_copy(path: str):
     """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
     d = os.path.dirname(os.path.abspath(path))
@@ -384,15 +595,7 @@ def _vertex_smoothed_corners(me, poly_values, poly_area):
     """Corner values: per vertex, the area-weighted mean of its polygons' values."""
     loop_poly, _, _ = loop_polygons(me)
     loop_vert = foreach_array(me.loops, "vertex_index", len(me.loops), np.int64)
-    nv = len(me.vertices)
-    w = poly_area[loop_poly]
-    num = np.stack([np.bincount(loop_vert, weights=w * poly_values[loop_poly, k], minlength=nv)
-                    for k in range(3)], axis=1)
-    den = np.bincount(loop_vert, weights=w, minlength=nv)
-    cnt = np.bincount(loop_vert, minlength=nv)
-    plain = np.stack([np.bincount(loop_vert, weights=poly_values[loop_poly, k], minlength=nv)
-                      for k in range(3)], axis=1) / np.maximum(cnt, 1)[:, None]
-    vert = np.where(den[:, None] > 0, num / np.where(den > 0, den, 1.0)[:, None], plain)
+    vert = group_mean(loop_vert, poly_values[loop_poly], len(me.vertices), poly_area[loop_poly])
     return vert[loop_vert]
 
 

@@ -165,30 +165,27 @@ R["whole_curve_points"] = int(len(data["curve_n_lights"]))
 
 
 def emitting_state():
-    """Faces that emit, per object: (object, polygon, radiance from the relight_emission
-    attribute) and whether their material is a Relight emissive variant."""
-    out = []
-    for ob in scene.objects:
-        if ob.type != "MESH" or "relight_emission" not in ob.data.attributes:
-            continue
-        me = ob.data
-        em = np.zeros(len(me.polygons) * 4, dtype=np.float32)
-        me.attributes["relight_emission"].data.foreach_get("color", em)
-        em = em.reshape(-1, 4)[:, :3]
-        idx = np.zeros(len(me.polygons), dtype=np.int32)
-        me.polygons.foreach_get("material_index", idx)
-        for p in np.flatnonzero(np.any(em > 0, axis=1)):
-            mat = me.materials[idx[p]]
-            out.append([ob.name, int(p), em[p].tolist(), bool(mat is not None and mat.get("relight_generated"))])
-    return out
+    """What Relight's emitters object emits: [total power per channel (W) = sum of pi x
+    radiance x area over its faces, emitting area (m^2), number of faces]."""
+    ob = next((o for o in scene.objects if o.get("relight_owner") and o.type == "MESH"), None)
+    if ob is None:
+        return [[0.0, 0.0, 0.0], 0.0, 0]
+    me = ob.data
+    n = len(me.polygons)
+    em = np.zeros(n * 4, dtype=np.float32)
+    me.attributes["relight_emission"].data.foreach_get("color", em)
+    area = np.zeros(n)
+    me.polygons.foreach_get("area", area)
+    em = em.reshape(-1, 4)[:, :3]
+    return [(math.pi * em * area[:, None]).sum(axis=0).tolist(), float(area.sum()), n]
 
 
 def expected_lights(k):
-    names = data["objects"]
-    e = data["exitance"][k]
+    """From the stored curve: the power per channel and the area of configuration k's positive lights."""
+    e = data["exitance"][k].astype(float)
     pos = np.any(e > 0, axis=1) & ~np.any(e < 0, axis=1)
-    return sorted([names[data["light_object"][j]], int(data["light_face"][j]), (e[j] / math.pi).tolist()]
-                  for j in np.flatnonzero(pos))
+    a = data["light_area"].astype(float)
+    return [(e[pos] * a[pos, None]).sum(axis=0).tolist(), float(a[pos].sum()), int(pos.sum())]
 
 
 def target_check(k):
@@ -197,18 +194,21 @@ def target_check(k):
     rad = np.zeros(len(me.loops) * 4, dtype=np.float32)
     me.color_attributes["relight_radiosity"].data.foreach_get("color", rad)
     rad = rad.reshape(-1, 4)[:, :3]
-    oi = data["objects"].index(floor.name)
-    sel = data["radiosity_object"] == oi
-    face_b = np.zeros((len(me.polygons), 3))
-    face_b[data["radiosity_face"][sel]] = data["radiosity"][k][sel]
-    return {"stored_target_radiance": (face_b[paint] / math.pi).tolist(),
+    rows = results.polygon_rows(data, data["radiosity"][k].astype(float))
+    off = data["polygon_offset"][data["objects"].index(floor.name)]
+    return {"stored_target_radiance": (rows[off + paint] / math.pi).tolist(),
             "layer_corner_radiance_mean": float(rad.mean())}
 
 
 k_final = settings.curve_index
 R["final_state"] = emitting_state()
-# Select Light Faces selects exactly the emitting faces of the selected objects
-lit_obj = bpy.data.objects[R["final_state"][0][0]] if R["final_state"] else floor
+R["final_lights"] = [[li_obj, li_polys] for li_obj, li_polys in (
+    (data["objects"][data["light_object"][j]],
+     (data["light_polygons"][data["light_polygons_indptr"][j]:data["light_polygons_indptr"][j + 1]]
+      - data["polygon_offset"][data["light_object"][j]]).tolist())
+    for j in np.flatnonzero(np.any(data["exitance"][settings.curve_index] > 0, axis=1)))]
+# Select Light Faces selects exactly the polygons under the lights shown, on the selected objects
+lit_obj = bpy.data.objects[R["final_lights"][0][0]] if R["final_lights"] else floor
 bpy.context.view_layer.objects.active = lit_obj
 for o in scene.objects:
     o.select_set(o == lit_obj)
@@ -237,10 +237,30 @@ R["back_to_final_state"] = emitting_state()
 chart = bpy.data.images.get(results.CHART_IMAGE)
 R["chart"] = None if chart is None else list(chart.size)
 
-# 6. area lights, then clear: the scene is exactly as before the solve
+# 6. area lights (one per emitting cell, the same power), then clear: the area lights stay (they
+# are the artist's, as the button says), so do the artist's own objects in a collection that
+# happens to be called "Relight Lights"; the rest is exactly as before the solve
 R["area_lights"] = op(bpy.ops.relight.make_area_lights)
-R["n_area_lights"] = len([o for o in scene.objects if o.type == "LIGHT"])
+area_objs = [o for o in scene.objects if o.type == "LIGHT"]
+R["n_area_lights"] = len(area_objs)
+R["area_light_power"] = float(sum(o.data.energy for o in area_objs))
+R["emitted_power_sum"] = float(sum(R["final_state"][0]))
+mine = bpy.data.collections.new("Relight Lights")  # the artist's own collection of that name
+scene.collection.children.link(mine)
+cube = bpy.data.objects.new("artist_empty", None)
+mine.objects.link(cube)
 R["clear"] = op(bpy.ops.relight.clear_results)
+R["area_lights_kept"] = len([o for o in scene.objects if o.type == "LIGHT"]) == len(area_objs)
+R["artist_collection_kept"] = "artist_empty" in bpy.data.objects and cube.name in mine.objects
+R["emitters_after_clear"] = emitting_state()[2]
+for o in [o for o in scene.objects if o.type == "LIGHT"]:  # the artist deletes them
+    d = o.data
+    bpy.data.objects.remove(o)
+    bpy.data.lights.remove(d)
+for c in [c for c in bpy.data.collections if c.get("relight_area_lights") is not None]:
+    bpy.data.collections.remove(c)
+bpy.data.objects.remove(cube)
+bpy.data.collections.remove(mine)
 R["clear_restores"] = snapshot() == before
 if not R["clear_restores"]:
     a, b = snapshot(), before

@@ -140,7 +140,7 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
         objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
-        masks = {o.name: (results.light_faces(o) if self.kind == "LIGHT"
+        masks = {o.name: (results.shown_light_polygons(context.scene, o) if self.kind == "LIGHT"
                           else export.face_flags(o, self.kind.lower())) for o in objs}
         for o in objs:
             o.select_set(True)
@@ -231,11 +231,13 @@ def sync_curve_list(scene):
     results.update_chart(scene)
 
 
-def store_outcome(context, outcome):
-    """Keep the curve in the scene and show the final configuration (main thread)."""
-    results.show_outcome(context.scene, outcome)
+def store_outcome(context, outcome, fingerprints=None):
+    """Keep the curve in the scene and show the final configuration (main thread); returns the
+    messages about objects that could not show everything."""
+    shown = results.show_outcome(context.scene, outcome, fingerprints)
     _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
     results.update_chart(context.scene)
+    return shown["skipped"]
 
 
 _QUIET = {"on": False}
@@ -286,11 +288,15 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        return self._finish(context, outcome)
+        return self._finish(context, outcome, exp.fingerprints)
 
-    def _finish(self, context, outcome):
-        store_outcome(context, outcome)
-        for w in outcome.warnings:
+    def _finish(self, context, outcome, fingerprints=None):
+        try:
+            skipped = store_outcome(context, outcome, fingerprints)
+        except (SceneError, ValueError) as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        for w in list(outcome.warnings) + skipped:
             self.report({"WARNING"}, w)
         f = outcome.curve[outcome.final_index]
         self.report({"INFO"}, f"Relight: {f['n_lights']} light(s), relative error {f['relative_error']:.3g}, "
@@ -315,6 +321,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         return self._start(context, exp, options, inputs, patches)
 
     def _start(self, context, exp, options, inputs, patches):
+        self._fingerprints = exp.fingerprints
         self._cancel = threading.Event()
         self._progress = [0.0, "starting"]
         self._result = {}
@@ -370,7 +377,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             else:
                 self.report({"ERROR"}, f"Relight: {exc}")
             return {"CANCELLED"}
-        return self._finish(context, self._result["outcome"])
+        return self._finish(context, self._result["outcome"], self._fingerprints)
 
 
 # --- results --------------------------------------------------------------------------

@@ -3,12 +3,14 @@
 Per face, a size (m):
 - candidate faces (may emit): the *light size* ``light_size`` (default: the patch size);
 - painted targets and the scene's emitters: the patch size;
-- everything else (reflectors, occluders): the patch size x 2^(1 - level), level 0 at first
-  (twice the patch size: coarse), raised by ``refine`` where the targets need it.
+- everything else (reflectors, occluders): the patch size x 2^(1 - level), level 1 at first
+  (the patch size); ``refine`` raises it where the targets need it and lowers it (twice the
+  patch size) where they do not.
 
 A face larger than its size is split (quads into grids of bilinear sub-quads, other faces'
-triangles into sub-triangles): each piece is a patch. Faces no larger than their size are
-*clustered*: the faces of one object that share a key -- candidate / forbidden / target /
+triangles into sub-triangles): each piece is a patch. A face about its size (longest edge between
+half its size and its size) is a patch of its own. Faces much smaller than their size (longest
+edge below half of it) are *clustered*: the faces of one object that share a key -- candidate / forbidden / target /
 emitter status, reflectance, exitance, painted value, size, normal bucket (the nearest of 26
 directions: a normal cone of about 30 degrees) and voxel of that size -- and are connected
 through shared (welded) vertices form one patch. So a dense prop becomes a handful of patches,
@@ -24,8 +26,8 @@ its cells' (InverseProblem's light basis).
 Refinement (``refine``): the importance psi of every patch for the targets, the adjoint
 solution A^T psi = w (w: the targets' area fractions; Smits, Arvo & Salesin 1992), times the
 power it sends, A_j B_j, ranks the reflector patches; the highest are split (their faces go one
-level finer) until they cover ``REFINE_SHARE`` of the total. Merging is the coarse start: a
-reflector stays at twice the patch size unless the targets need it finer.
+level finer) until they cover ``REFINE_SHARE`` of the total, and those of the lowest
+``MERGE_SHARE`` are merged (their faces go one level coarser).
 """
 from __future__ import annotations
 
@@ -44,11 +46,17 @@ _d = np.array([(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0
               dtype=np.float64)
 #: the 26 directions of the normal buckets (cube faces, edges and corners)
 DIRECTIONS = _d / np.linalg.norm(_d, axis=1, keepdims=True)
-#: reflector levels: 0 (twice the patch size) .. MAX_LEVEL (half the patch size)
-MAX_LEVEL = 2
+#: reflector levels: 0 (twice the patch size), 1 (the patch size: the start) .. MAX_LEVEL
+START_LEVEL = 1
+MAX_LEVEL = 3
+#: ... and the merged ones the lowest share
+MERGE_SHARE = 0.05
 #: a refinement pass splits the most important reflector patches until they hold this share of
 #: the total importance-weighted power of the splittable ones
 REFINE_SHARE = 0.5
+#: faces whose longest edge is below this fraction of their size are clustered; faces between
+#: it and their size are patches of their own (as in the polygon model); larger faces are split
+CLUSTER_BELOW = 0.5
 #: welding tolerance of vertices, relative to the scene's diagonal
 WELD = 1e-7
 
@@ -62,9 +70,9 @@ def _ids(rows) -> np.ndarray:
     """A dense id per distinct row of ``rows`` (N, k), in sorted-row order (floats compared by
     their exact value). A lexicographic sort of the columns: much faster than np.unique(axis=0)."""
     rows = np.asarray(rows)
-    rows = rows.reshape(len(rows), -1)
     if len(rows) == 0:
         return np.zeros(0, dtype=np.int64)
+    rows = rows.reshape(len(rows), -1)
     if rows.dtype.kind == "f":
         rows = np.ascontiguousarray(rows + 0.0, dtype=np.float64).view(np.int64)  # +0.0: no -0.0
     order = np.lexsort(rows.T[::-1])
@@ -97,7 +105,7 @@ class AdaptiveModel:
         emit = np.any(faces.exitance > 0, axis=1)
         cand = ~faces.forbidden & ~emit
         if self.level is None:
-            self.level = np.zeros(faces.n_faces, dtype=np.int64)
+            self.level = np.full(faces.n_faces, START_LEVEL, dtype=np.int64)
         reflector = ~cand & ~faces.target & ~emit
         size = np.where(cand, self.light_size, self.patch_size)
         size = np.where(reflector, self.patch_size * 2.0 ** (1 - self.level), size)
@@ -107,7 +115,8 @@ class AdaptiveModel:
         size, cand, emit, reflector = self._sizes(faces)
         T, ok, face_edge = face_triangles(faces)
         tf = faces.triangle_face
-        small = face_edge <= size
+        small = face_edge <= CLUSTER_BELOW * size  # much smaller than its size: clustered
+        whole = (face_edge <= size) & ~small  # about its size: a patch of its own
         # per face: area-weighted normal and centroid
         cr = triangle_cross(T)
         ta = 0.5 * np.linalg.norm(cr, axis=1)
@@ -135,13 +144,17 @@ class AdaptiveModel:
         G = sp.csr_matrix((np.ones(len(cf)), (cf, ns + node)), shape=(ns + nn, ns + nn))
         _, label = connected_components(G, directed=False)
         cluster = label[:ns]
-        # triangles: small faces whole (one patch per cluster), large faces split at their size
+        # triangles: small faces whole (one patch per cluster), faces about their size whole (one
+        # patch each), larger faces split at their size
         sel = small[tf] & ok
-        st, sf, sl = split_faces(faces, T, np.flatnonzero(~small), size)
-        tri = np.concatenate([T[sel], st])
-        face = np.concatenate([tf[sel], sf])
+        wsel = whole[tf] & ok
+        st, sf, sl = split_faces(faces, T, np.flatnonzero(~small & ~whole), size)
+        tri = np.concatenate([T[sel], T[wsel], st])
+        face = np.concatenate([tf[sel], tf[wsel], sf])
+        local = np.concatenate([np.zeros(int(wsel.sum()), dtype=np.int64), sl])
         n_cl = int(cluster.max(initial=-1)) + 1
-        pkey = np.concatenate([cluster[small_id[tf[sel]]], n_cl + face[len(T[sel]):] * (int(sl.max(initial=0)) + 1) + sl])
+        pkey = np.concatenate([cluster[small_id[tf[sel]]],
+                               n_cl + face[int(sel.sum()):] * (int(local.max(initial=0)) + 1) + local])
         patches = build_patches(faces, tri, face, pkey, self.patch_size, light_size=self.light_size)
         patches.level = np.where(reflector[patches.face], self.level[patches.face], -1)
         return patches
@@ -201,20 +214,23 @@ class AdaptiveModel:
 
     # -- refinement ----------------------------------------------------------------------
     def refine(self, faces, patches, importance) -> bool:
-        """Split the reflector patches of highest ``importance`` (P,) (psi_j A_j B_j): their
-        faces go one level finer. Returns False when nothing could be split."""
-        can = (patches.level >= 0) & (patches.level < MAX_LEVEL)
-        eta = np.where(can, np.maximum(importance, 0.0), 0.0)
+        """Split the reflector patches of highest ``importance`` (P,) (psi_j A_j B_j) and merge
+        those of lowest: their faces go one level finer / coarser. Returns False when nothing
+        changed."""
+        refl = patches.level >= 0
+        eta = np.where(refl, np.maximum(importance, 0.0), 0.0)
         total = eta.sum()
         if not total > 0:
             return False
         order = np.argsort(-eta, kind="stable")
-        n = int(np.searchsorted(np.cumsum(eta[order]), REFINE_SHARE * total)) + 1
-        split = order[:n]
-        split = split[eta[split] > 0]
-        if not len(split):
-            return False
-        faces_of = np.unique(patches.tri_face[np.isin(patches.tri_patch, split)])
+        cum = np.cumsum(eta[order])
+        split = order[:int(np.searchsorted(cum, REFINE_SHARE * total)) + 1]
+        split = split[(eta[split] > 0) & (patches.level[split] < MAX_LEVEL)]
+        low = order[cum > (1.0 - MERGE_SHARE) * total]
+        merge = low[refl[low] & (patches.level[low] > 0)]
         before = self.level.copy()
-        self.level[faces_of] = np.minimum(self.level[faces_of] + 1, MAX_LEVEL)
+        for sel, step in ((split, 1), (merge, -1)):
+            if len(sel):
+                f = np.unique(patches.tri_face[np.isin(patches.tri_patch, sel)])
+                self.level[f] = np.clip(before[f] + step, 0, MAX_LEVEL)
         return bool(np.any(self.level != before))

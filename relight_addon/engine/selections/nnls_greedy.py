@@ -10,7 +10,8 @@ from ..registry import SELECTIONS
 
 
 @SELECTIONS.register("nnls-greedy", "NNLS Greedy",
-                     "Greedy non-negative sparse selection with NNLS refits (beyond the paper)", distributes=False)
+                     "Greedy non-negative sparse selection with NNLS refits (beyond the paper)", distributes=False,
+                     multiscale=True)
 def nnls_greedy(s):
     """Non-negative orthogonal matching pursuit on T (all channels share the support)."""
     problem, record, step_hook, max_steps = s.problem, s.record, s.step, s.max_steps
