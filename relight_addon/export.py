@@ -21,7 +21,12 @@ What is exported
   reflect (their material) and emit, but their faces are never targets or candidate lights
   (``forbidden``) and have ``face_index`` -1 (not reported: one base mesh cannot hold
   per-instance values). They are grouped in ``object_names`` entries named
-  ``"<instancer>/<object>"`` after the real objects, with ``polygon_counts`` 0.
+  ``"<instancer>/<object>"`` after the real objects; everything is keyed by object index
+  (``job_inputs``: polygon counts per index, None for these groups), and the reports list the
+  real objects only, so a real object may have any name (even ``"<instancer>/<object>"``).
+- Visible objects with geometry that are not meshes (curves, text, surfaces, metaballs) are
+  not exported as objects: what they evaluate to comes in as instances (geometry only, above),
+  with a warning naming them (convert them to meshes to paint or light them).
 
 Materials (per face, through ``material_index`` and the object's material slots)
 - Principled BSDF connected to the active Material Output: reflectance = Base Color
@@ -35,13 +40,20 @@ Materials (per face, through ``material_index`` and the object's material slots)
   negative emission to 0, with a warning.
 
 Relight attributes (read from the base mesh)
-- ``relight_target``: FLOAT_COLOR corner attribute; a polygon is a target when the mean
-  alpha of its corners is >= 0.5, its target radiosity = pi x mean RGB x target scale
-  (scene custom property ``relight_target_scale``, default 1).
-- ``relight_forbidden``: BOOLEAN face attribute; ``relight_no_lights`` object custom
-  property (truthy) forbids every face of the object.
-- Scene custom property ``relight_max_patch_size`` (metres): the scene's default patch
-  size when the job does not set one.
+- ``relight_target``: a Face Corner colour attribute, FLOAT_COLOR or BYTE_COLOR (read as linear
+  RGB); a polygon is a target when the mean alpha of its corners is >= 0.5, its target
+  radiosity = pi x mean RGB x target scale (scene custom property ``relight_target_scale``,
+  default 1; the add-on's Target Scale reads and writes that same property). A
+  ``relight_target`` of another domain or type is not used, with a warning naming it; NaN or
+  infinite colours are refused; negative ones are set to 0 with a warning.
+- ``relight_forbidden``: a Face attribute of any numeric type (BOOLEAN, INT, INT8, FLOAT):
+  non-zero (NaN included) = forbidden. Of another domain or type it is refused (an error naming
+  it: lights must never land on faces meant to be forbidden).
+- ``relight_no_lights``: object custom property (or the add-on's property), a boolean or a
+  number, non-zero forbids every face of the object; any other type (a string) is refused.
+- Scene custom properties ``relight_target_scale`` (>= 0) and ``relight_max_patch_size``
+  (metres, > 0: the scene's default patch size when the job does not set one) must be finite
+  numbers; anything else is refused with a message naming the property.
 
 """
 from __future__ import annotations
@@ -66,6 +78,20 @@ TARGET_SCALE_PROP = "relight_target_scale"
 MAX_PATCH_SIZE_PROP = "relight_max_patch_size"
 _FACE_INDEX_ATTRIBUTE = "_relight_face_index"
 RELIGHT_OWNER_PROP = "relight_owner"  # on everything Relight creates (results.py)
+#: the attribute types Relight reads and writes its layers as
+TARGET_TYPES = ("FLOAT_COLOR", "BYTE_COLOR")
+TARGET_DOMAIN = "CORNER"
+FORBIDDEN_TYPES = ("BOOLEAN", "INT", "INT8", "FLOAT")
+FORBIDDEN_DOMAIN = "FACE"
+#: Blender's UI names of attribute domains and types (for messages)
+DOMAIN_NAMES = {"POINT": "Vertex", "EDGE": "Edge", "FACE": "Face", "CORNER": "Face Corner",
+                "CURVE": "Spline", "INSTANCE": "Instance", "LAYER": "Layer"}
+TYPE_NAMES = {"FLOAT_COLOR": "Color", "BYTE_COLOR": "Byte Color", "BOOLEAN": "Boolean", "INT": "Integer",
+              "INT8": "8-Bit Integer", "FLOAT": "Float", "FLOAT_VECTOR": "Vector", "FLOAT2": "2D Vector",
+              "INT32_2D": "2D Integer Vector", "QUATERNION": "Quaternion", "FLOAT4X4": "4x4 Matrix",
+              "STRING": "String"}
+#: object types with geometry that are not exported (only meshes are)
+NON_MESH_GEOMETRY = ("CURVE", "FONT", "SURFACE", "META", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL")
 
 
 class BlendFileError(SceneError):
@@ -152,10 +178,13 @@ class ExportedScene:
     faces: FaceSet
     objects: list  # the exported bpy objects: FaceSet.object_names[:len(objects)]; the names after
     # them are instance groups "<instancer>/<object>" (no bpy object, 0 polygons)
-    polygon_counts: dict  # object name -> number of polygons of its base mesh
+    polygon_counts: dict  # object name -> number of polygons of its base mesh (the real objects)
     settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
     seconds: float = 0.0
     fingerprints: dict = field(default_factory=dict)  # object name -> mesh_fingerprint (stale-result check)
+    #: what an error about the scene should also say (jobs.check_solvable): "target": target layers
+    #: found but not used, the target scale 0; "candidates": objects not exported, without area
+    notes: dict = field(default_factory=dict)
 
 
 #: positions are compared within this fraction of the object's size (times sqrt(vertices))
@@ -231,13 +260,35 @@ def exported_objects(context=None):
             and ob.visible_get(view_layer=view_layer) and ob.get(RELIGHT_OWNER_PROP) is None]
 
 
+def _number_property(holder, prop, what):
+    """The custom property ``prop`` of ``holder`` as a finite float (None when missing); anything
+    else (a string, a list, NaN) is a SceneError naming the property."""
+    value = holder.get(prop)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        shown = repr(value) if isinstance(value, str) else type(value).__name__
+        raise SceneError(f"{what} custom property {prop} is {shown}, not a number: set it to a number "
+                         "(or delete it)")
+    value = float(value)
+    if not math.isfinite(value):
+        raise SceneError(f"{what} custom property {prop} is {value}: it must be a finite number")
+    return value
+
+
 def scene_settings(scene):
-    scale = scene.get(TARGET_SCALE_PROP, 1.0)
-    rl = getattr(scene, "relight", None)
-    if rl is not None and hasattr(rl, "target_scale"):
-        scale = rl.target_scale
-    size = scene.get(MAX_PATCH_SIZE_PROP)
-    return {"target_scale": float(scale), "max_patch_size": None if size is None else float(size)}
+    """The scene's Relight settings from its custom properties (one source of truth: the add-on's
+    Target Scale reads and writes ``relight_target_scale`` itself). Refuses values of the wrong
+    type or range with a message naming the property."""
+    what = f"scene {scene.name!r}:"
+    scale = _number_property(scene, TARGET_SCALE_PROP, what)
+    if scale is not None and scale < 0:
+        raise SceneError(f"{what} custom property {TARGET_SCALE_PROP} is {scale:g}: it must be >= 0")
+    size = _number_property(scene, MAX_PATCH_SIZE_PROP, what)
+    if size is not None and not size > 0:
+        raise SceneError(f"{what} custom property {MAX_PATCH_SIZE_PROP} is {size:g}: it must be a positive "
+                         "length in metres")
+    return {"target_scale": 1.0 if scale is None else scale, "max_patch_size": size}
 
 
 def foreach_array(seq, attr, n, dtype, width=1):
@@ -256,24 +307,81 @@ def loop_polygons(mesh):
     return np.repeat(np.arange(n), totals), starts, totals
 
 
-def _base_attributes(ob, target_scale):
-    """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool)."""
+def describe_attribute(attr) -> str:
+    """"a Vertex (POINT) Color (FLOAT_COLOR) attribute": what a message says about an attribute."""
+    d, t = attr.domain, attr.data_type
+    return f"a {DOMAIN_NAMES.get(d, d)} ({d}) {TYPE_NAMES.get(t, t)} ({t}) attribute"
+
+
+def target_layer(mesh, owner=None):
+    """The mesh's usable ``relight_target`` (a Face Corner FLOAT_COLOR or BYTE_COLOR attribute),
+    None when there is none; a ``relight_target`` of another domain or type raises SceneError
+    naming it (``owner``: the object name for the message)."""
+    attr = mesh.attributes.get(TARGET_ATTRIBUTE)
+    if attr is None:
+        return None
+    if attr.domain != TARGET_DOMAIN or attr.data_type not in TARGET_TYPES:
+        raise SceneError(f"{owner or mesh.name}: its {TARGET_ATTRIBUTE} is {describe_attribute(attr)}; Relight "
+                         "reads targets from a Face Corner colour attribute (Color or Byte Color), so this one is "
+                         "not used: convert it (Object Data > Color Attributes > Convert, Face Corner) or remove it")
+    return attr
+
+
+def forbidden_layer(mesh, owner=None):
+    """The mesh's ``relight_forbidden`` (a Face attribute of a numeric type: BOOLEAN, INT, INT8,
+    FLOAT), None when there is none; one of another domain or type raises SceneError naming it."""
+    attr = mesh.attributes.get(FORBIDDEN_ATTRIBUTE)
+    if attr is None:
+        return None
+    if attr.domain != FORBIDDEN_DOMAIN or attr.data_type not in FORBIDDEN_TYPES:
+        raise SceneError(f"{owner or mesh.name}: its {FORBIDDEN_ATTRIBUTE} is {describe_attribute(attr)}; Relight "
+                         "reads a Face attribute of a numeric type (Boolean, Integer or Float; non-zero = forbidden): "
+                         "convert it (Object Data > Attributes > Convert, Face) or remove it")
+    return attr
+
+
+def read_forbidden(attr, n) -> np.ndarray:
+    """(n,) bool: non-zero values (NaN included) of a numeric face attribute."""
+    if attr.data_type == "BOOLEAN":
+        return foreach_array(attr.data, "value", n, bool)
+    if attr.data_type == "FLOAT":
+        v = foreach_array(attr.data, "value", n, np.float64)
+        return (v != 0) | np.isnan(v)
+    return foreach_array(attr.data, "value", n, np.int64) != 0
+
+
+def _base_attributes(ob, target_scale, notes=None):
+    """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool).
+    ``notes``: a list that gets the messages about layers found but not used."""
     me = ob.data
     n = len(me.polygons)
     target = np.zeros(n, dtype=bool)
     target_b = np.zeros((n, 3))
     forbidden = np.zeros(n, dtype=bool)
     loop_poly, _, totals = loop_polygons(me)
-    attr = me.attributes.get(TARGET_ATTRIBUTE)
-    if attr is not None and attr.domain == "CORNER" and len(me.loops):
+    try:
+        attr = target_layer(me, ob.name)
+    except SceneError as exc:  # found, not used: said (and repeated in a "no target" error)
+        attr = None
+        if notes is not None:
+            notes.append(str(exc))
+    if attr is not None and len(me.loops):
         col = foreach_array(attr.data, "color", len(me.loops), np.float64, 4)
         mean = np.stack([np.bincount(loop_poly, weights=col[:, k], minlength=n) for k in range(4)], axis=1)
         mean /= np.maximum(totals, 1)[:, None]
+        if not np.all(np.isfinite(mean)):
+            raise SceneError(f"{ob.name}: its {TARGET_ATTRIBUTE} holds NaN or infinite colours; paint it again")
         target = mean[:, 3] >= 0.5
-        target_b[target] = math.pi * mean[target, :3] * target_scale
-    attr = me.attributes.get(FORBIDDEN_ATTRIBUTE)
-    if attr is not None and attr.domain == "FACE" and attr.data_type == "BOOLEAN":
-        forbidden = foreach_array(attr.data, "value", n, bool)
+        rgb = mean[target, :3]
+        if np.any(rgb < 0):
+            if notes is not None:
+                notes.append(f"{ob.name}: {int(np.sum(np.any(rgb < 0, axis=1)))} target(s) with a negative colour "
+                             "set to 0 (light cannot be negative)")
+            rgb = np.maximum(rgb, 0.0)
+        target_b[target] = math.pi * rgb * target_scale
+    attr = forbidden_layer(me, ob.name)  # another domain or type: refused (never ignored)
+    if attr is not None:
+        forbidden = read_forbidden(attr, n)
     if no_lights(ob):
         forbidden[:] = True
     return target, target_b, forbidden
@@ -281,8 +389,16 @@ def _base_attributes(ob, target_scale):
 
 def no_lights(ob) -> bool:
     """The object's "no lights on this object" switch: the add-on's property, or a custom
-    property of the same name (files prepared without the add-on)."""
-    return bool(getattr(ob, NO_LIGHTS_PROP, False) or ob.get(NO_LIGHTS_PROP, False))
+    property of the same name (files prepared without the add-on): a boolean or a number,
+    non-zero = no lights. Any other type (a string such as "false") is a SceneError."""
+    raw = ob.get(NO_LIGHTS_PROP)
+    if raw is not None and not isinstance(raw, (bool, int, float)):
+        shown = repr(raw) if isinstance(raw, str) else type(raw).__name__
+        raise SceneError(f"object {ob.name!r}: custom property {NO_LIGHTS_PROP} is {shown}, not a boolean or a "
+                         "number: set it to True/False (or 1/0)")
+    if isinstance(raw, float) and math.isnan(raw):
+        return True
+    return bool(getattr(ob, NO_LIGHTS_PROP, False) or raw)
 
 
 def _evaluated_mesh(ob, context):
@@ -430,6 +546,18 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         settings["target_scale"] = float(target_scale)
     renderable = render_visible_objects(context.scene)
     objs = exported_objects(context)
+    notes = {"target": [], "candidates": []}
+    warnings = []
+    skipped = [f"{ob.name!r} ({ob.type})" for ob in context.scene.objects
+               if ob.type in NON_MESH_GEOMETRY and not ob.hide_render and ob.name in renderable
+               and ob.visible_get(view_layer=context.view_layer)]
+    if skipped:
+        text = (f"{len(skipped)} visible object(s) are not meshes: {', '.join(skipped[:10])}"
+                f"{' ...' if len(skipped) > 10 else ''}; whatever geometry they evaluate to takes part as occluders "
+                "and reflectors only (never targets or lights): convert them to meshes (Object > Convert > Mesh) "
+                "to paint targets or place lights on them")
+        warnings.append(text)
+        notes["candidates"].append(text)
     b = _Builder()
     counts = {}
     names = []
@@ -437,13 +565,18 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     for oi, ob in enumerate(objs):
         counts[ob.name] = len(ob.data.polygons)
         names.append(ob.name)
-        target, target_b, forbidden = _base_attributes(ob, settings["target_scale"])
+        target, target_b, forbidden = _base_attributes(ob, settings["target_scale"], notes["target"])
         ob_eval, me, mapping = _evaluated_mesh(ob, context)
         try:
             geo = _mesh_geometry(ob_eval, me, ob.name)
             M = np.array(ob_eval.matrix_world, dtype=np.float64)
         finally:
             ob_eval.to_mesh_clear()
+        if len(geo["lt"]) and _no_area(geo, M):
+            text = (f"object {ob.name!r} has no area in world space (scaled to zero?): its faces can be neither "
+                    "targets nor lights")
+            warnings.append(text)
+            notes["candidates"].append(text)
         npoly = len(geo["loop_start"])
         idx = np.arange(npoly) if mapping is None else mapping
         unmapped += int(np.sum(idx < 0))
@@ -463,8 +596,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
             finally:
                 ob.to_mesh_clear()
         geo = geo_cache[key]
-        if name not in group:
-            counts[name] = 0
+        if name not in group:  # keyed by index everywhere: a real object may have this name too
             group[name] = len(names)
             names.append(name)
         npoly = len(geo["loop_start"])
@@ -472,8 +604,12 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
               np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
         n_inst += 1
     if not names:
-        raise SceneError("the scene has no visible mesh objects")
-    warnings = b.warnings
+        raise SceneError("the scene has no visible mesh objects"
+                         + (f" ({notes['candidates'][0]})" if notes["candidates"] else ""))
+    warnings = warnings + b.warnings + [n for n in notes["target"] if n not in warnings]
+    if settings["target_scale"] == 0:
+        notes["target"].append("the target scale is 0 (scene custom property relight_target_scale, the add-on's "
+                               "Target Scale, or --target-scale): every target asks for no light")
     if unmapped:
         warnings.append(f"{unmapped} face(s) created by modifiers could not be mapped to base-mesh polygons "
                         "and are not reported")
@@ -510,12 +646,27 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings=warnings,
     )
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
-    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints)
+    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints, notes)
+
+
+def _no_area(geo, M) -> bool:
+    """True when the object's triangles have no area in world space (but some in its own)."""
+    V = geo["V"]
+    T = V[geo["lt"]]
+    local = np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1).sum()
+    W = T @ np.asarray(M, dtype=np.float64)[:3, :3].T
+    world = np.linalg.norm(np.cross(W[:, 1] - W[:, 0], W[:, 2] - W[:, 0]), axis=1).sum()
+    return bool(local > 0 and not world > 1e-12 * local)
 
 
 def job_inputs(exp: ExportedScene) -> dict:
-    """Keyword arguments of jobs.run_radiosity / jobs.run_solve that come from the scene."""
-    return {"polygon_counts": exp.polygon_counts, "default_max_patch_size": exp.settings.get("max_patch_size")}
+    """Keyword arguments of jobs.run_radiosity / jobs.run_solve that come from the scene: the
+    polygon counts per object index (None for the instance groups: not reported), the scene's
+    patch size and the notes an error about the scene should repeat."""
+    n_real = len(exp.objects)
+    counts = [exp.polygon_counts[ob.name] for ob in exp.objects] + [None] * (len(exp.faces.object_names) - n_real)
+    return {"polygon_counts": counts, "default_max_patch_size": exp.settings.get("max_patch_size"),
+            "notes": exp.notes}
 
 
 def export_faceset(context=None, target_scale=None) -> FaceSet:
@@ -525,7 +676,7 @@ def export_faceset(context=None, target_scale=None) -> FaceSet:
 
 def face_flags(ob, kind):
     """Per base-mesh polygon of ``ob``: kind "target", "forbidden" or "candidate" (bool array)."""
-    target, _, forbidden = _base_attributes(ob, 1.0)
+    target, _, forbidden = _base_attributes(ob, 1.0, [])
     if kind == "target":
         return target
     if kind == "forbidden":
@@ -533,6 +684,14 @@ def face_flags(ob, kind):
     if kind == "candidate":
         return ~forbidden
     raise ValueError(f"unknown face flag {kind!r}; use target, forbidden or candidate")
+
+
+def check_writable_mesh(ob):
+    """SceneError when Relight cannot write on ``ob``'s mesh (linked from a library: read-only)."""
+    me = ob.data
+    if getattr(me, "library", None) is not None:
+        raise SceneError(f"{ob.name}: its mesh is linked from {me.library.filepath} (read-only); make it local "
+                         "first (Object > Relations > Make Local > Object and Data)")
 
 
 def ensure_attribute(mesh, name, data_type, domain):
@@ -552,5 +711,31 @@ def ensure_attribute(mesh, name, data_type, domain):
 
 
 def ensure_target_layer(mesh):
-    """The mesh's ``relight_target`` FLOAT_COLOR corner attribute (created transparent black)."""
-    return ensure_attribute(mesh, TARGET_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+    """The mesh's ``relight_target``: the existing Face Corner colour attribute of either type
+    (FLOAT_COLOR or BYTE_COLOR: never a duplicate, never replaced), else a new FLOAT_COLOR one
+    (transparent black: unpainted). One of another domain or type: SceneError, nothing changed."""
+    attr = target_layer(mesh)
+    if attr is not None:
+        return attr
+    return ensure_attribute(mesh, TARGET_ATTRIBUTE, "FLOAT_COLOR", TARGET_DOMAIN)
+
+
+def ensure_forbidden_layer(mesh):
+    """The mesh's ``relight_forbidden``: the existing numeric Face attribute of any type
+    (BOOLEAN, INT, INT8, FLOAT), else a new BOOLEAN one (all allowed). One of another domain or
+    type: SceneError, nothing changed."""
+    attr = forbidden_layer(mesh)
+    if attr is not None:
+        return attr
+    return ensure_attribute(mesh, FORBIDDEN_ATTRIBUTE, "BOOLEAN", FORBIDDEN_DOMAIN)
+
+
+def write_forbidden(attr, values):
+    """Write (n,) bool ``values`` into a numeric face attribute of any of FORBIDDEN_TYPES (1/0)."""
+    values = np.asarray(values, dtype=bool)
+    if attr.data_type == "BOOLEAN":
+        attr.data.foreach_set("value", values)
+    elif attr.data_type == "FLOAT":
+        attr.data.foreach_set("value", values.astype(np.float32))
+    else:
+        attr.data.foreach_set("value", values.astype(np.int32))

@@ -11,6 +11,7 @@ warning (the form factors are then not computed).
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass, replace
 
@@ -18,15 +19,15 @@ import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
-from .engine.cost import estimate_patches_cost
+from .engine.cost import estimate_cost, estimate_patches_cost, format_bytes
 from .engine.formfactors import Cancelled, auto_rays_per_patch
-from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
+from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
 from .engine.options import JobOptions
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
 from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
-from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
+from .engine.scene import FaceSet, PatchSet, SceneError, default_max_patch_size as _default_patch_size, face_mean
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]
 
@@ -53,15 +54,25 @@ class PolygonMap:
     modifier, or instances) are left out; a polygon without area gets 0.
     """
 
-    def __init__(self, faces: FaceSet, patches: PatchSet, polygon_counts: dict | None = None):
+    def __init__(self, faces: FaceSet, patches: PatchSet, polygon_counts=None):
         counts = []
+        per_index = isinstance(polygon_counts, (list, tuple))
+        if per_index and len(polygon_counts) != len(faces.object_names):
+            raise ValueError(f"polygon_counts has {len(polygon_counts)} entries for {len(faces.object_names)} objects")
         for oi, name in enumerate(faces.object_names):
-            n = polygon_counts.get(name) if polygon_counts else None
+            if per_index:  # per object index: None = an unreported group (instances), no polygons
+                n = 0 if polygon_counts[oi] is None else polygon_counts[oi]
+            else:
+                n = polygon_counts.get(name) if polygon_counts else None
             if n is None:
                 idx = faces.face_index[(faces.face_object == oi) & (faces.face_index >= 0)]
                 n = int(idx.max()) + 1 if len(idx) else 0
             counts.append(int(n))
         self.names = list(faces.object_names)
+        #: indices of the objects the reports list (keyed by name): every one, except the
+        #: unreported groups (None in a per-index ``polygon_counts``: instance groups)
+        self.reported = [oi for oi in range(len(self.names))
+                         if not (per_index and polygon_counts[oi] is None)]
         self.offset = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         self.n = int(self.offset[-1])
         face_pid = np.where(faces.face_index >= 0, self.offset[faces.face_object] + faces.face_index, -1)
@@ -79,8 +90,12 @@ class PolygonMap:
         return np.asarray(self.weights @ np.asarray(patch_values, dtype=np.float64))
 
     def split(self, rows) -> dict:
-        """Global polygon rows -> {object name: its rows}."""
-        return {name: rows[self.offset[k]:self.offset[k + 1]] for k, name in enumerate(self.names)}
+        """Global polygon rows -> {object name: its rows}, for the reported objects (keys are
+        unambiguous: real object names; groups without polygons are left out)."""
+        out = {}
+        for k in self.reported:  # real objects come first: a later group of the same name is left out
+            out.setdefault(self.names[k], rows[self.offset[k]:self.offset[k + 1]])
+        return out
 
     def object_of(self, pid) -> np.ndarray:
         return np.searchsorted(self.offset, np.asarray(pid), side="right") - 1
@@ -103,25 +118,31 @@ def _json_safe(x):
     return x
 
 
-def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
-                  default_max_patch_size: float | None = None, progress=None, cancel=None):
+def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
+                  default_max_patch_size: float | None = None, progress=None, cancel=None,
+                  patches: PatchSet | None = None, notes: dict | None = None):
     """Forward radiosity of ``faces`` lit by their own exitance.
 
     ``options``: JobOptions (rays_per_patch, max_patch_size, seed, threads are used).
-    ``polygon_counts``: object name -> polygons of its base mesh (report rows); default
+    ``polygon_counts``: per object index (a list; None = a group that is not reported, e.g.
+    instances), or object name -> polygons of its base mesh (report rows); default
     max(face_index) + 1. ``default_max_patch_size``: used when options.max_patch_size is
     None (e.g. the scene's ``relight_max_patch_size``); None = engine default.
     ``progress(stage, fraction)``: optional; ``cancel()`` returning True raises Cancelled.
     Returns ``(report, RadiosityResult)``; the report has no export/apply timings (the
-    caller adds them) and ``total`` covers this job only.
+    caller adds them) and ``total`` covers this job only. ``patches``: the meshed faces when the
+    caller already has them (to print the estimate first); ``notes``: unused (export's notes).
+    A job that cannot fit in memory is refused before any work (``check_memory``).
     """
     options = (options or JobOptions()).validate()
     t0 = time.perf_counter()
-    patches = mesh_for_job(faces, options, default_max_patch_size)
+    if patches is None:
+        patches = mesh_for_job(faces, options, default_max_patch_size, mode="direct")
     t_mesh = time.perf_counter() - t0
+    cost = check_memory(radiosity_cost(patches, options), f"{patches.n_patches} patches")
     if cancel is not None and cancel():
         raise Cancelled("radiosity cancelled")
-    warnings = list(faces.warnings)
+    warnings = list(faces.warnings) + [w for w in cost["warnings"] if w not in faces.warnings]
     P = patches.n_patches
     F = None
     t_ff = t_solve = 0.0
@@ -154,10 +175,11 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(P)},
         "timings_s": {"export": 0.0, "meshing": t_mesh, "form_factors": t_ff, "solve": t_solve, "apply": 0.0,
                       "total": time.perf_counter() - t0},
+        "estimate": {"memory_bytes": cost["memory_bytes"], "seconds": cost["seconds"]},
         "options": {"rays_per_patch": None if F is None else int(F.rays_per_patch),
                     "max_patch_size": float(patches.max_patch_size), "seed": int(options.seed)},
         "solver": {k: v for k, v in info.items() if k != "warnings"},
-        "objects": {name: {"radiosity": poly[name]} for name in faces.object_names},
+        "objects": {name: {"radiosity": rows} for name, rows in poly.items()},
         "warnings": warnings,
     }
     result = RadiosityResult(patches, B, B_face, poly, areas, F)
@@ -179,13 +201,44 @@ BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed bac
                    "the solve lights what they leave to the targets")
 
 
-def check_solvable(faces: FaceSet, mode: str = "inverse"):
-    """Fail early, before any work, on problems the user can fix."""
+def _with_notes(text, notes):
+    notes = [n for n in (notes or []) if n]
+    return text + ("; " + "; ".join(notes) if notes else "")
+
+
+def face_areas(faces: FaceSet) -> np.ndarray:
+    """(F,) world-space area of every face (m^2)."""
+    T = faces.vertices[faces.triangles]
+    a = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
+    return np.bincount(faces.triangle_face, weights=a, minlength=faces.n_faces)
+
+
+def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = None):
+    """Fail early, before any work, on problems the user can fix. ``notes`` (export: what the
+    scene holds but Relight does not use) are repeated in the message they explain."""
+    notes = notes or {}
+    area = face_areas(faces)
+    scale = float(np.linalg.norm(np.ptp(faces.vertices, axis=0))) if len(faces.vertices) else 0.0
+    has_area = area > (1e-10 * max(scale, 1e-300)) ** 2
     if mode == "inverse":
         if not np.any(faces.target):
-            raise SceneError("no target: paint a radiosity on at least one face (relight_target, alpha >= 0.5)")
-        if np.all(faces.forbidden):
-            raise SceneError("no candidate light: every face is forbidden")
+            raise SceneError(_with_notes("no target: paint a radiosity on at least one face (relight_target, "
+                                         "alpha >= 0.5)", notes.get("target")))
+        if not np.any(faces.target & has_area):
+            raise SceneError(_with_notes("no target: every painted face has no area", notes.get("candidates")))
+        if not np.any(faces.target_radiosity[faces.target & has_area] > 0):
+            raise SceneError(_with_notes("every target asks for radiosity 0 (painted black, or a target scale of "
+                                         "0): there is nothing to light", notes.get("target")))
+        free = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
+        if not np.any(free):
+            owners = sorted({faces.object_names[o] for o in np.unique(faces.face_object[faces.face_index >= 0])})
+            raise SceneError(_with_notes(
+                "no candidate light: every face is forbidden (relight_forbidden, relight_no_lights) or already "
+                f"emits; objects: {', '.join(owners[:10])}{' ...' if len(owners) > 10 else ''}",
+                notes.get("candidates")))
+        if not np.any(free & has_area):
+            raise SceneError(_with_notes("no candidate light: the faces that may hold lights have no area",
+                                         notes.get("candidates")))
     elif not np.any(faces.exitance > 0):
         raise SceneError("the scene has no emitter to reduce (no material with emission)")
 
@@ -201,13 +254,97 @@ def patch_model(options: JobOptions, default_max_patch_size=None):
     return PATCH_MODELS[options.patch_model].impl(options, default_max_patch_size)
 
 
-def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> PatchSet:
+def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=None, mode="inverse") -> PatchSet:
+    """The faces meshed by the job's patch model, after checking (from the faces alone) that the
+    patches would fit in this machine's memory."""
+    check_before_meshing(faces, options, default_max_patch_size, mode)
     return patch_model(options, default_max_patch_size).mesh(faces)
 
 
 def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
-    return estimate_patches_cost(patches, options.rays_per_patch, options.solver)
+    return estimate_patches_cost(patches, options.rays_per_patch, options.solver, threads=options.threads)
+
+
+def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
+    """Memory and time estimate of a forward radiosity job (no inverse problem)."""
+    rays = options.rays_per_patch or auto_rays_per_patch(patches.n_patches)
+    return estimate_cost(patches.n_patches, rays, 0, 0, threads=options.threads)
+
+
+# ---------------------------------------------------------------------------- memory guard
+
+#: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
+_MAX_COUNT = 1e30
+
+
+def machine_memory() -> int | None:
+    """Physical memory of this machine in bytes (None when the platform does not say)."""
+    try:
+        n = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        return int(n) if n > 0 else None
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> float:
+    """How many patches the job's patch model makes of ``faces``, from the faces alone (no
+    meshing): a face no larger than its size is one patch, a larger quad an nu x nv grid, any
+    other face k x k pieces per triangle (engine.scene.split_faces). The adaptive model's
+    candidate faces use the light size; its clustering only makes fewer patches."""
+    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+    if size is None:
+        size = _default_patch_size(faces.vertices)
+    F = faces.n_faces
+    s = np.full(F, float(size))
+    if options.patch_model == "adaptive":
+        cand = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
+        s[cand] = float(options.light_size or size)
+    V = faces.vertices
+    with np.errstate(over="ignore", invalid="ignore"):
+        T = V[faces.triangles]
+        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+        tf = faces.triangle_face
+        k = np.maximum(np.ceil(np.minimum(edge / s[tf], _MAX_COUNT)), 1.0)
+        per_tri = np.bincount(tf, weights=np.minimum(k * k, _MAX_COUNT), minlength=F)
+        face_edge = np.zeros(F)
+        np.maximum.at(face_edge, tf, edge)
+        count = np.where(face_edge <= s, 1.0, per_tri)
+        quad = np.flatnonzero((faces.loop_total == 4) & (face_edge > s))
+        if len(quad):
+            p = V[faces.loop_vertices[faces.loop_start[quad][:, None] + np.arange(4)]]
+            d = lambda a, b: np.linalg.norm(p[:, a] - p[:, b], axis=1)  # noqa: E731
+            nu = np.maximum(np.ceil(np.minimum(np.maximum(d(1, 0), d(2, 3)) / s[quad], _MAX_COUNT)), 1.0)
+            nv = np.maximum(np.ceil(np.minimum(np.maximum(d(3, 0), d(2, 1)) / s[quad], _MAX_COUNT)), 1.0)
+            count[quad] = np.minimum(nu * nv, _MAX_COUNT)
+    return float(min(count.sum(), _MAX_COUNT))
+
+
+def check_memory(cost: dict, what: str):
+    """Refuse (SceneError) a job whose certain memory need (``memory_floor_bytes``) exceeds this
+    machine's memory, naming the estimate; returns ``cost``."""
+    total = machine_memory()
+    if total is not None and cost["memory_floor_bytes"] > total:
+        raise SceneError(f"this job needs at least {format_bytes(cost['memory_floor_bytes'])} of memory "
+                         f"(estimate {format_bytes(cost['memory_bytes'])}, {cost['seconds']:.3g} s; {what}), more "
+                         f"than this machine has ({format_bytes(total)}): use a larger patch size "
+                         "(--max-patch-size / relight_max_patch_size) or fewer rays per patch")
+    return cost
+
+
+def check_before_meshing(faces: FaceSet, options: JobOptions, default_max_patch_size=None, mode="inverse") -> dict:
+    """The cost estimate from the patch count the faces will give (``estimate_patch_count``),
+    refused when it cannot fit in memory (``check_memory``), before any allocation."""
+    P = estimate_patch_count(faces, options, default_max_patch_size)
+    Pi = int(P)
+    rays = options.rays_per_patch or auto_rays_per_patch(Pi)
+    frac_c = float(np.mean(~faces.forbidden)) if mode == "inverse" else 0.0
+    frac_t = float(np.mean(faces.target)) if mode == "inverse" else 0.0
+    cost = estimate_cost(Pi, int(rays), int(P * frac_c), int(P * frac_t),
+                         solver=options.solver if mode == "inverse" else "reduced", threads=options.threads)
+    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+    where = f"about {P:.3g} patches" + (f" at a patch size of {size:g} m" if size is not None else "")
+    return check_memory(cost, f"{where}, {int(rays)} rays per patch")
 
 
 @dataclass
@@ -304,10 +441,11 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     t0 = time.perf_counter()
     pm = patch_model(options, default_max_patch_size)
     if patches is None:
+        check_before_meshing(faces, options, default_max_patch_size, mode)
         patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
-    cost = solve_cost(patches, options)
+    cost = check_memory(solve_cost(patches, options), f"{patches.n_patches} patches")
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
     t_ff = t_problem = 0.0
@@ -444,7 +582,7 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
     target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
                                  pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
     objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
-               for name in faces.object_names}
+               for name in radiosity}
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
@@ -528,9 +666,9 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
     }
 
 
-def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts: dict | None = None,
+def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
               default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
-              patches: PatchSet | None = None):
+              patches: PatchSet | None = None, notes: dict | None = None):
     """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``:
     build_model -> solve_stage -> reduce_stage -> assemble_curve -> make_report.
 
@@ -542,10 +680,27 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     patch is a target at the radiosity they give it (the paper's direct-lighting mode).
     ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
     returning True raises Cancelled. ``patches``: the meshed faces when the caller already
-    has them (the operator meshes first to estimate the cost). Returns a SolveOutcome.
+    has them (the operator meshes first to estimate the cost). ``notes``: export's notes, repeated
+    in the errors they explain (check_solvable). Returns a SolveOutcome.
     """
     options = (options or JobOptions()).validate()
-    check_solvable(faces, mode)
+    check_solvable(faces, mode, notes)
+    try:
+        return _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches)
+    except InverseError as exc:
+        rays = options.rays_per_patch
+        if "reaches any target" in str(exc) and rays is not None and rays < FEW_RAYS:
+            raise InverseError(f"no ray from a candidate light reached a target with {rays} ray(s) per patch: "
+                               f"cast more rays per patch (at least {FEW_RAYS}; --rays-per-patch, or 0 = automatic) "
+                               "before concluding the targets are occluded") from None
+        raise
+
+
+#: below this many rays per patch, "no light reaches the targets" may be sampling, not geometry
+FEW_RAYS = 256
+
+
+def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches):
     t0 = time.perf_counter()
     model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches)
     t1 = time.perf_counter()

@@ -395,9 +395,9 @@ def apply_stored_point(scene, index) -> dict:
     off = data["polygon_offset"]
     layers, skipped, seen_mesh = [], [], {}
     for oi, ob in objs.items():
-        if ob.data.library is not None:
-            skipped.append(f"{ob.name}: its mesh is linked from {ob.data.library.filepath} (read-only), so the "
-                           "radiosity layer is not written; make it local (Object > Relations > Make Local) to see it")
+        why = linked_message(ob)
+        if why:
+            skipped.append(why)
             continue
         if ob.data.name in seen_mesh:
             skipped.append(f"{ob.name} shares its mesh with {seen_mesh[ob.data.name]}: the radiosity layer shows "
@@ -655,19 +655,41 @@ def remove_radiosity_layer(ob) -> bool:
     return True
 
 
-def write_radiosity(objects, radiosity, areas):
+def linked_message(ob) -> str | None:
+    """Why Relight cannot write its radiosity layer on ``ob``'s mesh (linked from a library:
+    read-only, and not saved with this file), or None when it can."""
+    lib = ob.data.library or ob.library
+    if lib is None:
+        return None
+    return (f"{ob.name}: its mesh is linked from {lib.filepath} (read-only), so the radiosity layer is not written "
+            "(the lights are shown); make it local (Object > Relations > Make Local > Object and Data) to see it")
+
+
+def write_radiosity(objects, radiosity, areas, skipped=None):
     """Write radiance B/pi into ``relight_radiosity`` on each object's mesh (see
     ``write_radiosity_layer``). ``radiosity[name]``: (n_polygons, 3) W/m^2 per base polygon;
     ``areas[name]``: (n_polygons,) weights (m^2). A mesh shared by several exported objects
-    is made single-user first (each object gets its own values)."""
-    written = set()
+    is made single-user first (each object gets its own values). Linked (library) meshes are
+    read-only: skipped, with a message appended to ``skipped`` (a list). Everything is checked
+    before the first write."""
+    plan, seen = [], set()
     for ob in objects:
         if ob.name not in radiosity:
             continue
-        if ob.data.name in written or ob.data.library is not None:
+        why = linked_message(ob)
+        if why:
+            if skipped is not None and why not in skipped:
+                skipped.append(why)
+            continue
+        values = np.asarray(radiosity[ob.name], dtype=np.float64)
+        if not np.all(np.isfinite(values)):
+            raise SceneError(f"{ob.name}: refusing to write non-finite radiosity")
+        plan.append((ob, values, ob.data.name in seen))
+        seen.add(ob.data.name)
+    for ob, values, shared in plan:
+        if shared:
             ob.data = ob.data.copy()
-        written.add(ob.data.name)
-        write_radiosity_layer(ob, radiosity[ob.name], areas[ob.name])
+        write_radiosity_layer(ob, values, areas[ob.name])
 
 
 def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):

@@ -6,10 +6,17 @@ terms of a solve (jobs.run_solve) from the sizes alone:
 - form factors F: float32, dense P x P (4 P^2 bytes) when P <= DENSE_LIMIT, else CSR with at
   most min(P, rays per patch) non-zeros per row (float32 value + int32 column: 8 bytes
   each); ray casting time = P x rays per patch / RAYS_PER_SECOND.
-- the radiosity system A = I - rho F per colour channel: a dense float64 copy and its LU
-  factors (scipy lu_factor / splu; sparse F gives nearly dense LU factors once filled in,
-  so both are counted dense): 3 x 8 P^2 bytes kept (the three factorisations) plus one
-  8 P^2 working copy; 3 x 2/3 P^3 flops.
+- the radiosity system A = I - rho F per colour channel and its LU factors. Dense (P <=
+  DENSE_LIMIT, scipy lu_factor): 3 x 8 P^2 bytes kept (the three factorisations) plus one
+  8 P^2 working copy; 3 x 2/3 P^3 flops. Sparse (splu): A has nnz = P x min(P, HIT_FRACTION x
+  rays per patch) (the distinct patches a patch's rays hit), its factors about LU_FILL times
+  that (at most P^2): 12 bytes per non-zero (value + index), nnz(LU)^2 / P flops, per channel.
+  Measured (benchmarks/, docs/benchmarks.md "Sparse LU"): nnz(A)/P = 0.53-0.72 x 1024 rays,
+  fill 10-15, and nnz(LU)^2/P within a factor 1.3 of splu's time at FLOPS / 3 on the Cornell
+  box and the staircase at 6-13 k patches (their factors fill to near dense; scenes with much
+  occlusion fill less, so this term may be pessimistic there).
+- ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
+  formfactors.CHUNK_RAYS) per thread.
 - the transfer matrix T (rows P, columns C of A^-1; solvers registered with cost="transfer"): 3 x 8 m C
   bytes, 3 x 2 P^2 min(m, C) flops of triangular solves, and its minimum-norm solve (Gram
   matrix m x m: m^2 C + m^3/3 flops per channel).
@@ -23,6 +30,11 @@ Rates: RAYS_PER_SECOND = 3e6 (docs/benchmarks.md "Form factors": 2.1 to 4.6 M ra
 2 cores under load) and FLOPS = 5e9 (scipy LU of a 2000 x 2000 matrix on the 2-core test
 machine under load: 7 GFLOP/s). The estimate is meant to be right to a factor of a few.
 Thresholds: MEMORY_WARNING_BYTES (4 GB) and SECONDS_WARNING (60 s) give a warning text.
+
+``memory_floor_bytes``: what the solve allocates for sure (the patches, the form factors'
+minimum, dense matrices when P <= DENSE_LIMIT, one patch's rays): the callers refuse a job
+whose floor exceeds the machine's memory, before any work; ``memory_bytes`` (which may be
+pessimistic) only warns.
 """
 from __future__ import annotations
 
@@ -34,12 +46,23 @@ __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "MEMORY_WAR
 
 RAYS_PER_SECOND = 3.0e6
 FLOPS = 5.0e9
+#: sparse systems: distinct patches hit per ray cast, fill-in of the LU factors, and splu's
+#: speed relative to FLOPS (measured, see the module docstring)
+HIT_FRACTION = 0.6
+LU_FILL = 12.0
+SPLU_SPEED = 1.0 / 3.0
+#: working memory per ray in flight (origins, directions, hits, sample pool), bytes
+RAY_BYTES = 96
+#: memory per patch of the meshed scene (triangles, attributes, maps), bytes
+PATCH_BYTES = 400
 MEMORY_WARNING_BYTES = 4 * 1024 ** 3
 SECONDS_WARNING = 60.0
 
 
 def format_bytes(n: float) -> str:
-    for unit, size in (("GB", 1024 ** 3), ("MB", 1024 ** 2), ("kB", 1024)):
+    if n >= 1024 ** 6:  # beyond any machine: an order of magnitude is enough
+        return f"{n / 1024 ** 5:.2g} PB"
+    for unit, size in (("PB", 1024 ** 5), ("TB", 1024 ** 4), ("GB", 1024 ** 3), ("MB", 1024 ** 2), ("kB", 1024)):
         if n >= size:
             return f"{n / size:.1f} {unit}"
     return f"{int(n)} B"
@@ -48,7 +71,7 @@ def format_bytes(n: float) -> str:
 def _count(name, value):
     try:
         v = int(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"{name} must be a non-negative integer, got {value!r}") from None
     if v < 0 or v != value:
         raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
@@ -58,11 +81,12 @@ def _count(name, value):
 def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targets: int,
                   solver: str = "reduced", rays_per_second: float = RAYS_PER_SECOND, flops: float = FLOPS,
                   memory_limit: float = MEMORY_WARNING_BYTES, seconds_limit: float = SECONDS_WARNING,
-                  dense_limit: int = DENSE_LIMIT) -> dict:
+                  dense_limit: int = DENSE_LIMIT, threads: int | None = None) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
-    Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
-    ``warnings`` is empty unless memory > ``memory_limit`` or time > ``seconds_limit``.
+    Returns ``{"memory_bytes", "memory_floor_bytes", "seconds", "warnings": [str], "parts":
+    {name: (bytes, seconds)}}``; ``warnings`` is empty unless memory > ``memory_limit`` or time
+    > ``seconds_limit``. Counts may be floats (estimates before meshing).
     """
     P = _count("n_patches", n_patches)
     N = _count("rays_per_patch", rays_per_patch)
@@ -71,11 +95,24 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     kind = SOLVERS[solver].get("cost", "transfer")  # ValueError for an unknown solver
     if not (rays_per_second > 0 and flops > 0):
         raise ValueError("rays_per_second and flops must be positive")
+    import os
+
+    from .formfactors import CHUNK_RAYS
+
     P2 = float(P) * P
     parts = {}
-    ff_bytes = 4.0 * P2 if P <= dense_limit else 8.0 * P * min(P, N) + 8.0 * (P + 1)
+    dense = P <= dense_limit
+    row = min(float(P), HIT_FRACTION * N + 1.0)  # non-zeros per row of a sparse F (A: + the diagonal)
+    ff_bytes = 4.0 * P2 if dense else 8.0 * P * row + 8.0 * (P + 1)
     parts["form_factors"] = (ff_bytes, float(P) * N / rays_per_second)
-    parts["lu"] = (3 * 8.0 * P2 + 8.0 * P2, 3 * (2.0 / 3.0) * P2 * P / flops)
+    if dense:
+        parts["lu"] = (3 * 8.0 * P2 + 8.0 * P2, 3 * (2.0 / 3.0) * P2 * P / flops)
+    else:
+        nnz_lu = min(P2, LU_FILL * P * row)
+        parts["lu"] = (3 * 12.0 * nnz_lu + 12.0 * P * row, 3 * nnz_lu * nnz_lu / max(P, 1) / (flops * SPLU_SPEED))
+    in_flight = float(max(N, CHUNK_RAYS)) * (threads or os.cpu_count() or 1)
+    parts["rays"] = (RAY_BYTES * in_flight, 0.0)
+    parts["patches"] = (PATCH_BYTES * float(P), 0.0)
     k = min(m, C)
     if kind == "paper":
         cols = P - m + C
@@ -85,6 +122,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                             3 * (2.0 * P2 * k + float(m) * m * C + float(m) ** 3 / 3.0) / flops)
     memory = sum(b for b, _ in parts.values())
     seconds = sum(s for _, s in parts.values())
+    floor = PATCH_BYTES * float(P) + RAY_BYTES * float(N) + (4.0 * P2 + 8.0 * P2 if dense else 12.0 * P)
     warnings = []
     if memory > memory_limit:
         warnings.append(f"this solve needs about {format_bytes(memory)} of memory ({P} patches); "
@@ -92,7 +130,8 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     if seconds > seconds_limit:
         warnings.append(f"this solve may take about {seconds:.0f} s ({P} patches, {N} rays per patch); "
                         "use a larger patch size or fewer rays per patch to speed it up")
-    return {"memory_bytes": float(memory), "seconds": float(seconds), "warnings": warnings, "parts": parts}
+    return {"memory_bytes": float(memory), "memory_floor_bytes": float(floor), "seconds": float(seconds),
+            "warnings": warnings, "parts": parts}
 
 
 def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", **kw) -> dict:
