@@ -5,16 +5,25 @@ file imports its own package from its parent folder by the folder's name.
 """
 import sys
 
+import os
+
 if __package__:
-    from .cli import main, script_argv
+    from . import cli as _cli
 else:  # blender -b --python path/to/relight_addon/__main__.py -- radiosity ...
     import importlib
-    import os
 
     _here = os.path.dirname(os.path.abspath(__file__))
     sys.path.insert(0, os.path.dirname(_here))
     _cli = importlib.import_module(os.path.basename(_here) + ".cli")
-    main, script_argv = _cli.main, _cli.script_argv
+main, script_argv = _cli.main, _cli.script_argv
 
 if __name__ == "__main__":
-    sys.exit(main(script_argv(sys.argv)))
+    code = main(script_argv(sys.argv))
+    if _cli.abandoned_jobs():  # a cancelled job: no interpreter shutdown under (or after) it
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except Exception:
+                pass
+        os._exit(code)
+    sys.exit(code)

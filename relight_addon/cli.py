@@ -282,6 +282,8 @@ class _Worker:
     is left behind (daemon) when the process exits."""
 
     GRACE_S = 2.0
+    #: the jobs still running after a cancel (left behind: see ``abandoned_jobs``)
+    left = []
 
     def __init__(self, fn, progress):
         self.fn, self.progress = fn, progress
@@ -306,10 +308,19 @@ class _Worker:
                 t.join(self.GRACE_S)
             except KeyboardInterrupt:
                 pass
+            _Worker.left.append(t)
             raise
         if "error" in self.result:
             raise self.result["error"]
         return self.result["value"]
+
+
+def abandoned_jobs() -> bool:
+    """True when a job was cancelled: a process that exits now should leave with ``os._exit``,
+    as ``__main__`` does. The job may still run inside a long native call (interpreter shutdown
+    under it can crash), or have been cut short inside one (scipy's splu, interrupted by SIGINT,
+    can end its thread leaving a stray error that fails the shutdown's flush of stdout)."""
+    return bool(_Worker.left)
 
 
 def _job(args, fn):

@@ -97,14 +97,19 @@ def load_result(scene) -> dict:
     return _cache[key]
 
 
-def store_result(scene, outcome, fingerprints=None) -> str:
-    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied;
-    returns the result's new id."""
-    from .curve_store import pack_curve
-
+def _stored_data(outcome, fingerprints=None) -> dict:
     data = dict(outcome.stored)
     data["meta"] = dict(data.get("meta", {}), fingerprints=fingerprints or {})
-    text = pack_curve(data)
+    return data
+
+
+def store_result(scene, outcome, fingerprints=None, text=None) -> str:
+    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied;
+    returns the result's new id. ``text``: the packed curve when the caller has it."""
+    from .curve_store import pack_curve
+
+    if text is None:
+        text = pack_curve(_stored_data(outcome, fingerprints))
     rid = uuid.uuid4().hex
     scene[RESULT_PROP] = text
     scene[RESULT_ID_PROP] = rid
@@ -114,9 +119,16 @@ def store_result(scene, outcome, fingerprints=None) -> str:
 
 def show_outcome(scene, outcome, fingerprints=None) -> dict:
     """Replace any previous result by this solve's: store its curve, show its final configuration.
-    All-or-nothing: when showing fails, the previous state is cleared and the error raised."""
+    All-or-nothing: the new result is packed (finite values) and checked against the scene (every
+    object present and unchanged since the export) before the previous one is touched; should
+    showing still fail, the new result is cleared and the error raised."""
+    from .curve_store import pack_curve
+
+    data = _stored_data(outcome, fingerprints)
+    text = pack_curve(data)  # ValueError on non-finite values: nothing changed yet
+    check_stored(scene, data)  # StaleResult when the scene changed during the solve: nothing changed yet
     clear_results(scene)
-    store_result(scene, outcome, fingerprints)
+    store_result(scene, outcome, fingerprints, text)
     try:
         return apply_stored_point(scene, outcome.final_index)
     except BaseException:
@@ -486,14 +498,21 @@ def make_area_lights(scene, index) -> int:
     """Real Blender area lights for configuration ``index``: one per light cell that emits, a
     one-sided area light of the cell's area at its centre (set off like the emitters object),
     facing along its normal, power = exitance x area (W), in a new collection. Rectangular cells
-    (grid cells of quads) get a rectangle of their sides; others a square of their area."""
+    (grid cells of quads) get a rectangle of their sides; others a square of their area.
+    All or nothing: every light is computed and checked (finite, positive area) before the
+    previous lights of this result are replaced; cells without area are left out."""
     from mathutils import Matrix, Vector
     import scipy.sparse as sp
 
     data = load_result(scene)
     rid = result_id(scene)
+    n_points = len(data["n_lights"])
+    if not 0 <= int(index) < n_points:
+        raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     check_stored(scene, data)
     exitance = data["exitance"][int(index)].astype(np.float64)
+    if not np.all(np.isfinite(exitance)):
+        raise SceneError("the stored result holds non-finite values: solve again")
     nC = len(data["cell_normal"])
     basis = sp.csr_matrix((np.ones(len(data["basis_indices"])), data["basis_indices"], data["basis_indptr"]),
                           shape=(nC, len(data["light_area"])))
@@ -501,7 +520,37 @@ def make_area_lights(scene, index) -> int:
     cells = np.flatnonzero(np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1))
     tc = data["cell_triangle_cell"]
     tri_all = data["cell_triangles"].astype(np.float64)
-    old = [c for c in bpy.data.collections if c.get(AREA_LIGHTS_PROP) == rid]
+    scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
+    offset = max(1e-3, OVERLAY_OFFSET * scale)
+    plan = []
+    for c in cells:  # everything computed first
+        tri = tri_all[tc == c]
+        a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        area = float(a.sum())
+        if not (area > 0 and np.isfinite(area)):
+            continue
+        center = (tri.mean(axis=1) * a[:, None]).sum(axis=0) / area
+        n = data["cell_normal"][c]
+        power = cell_e[c] * area
+        # the cell's own frame: its longest edge and the side across it
+        pts = tri.reshape(-1, 3)
+        e1 = tri[0, 1] - tri[0, 0]
+        u = e1 - n * (e1 @ n)
+        u /= max(np.linalg.norm(u), 1e-30)
+        v = np.cross(n, u)
+        su, sv = np.ptp(pts @ u), np.ptp(pts @ v)
+        if len(tri) == 2 and abs(su * sv - area) <= 1e-3 * area:  # a rectangle
+            shape, size = "RECTANGLE", (float(sv), float(su))
+        else:
+            shape, size = "SQUARE", (float(np.sqrt(area)), float(np.sqrt(area)))
+        rot = np.column_stack([v, u, -n])  # a rotation; the light shines along its local -Z
+        values = np.concatenate([center, n, power, size, rot.ravel()])
+        if not np.all(np.isfinite(values)):
+            raise SceneError(f"light cell {int(c)} of the stored result has non-finite geometry: solve again")
+        plan.append((int(c), shape, size, float(power.sum()), power / max(power.max(), 1e-30),
+                     center + offset * n, rot))
+    # write: replace this result's own earlier lights (by identity), then add the new ones
+    old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
     for coll in old:  # Make Area Lights again replaces its own lights of this result
         for o in list(coll.objects):
             d = o.data
@@ -512,36 +561,18 @@ def make_area_lights(scene, index) -> int:
     coll = bpy.data.collections.new("Relight Lights")
     coll[AREA_LIGHTS_PROP] = rid or ""
     scene.collection.children.link(coll)
-    scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
-    offset = max(1e-3, OVERLAY_OFFSET * scale)
-    for c in cells:
-        tri = tri_all[tc == c]
-        a = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        area = float(a.sum())
-        center = (tri.mean(axis=1) * a[:, None]).sum(axis=0) / area
-        n = data["cell_normal"][c]
-        power = cell_e[c] * area
+    for c, shape, size, energy, color, location, rot in plan:
         light = bpy.data.lights.new(f"Relight light {c}", "AREA")
-        # the cell's own frame: its longest edge and the side across it
-        pts = tri.reshape(-1, 3)
-        e1 = tri[0, 1] - tri[0, 0]
-        u = e1 - n * (e1 @ n)
-        u /= max(np.linalg.norm(u), 1e-30)
-        v = np.cross(n, u)
-        su, sv = np.ptp(pts @ u), np.ptp(pts @ v)
-        if len(tri) == 2 and abs(su * sv - area) <= 1e-3 * area:  # a rectangle
-            light.shape = "RECTANGLE"
-            light.size, light.size_y = float(sv), float(su)
-        else:
-            light.shape = "SQUARE"
-            light.size = float(np.sqrt(area))
-        light.energy = float(power.sum())  # Blender's area-light power is radiant flux (W)
-        light.color = tuple(float(x) for x in power / max(power.max(), 1e-30))
+        light.shape = shape
+        light.size = size[0]
+        if shape == "RECTANGLE":
+            light.size_y = size[1]
+        light.energy = energy  # Blender's area-light power is radiant flux (W)
+        light.color = tuple(float(x) for x in color)
         obj = bpy.data.objects.new(light.name, light)
-        rot = Matrix(np.column_stack([v, u, -n]).tolist())  # a rotation; the light shines along its local -Z
-        obj.matrix_world = Matrix.Translation(Vector(center + offset * n)) @ rot.to_4x4()
+        obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
         coll.objects.link(obj)
-    return len(cells)
+    return len(plan)
 
 
 # --- the chart ---------------------------------------------------------------------------------

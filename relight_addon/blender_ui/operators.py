@@ -43,6 +43,25 @@ def _mesh_objects(context, selected_only=False):
     return [o for o in objs if o.type == "MESH"]
 
 
+def _message(exc) -> str:
+    """The user's message of an exception (a KeyError's without the quotes str() adds)."""
+    if isinstance(exc, KeyError) and exc.args:
+        return str(exc.args[0])
+    return str(exc)
+
+
+def _refuse(op, exc):
+    """Report a refusal (the scene is unchanged) and cancel."""
+    op.report({"ERROR"}, _message(exc))
+    return {"CANCELLED"}
+
+
+def linear_to_srgb(c):
+    """Scene-linear -> sRGB-encoded values (what BMesh byte colour layers hold)."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+
+
 # --- targets ---------------------------------------------------------------------------
 
 class RELIGHT_OT_paint_targets(bpy.types.Operator):
@@ -58,7 +77,11 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
 
     def execute(self, context):
         obj = context.active_object
-        layer = export.ensure_target_layer(obj.data)
+        try:  # validated first: a linked mesh, or a relight_target of another domain or type, is refused
+            export.check_writable_mesh(obj)
+            layer = export.ensure_target_layer(obj.data)  # the existing layer of either colour type
+        except SceneError as exc:
+            return _refuse(self, exc)
         colors = obj.data.color_attributes
         colors.active_color = colors[layer.name]  # vertex paint paints the active colour layer
         if context.mode != "PAINT_VERTEX":
@@ -88,15 +111,30 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
 
     def execute(self, context):
         color = tuple(context.scene.relight.paint_color) + (1.0,)
+        objs = [o for o in context.objects_in_mode if o.type == "MESH"]
+        try:  # every object checked before any is written: all or nothing
+            for obj in objs:
+                export.check_writable_mesh(obj)
+                export.target_layer(obj.data, obj.name)  # None, or a Face Corner colour layer of either type
+        except SceneError as exc:
+            return _refuse(self, exc)
         count = 0
-        for obj in context.objects_in_mode:
+        for obj in objs:
             mesh = obj.data
             bm = bmesh.from_edit_mesh(mesh)
-            layer = bm.loops.layers.float_color.get(TARGET) or bm.loops.layers.float_color.new(TARGET)
+            # write into the existing layer whatever its type (BMesh byte colours hold sRGB values)
+            layer = bm.loops.layers.float_color.get(TARGET)
+            value = (0.0, 0.0, 0.0, 0.0) if self.unpaint else color
+            if layer is None and bm.loops.layers.color.get(TARGET) is not None:
+                layer = bm.loops.layers.color.get(TARGET)
+                if not self.unpaint:
+                    value = tuple(linear_to_srgb(color[:3])) + (1.0,)
+            if layer is None:
+                layer = bm.loops.layers.float_color.new(TARGET)
             for f in bm.faces:
                 if f.select:
                     for loop in f.loops:
-                        loop[layer] = (0.0, 0.0, 0.0, 0.0) if self.unpaint else color
+                        loop[layer] = value
                     count += 1
             bmesh.update_edit_mesh(mesh)
         self.report({"INFO"}, f"{'Unpainted' if self.unpaint else 'Painted'} {count} face(s)")
@@ -110,9 +148,15 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
+        objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
+        objs = [o for o in objs if o.data.attributes.get(TARGET) is not None]
+        try:  # all or nothing: a linked (read-only) mesh among them refuses the whole operation
+            for obj in objs:
+                export.check_writable_mesh(obj)
+        except SceneError as exc:
+            return _refuse(self, exc)
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
         n = 0
         for obj in objs:
             attr = obj.data.attributes.get(TARGET)
@@ -137,11 +181,14 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
         return context.active_object is not None and context.active_object.type == "MESH"
 
     def execute(self, context):
-        if context.mode != "OBJECT":
+        if context.mode != "OBJECT":  # the attributes are read in Object Mode (edit-mode changes flushed)
             bpy.ops.object.mode_set(mode="OBJECT")
         objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
-        masks = {o.name: (results.shown_light_polygons(context.scene, o) if self.kind == "LIGHT"
-                          else export.face_flags(o, self.kind.lower())) for o in objs}
+        try:
+            masks = {o.name: (results.shown_light_polygons(context.scene, o) if self.kind == "LIGHT"
+                              else export.face_flags(o, self.kind.lower())) for o in objs}
+        except (SceneError, KeyError) as exc:
+            return _refuse(self, exc)
         for o in objs:
             o.select_set(True)
         bpy.ops.object.mode_set(mode="EDIT")
@@ -181,9 +228,16 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
         return context.mode == "EDIT_MESH"
 
     def execute(self, context):
-        # the selection is read in Edit Mode, the BOOLEAN face attribute written in Object Mode
-        # (BMesh has no boolean layers before Blender 4.3)
-        objs = list(context.objects_in_mode)
+        # the selection is read in Edit Mode, the face attribute written in Object Mode (BMesh has
+        # no boolean layers before Blender 4.3), into the existing relight_forbidden whatever its
+        # numeric type (BOOLEAN, INT, INT8, FLOAT: non-zero = forbidden), else a new BOOLEAN one
+        objs = [o for o in context.objects_in_mode if o.type == "MESH"]
+        try:  # every object checked before any is written: all or nothing
+            for obj in objs:
+                export.check_writable_mesh(obj)
+                export.forbidden_layer(obj.data, obj.name)
+        except SceneError as exc:
+            return _refuse(self, exc)
         bpy.ops.object.mode_set(mode="OBJECT")
         count = 0
         for obj in objs:
@@ -191,11 +245,10 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
             n = len(mesh.polygons)
             sel = np.zeros(n, dtype=bool)
             mesh.polygons.foreach_get("select", sel)
-            attr = export.ensure_attribute(mesh, FORBIDDEN, "BOOLEAN", "FACE")
-            vals = np.zeros(n, dtype=bool)
-            attr.data.foreach_get("value", vals)
+            attr = export.ensure_forbidden_layer(mesh)
+            vals = export.read_forbidden(attr, n)
             vals[sel] = not self.allow
-            attr.data.foreach_set("value", vals)
+            export.write_forbidden(attr, vals)
             mesh.update()
             count += int(sel.sum())
         bpy.ops.object.mode_set(mode="EDIT")
@@ -277,8 +330,8 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         settings = context.scene.relight
         options = job_options(settings)
-        exp = export.export_scene(context, target_scale=settings.target_scale)
-        jobs.check_solvable(exp.faces)
+        exp = export.export_scene(context)  # the target scale: the scene's relight_target_scale (= settings')
+        jobs.check_solvable(exp.faces, "inverse", exp.notes)
         return exp, options
 
     def execute(self, context):
@@ -402,12 +455,13 @@ class RELIGHT_OT_apply_configuration(bpy.types.Operator):
             self.report({"ERROR"}, f"Configuration {k} does not exist (0..{n - 1})")
             return {"CANCELLED"}
         try:
-            results.apply_stored_point(context.scene, k)
+            shown = results.apply_stored_point(context.scene, k)
         except (ValueError, KeyError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+            return _refuse(self, exc)
         set_curve_index(settings, k)
         results.update_chart(context.scene)
+        for w in shown["skipped"]:  # e.g. linked meshes: the lights show, the radiosity layer cannot
+            self.report({"WARNING"}, w)
         p = settings.curve[k]
         self.report({"INFO"}, f"Configuration {k}: {p.n_lights} light(s), relative error {p.relative_error:.3g}")
         return {"FINISHED"}
@@ -441,8 +495,7 @@ class RELIGHT_OT_make_area_lights(bpy.types.Operator):
         try:
             n = results.make_area_lights(context.scene, context.scene.relight.curve_index)
         except (ValueError, KeyError) as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
+            return _refuse(self, exc)
         self.report({"INFO"}, f"Created {n} area light(s) in collection 'Relight Lights'")
         return {"FINISHED"}
 

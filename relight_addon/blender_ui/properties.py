@@ -21,10 +21,31 @@ class RELIGHT_CurvePoint(bpy.types.PropertyGroup):
     curve_index: IntProperty(name="Curve Index", description="Position of this configuration on the whole curve")
 
 
+def _get_target_scale(self):
+    """The scene custom property ``relight_target_scale`` (the one source of truth, read by the CLI
+    too), 1 when missing; a value that is not a finite number shows as 1 here and is refused, with
+    its name, by a solve."""
+    import math
+
+    from ..export import TARGET_SCALE_PROP
+
+    value = self.id_data.get(TARGET_SCALE_PROP, 1.0)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return 1.0
+    return float(value)
+
+
+def _set_target_scale(self, value):
+    from ..export import TARGET_SCALE_PROP
+
+    self.id_data[TARGET_SCALE_PROP] = float(value)
+
+
 class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
     target_scale: FloatProperty(
-        name="Target Scale", default=1.0, min=0.0, soft_max=100.0,
-        description="Painted colours are radiance; the target radiosity is pi x colour x this scale (W/m^2)")
+        name="Target Scale", default=1.0, min=0.0, soft_max=100.0, get=_get_target_scale, set=_set_target_scale,
+        description="Painted colours are radiance; the target radiosity is pi x colour x this scale (W/m^2). "
+                    "Stored as the scene custom property relight_target_scale (the CLI reads the same)")
     paint_color: bpy.props.FloatVectorProperty(
         name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
         description="Colour used by Fill Targets")
