@@ -239,6 +239,16 @@ def build(name, d):
         floor["relight_no_lights"] = True
         _paint(floor)
         _link(lib, "lib_ceiling")
+    elif name == "linked_lamp":  # radiosity: the library's ceiling emits
+        _reset()
+        cv, cf = _grid(2, z=1.0, flip=True)
+        _mesh("lib_ceiling", cv, cf, material=_emissive("lamp", 1.0))
+        lib = os.path.join(d, "lib_lamp.blend")
+        bpy.ops.wm.save_as_mainfile(filepath=lib)
+        _reset()
+        fv, ff = _grid(2)
+        _mesh("floor", fv, ff)
+        _link(lib, "lib_ceiling")
     elif name == "bright_lamp":
         _room()
         led = _emissive("led", 30000.0)  # radiosity 94,000 W/m^2: above float16's 65,504
@@ -545,7 +555,16 @@ CLI_CASES = [
     Cli("bright-lamp-float16", "bright_lamp", code=0, out=True, check=_check_bright),
     Cli("corrupt-stored-result-replaced", "corrupt_result", code=0, out=True, check=_check_room_ok),
     Cli("radiosity-out", "lamp_room", command="radiosity", code=0, out=True),
+    Cli("radiosity-linked-mesh", "linked_lamp", command="radiosity", code=0, out=True, message="linked from",
+        check=lambda report, out, tmp: _check_linked_radiosity(out)),
 ]
+
+
+def _check_linked_radiosity(out):
+    bpy.ops.wm.open_mainfile(filepath=out)
+    assert "relight_radiosity" in bpy.data.objects["floor"].data.attributes
+    assert "relight_radiosity" not in bpy.data.objects["lib_ceiling"].data.attributes
+    assert bpy.data.objects["lib_ceiling"].data.library is not None  # still the library's mesh
 
 
 def _fill(a, tmp, scene):
@@ -890,6 +909,15 @@ def _check_int_forbidden_solve():
     assert lit.any() and not lit[0] and not lit[3]
 
 
+def _check_area_lights_beside_users():
+    _check_user_collection_kept()
+    ours = [c for c in bpy.data.collections if c.get("relight_area_lights")]
+    assert len(ours) == 1 and ours[0].name != "Relight Lights"
+    lights = [o.data for o in ours[0].objects]
+    settings = bpy.context.scene.relight
+    n = settings.curve[settings.curve_index].n_lights  # one area light per lit cell: at least one per light
+    assert len(lights) >= n > 0 and all(light.type == "AREA" and light.energy > 0 for light in lights)
+
 OP_CASES = [
     # --- targets
     Op("paint-keeps-byte-layer", "target_byte", lambda: _activate("floor"), lambda: bpy.ops.relight.paint_targets(),
@@ -945,7 +973,14 @@ OP_CASES = [
        error="ceiling has changed since the solve"),
     Op("clear-results-keeps-user-collection", "room", _user_relight_lights,
        lambda: bpy.ops.relight.clear_results(), check=_check_user_collection_kept),
+    Op("area-lights-beside-user-collection", "room", lambda: (_user_relight_lights(), _prepare_solved()),
+       lambda: bpy.ops.relight.make_area_lights(), check=_check_area_lights_beside_users),
+    Op("apply-linked-mesh-warns", "linked_ceiling", _prepare_solved,
+       lambda: bpy.ops.relight.apply_configuration(index=0), warning="its mesh is linked from",
+       check=_check_linked_solve),
 ]
+
+
 
 
 def _build_extra(name, d):

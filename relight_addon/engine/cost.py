@@ -10,16 +10,16 @@ terms of a solve (jobs.run_solve) from the sizes alone:
   DENSE_LIMIT, scipy lu_factor): 3 x 8 P^2 bytes kept (the three factorisations) plus one
   8 P^2 working copy; 3 x 2/3 P^3 flops. Sparse (splu): A has nnz = P x min(P, HIT_FRACTION x
   rays per patch) (the distinct patches a patch's rays hit), its factors about LU_FILL times
-  that (at most P^2): 12 bytes per non-zero (value + index), nnz(LU)^2 / P flops, per channel.
-  Measured (benchmarks/, docs/benchmarks.md "Sparse LU"): nnz(A)/P = 0.53-0.72 x 1024 rays,
-  fill 10-15, and nnz(LU)^2/P within a factor 1.3 of splu's time at FLOPS / 3 on the Cornell
-  box and the staircase at 6-13 k patches (their factors fill to near dense; scenes with much
-  occlusion fill less, so this term may be pessimistic there).
+  that (at most P^2): 12 bytes per non-zero (value + index), nnz(LU)^2 / P flops at FLOPS x
+  SPLU_SPEED, per channel. Measured (benchmarks/bench_sparse_lu.py, docs/benchmarks.md "Sparse
+  LU"): nnz(A)/P = 0.53-0.71 x 1024 rays, fill 10.1-14.7, LU memory within 0.7-1.15 x the model,
+  splu's time 0.35-3 x the model on the Cornell box and the staircase at 6-13 k patches (their
+  factors fill to near dense; scenes with much occlusion fill less: pessimistic there).
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread.
 - the transfer matrix T (rows P, columns C of A^-1; solvers registered with cost="transfer"): 3 x 8 m C
-  bytes, 3 x 2 P^2 min(m, C) flops of triangular solves, and its minimum-norm solve (Gram
-  matrix m x m: m^2 C + m^3/3 flops per channel).
+  bytes, 3 x 2 nnz(LU) min(m, C) flops of triangular solves (nnz(LU) = P^2 when dense), and its
+  minimum-norm solve (Gram matrix m x m: m^2 C + m^3/3 flops per channel).
 - the paper's formulation (a solver registered with cost="paper": "svd") instead builds M = [A_U | -I_C] (P x (P - m + C))
   and its Gram matrix P x P: 8 P (P - m + C) + 8 P^2 bytes, P^2 (P - m + C) + P^3/3 flops
   per channel.
@@ -50,7 +50,7 @@ FLOPS = 5.0e9
 #: speed relative to FLOPS (measured, see the module docstring)
 HIT_FRACTION = 0.6
 LU_FILL = 12.0
-SPLU_SPEED = 1.0 / 3.0
+SPLU_SPEED = 0.5
 #: working memory per ray in flight (origins, directions, hits, sample pool), bytes
 RAY_BYTES = 96
 #: memory per patch of the meshed scene (triangles, attributes, maps), bytes
@@ -118,8 +118,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         cols = P - m + C
         parts["inverse"] = (8.0 * P * cols + 8.0 * P2, 3 * (P2 * cols + P2 * P / 3.0) / flops)
     else:
+        solve = P2 if dense else min(P2, LU_FILL * P * row)  # flops/2 of one solve with the factors
         parts["inverse"] = (3 * 8.0 * m * C + 8.0 * P * k + 8.0 * m * m,
-                            3 * (2.0 * P2 * k + float(m) * m * C + float(m) ** 3 / 3.0) / flops)
+                            3 * (2.0 * solve * k + float(m) * m * C + float(m) ** 3 / 3.0) / flops)
     memory = sum(b for b, _ in parts.values())
     seconds = sum(s for _, s in parts.values())
     floor = PATCH_BYTES * float(P) + RAY_BYTES * float(N) + (4.0 * P2 + 8.0 * P2 if dense else 12.0 * P)
