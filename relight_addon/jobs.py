@@ -492,6 +492,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if not pm.refine(faces, patches, importance):
             break
         patches = pm.mesh(faces)
+        check_memory(solve_cost(patches, options), f"{patches.n_patches} patches after refinement pass {p + 1}")
         t_mesh += time.perf_counter() - t3
     if mode == "inverse" and np.any(background > 0):
         emitting = np.any(patches.exitance > 0, axis=1)

@@ -423,7 +423,11 @@ def apply_stored_point(scene, index) -> dict:
         for oi, ob in objs.items():
             sel = np.flatnonzero(data["light_object"] == oi)
             polys = np.concatenate([lp[lp_ptr[j]:lp_ptr[j + 1]] for j in sel]) if len(sel) else np.zeros(0, int)
-            if len(polys):
+            if len(polys) and linked_message(ob):
+                skipped.append(f"{ob.name}: its mesh is linked (read-only), so its own emission cannot be switched "
+                               "off: it still emits on top of the reduced lights; make it local to see the reduction "
+                               "alone")
+            elif len(polys):
                 suppress.append((ob, polys - off[oi]))
     # write
     clear_shown(scene)

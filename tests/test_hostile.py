@@ -557,6 +557,8 @@ CLI_CASES = [
     Cli("radiosity-out", "lamp_room", command="radiosity", code=0, out=True),
     Cli("radiosity-linked-mesh", "linked_lamp", command="radiosity", code=0, out=True, message="linked from",
         check=lambda report, out, tmp: _check_linked_radiosity(out)),
+    Cli("reduce-linked-emitter", "linked_lamp", command="reduce", code=0, out=True,
+        message="lib_ceiling: its mesh is linked (read-only), so its own emission cannot be switched off"),
 ]
 
 
