@@ -440,8 +440,11 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     emitters as fixed background; direct: the paper's direct-lighting mode)."""
     t0 = time.perf_counter()
     pm = patch_model(options, default_max_patch_size)
+    refines = mode == "inverse" and hasattr(pm, "refine") and options.refine_passes > 0
     if patches is None:
         check_before_meshing(faces, options, default_max_patch_size, mode)
+        patches = pm.mesh(faces)
+    elif refines:  # a refining model keeps its state from its own first mesh (same patches: deterministic)
         patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
