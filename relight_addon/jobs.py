@@ -18,7 +18,7 @@ import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
-from .engine.cost import estimate_patches_cost
+from .engine.cost import check_memory, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
@@ -205,9 +205,11 @@ def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=Non
     return patch_model(options, default_max_patch_size).mesh(faces)
 
 
-def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
+def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0) -> dict:
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
-    return estimate_patches_cost(patches, options.rays_per_patch, options.solver)
+    passes = options.refine_passes if PATCH_MODELS[options.patch_model].get("refines") else 0
+    return estimate_patches_cost(patches, options.rays_per_patch, options.solver, n_triangles=n_triangles,
+                                 refine_passes=passes)
 
 
 @dataclass
@@ -307,7 +309,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
-    cost = solve_cost(patches, options)
+    cost = solve_cost(patches, options, len(faces.triangles))
+    check_memory(cost)  # refuse before any more work
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
     t_ff = t_problem = 0.0

@@ -85,7 +85,7 @@ def _ids(rows) -> np.ndarray:
 
 @PATCH_MODELS.register("adaptive", "Adaptive",
                        "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
-                       "whole polygons), reflectors refined where the targets need it")
+                       "whole polygons), reflectors refined where the targets need it", refines=True)
 class AdaptiveModel:
     scales = ("cell", "group", "polygon")
 
@@ -217,6 +217,8 @@ class AdaptiveModel:
         """Split the reflector patches of highest ``importance`` (P,) (psi_j A_j B_j) and merge
         those of lowest: their faces go one level finer / coarser. Returns False when nothing
         changed."""
+        if self.level is None:  # the patches were meshed by another instance with the same options
+            self._sizes(faces)
         refl = patches.level >= 0
         eta = np.where(refl, np.maximum(importance, 0.0), 0.0)
         total = eta.sum()
