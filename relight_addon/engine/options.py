@@ -28,7 +28,7 @@ class JobOptions:
     require_positive: bool = True  # stop criterion: no negatives
     patch_model: str = DEFAULT_PATCH_MODEL
     light_size: float | None = None  # None: the patch size (adaptive model's light cells)
-    refine_passes: int = 2  # adaptive model: refinement passes after the first solve (0 = none)
+    refine_passes: int = 0  # adaptive model: refinement passes after a first solve (measured: docs/benchmarks.md)
     refine_tolerance: float = 0.02  # ... stop when the predicted target radiosity moves less than this (relative)
     estimator: str = DEFAULT_ESTIMATOR
 
