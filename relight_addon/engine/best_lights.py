@@ -64,6 +64,7 @@ __all__ = [
     "total_power",
     "fit_lights",
     "curve_notes",
+    "best_k_for_problem",
 ]
 
 SCORES = ("error", "correlation")
@@ -488,10 +489,16 @@ def _add_one(model, S, fit, score, max_exact):
         return None
     if score == "correlation":
         gain = gain1[cand]
-        j = int(cand[np.argmax(gain)])  # first maximum: lowest index on ties
-        if not gain.max() > 0:
+        gmax = float(gain.max())
+        if not gmax > 0:
             return None
-        f = model.fit(np.append(S, j))
+        # ties (numerically equal gains, e.g. duplicate lights): the exact fits decide (error, power)
+        ties = cand[gain >= gmax - 1e-9 * max(gmax, model.tol * model.norm)][:max_exact]
+        f = None
+        for j in ties:
+            fj = model.fit(np.append(S, j))
+            if f is None or model.better(fj, f):
+                f = fj
     else:
         best, _ = _branch_and_bound(model, lambda i: np.append(S, cand[i]), LB[cand], UB[cand], fit, max_exact)
         f = best
@@ -656,6 +663,11 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
     if stats is not None:
         stats.update(counts)
     return curve
+
+
+def best_k_for_problem(problem, k_max, **kw):
+    """best_k_curve on an InverseProblem: its transfer matrices, targets and light areas."""
+    return best_k_curve(problem.transfer, problem.b_target, k_max, problem.light_area, **kw)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -987,11 +999,11 @@ def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
     err = float(np.linalg.norm(np.stack([model.T[c] @ e[:, c] for c in range(3)], axis=1) - model.b))
     rel = err / model.norm if model.norm > 0 else err
     if status == "ok":
-        msg = (f"every target within +-{100 * tol:.3g} %: {int(on.sum())} light(s), {power:.4g} W "
+        msg = (f"every target within \u00b1{100 * tol:.3g} %: {int(on.sum())} light(s), {power:.4g} W "
                f"(largest deviation {100 * dev:.3g} %)")
     else:
-        msg = (f"no non-negative lights keep every target within +-{100 * tol:.3g} %; the closest is "
-               f"+-{100 * reach:.3g} % ({int(on.sum())} light(s), {power:.4g} W at that tolerance)")
+        msg = (f"no non-negative lights keep every target within \u00b1{100 * tol:.3g} %; the closest is "
+               f"\u00b1{100 * reach:.3g} % ({int(on.sum())} light(s), {power:.4g} W at that tolerance)")
     return ToleranceResult(status=status, message=msg, tolerance=tol, exitance=e, lights=np.flatnonzero(on),
                            n_lights=int(on.sum()), power=power, max_deviation=dev, error=err, relative_error=rel,
                            reachable_tolerance=reach, zero_band=zb, seconds=time.perf_counter() - t0)
