@@ -72,14 +72,17 @@ def uptime():
 
 
 def per_k_from_reduction(curve, k_max, norm):
-    """Relative error, negatives and power of the curve point with exactly k lights (None if absent)."""
+    """Relative error, negatives and power of the curve point with exactly k lights (the first one on
+    the curve), or when the curve has none (nnls-greedy drops lights its refit switches off), of its
+    point with the most lights below k."""
     by_n = {}
     for p in curve:
         if p.n_lights <= k_max and p.n_lights not in by_n:
             by_n[p.n_lights] = p
     rel, neg, power = [], [], []
     for k in range(1, k_max + 1):
-        p = by_n.get(k)
+        below = [n for n in by_n if n <= k]
+        p = by_n[max(below)] if below else None
         rel.append(None if p is None else float(p.error / norm))
         neg.append(None if p is None else int(p.n_negative))
         power.append(None if p is None else float(np.sum(p.exitance.sum(1) * AREA[p.lights])))
@@ -221,7 +224,8 @@ def plot(out, K):
     ax.set_yscale("log")
     ax.set_xlabel("number of lights k")
     ax.set_ylabel("relative error  ||T e - b|| / ||b||")
-    ax.set_title("Staircase (693 candidate lights, 44 targets): best k-light configurations")
+    ax.set_title("Staircase (693 candidate lights, 44 targets): best k-light configurations\n"
+                 "dashed: the paper's reductions and nnls-greedy; hollow markers: negative lights", fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7.5, loc="upper right")
     fig.tight_layout()

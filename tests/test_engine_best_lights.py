@@ -299,7 +299,11 @@ def test_curve_notes():
     curve = bl.best_k_curve(T, b, 2, area)
     lb = bl.lower_bounds(T, b, 2)
     notes = bl.curve_notes(curve, lb, np.linalg.norm(b))
-    assert any("optimal (exhaustive search)" in n for n in notes)
+    assert notes == ["2 light(s) meet the targets (relative error 0)"] or "meet the targets" in notes[-1]
+    T, b, area = rand_problem(3)
+    curve = bl.best_k_curve(T, b, 2, area)
+    notes = bl.curve_notes(curve, bl.lower_bounds(T, b, 2), np.linalg.norm(b))
+    assert notes[-1].startswith("2 light(s): optimal (exhaustive search), relative error")
     # targets no positive lights can give: a bright target and a dark one seen the same way
     t = np.array([[1.0, 0.9], [0.9, 1.0]])
     bb = np.array([[10.0] * 3, [0.0] * 3])

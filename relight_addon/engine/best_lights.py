@@ -844,7 +844,9 @@ def curve_notes(curve, bounds, target_norm, gap=0.1, k=None):
         notes.append(f"no non-negative lights meet these targets: the best any number of lights can do is a "
                      f"relative error of {bounds.nnls / norm:.3g} (NNLS on every candidate); "
                      f"{pt.n_lights} light(s) give {pt.relative_error:.3g}")
-    if exact and pt.error <= lb / (1 - BOUND_MARGIN) * (1 + 1e-6) + 1e-12 * norm:
+    if pt.relative_error <= 1e-9:
+        notes.append(f"{pt.n_lights} light(s) meet the targets (relative error {pt.relative_error:.2g})")
+    elif exact and pt.error <= lb / (1 - BOUND_MARGIN) * (1 + 1e-6) + 1e-12 * norm:
         notes.append(f"{pt.n_lights} light(s): optimal (exhaustive search), relative error {pt.relative_error:.3g}")
     else:
         notes.append(f"{pt.n_lights} light(s): relative error {pt.relative_error:.3g}; no configuration of at most "
@@ -860,13 +862,18 @@ def curve_notes(curve, bounds, target_norm, gap=0.1, k=None):
 class ToleranceResult:
     """Least total power within a tolerance band.
 
-    status: 'ok' (every target channel within the band), 'infeasible' (no non-negative
+    status: 'ok' (every target channel within the band), 'partial' (every target channel that
+    a light reaches is within the band, but some targets no light reaches stay dark; see
+    ``unreachable``), 'infeasible' (no non-negative
     configuration is; ``exitance`` is then the least-power configuration at the smallest
     reachable tolerance ``reachable_tolerance``) or 'failed' (the LP solver failed; see
     message). exitance (n, 3) W/m^2 >= 0 on every light (zero when unused); lights: indices
     of the lights used (any channel above ``1e-9`` of the largest exitance); max_deviation:
     max over target channels of |T e - b| / band_scale (band_scale = b, or the zero-target
-    band for b = 0); power (W) = sum_j A_j sum_c e_jc; error: Eq. 1 of that configuration.
+    band for b = 0); power (W) = sum_j A_j sum_c e_jc; error: Eq. 1 of that configuration
+    (over every target). unreachable: target rows that no light reaches while painted above 0
+    (occluded); they are left out of the band (their deviation is 100 % whatever the lights)
+    and named in the message.
     """
 
     status: str
@@ -881,6 +888,7 @@ class ToleranceResult:
     relative_error: float
     reachable_tolerance: float | None = None
     zero_band: float = 0.0
+    unreachable: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     seconds: float = 0.0
 
 
@@ -894,8 +902,18 @@ def _default_zero_band(b):
     return float(pos.mean()) if len(pos) else 0.0
 
 
-def _deviation(model, e, scale):
+def _unreachable(model):
+    """(m, 3) bool: target channels no light reaches (a zero row of T) that are painted above 0."""
+    scale = max(float(np.abs(t).max()) for t in model.T) if model.T[0].size else 0.0
+    zero = np.stack([np.abs(t).max(axis=1) <= 1e-12 * max(scale, 1e-300) if t.shape[1] else
+                     np.ones(t.shape[0], dtype=bool) for t in model.T], axis=1)
+    return zero & (model.b > 0)
+
+
+def _deviation(model, e, scale, rows=None):
     dev = np.abs(np.stack([model.T[c] @ e[:, c] for c in range(3)], axis=1) - model.b)
+    if rows is not None:
+        dev = np.where(rows, dev, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(scale > 0, dev / np.where(scale > 0, scale, 1.0),
                        np.where(dev > 1e-12 * max(model.norm, 1e-300), np.inf, 0.0))
@@ -906,22 +924,29 @@ def _lp_options():
     return {"presolve": True, "primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}
 
 
-def min_max_deviation(T, b, zero_band=None):
+def min_max_deviation(T, b, zero_band=None, skip_unreachable=True):
     """The smallest tolerance x such that non-negative lights keep |T e - b| <= x * scale on every
     target channel (scale = b, or ``zero_band`` W/m^2 where b = 0; default the mean of the positive
-    target values), and such an exitance (n, 3). One LP per channel (the channels decouple)."""
+    target values), and such an exitance (n, 3). One LP per channel (the channels decouple).
+    ``skip_unreachable``: leave out the target channels no light reaches (their deviation is 1
+    whatever the lights)."""
     model = _Model(T, b, None)
     zb = _default_zero_band(model.b) if zero_band is None else float(zero_band)
     scale = _band_scale(model.b, zb)
-    m, n = model.m, model.n
+    rows = ~_unreachable(model) if skip_unreachable else np.ones(model.b.shape, dtype=bool)
+    n = model.n
     e = np.zeros((n, 3))
     xs = []
     for c in range(3):
-        w = scale[:, c]
-        t = model.T[c]
+        keep = rows[:, c]
+        if not keep.any():
+            xs.append(0.0)
+            continue
+        w = scale[keep, c]
+        t = model.T[c][keep]
         # variables [e (n), x]; min x s.t. T e - x w <= b, -T e - x w <= -b, e >= 0, x >= 0
         A = np.block([[t, -w[:, None]], [-t, -w[:, None]]])
-        ub = np.concatenate([model.b[:, c], -model.b[:, c]])
+        ub = np.concatenate([model.b[keep, c], -model.b[keep, c]])
         cost = np.zeros(n + 1)
         cost[-1] = 1.0
         res = sopt.linprog(cost, A_ub=A, b_ub=ub, bounds=[(0, None)] * (n + 1), method="highs",
@@ -945,7 +970,8 @@ def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
     per channel (they decouple) with scipy.optimize.linprog(method='highs'). A basic
     solution uses at most 2 m lights per channel; nothing limits the number of lights.
 
-    When no non-negative configuration satisfies the band, the result has status
+    Target channels no light reaches (zero rows of T) are left out of the constraints and named
+    in the message. When no non-negative configuration satisfies the band, the result has status
     'infeasible', a message naming the smallest reachable tolerance (the min-max deviation
     LP), and the least-power configuration at that tolerance. Returns a ToleranceResult.
     """
@@ -959,13 +985,18 @@ def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
         raise ValueError(f"zero_band must be a non-negative number (W/m^2), got {zero_band}")
     scale = _band_scale(model.b, zb)
     n = model.n
+    unreach = _unreachable(model)
+    rows = ~unreach
 
     def solve(x):
         e = np.zeros((n, 3))
         for c in range(3):
-            t = model.T[c]
-            lo = model.b[:, c] - x * scale[:, c]
-            hi = model.b[:, c] + x * scale[:, c]
+            keep = rows[:, c]
+            if not keep.any():
+                continue
+            t = model.T[c][keep]
+            lo = model.b[keep, c] - x * scale[keep, c]
+            hi = model.b[keep, c] + x * scale[keep, c]
             A = np.vstack([t, -t])
             ub = np.concatenate([hi, -lo])
             res = sopt.linprog(model.area, A_ub=A, b_ub=ub, bounds=(0, None), method="highs",
@@ -990,20 +1021,30 @@ def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
         return ToleranceResult(status="failed", message=status, tolerance=tol, exitance=np.zeros((n, 3)),
                                lights=np.zeros(0, dtype=np.int64), n_lights=0, power=0.0,
                                max_deviation=float("nan"), error=float("nan"), relative_error=float("nan"),
-                               reachable_tolerance=reach, zero_band=zb, seconds=time.perf_counter() - t0)
+                               reachable_tolerance=reach, zero_band=zb, unreachable=np.flatnonzero(unreach.any(1)),
+                               seconds=time.perf_counter() - t0)
     emax = float(e.max()) if e.size else 0.0
     on = e.max(axis=1) > 1e-9 * max(emax, 1e-300)
     e = np.where(on[:, None], e, 0.0)
     power = total_power(e, model.area)
-    dev = _deviation(model, e, scale)
+    dev = _deviation(model, e, scale, rows)
     err = float(np.linalg.norm(np.stack([model.T[c] @ e[:, c] for c in range(3)], axis=1) - model.b))
     rel = err / model.norm if model.norm > 0 else err
-    if status == "ok":
-        msg = (f"every target within \u00b1{100 * tol:.3g} %: {int(on.sum())} light(s), {power:.4g} W "
-               f"(largest deviation {100 * dev:.3g} %)")
+    bad = np.flatnonzero(unreach.any(axis=1))  # target rows no light reaches (painted above 0)
+    if unreach.any() and not (rows & (model.b > 0)).any():
+        status = "infeasible"
+        msg = "no candidate light reaches any painted target: every light stays off"
+    elif status == "ok":
+        status = "partial" if len(bad) else "ok"
+        msg = (f"every target {'a light reaches ' if len(bad) else ''}within \u00b1{100 * tol:.3g} %: "
+               f"{int(on.sum())} light(s), {power:.4g} W (largest deviation {100 * dev:.3g} %)")
     else:
         msg = (f"no non-negative lights keep every target within \u00b1{100 * tol:.3g} %; the closest is "
                f"\u00b1{100 * reach:.3g} % ({int(on.sum())} light(s), {power:.4g} W at that tolerance)")
+    if len(bad):
+        msg += (f"; {len(bad)} target(s) no candidate light reaches are left out (always dark): target rows "
+                f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
     return ToleranceResult(status=status, message=msg, tolerance=tol, exitance=e, lights=np.flatnonzero(on),
                            n_lights=int(on.sum()), power=power, max_deviation=dev, error=err, relative_error=rel,
-                           reachable_tolerance=reach, zero_band=zb, seconds=time.perf_counter() - t0)
+                           reachable_tolerance=reach, zero_band=zb, unreachable=bad,
+                           seconds=time.perf_counter() - t0)
