@@ -169,6 +169,42 @@ def test_heuristic_alone_against_exhaustive_search(score):
         assert ex[(False, k)].max() > 0.4  # greedy alone is far off somewhere: the swap matters
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_screening_bounds_bracket_the_exact_fits(seed):
+    """The search's screening (engine-internal): for every candidate addition and every swap, the
+    lower bound is <= the exact NNLS error (scipy, per subset) <= the upper bound, and where the
+    two bounds coincide (certified exact) they are that error. Channels differ or not, some target
+    channels are 0 (lights switched off in one channel: the KKT branch)."""
+    rng = np.random.default_rng(seed)
+    m, n = 10, 18
+    t = rng.uniform(0, 1, (m, n)) ** 3
+    T = [t, t, t] if seed % 2 else [rng.uniform(0, 1, (m, n)) ** 3 for _ in range(3)]
+    b = rng.uniform(0, 1, (m, 3))
+    b[:, seed % 3] *= rng.uniform(0, 1, m) > 0.5
+    model = bl._Model(T, b, None)
+    tol = 1e-9 * model.bb.sum()
+
+    def exact(S):
+        return sum(sopt.nnls(T[c][:, list(S)], b[:, c])[1] ** 2 for c in range(3))
+
+    n_cert = 0
+    for k in (0, 2, 4, 6):
+        lights, e, err2, _ = model.fit(rng.choice(n, k, replace=False))
+        LB, UB, _ = model.add_bounds(lights, e, err2)
+        for j in set(range(n)) - set(lights.tolist()):
+            v = exact(list(lights) + [j])
+            assert LB[j] <= v + tol and v <= UB[j] + tol, (k, j)
+            n_cert += UB[j] == LB[j]
+        if len(lights):
+            I, J, LBs, UBs = model.swap_bounds(lights, e, err2)
+            assert len(I) == len(lights) * (n - len(lights))
+            for i, j, lo, hi in zip(I, J, LBs, UBs):
+                v = exact(list(np.delete(lights, i)) + [j])
+                assert lo <= v + tol and v <= hi + tol, (k, i, j)
+                n_cert += hi == lo
+    assert n_cert > 0  # the certificate is used
+
+
 def adversarial(n_extra=12, seed=0):
     """b = t1 + t2 (error 0 with 2 lights), but a third light t3 ~ b is the best single light:
     greedy takes it first and then cannot reach 0; swapping t3 for the missing one does."""

@@ -67,7 +67,7 @@ __all__ = [
     "best_k_for_problem",
 ]
 
-SCORES = ("error", "correlation")
+SCORES = ("error", "correlation")  # 'both' is also accepted by best_k_curve
 
 #: errors within this fraction of ||b|| are "numerically equal" (then the least power wins)
 EQUAL_ERROR_RTOL = 1e-9
@@ -332,7 +332,7 @@ class _Model:
         UB = np.where(exact, np.maximum(exact_val, 0.0), np.maximum(err2.sum() - gain1, 0.0))
         return LB, UB, gain1
 
-    def swap_bounds(self, S, e, err2, limit=np.inf):
+    def swap_bounds(self, S, e, err2, limit=np.inf, max_pairs=2048):
         """Swaps S[i] -> j whose lower bound on the squared error is <= limit.
 
         Returns (I, J, LB, UB) over those pairs (I: positions in S, J: light indices); bounds as
@@ -342,7 +342,7 @@ class _Model:
         ||r'||^2 is a lower bound (and the NNLS value itself when the coefficients are also
         >= 0). Where the KKT condition fails, the relaxation over all of S is used. O(k^2 n)
         per channel for all pairs; the coefficient signs (exactness) only for the pairs
-        within the limit.
+        within the limit, at most ``max_pairs`` of them (the smallest bounds).
         """
         S = np.asarray(S, dtype=np.int64)
         k, n = len(S), self.n
@@ -388,7 +388,8 @@ class _Model:
                 if len(N):
                     zN = Z[:, N]  # [i, l]: t_l . z_i
                     gl = g[N][None, :] + (x / Hd)[:, None] * zN  # t_l . r without light i
-                    kkt = gl[:, :, None] - bA[:, None, :] * (MN[None, :, :] + zN[:, :, None] * (Z / Hd[:, None])[:, None, :])
+                    MNi = MN[None, :, :] + zN[:, :, None] * (Z / Hd[:, None])[:, None, :]  # [i, l, j]
+                    kkt = gl[:, :, None] - bA[:, None, :] * MNi
                     kkt_ok[ia] = (kkt <= tolN[None, :, None]).all(axis=1)
             if len(N) and not kkt_ok.all():
                 LB0 += np.where(kkt_ok, val, np.minimum(self._swap_relaxation(G, d, S, c), val))
@@ -405,6 +406,10 @@ class _Model:
             chan[-1] = chan[-1] + (kkt_ok,)
         LB0 = np.maximum(LB0, 0.0)
         I, J = np.nonzero((LB0 <= limit) & cols[None, :])
+        if len(I) > max_pairs:  # the search refits pairs in increasing bound: keep the most promising
+            keep = np.argpartition(LB0[I, J], max_pairs - 1)[:max_pairs]
+            keep.sort()
+            I, J = I[keep], J[keep]
         P = len(I)
         if P == 0:
             return I, J, np.zeros(0), np.zeros(0)
@@ -423,7 +428,8 @@ class _Model:
                 if len(t):  # coefficients on A - {i} after adding j: all >= 0?
                     ai = a[t]
                     Hr = H[ai] / Hd[ai][:, None]
-                    coef = (x[None, :] - Hr * x[ai][:, None]) - bt[t][:, None] * (Z[:, J[t]].T - Hr * Z[ai, J[t]][:, None])
+                    Wd = Z[:, J[t]].T - Hr * Z[ai, J[t]][:, None]  # G_WW^-1 G_Wj on A - {i}
+                    coef = (x[None, :] - Hr * x[ai][:, None]) - bt[t][:, None] * Wd
                     coef[np.arange(len(t)), ai] = 0.0
                     cert[t] = coef.min(axis=1) >= 0
                 t = np.flatnonzero((a < 0) & cert)
@@ -540,36 +546,41 @@ def fit_lights(T, b, lights, light_area=None):
 
 
 def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0, max_swap_rounds=None,
-                 max_exact=24, restarts=0, initial=None, exhaustive_limit=20_000, cancel=None, progress=None,
-                 stats=None):
+                 max_exact=24, restarts=0, initial=None, exhaustive_limit=20_000, swap_all=True, cancel=None,
+                 progress=None, stats=None):
     """The best configuration found with at most k lights, for k = 1 .. k_max.
 
     T: list of 3 (m, n) transfer matrices (``problem.transfer``) or one (m, n) for all
     channels; b (m, 3) targets W/m^2 (``problem.b_target``); light_area (n,) m^2 (for the
-    power and the least-power tie-break; default 1). ``swap``: run the swap local search at
-    every k (from the configuration of k - 1 lights plus the greedy addition); without it
-    the curve is the plain greedy path. ``score``: 'error' (each addition is the candidate
-    with the smallest exact NNLS error, found by branch and bound on the screening bounds,
-    with at most ``max_exact`` refits per step) or 'correlation' (the largest non-negative
-    1-D gain on the residual, one refit). ``max_swap_rounds``: cap on improving swaps per k
-    (default 2 k + 10). ``restarts``: extra swap searches per k from random k-sets (seeded
-    by ``seed``); 0 (the default) makes the result independent of the seed. ``initial``:
+    power and the least-power tie-break; default 1).
+
+    At every k the starts are the plain greedy path (one light added per step, each with an
+    NNLS refit) and the chained configuration (the one kept for k - 1 plus greedy
+    additions). ``score`` chooses the additions: 'error' (the candidate with the smallest
+    exact NNLS error, found by branch and bound on the screening bounds, at most
+    ``max_exact`` refits per step), 'correlation' (the largest non-negative 1-D gain on the
+    residual, one refit), or 'both' (both greedy paths are starts). ``swap``: run the swap
+    local search (best-improvement single swaps while the error, then the power, drops; at
+    most ``max_swap_rounds`` per start, default 2 k + 10) from every distinct start
+    (``swap_all``, the default) or from the best one only; without ``swap`` the curve is the
+    best greedy path. ``restarts``: extra swap searches per k from random k-sets (seeded by
+    ``seed``); 0 (the default) makes the result independent of the seed. ``initial``:
     optional light sets to start a swap search from as well, a list indexed by k - 1 or a
     dict {k: lights} (e.g. ``lower_bounds(...).optimum_lights``: the exact optima where the
     exhaustive search ran, which the curve then contains). ``exhaustive_limit``: for every k
     with at most that many subsets of at most k lights, the exact optimum (found by
     :func:`lower_bounds`' enumeration) is such a start too, so small problems get their
-    optimum (0 turns it off). ``cancel()``
-    returning True stops after the current k (the list is then shorter); ``progress(done,
-    total)`` is called after every k. ``stats``: optional dict filled with counters.
+    optimum (0 turns it off). ``cancel()`` returning True stops after the current k (the
+    list is then shorter); ``progress(done, total)`` is called after every k. ``stats``:
+    optional dict filled with counters.
 
     Returns a list of :class:`KLightPoint`, one per k (``point.k``), monotone
     non-increasing in error, every exitance >= 0. A point has fewer than k lights when no
     configuration found with k lights is better (``source='fewer'``) or when no light can
     lower the error (``source='none'``, e.g. b = 0: no light at all).
     """
-    if score not in SCORES:
-        raise ValueError(f"unknown score {score!r}; choose one of {', '.join(SCORES)}")
+    if score not in SCORES + ("both",):
+        raise ValueError(f"unknown score {score!r}; choose one of {', '.join(SCORES + ('both',))}")
     model = _Model(T, b, light_area)
     k_max = int(k_max)
     if k_max < 1:
@@ -583,7 +594,6 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
     curve = []
     counts = {"exact_fits": 0, "swap_rounds": 0, "restarts_won": 0}
     usable = np.flatnonzero(model.usable)
-    greedy = empty  # the plain greedy path (with swap, the chain may leave it)
     exact_sets = {}
     if swap and exhaustive_limit:
         k_exh = 0
@@ -592,29 +602,41 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
         if k_exh:
             exact_sets = {s + 1: st for s, st in enumerate(_exhaustive(model, k_exh)[1])}
 
-    def fill(fit, k):
+    def fill(fit, k, sc):
         # add lights up to k (an addition can switch another light off under the refit)
         for _ in range(2 * k + 2):
             if len(fit[0]) >= k:
                 break
-            nxt = _add_one(model, fit[0], fit, score, max_exact)
+            nxt = _add_one(model, fit[0], fit, sc, max_exact)
             if nxt is None:
                 break
             fit = nxt
         return fit
 
+    paths = {sc: empty for sc in (SCORES if score == "both" else (score,))}  # plain greedy paths
     for k in range(1, k_max + 1):
         source = "greedy"
-        greedy = fill(greedy, k)
-        cand = greedy
+        cand = None
+        for sc in paths:
+            paths[sc] = fill(paths[sc], k, sc)
+            if cand is None or model.better(paths[sc], cand):
+                cand = paths[sc]
         if swap:
-            if tuple(cur[0]) != tuple(greedy[0]):
-                chained = fill(cur, k)
+            starts = list(paths.values())
+            if all(tuple(cur[0]) != tuple(f[0]) for f in paths.values()):
+                chained = fill(cur, k, "error" if score == "both" else score)
+                starts.append(chained)
                 if model.better(chained, cand):
                     cand, source = chained, "swap"
+            if not swap_all:
+                starts = [cand]  # the swap search from the best start only
             rounds = max_swap_rounds if max_swap_rounds is not None else 2 * k + 10
-            if len(cand[0]):
-                sw, r = _swap_search(model, cand, rounds, max_exact)
+            seen = set()
+            for f in starts:
+                if not len(f[0]) or tuple(f[0]) in seen:
+                    continue
+                seen.add(tuple(f[0]))
+                sw, r = _swap_search(model, f, rounds, max_exact)
                 counts["swap_rounds"] += r
                 if model.better(sw, cand):
                     cand, source = sw, "swap"
