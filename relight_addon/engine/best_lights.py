@@ -857,7 +857,7 @@ def curve_notes(curve, bounds, target_norm, gap=0.1, k=None):
     the targets can be met at all with non-negative lights (from the certificate)."""
     if not curve:
         return ["no configuration"]
-    pt = curve[-1] if k is None else next(p for p in curve if p.k == k)
+    pt = curve[-1] if k is None else next((p for p in curve if p.k == k), curve[-1])
     norm = target_norm if target_norm > 0 else 1.0
     lb = bounds.at(pt.k)
     notes = []
