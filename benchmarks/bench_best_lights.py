@@ -18,11 +18,17 @@ Reports the wall time of each full curve (min and median of --repeat runs, and t
 CPU time, steadier on a shared machine; the paper's curves once, they are the slow ones) and the relative error (Eq. 1 / ||b_P||) at
 k = 1, 3, 5, 10, 32; writes benchmarks/results/bench_best_lights.json and the chart
 docs/img/bench_best_lights.png (relative error vs k, log y).
+
+On a loaded 2-core machine, OpenBLAS's second thread costs more than it gives on these small
+products (a 693 x 30 matrix-vector product: 7 us single-threaded, 130 us with 2 threads under
+load); ``OPENBLAS_NUM_THREADS=1`` before the run measures the methods without that contention
+(the JSON records the setting).
 """
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -100,7 +106,8 @@ def main():
     ap.add_argument("--k-max", type=int, default=32)
     args = ap.parse_args()
     K = args.k_max
-    out = {"command": "benchmarks/bench_best_lights.py " + " ".join(sys.argv[1:]), "load": [uptime()]}
+    out = {"command": "benchmarks/bench_best_lights.py " + " ".join(sys.argv[1:]), "load": [uptime()],
+           "env": {v: os.environ.get(v) for v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}}
     t = time.perf_counter()
     prob = staircase_problem()
     T, b, AREA = prob.transfer, prob.b_target, prob.light_area

@@ -212,6 +212,7 @@ class _Model:
         dsum = sum(self.d[id(self.T[c])] for c in range(3))
         self.usable = dsum > 0  # lights that reach at least one target
         self._cache = {}
+        self._gcache = {}
         self.n_fits = 0
 
     # -- exact fits ------------------------------------------------------------------------
@@ -228,8 +229,8 @@ class _Model:
             for c in range(3):
                 A = self.T[c][:, idx]
                 e[:, c] = _nnls(A, self.b[:, c])
-                r = A @ e[:, c] - self.b[:, c]
-                err2[c] = float(r @ r)
+                r = np.einsum("ij,j->i", A, e[:, c]) - self.b[:, c]
+                err2[c] = float(np.dot(r, r))
         on = e.max(axis=1) > 0
         res = (idx[on], e[on], err2, total_power(e[on], self.area[idx[on]]))
         self._cache[S] = res
@@ -265,25 +266,40 @@ class _Model:
     # rank-one downdate of H (z_i = T_A H e_i, ||z_i||^2 = H_ii): the residual grows by
     # x_i^2 / H_ii, t_j . r changes by Z_ij x_i / H_ii, ||t_j - P t_j||^2 by Z_ij^2 / H_ii.
 
+    def _gram_part(self, G, d, A):
+        """The part of _channel that depends on T only, cached per (matrix, light set): the same
+        sets recur (between the additions and the swaps, and across channels sharing T)."""
+        key = (id(G), A.tobytes())
+        got = self._gcache.get(key)
+        if got is None:
+            if len(A):
+                GA = G[A]
+                H = _inv_spd(G[np.ix_(A, A)])
+                Z = H @ GA
+                perp = d - np.einsum("ij,ij->j", GA, Z)
+            else:
+                GA = H = Z = None
+                perp = d.copy()
+            ok = perp > 1e-10 * np.maximum(d, 1e-300)
+            got = (GA, H, Z, perp, ok, np.where(ok, perp, 1.0))
+            if len(self._gcache) > 256:
+                self._gcache.clear()
+            self._gcache[key] = got
+        return got
+
     def _channel(self, G, d, A, c):
         """Least-squares quantities of channel c on the light set A (see above)."""
         h = self.h[:, c]
+        GA, H, Z, perp, ok, safe = self._gram_part(G, d, np.asarray(A, dtype=np.int64))
         if len(A):
-            GA = G[A]
-            H = _inv_spd(G[np.ix_(A, A)])
-            Z = H @ GA
             x = H @ h[A]
-            perp = d - np.einsum("ij,ij->j", GA, Z)
             rls2 = max(self.bb[c] - float(h[A] @ x), 0.0)
-            corr = h - GA.T @ x
+            corr = h - np.einsum("ij,i->j", GA, x)
         else:
-            GA = H = Z = x = None
-            perp = d.copy()
+            x = None
             rls2 = float(self.bb[c])
             corr = h.copy()
-        ok = perp > 1e-10 * np.maximum(d, 1e-300)
-        return dict(GA=GA, H=H, Z=Z, x=x, perp=np.where(ok, perp, 1.0), raw_perp=perp, ok=ok, rls2=rls2,
-                    corr=corr)
+        return dict(GA=GA, H=H, Z=Z, x=x, perp=safe, raw_perp=perp, ok=ok, rls2=rls2, corr=corr)
 
     def _kkt_tol(self, d, c):
         return 1e-9 * np.sqrt(np.maximum(d, 0.0) * max(self.bb[c], 1e-300))
@@ -398,7 +414,7 @@ class _Model:
             chan.append((c, q, A, ia, val, beta))
             # achievable: drop light i from the current fit, best non-negative multiple of j
             ec = e[:, c]
-            gS = self.h[:, c] - G[S].T @ ec  # t_j . rho
+            gS = self.h[:, c] - np.einsum("ij,i->j", G[S], ec)  # t_j . rho
             rho_i2 = err2[c] + 2.0 * ec * gS[S] + ec * ec * d[S]
             gij = gS[None, :] + G[S] * ec[:, None]
             UB1 += rho_i2[:, None] - np.where((d > 0)[None, :], np.maximum(gij, 0.0) ** 2
