@@ -280,7 +280,7 @@ def test_curve_properties_and_bounds_on_random_problems():
         T, b, area = geo_problem(100 + seed, m=20, n=60, noise=0.5)
         lb = bl.lower_bounds(T, b, 12, exhaustive_limit=1000)  # k = 1 exact only (60 + C(60, 2) > 1000)
         assert lb.exact[0] and not lb.exact[1]
-        for score in bl.SCORES:
+        for score in bl.SCORES + ("both",):
             curve = bl.best_k_curve(T, b, 12, area, score=score)
             check_curve(curve, T, b, area, 12)
             for p in curve:
