@@ -14,25 +14,29 @@ Choosing S is the hard part (best subset selection is NP-hard in general).
     greedy pursuit (add one light at a time, each followed by an NNLS refit) then a local
     search that swaps one chosen light for an unchosen one while the error drops. Both
     phases screen all candidates at once with matrix work on the Gram matrices
-    ``G = T^T T``: a least-squares lower bound (the error after adding light j, or
-    swapping i for j, with the sign constraints dropped: rank-one updates of the
-    inverse Gram matrix of S) and an achievable upper bound (the closed-form 1-D
-    non-negative step along j on the current residual). Only the few candidates whose
-    lower bound beats the best exact error found so far get an exact NNLS refit (branch
-    and bound), so each step picks the candidate with the smallest *exact* error
-    (``score="error"``), up to ``max_exact`` refits per step. ``score="correlation"``
-    instead takes the candidate with the largest 1-D gain
+    ``G = T^T T`` (rank-one updates of the inverse Gram matrix of the chosen set): per
+    candidate a lower bound on the squared error of its exact NNLS refit (least squares
+    with only the new light's sign constrained, or dual-feasible residuals), certified
+    exact where the resulting fit is non-negative and satisfies the KKT conditions, and an
+    achievable upper bound (the closed-form 1-D non-negative step along the new light). Only
+    the candidates whose lower bound beats the best exact error found so far get an exact
+    NNLS refit (branch and bound, at most ``max_exact`` per step), so with
+    ``score="error"`` (the default) each addition is the one with the smallest *exact*
+    error. ``score="correlation"`` instead takes the largest 1-D gain
     ``sum_c max(0, t_jc . r_c)^2 / ||t_jc||^2`` (the squared non-negative correlation
-    with the residual, normalised), one refit per step: cheaper, usually a little worse.
-    The curve is monotone non-increasing in k and has no negative exitance. Among
-    configurations whose errors agree within ``1e-9 ||b||`` the one with the smaller total
-    power wins (see :func:`total_power`).
+    with the residual, normalised), one refit per step: cheaper, worse on the staircase's
+    greedy path (3 lights: 0.138 against 0.119), about as good after the swaps. The swap
+    search runs from the greedy path and from the configuration kept for k - 1 plus an
+    addition; for small problems the exhaustive optimum is a start too. The curve is
+    monotone non-increasing in k and has no negative exitance. Among configurations whose
+    errors agree within ``1e-9 ||b||`` the one with the smaller total power wins (see
+    :func:`total_power`).
 
 :func:`lower_bounds`
     A lower bound on the best possible error with k non-negative lights, for each k: the
     all-lights NNLS error (valid for every k) and, where the number of subsets of at most k
     of the n lights is at most ``exhaustive_limit``, the exact optimum by exhaustive search
-    (all subsets at once, Gram matrices, closed form for k <= 2).
+    (all subsets at once from the Gram matrices, batched small eigen-solves).
 
 :func:`least_power_within_tolerance`
     The tolerance mode after Castro, del Acebo and Sbert ("Heuristic-search-based light
