@@ -52,22 +52,15 @@ _CACHE = {}
 def staircase_problem():
     """The staircase's InverseProblem as jobs.run_solve builds it (cached per process)."""
     if "p" not in _CACHE:
-        from relight_addon import bridge
-        from relight_addon.engine.formfactors import compute_form_factors
-        from relight_addon.engine.scene import mesh_patches
+        from relight_addon import export, jobs
+        from relight_addon.engine.options import JobOptions
 
-        bridge.open_blend(str(SCENE))
-        exp = bridge.export_scene()
-        patches = mesh_patches(exp.faces, exp.settings.get("max_patch_size"))
-        F = compute_form_factors(patches, seed=0)
-        emitting = np.any(patches.exitance > 0, axis=1)
-        prob = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                              patches.candidate & ~emitting, patches.center, patches.normal,
-                              light_groups=patches.face)
-        if emitting.any():  # the scene's own emitters are background light (as run_solve)
-            B = prob.forward_radiosity(patches.exitance)
-            prob.b_target = prob.b_target - B[prob.targets]
-            prob.target_norm = float(np.linalg.norm(prob.b_target))
+        export.open_blend(str(SCENE))
+        exp = export.export_scene()
+        # the paper's experiment: a patch and a light per polygon (the polygon model)
+        model = jobs.build_model(exp.faces, JobOptions(patch_model="polygon", seed=0).validate(), "inverse",
+                                 exp.settings.get("max_patch_size"))
+        prob = model.problem
         prob.transfer  # noqa: B018 (computes and caches T)
         _CACHE["p"] = prob
     return _CACHE["p"]

@@ -18,6 +18,7 @@ import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
+from .engine.best_lights import lower_bounds
 from .engine.cost import check_memory, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.inverse import InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
@@ -315,8 +316,11 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
     t_ff = t_problem = 0.0
     history = []
-    # the paper's heuristics redistribute between lights that partition the candidates: single-scale
+    # the paper's heuristics redistribute between lights that partition the candidates: single-scale;
+    # direct-lighting mode reduces the scene's own lamps: one light per emitter polygon
     scales = None if SELECTIONS[options.selection].get("multiscale") else ("cell",)
+    if mode == "direct":
+        scales = ("polygon",)
     for p in range(passes + 1):
         mask = candidate_mask(patches, mode)
         lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
@@ -377,14 +381,44 @@ def solve_stage(model: Model, options: JobOptions) -> tuple:
 
 def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None) -> ReductionResult:
     """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the final point."""
+    by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
     red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
-                        max_lights=options.max_lights, relative_error_threshold=options.error_threshold,
-                        require_positive=options.require_positive,
+                        max_lights=None if by_lp else options.max_lights,
+                        relative_error_threshold=None if by_lp else options.error_threshold,
+                        require_positive=options.require_positive, tolerance=options.tolerance,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
         raise Cancelled("solve cancelled")
     return red
+
+
+#: the certificate (lower bounds) covers the curve up to this many lights; above, the NNLS bound
+CERTIFICATE_LIGHTS = 32
+
+
+def certificate(problem: InverseProblem, red: ReductionResult):
+    """Lower bounds on the best error any non-negative configuration of at most k lights can reach
+    (engine.best_lights.lower_bounds: exact by exhaustive search where small enough, else the
+    all-lights NNLS bound), and per curve point its bound (W/m^2)."""
+    k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
+    bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
+    return bounds, np.array([bounds.at(p.n_lights) for p in red.curve])
+
+
+def certificate_notes(problem, bounds, final) -> list:
+    """How good the final configuration is against the certificate."""
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    k = final.n_lights
+    exact = 1 <= k <= len(bounds.exact) and bool(bounds.exact[k - 1])
+    lb = bounds.at(k) / norm
+    if final.n_negative or final.relative_error <= 1e-9:
+        return []
+    if exact and final.relative_error <= lb * (1 + 1e-6) + 1e-12:
+        return [f"{k} light(s): the best possible with {k} non-negative lights (exhaustive search), "
+                f"relative error {final.relative_error:.3g}"]
+    return [f"{k} light(s): relative error {final.relative_error:.3g}; no {k} non-negative lights can go below "
+            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
 
 
 def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
@@ -435,7 +469,7 @@ def light_records(model: Model, curve: Curve, row: int) -> list:
 
 
 def make_report(model: Model, options: JobOptions, inv: InverseResult | None, red: ReductionResult,
-                curve: Curve, warnings: list, timings: dict) -> dict:
+                curve: Curve, warnings: list, timings: dict, bounds=None, point_bounds=None) -> dict:
     """Stage 5: the JSON report (see README.md)."""
     faces, patches, problem = model.faces, model.patches, model.problem
     fi = curve.final_row
@@ -449,6 +483,7 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
     objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
                for name in faces.object_names}
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
         "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
@@ -479,14 +514,25 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-                   "n_negative": p.n_negative, "power": float(np.sum(p.exitance.sum(axis=1)
-                                                                     * problem.light_area[p.lights]))}
-                  for p in red.curve],
+                   "n_negative": p.n_negative, "power": _power(problem, p),
+                   "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
+                  for i, p in enumerate(red.curve)],
+        "certificate": None if bounds is None else {
+            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
+            "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
+                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
-                  "n_negative": final.n_negative, "lights": light_records(model, curve, fi)},
+                  "n_negative": final.n_negative, "power": _power(problem, final),
+                  "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
+                  "lights": light_records(model, curve, fi)},
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def _power(problem, point) -> float:
+    """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
+    return float(np.sum(point.exitance.sum(axis=1) * problem.light_area[point.lights]))
 
 
 def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:
@@ -518,6 +564,10 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "curve_error": np.array([p.error for p in pts]),
         "curve_relative_error": np.array([p.relative_error for p in pts]),
         "curve_n_negative": np.array([p.n_negative for p in pts]),
+        "curve_power": np.array([c["power"] for c in report["curve"]]),
+        # -1: no certificate (direct-lighting mode)
+        "curve_bound_relative_error": np.array([-1.0 if c["bound_relative_error"] is None else
+                                                c["bound_relative_error"] for c in report["curve"]]),
         "point_index": keep,
         "n_lights": np.array([pts[i].n_lights for i in keep]),
         "error": np.array([pts[i].error for i in keep]),
@@ -562,15 +612,20 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts:
     red = reduce_stage(model, e_x, options, progress, cancel)
     t_reduce = time.perf_counter() - t2
     warnings = list(model.warnings)
+    bounds = point_bounds = None
     if mode == "inverse":
+        t3 = time.perf_counter()
+        bounds, point_bounds = certificate(model.problem, red)
+        t_reduce += time.perf_counter() - t3
         warnings.extend(_positivity_notes(model.problem, inv, red.final))
+        warnings.extend(certificate_notes(model.problem, bounds, red.final))
     warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
-    report = make_report(model, options, inv, red, curve, warnings, timings)
+    report = make_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]
@@ -597,8 +652,8 @@ def _positivity_notes(problem, inv, final):
                 f"relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
                 f"is {final.relative_error:.3g}"]
     return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
-            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or try the "
-            "nnls-greedy selection"]
+            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "
+            "greedy-swap selection (Best k Lights)"]
 
 
 def stored_points(n_lights, final_index):

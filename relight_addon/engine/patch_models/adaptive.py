@@ -115,7 +115,9 @@ class AdaptiveModel:
         size, cand, emit, reflector = self._sizes(faces)
         T, ok, face_edge = face_triangles(faces)
         tf = faces.triangle_face
-        small = face_edge <= CLUSTER_BELOW * size  # much smaller than its size: clustered
+        # much smaller than its size: clustered (never the scene's emitters: they are lamps the
+        # direct-lighting mode reduces one polygon at a time)
+        small = (face_edge <= CLUSTER_BELOW * size) & ~emit
         whole = (face_edge <= size) & ~small  # about its size: a patch of its own
         # per face: area-weighted normal and centroid
         cr = triangle_cross(T)
