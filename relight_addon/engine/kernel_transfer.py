@@ -23,27 +23,41 @@ patches), F is integrated instead:
   (a jittered g x g grid over the source's area, triangles picked by area),
   ``w_j = cos_x cos_y / r^4`` (zero behind either surface), ``v_j`` from an Embree
   occlusion query (robust mode, the same triangles and ray offsets as formfactors.py).
-  Unoccluded pairs get V = 1 exactly, whatever the number of rays.
-- The integral over the receiver is a quadrature (not Monte Carlo): each receiver triangle
-  gets a collapsed (Duffy) Gauss rule, Gauss-Jacobi along the triangle's length and
-  Gauss-Legendre across it, with about ``points_per_patch`` points per patch in all,
-  shared among its triangles by area (a long thin triangle gets its points along its
-  length). Every point is strictly inside its triangle (set in from the edges); the
-  normal at a point is its own triangle's (a patch may be several non-coplanar triangles).
-- Near pairs are refined: when the receiver is large compared with the source's width
-  (area / diameter) or with the gap between the two, the receiver's rule is made finer
-  (level L: node spacing / 2^L, L <= MAX_LEVEL), and each point then casts
+- Phase 1, every pair: the integral over the receiver is a quadrature (not Monte Carlo):
+  each receiver triangle gets a collapsed (Duffy) Gauss rule, Gauss-Jacobi along the
+  triangle's length and Gauss-Legendre across it, with about ``points_per_patch`` points
+  per patch in all, shared among its triangles by area (a long thin triangle gets its
+  points along its length). Every point is strictly inside its triangle (set in from the
+  edges); the normal at a point is its own triangle's (a patch may be several non-coplanar
+  triangles). Each point casts ``shadow_rays`` rays. A pair whose rays all reach the source
+  gets the unoccluded integral exactly (no noise at all); a pair whose rays are all blocked
+  gets 0.
+- Phase 2, pairs in penumbra (some rays blocked, some not): a Gauss rule is no good across a
+  shadow edge, so the pair's visible fraction is estimated again from ``penumbra_points``
+  jittered receiver points (stratified over the receiver's area) with ``penumbra_rays`` rays
+  each, as the ratio sum w v / sum w over all these rays, and multiplies the phase-1
+  unoccluded integral (a ratio estimator: the kernel's variation is exact, only the
+  visibility is sampled).
+- Near pairs are refined in phase 1: when the receiver is large compared with the source's
+  width (area / diameter) or with the gap between the two, the receiver's rule is made
+  finer (level L: node spacing / 2^L, L <= MAX_LEVEL), and each point then casts
   ``shadow_rays / 4^L`` rays (at least 1), so the rays per pair stay about the same.
 - Far pairs (centre distance > ``far_ratio`` x the larger patch diameter) use the
   point-to-point kernel ``a_t cos cos / (pi r^2)`` to each source triangle's centroid
   instead of the contour integral (relative error about (diameter / distance)^2 / 4).
+- A receiver that crosses a (planar) source's plane gets its rule on the part in front of
+  that plane only (the integrand jumps to 0 behind it; the source crossing the receiver's
+  plane is handled exactly by the clipped contour integral).
 - Pairs where one patch lies entirely behind the other's plane (planar patches) are 0
   without any work; a pair (r, r) is 0 (a patch's transfer to itself is left to the
   hemisphere estimate).
 
 Errors: the receiver quadrature is deterministic (below 0.5 % on the closed-form
 configurations of tests/test_engine_kernel_transfer.py at the default settings, 0.01 %
-for small or distant sources); the only noise is the visibility of partly occluded pairs.
+for small or distant sources); the noise is that of the visibility of pairs in penumbra.
+An occluder that none of a pair's phase-1 rays meets (one covering a few per cent of the
+pair's ray bundle or less) is missed: that pair is then taken as unoccluded.
+Accuracy against time on the staircase and a furnished room: benchmarks/bench_kernel_transfer.py.
 
 Determinism: the pairs are processed in fixed chunks, each with its own random stream
 ``np.random.default_rng([seed, chunk])``; the result is the same for any thread count.
@@ -71,6 +85,8 @@ from .scene import PatchSet, SceneError
 __all__ = [
     "DEFAULT_POINTS_PER_PATCH",
     "DEFAULT_SHADOW_RAYS",
+    "DEFAULT_PENUMBRA_POINTS",
+    "DEFAULT_PENUMBRA_RAYS",
     "DEFAULT_FAR_RATIO",
     "MAX_LEVEL",
     "kernel_form_factors",
@@ -80,8 +96,11 @@ __all__ = [
 
 #: receiver quadrature points per patch (about: the rule is rounded per triangle).
 DEFAULT_POINTS_PER_PATCH = 16
-#: shadow rays per receiver point and source patch.
-DEFAULT_SHADOW_RAYS = 16
+#: shadow rays per receiver point and source patch (phase 1: they find the pairs in penumbra).
+DEFAULT_SHADOW_RAYS = 4
+#: jittered receiver points of a pair in penumbra (phase 2), and rays from each.
+DEFAULT_PENUMBRA_POINTS = 256
+DEFAULT_PENUMBRA_RAYS = 4
 #: pairs farther apart than this many times the larger patch diameter use the point kernel.
 DEFAULT_FAR_RATIO = 10.0
 #: the finest refinement level of near pairs (node spacing / 2^level).
@@ -91,11 +110,10 @@ MAX_LEVEL = 3
 LEVEL_SPAN = 4.0
 #: at most this many Gauss nodes along either direction of one receiver triangle.
 MAX_NODES = 24
-#: pairs partly in shadow are estimated again with this many times points_per_patch
-#: jittered receiver points (rounded to a square)
-PENUMBRA_POINTS_FACTOR = 4
 #: kernel evaluations (receiver point x source triangle) per work chunk.
 CHUNK_EVALS = 1 << 15
+#: at most about this many penumbra rays are generated at once.
+CHUNK_RAYS = 1 << 18
 
 
 # --------------------------------------------------------------------------------------
@@ -329,6 +347,24 @@ class _Geometry:
         return got
 
 
+def _clipped_receiver_points(g, r, level, s):
+    """Receiver r's rule restricted to the part in front of planar source s's plane (the
+    kernel is 0 behind it, a jump the Gauss rule would straddle); weights / A_r."""
+    h = math.sqrt(2 * g.area[r] / max(g.M, 1)) / 2 ** level
+    pts, nrm, wts = [], [], []
+    for t in range(g.tstart[r], g.tstart[r] + g.tcount[r]):
+        for part in _clip_triangle(g.tv[t], g.normal[s], g.center[s]):
+            if np.linalg.norm(np.cross(part[1] - part[0], part[2] - part[0])) <= 0:
+                continue
+            p, w = _triangle_rule(part, h)
+            pts.append(p)
+            wts.append(w)
+            nrm.append(np.repeat(g.tn[t][None], len(p), axis=0))
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(wts) / g.area[r]
+
+
 def _ragged(starts, counts):
     """Concatenation of arange(s, s + c) for each (s, c)."""
     counts = np.asarray(counts, dtype=np.int64)
@@ -340,24 +376,40 @@ def _ragged(starts, counts):
     return idx - np.repeat(ends - counts, counts) + np.repeat(np.asarray(starts, dtype=np.int64), counts)
 
 
-def _behind(g: _Geometry, a, b):
-    """Per pair: planar patch b lies entirely in or behind planar patch a's plane (bool)."""
-    out = np.zeros(len(a), dtype=bool)
+def _signed_range(g: _Geometry, a, b):
+    """Per pair: (min, max) over patch b's vertices of the signed distance to planar patch
+    a's plane (NaN where a is not planar), and the tolerance for 'in the plane'."""
+    mn = np.full(len(a), np.nan)
+    mx = np.full(len(a), np.nan)
+    tol = 1e-9 * np.maximum(g.diam[a], g.diam[b])
     sel = np.flatnonzero(g.planar[a])
     if len(sel) == 0:
-        return out
+        return mn, mx, tol
     ta, tb = a[sel], b[sel]
-    # max over b's vertices of n_a . (v - c_a) <= tolerance
     cnt = g.tcount[tb]
     tri = _ragged(g.tstart[tb], cnt)
     pair = np.repeat(np.arange(len(sel)), cnt)
-    v = g.tv[tri]  # (k, 3, 3)
-    na = g.normal[ta][pair]
-    h = np.einsum("kij,kj->ki", v - g.center[ta][pair][:, None, :], na).max(axis=1)
-    m = np.full(len(sel), -np.inf)
-    np.maximum.at(m, pair, h)
-    out[sel] = m <= 1e-9 * np.maximum(g.diam[ta], g.diam[tb])
-    return out
+    h = np.einsum("kij,kj->ki", g.tv[tri] - g.center[ta][pair][:, None, :], g.normal[ta][pair])
+    lo = np.full(len(sel), np.inf)
+    hi = np.full(len(sel), -np.inf)
+    np.minimum.at(lo, pair, h.min(axis=1))
+    np.maximum.at(hi, pair, h.max(axis=1))
+    mn[sel], mx[sel] = lo, hi
+    return mn, mx, tol
+
+
+def _clip_triangle(v, n, p0):
+    """The part of triangle v (3, 3) strictly in front of the plane n . (x - p0) = 0, as a
+    list of 0 to 2 triangles."""
+    d = (v - p0) @ n
+    poly = []
+    for k in range(3):
+        a, b, da, db = v[k], v[(k + 1) % 3], d[k], d[(k + 1) % 3]
+        if da > 0:
+            poly.append(a)
+        if (da > 0) != (db > 0):
+            poly.append(a + (da / (da - db)) * (b - a))
+    return [np.array([poly[0], poly[i], poly[i + 1]]) for i in range(1, len(poly) - 1)]
 
 
 # --------------------------------------------------------------------------------------
@@ -372,8 +424,8 @@ def kernel_form_factors(
     seed: int = 0,
     threads: int | None = None,
     far_ratio: float = DEFAULT_FAR_RATIO,
-    penumbra_points: int | None = None,
-    penumbra_rays: int | None = None,
+    penumbra_points: int = DEFAULT_PENUMBRA_POINTS,
+    penumbra_rays: int = DEFAULT_PENUMBRA_RAYS,
     cancel=None,
     progress=None,
     stats: dict | None = None,
@@ -413,6 +465,10 @@ def kernel_form_factors(
         raise ValueError(f"points per patch must be a positive integer, got {points_per_patch!r}")
     if not (isinstance(shadow_rays, (int, np.integer)) and shadow_rays >= 0):
         raise ValueError(f"shadow rays must be a non-negative integer, got {shadow_rays!r}")
+    if not (isinstance(penumbra_points, (int, np.integer)) and penumbra_points >= 0):
+        raise ValueError(f"penumbra points must be a non-negative integer, got {penumbra_points!r}")
+    if not (isinstance(penumbra_rays, (int, np.integer)) and penumbra_rays >= 1):
+        raise ValueError(f"penumbra rays must be a positive integer, got {penumbra_rays!r}")
     if not far_ratio > 0:
         raise ValueError(f"far ratio must be positive, got {far_ratio!r}")
     if threads is None:
@@ -420,7 +476,8 @@ def kernel_form_factors(
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     out = np.zeros((len(rec), len(src)))
-    info = {"pairs": 0, "culled": 0, "far": 0, "levels": [0] * (MAX_LEVEL + 1), "evaluations": 0, "rays": 0}
+    info = {"pairs": 0, "culled": 0, "far": 0, "levels": [0] * (MAX_LEVEL + 1), "clipped_receivers": 0,
+            "evaluations": 0, "rays": 0, "penumbra_pairs": 0}
     if len(rec) == 0 or len(src) == 0:
         if stats is not None:
             stats.update(info, seconds=time.perf_counter() - t_start)
@@ -433,9 +490,15 @@ def kernel_form_factors(
     pr, ps = rec[ii], src[jj]
     keep = pr != ps
     ii, jj, pr, ps = ii[keep], jj[keep], pr[keep], ps[keep]
-    culled = _behind(g, pr, ps) | _behind(g, ps, pr)
+    # one patch entirely in or behind the other's plane: 0. A receiver crossing the source's
+    # plane: its rule is clipped to the source's front (the source crossing the receiver's
+    # plane is clipped exactly by the contour integral).
+    _, mx_sr, tol_sr = _signed_range(g, pr, ps)  # source vertices vs the receiver's plane
+    mn_rs, mx_rs, tol_rs = _signed_range(g, ps, pr)  # receiver vertices vs the source's plane
+    culled = (mx_sr <= tol_sr) | (mx_rs <= tol_rs)  # False where NaN (not planar)
+    straddle = (mn_rs < -tol_rs) & (mx_rs > tol_rs)
     info["culled"] = int(culled.sum())
-    ii, jj, pr, ps = ii[~culled], jj[~culled], pr[~culled], ps[~culled]
+    ii, jj, pr, ps, straddle = ii[~culled], jj[~culled], pr[~culled], ps[~culled], straddle[~culled]
     dist = np.linalg.norm(g.center[pr] - g.center[ps], axis=1)
     far = dist > far_ratio * np.maximum(g.diam[pr], g.diam[ps])
     gap = np.maximum(dist - g.radius[pr] - g.radius[ps], 0.0)
@@ -464,11 +527,20 @@ def kernel_form_factors(
         ns.append(n)
         ws.append(w)
         base += len(x)
-    X, N, W = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
     rule_key = pr * (MAX_LEVEL + 1) + lev
     lookup = np.array([sets[int(k)] for k in need], dtype=np.int64)
     pos = np.searchsorted(need, rule_key)
     pstart, pcount = lookup[pos, 0], lookup[pos, 1]
+    # pairs whose receiver crosses the source's plane: a rule of their own
+    info["clipped_receivers"] = int(straddle.sum())
+    for k in np.flatnonzero(straddle):
+        x, n, w = _clipped_receiver_points(g, pr[k], lev[k], ps[k])
+        pstart[k], pcount[k] = base, len(x)
+        xs.append(x)
+        ns.append(n)
+        ws.append(w)
+        base += len(x)
+    X, N, W = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
 
     # chunks: contiguous pair ranges of about CHUNK_EVALS kernel evaluations
     evals = pcount * g.tcount[ps]
@@ -482,9 +554,8 @@ def kernel_form_factors(
     rays = np.zeros(len(chunks), dtype=np.int64)
     stop = threading.Event()
     S = int(shadow_rays)
-    Q = PENUMBRA_POINTS_FACTOR * int(points_per_patch) if penumbra_points is None else int(penumbra_points)
-    Q = int(round(math.sqrt(Q))) ** 2  # a square: a jittered grid
-    K2 = max(1, S // 4) if penumbra_rays is None else int(penumbra_rays)
+    Q = int(round(math.sqrt(penumbra_points))) ** 2  # a square: a jittered grid
+    K2 = int(penumbra_rays)
 
     def work(ci):
         if stop.is_set():
@@ -519,22 +590,16 @@ def kernel_form_factors(
             np.maximum.at(vmax, pp_pair[live], vis[live])
             part = np.flatnonzero((vmin < 1) & (vmax > 0))
             partial[a + part] = True
-            per = max(1, CHUNK_EVALS // (Q * max(1, int(g.tcount[cps[part]].max(initial=1)))))
+            per = max(1, CHUNK_RAYS // (Q * K2))
             for q0 in range(0, len(part), per):
                 sub = part[q0:q0 + per]
-                rcv = pr[a + sub]
-                x, n = _sample_patches(g, rcv, Q, rng)
-                s_pp = np.repeat(cps[sub], Q)
-                f = _source_kernel(g, x, n, s_pp, np.repeat(cfar[sub], Q))
-                v = np.ones(len(f))
-                on = np.flatnonzero(f > 0)
-                if len(on):
-                    v[on], nr = _visibility(g, x[on], n[on], s_pp[on], K2, rng)
-                    n_rays += nr
+                x, n = _sample_patches(g, pr[a + sub], Q, rng)
+                wv, ws, nr = _visibility(g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
+                n_rays += nr
                 # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
-                # fraction of the kernel over the jittered points
-                fs = f.reshape(len(sub), Q).sum(axis=1)
-                fv = (f * v).reshape(len(sub), Q).sum(axis=1)
+                # fraction of the point-to-point kernel over all the rays of the pair
+                fv = wv.reshape(len(sub), Q).sum(axis=1)
+                fs = ws.reshape(len(sub), Q).sum(axis=1)
                 values[a + sub] = unoccluded[sub] * fv / np.where(fs > 0, fs, 1.0)
         rays[ci] = n_rays
         return ci
@@ -625,7 +690,7 @@ def _sample_patches(g: _Geometry, s, k, rng):
     return y, g.tn[tri]
 
 
-def _visibility(g: _Geometry, x, n, s, k, rng):
+def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
     """Kernel-weighted visible fraction of source patch s[i] from point x[i] (normal n[i]),
     from k shadow rays each (a jittered grid over the source's area). Returns (V (m,), rays)."""
     m = len(x)
@@ -650,6 +715,8 @@ def _visibility(g: _Geometry, x, n, s, k, rng):
         vis[live] = hit == -1
     wsum = w.reshape(m, k).sum(axis=1)
     wvis = (w * vis).reshape(m, k).sum(axis=1)
+    if sums:
+        return wvis, wsum, len(live)
     V = np.where(wsum > 0, wvis / np.where(wsum > 0, wsum, 1.0), 1.0)
     return V, len(live)
 
