@@ -58,7 +58,7 @@ KERNEL_LEVELS = [
     ("k3", dict(points_per_patch=16, shadow_rays=4, penumbra_points=144, penumbra_rays=2)),
     ("k4 (default)", dict()),
     ("k5", dict(points_per_patch=16, shadow_rays=8, penumbra_points=1024, penumbra_rays=8)),
-    ("k6", dict(points_per_patch=32, shadow_rays=16, penumbra_points=4096, penumbra_rays=16)),
+    ("k6", dict(points_per_patch=32, shadow_rays=8, penumbra_points=2048, penumbra_rays=8)),
 ]
 FULL_RAYS = [1024, 2048, 4096, 16384, 65536]
 ROWS_RAYS = [4096, 16384, 65536, 262144]

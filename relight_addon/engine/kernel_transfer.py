@@ -318,10 +318,48 @@ class _Geometry:
         self.cdf_w = np.maximum(cdf_hi - self.cdf_lo, 1e-300)
         self.key = self.tri_patch + cdf_hi
 
+        self.tgeo = np.concatenate([self.s_v0, self.s_e1, self.s_e2, self.tn], axis=1).astype(np.float32)
+        self._parallelograms()
+
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         self._rules = {}
         self._lock = threading.Lock()
+
+    def _parallelograms(self):
+        """Patches of two triangles that share an edge and make a planar parallelogram (grid
+        cells, quads): ``para`` flags them, ``pgeo`` (P, 12) float32 holds origin, edge u,
+        edge v (set in from the edges by 2 * offset) and the normal."""
+        P = self.P
+        self.para = np.zeros(P, dtype=bool)
+        self.pgeo = np.zeros((P, 12), dtype=np.float32)
+        two = np.flatnonzero((self.tcount == 2) & self.planar)
+        if len(two) == 0:
+            return
+        t0 = self.tv[self.tstart[two]]  # (m, 3, 3)
+        t1 = self.tv[self.tstart[two] + 1]
+        tol = 1e-9 * self.diam[two]
+        same = np.linalg.norm(t0[:, :, None, :] - t1[:, None, :, :], axis=3) <= tol[:, None, None]  # (m, 3, 3)
+        shared0 = same.any(axis=2)  # vertices of t0 also in t1
+        shared1 = same.any(axis=1)
+        ok = (shared0.sum(axis=1) == 2) & (shared1.sum(axis=1) == 2)
+        m = np.arange(len(two))
+        i0 = np.argmin(shared0, axis=1)  # the vertex of t0 not in t1
+        i1 = np.argmin(shared1, axis=1)
+        o1, o2 = t0[m, i0], t1[m, i1]
+        sv = t0[m, (i0 + 1) % 3], t0[m, (i0 + 2) % 3]  # the shared edge
+        ok &= np.linalg.norm(o1 + o2 - sv[0] - sv[1], axis=1) <= tol
+        eu, ev = sv[0] - o1, sv[1] - o1
+        area = np.linalg.norm(np.cross(eu, ev), axis=1)
+        ok &= area > 0
+        area = np.where(area > 0, area, 1.0)
+        ea = np.minimum(0.25, 2 * self.offset * np.linalg.norm(ev, axis=1) / area)
+        eb = np.minimum(0.25, 2 * self.offset * np.linalg.norm(eu, axis=1) / area)
+        org = o1 + ea[:, None] * eu + eb[:, None] * ev
+        geo = np.concatenate([org, (1 - 2 * ea)[:, None] * eu, (1 - 2 * eb)[:, None] * ev,
+                              self.normal[two]], axis=1)
+        self.para[two[ok]] = True
+        self.pgeo[two[ok]] = geo[ok]
 
     def receiver_points(self, r: int, level: int):
         """(points (q, 3), normals (q, 3), weights (q,) summing to 1) of receiver r at a level."""
@@ -594,6 +632,7 @@ def kernel_form_factors(
             for q0 in range(0, len(part), per):
                 sub = part[q0:q0 + per]
                 x, n = _sample_patches(g, pr[a + sub], Q, rng)
+                x, n = x.reshape(-1, 3), n.reshape(-1, 3)
                 wv, ws, nr = _visibility(g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
                 n_rays += nr
                 # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
@@ -666,59 +705,87 @@ def _source_kernel(g: _Geometry, x, n, s, far):
 
 
 def _sample_patches(g: _Geometry, s, k, rng):
-    """k stratified points on each patch s[i]: a jittered grid (k a square) or strata along
-    the area CDF, triangles picked by area, on the triangles shrunk by 2 * offset.
-    Returns points (m * k, 3) and their triangles' normals, patch-major."""
+    """k stratified points on each patch s[i] (float32): a jittered grid (k a square) or
+    strata along the first coordinate. A parallelogram patch (two triangles, e.g. a grid
+    cell) maps the grid affinely onto itself; any other patch picks triangles by area
+    (the first coordinate through its area CDF). Points are set in from the edges by
+    2 * offset. Returns points (m, k, 3) and their normals (m, k, 3)."""
     m = len(s)
+    s = np.asarray(s, dtype=np.int64)
     gk = int(math.isqrt(k))
-    u = rng.random((m, k, 2))
+    u = rng.random((m, k, 2), dtype=np.float32)
     if gk * gk == k:
-        ia, ib = np.divmod(np.arange(k), gk)
-        u[..., 0] = (ia + u[..., 0]) / gk
-        u[..., 1] = (ib + u[..., 1]) / gk
-    else:  # strata along the area CDF, u1 random
-        u[..., 0] = (np.arange(k) + u[..., 0]) / k
-    u = np.clip(u, 1e-12, 1 - 1e-12).reshape(-1, 2)
-    src = np.repeat(np.asarray(s, dtype=np.int64), k)
-    tri = np.searchsorted(g.key, src + u[:, 0], side="right")
-    np.minimum(tri, len(g.key) - 1, out=tri)
-    sv = np.clip((u[:, 0] - g.cdf_lo[tri]) / g.cdf_w[tri], 0.0, 1.0)
-    su = np.sqrt(sv)
-    b2 = su * u[:, 1]
-    b1 = su - b2
-    y = g.s_v0[tri] + b1[:, None] * g.s_e1[tri] + b2[:, None] * g.s_e2[tri]
-    return y, g.tn[tri]
+        ia, ib = np.divmod(np.arange(k, dtype=np.float32), np.float32(gk))
+        u[..., 0] += ia
+        u[..., 1] += ib
+        u *= np.float32(1.0 / gk)
+    else:  # strata along the first coordinate, the second random
+        u[..., 0] += np.arange(k, dtype=np.float32)
+        u[..., 0] *= np.float32(1.0 / k)
+    np.clip(u, np.float32(1e-7), np.float32(1 - 1e-7), out=u)
+    y = np.empty((m, k, 3), dtype=np.float32)
+    ny = np.empty((m, k, 3), dtype=np.float32)
+    para = g.para[s]
+    ip = np.flatnonzero(para)
+    if len(ip):
+        G = g.pgeo[s[ip]]  # (mp, 12): origin, edge u, edge v, normal
+        up = u[ip]
+        yp = G[:, None, 0:3] + up[..., 0:1] * G[:, None, 3:6]
+        yp += up[..., 1:2] * G[:, None, 6:9]
+        y[ip] = yp
+        ny[ip] = G[:, None, 9:12]
+    ig = np.flatnonzero(~para)
+    if len(ig):
+        ug = u[ig].reshape(-1, 2).astype(np.float64)
+        src = np.repeat(s[ig], k)
+        tri = np.searchsorted(g.key, src + ug[:, 0], side="right")
+        np.minimum(tri, len(g.key) - 1, out=tri)
+        sv = np.clip((ug[:, 0] - g.cdf_lo[tri]) / g.cdf_w[tri], 0.0, 1.0)
+        su = np.sqrt(sv)
+        b2 = su * ug[:, 1]
+        b1 = su - b2
+        G = g.tgeo[tri]  # (n, 12): shrunk v0, e1, e2, normal
+        yg = G[:, 0:3] + b1[:, None].astype(np.float32) * G[:, 3:6] + b2[:, None].astype(np.float32) * G[:, 6:9]
+        y[ig] = yg.reshape(len(ig), k, 3)
+        ny[ig] = G[:, 9:12].reshape(len(ig), k, 3)
+    return y, ny
 
 
 def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
     """Kernel-weighted visible fraction of source patch s[i] from point x[i] (normal n[i]),
-    from k shadow rays each (a jittered grid over the source's area). Returns (V (m,), rays)."""
+    from k shadow rays each (stratified over the source). Returns (V (m,), rays), or with
+    ``sums`` (sum w v (m,), sum w (m,), rays)."""
     m = len(x)
     y, ny = _sample_patches(g, s, k, rng)
-    xr = np.repeat(x, k, axis=0)
-    nr = np.repeat(n, k, axis=0)
-    d = y - xr
-    r2 = _dot(d, d)
-    w = np.maximum(_dot(d, nr), 0.0) * np.maximum(-_dot(d, ny), 0.0) / np.maximum(r2 * r2, 1e-300)
-    live = np.flatnonzero(w > 0)
-    vis = np.zeros(len(w))
-    if len(live):
-        off = g.offset
-        org = xr[live] + off * nr[live]
-        tgt = y[live] + off * ny[live]
-        dv = tgt - org
-        length = np.sqrt(_dot(dv, dv))
-        dv /= np.maximum(length, 1e-300)[:, None]
-        tfar = np.maximum(length - off, 0.5 * length)
-        hit = np.asarray(g.scene.run(org.astype(np.float32), dv.astype(np.float32),
-                                     dists=tfar.astype(np.float32), query="OCCLUDED"))
-        vis[live] = hit == -1
-    wsum = w.reshape(m, k).sum(axis=1)
-    wvis = (w * vis).reshape(m, k).sum(axis=1)
+    x32 = np.asarray(x, dtype=np.float32)
+    n32 = np.asarray(n, dtype=np.float32)
+    d = y - x32[:, None, :]
+    r2 = np.einsum("mkj,mkj->mk", d, d)
+    cx = np.einsum("mkj,mj->mk", d, n32)
+    cy = np.einsum("mkj,mkj->mk", d, ny)
+    np.maximum(cx, 0, out=cx)
+    np.minimum(cy, 0, out=cy)
+    r2 *= r2
+    np.maximum(r2, np.float32(1e-30), out=r2)
+    w = cx * -cy / r2  # (m, k)
+    row, col = np.nonzero(w > 0)
+    vis = np.zeros((m, k), dtype=np.float32)
+    if len(row):
+        off = np.float32(g.offset)
+        org = (x32 + off * n32)[row]
+        dv = y[row, col] + off * ny[row, col]
+        dv -= org
+        length = np.sqrt(np.einsum("ij,ij->i", dv, dv))
+        dv /= np.maximum(length, np.float32(1e-30))[:, None]
+        tfar = np.maximum(length - off, np.float32(0.5) * length)
+        hit = np.asarray(g.scene.run(org, dv, dists=tfar, query="OCCLUDED"))
+        vis[row, col] = hit == -1
+    wsum = w.sum(axis=1, dtype=np.float64)
+    wvis = (w * vis).sum(axis=1, dtype=np.float64)
     if sums:
-        return wvis, wsum, len(live)
+        return wvis, wsum, len(row)
     V = np.where(wsum > 0, wvis / np.where(wsum > 0, wsum, 1.0), 1.0)
-    return V, len(live)
+    return V, len(row)
 
 
 # --------------------------------------------------------------------------------------
