@@ -15,17 +15,19 @@ Metric: the direct light of each target, D_r = sum_s F_rs E_s, for
   "few": 8 random sources lit (20 draws; the few-lights case that a solve ends with);
 per-target relative error against the reference, RMS over the targets (targets with
 D_ref >= 5 % of the mean only, for "few"; mean over the draws). The reference is an independent
-hemisphere estimate of the target rows with 2^ref_rays (default 2^22) rays per target patch and its own seed;
-its own variance (multinomial counts: Var D = (sum_s E_s^2 p_s - (sum_s E_s p_s)^2) / N) is
-subtracted from the mean squared error ("corrected"; the raw value is stored as well).
+hemisphere estimate of the target rows with 2^ref_rays (default 2^22) rays per target patch;
+the reference is the mean of two such estimates (seeds apart) and its own noise is measured
+from their difference; the chart shows the raw error (reference noise included, dotted line),
+the JSON also the error with the reference's variance subtracted ("corrected").
 
 Estimators, several quality levels each, timed on the same machine in one run:
 - "hemisphere (full F)": compute_form_factors at N rays per patch, the whole scene: what a
   solve pays today to get these rows;
 - "hemisphere (target rows)": rays shot from the target patches only (the cheapest ray-cast
   route to these rows; formfactors._Tracer with one chunk per target);
-- "kernel": kernel_form_factors on targets x sources at several settings (the full F at the
-  automatic quality is still needed for the rest of the matrix; its time is printed).
+- "kernel": kernel_form_factors on targets x sources at several settings (a solve still needs
+  the full F for the rest of the matrix: the "hemisphere (full F)" row marked auto).
+Two seeds per setting (one for the two slowest kernel levels), run seed by seed.
 
 Writes benchmarks/results/bench_kernel_transfer.json and docs/img/bench_kernel_transfer.png.
 """
@@ -147,25 +149,29 @@ def hemisphere_rows(ps, rows, rays, seed, threads):
     return out, time.perf_counter() - t0
 
 
-def direct_errors(F, ref, N_ref, lightings):
-    """RMS per-target relative error of D = F @ E against the reference, for each lighting:
-    (corrected, raw). ``lightings``: name -> list of exitance vectors (E, 'few' draws)."""
+def direct_errors(F, refs, lightings):
+    """Per-target relative error of the direct light D = F @ E against the reference (the mean
+    of two independent estimates ``refs``), RMS over the targets, mean over the lightings'
+    draws: ``raw``; the reference's own noise from the two estimates' difference,
+    Var(mean) ~ (D_a - D_b)^2 / 4 (``ref_noise``, RMS relative); ``corrected`` = sqrt(raw^2 -
+    ref_noise^2) (0 when negative). ``lightings``: name -> list of exitance vectors."""
+    ref = 0.5 * (refs[0] + refs[1])
     out = {}
     for name, Es in lightings.items():
-        raw, cor = [], []
+        raw, noise, mx = [], [], []
         for E in Es:
             d, dr = F @ E, ref @ E
             keep = dr >= (0.05 * dr.mean() if name != "all" else 0) + 1e-300
             rel2 = ((d[keep] - dr[keep]) / dr[keep]) ** 2
-            var = ((ref[keep] @ (E * E)) - dr[keep] ** 2) / N_ref / dr[keep] ** 2
-            raw.append(np.sqrt(rel2.mean()))
-            cor.append(np.sqrt(max(rel2.mean() - var.mean(), 0.0)))
-            out.setdefault(name + "_ref_noise", []).append(float(np.sqrt(var.mean())))
-            out.setdefault(name + "_max", []).append(float(np.sqrt(rel2.max())))
-        out[name] = float(np.mean(cor))
-        out[name + "_raw"] = float(np.mean(raw))
-        out[name + "_ref_noise"] = float(np.mean(out[name + "_ref_noise"]))
-        out[name + "_max"] = float(np.mean(out[name + "_max"]))
+            var = ((refs[0][keep] @ E - refs[1][keep] @ E) / 2) ** 2 / dr[keep] ** 2
+            raw.append(rel2.mean())
+            noise.append(var.mean())
+            mx.append(np.sqrt(rel2.max()))
+        r, v = float(np.mean(raw)), float(np.mean(noise))
+        out[name + "_raw"] = float(np.sqrt(r))
+        out[name + "_ref_noise"] = float(np.sqrt(v))
+        out[name] = float(np.sqrt(max(r - v, 0.0)))
+        out[name + "_max"] = float(np.mean(mx))
     return out
 
 
@@ -181,40 +187,43 @@ def run_scene(name, ps, targets, sources, args, threads):
     lightings = {"all": [np.ones(len(sources))], "few": few}
     N_ref = 1 << args.ref_rays
     t = time.perf_counter()
-    ref_full, _ = hemisphere_rows(ps, targets, N_ref, seed=987654, threads=threads)
-    ref = ref_full[:, sources]
+    refs = [hemisphere_rows(ps, targets, N_ref, seed=sd, threads=threads)[0][:, sources] for sd in (987654, 192837)]
     t_ref = time.perf_counter() - t
-    print(f"reference: {N_ref} rays per target, {t_ref:.1f} s", flush=True)
+    print(f"reference: 2 x {N_ref} rays per target, {t_ref:.1f} s", flush=True)
     res = {"patches": int(ps.n_patches), "targets": int(len(targets)), "sources": int(len(sources)),
            "reference_rays_per_target": N_ref, "reference_s": t_ref, "runs": []}
 
     def record(method, label, seconds, F, extra=None):
-        e = direct_errors(F, ref, N_ref, lightings)
+        e = direct_errors(F, refs, lightings)
         row = {"method": method, "label": label, "seconds": seconds, **e, **(extra or {})}
         res["runs"].append(row)
-        print(f"{method:26s} {label:14s} {seconds:7.2f} s   all {100 * e['all']:6.3f} % (raw {100 * e['all_raw']:.3f}, "
-              f"ref {100 * e['all_ref_noise']:.3f})   few {100 * e['few']:6.3f} % (raw {100 * e['few_raw']:.3f}, "
-              f"ref {100 * e['few_ref_noise']:.3f})", flush=True)
+        print(f"{method:26s} {label:14s} {seconds:7.2f} s   all {100 * e['all_raw']:6.3f} % (corrected "
+              f"{100 * e['all']:.3f}, ref {100 * e['all_ref_noise']:.3f})   few {100 * e['few_raw']:6.3f} % (corrected "
+              f"{100 * e['few']:.3f}, ref {100 * e['few_ref_noise']:.3f})", flush=True)
 
     seeds = (0,) if args.quick else (0, 1)
     auto = auto_rays_per_patch(ps.n_patches)
     res["auto_rays_per_patch"] = auto
-    for N in FULL_RAYS if not args.quick else FULL_RAYS[:3]:
-        for s in seeds:
+    full = FULL_RAYS if not args.quick else FULL_RAYS[:3]
+    rows = ROWS_RAYS if not args.quick else ROWS_RAYS[:2]
+    levels = KERNEL_LEVELS if not args.quick else KERNEL_LEVELS[:4]
+    for s in seeds:  # seed by seed, so that load changes hit every method
+        for N in full:
             ff = compute_form_factors(ps, N, seed=s, threads=threads)
             F = np.asarray(ff.matrix[np.ix_(targets, sources)], dtype=np.float64)
             record("hemisphere (full F)", f"{N}{' (auto)' if N == auto else ''}", ff.seconds, F, {"rays_per_patch": N})
-    for N in ROWS_RAYS if not args.quick else ROWS_RAYS[:2]:
-        for s in seeds:
+        for N in rows:
             R, dt = hemisphere_rows(ps, targets, N, seed=s, threads=threads)
             record("hemisphere (target rows)", str(N), dt, R[:, sources], {"rays_per_patch": N})
-    for label, kw in KERNEL_LEVELS if not args.quick else KERNEL_LEVELS[:4]:
-        for s in seeds:
+        for label, kw in levels:
+            if s > 0 and label in ("k5", "k6"):
+                continue  # the slowest levels once
             st = {}
             t = time.perf_counter()
             K = kernel_form_factors(ps, targets, sources, seed=s, threads=threads, stats=st, **kw)
             dt = time.perf_counter() - t
             record("kernel", label, dt, K, {"settings": kw, "stats": st})
+        res.setdefault("load", []).append(uptime())
     return res
 
 
@@ -235,23 +244,25 @@ def plot(out):
                 rows = [r for r in d["runs"] if r["method"] == method]
                 labels = list(dict.fromkeys(r["label"] for r in rows))
                 xs = [np.mean([r["seconds"] for r in rows if r["label"] == lb]) for lb in labels]
-                ys = [np.mean([max(r[metric], 1e-5) for r in rows if r["label"] == lb]) for lb in labels]
+                ys = [np.mean([r[metric + "_raw"] for r in rows if r["label"] == lb]) for lb in labels]
                 ax.plot(xs, ys, "-" + marker, color=color, label=method)
                 for x, y, lb in zip(xs, ys, labels):
                     ax.annotate(lb.replace(" (default)", "*").replace(" (auto)", "*"), (x, y), fontsize=7,
                                 xytext=(3, 3), textcoords="offset points")
             ax.axhline(0.01, color="0.6", lw=0.8, ls="--")
+            noise = np.mean([r[metric + "_ref_noise"] for r in d["runs"]])
+            ax.axhline(noise, color="k", lw=0.8, ls=":", label="reference's own noise")
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_xlabel("seconds (2 cores)")
-            ax.set_ylabel("RMS per-target error of direct light")
+            ax.set_ylabel("RMS per-target relative error of direct light")
             what = "all sources lit" if metric == "all" else "8 random sources lit (20 draws)"
             ax.set_title(f"{sc}: {d['targets']} targets x {d['sources']} sources\n{what}", fontsize=10)
             ax.grid(True, which="both", lw=0.3)
             if i == 0 and j == 0:
                 ax.legend(fontsize=8)
-    fig.suptitle("Light cells -> target patches: error against time (reference: independent hemisphere "
-                 "estimate, its variance subtracted; * = default)", fontsize=10)
+    fig.suptitle("Light cells -> target patches: error against time (reference: mean of two independent "
+                 f"hemisphere estimates, 2 x 2^{out.get('ref_rays', 22)} rays per target; * = default)", fontsize=10)
     fig.tight_layout()
     OUT_PNG.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(OUT_PNG, dpi=110)
@@ -272,6 +283,7 @@ def main():
         args.ref_rays = 19
     threads = os.cpu_count() or 1
     out = {"command": "benchmarks/bench_kernel_transfer.py " + " ".join(sys.argv[1:]), "threads": threads,
+           "ref_rays": args.ref_rays,
            "load": [uptime()], "scenes": {}}
     for sc in args.scenes.split(","):
         if sc == "staircase":

@@ -475,13 +475,21 @@ def kernel_form_factors(
     the gathering weight of B_r = E_r + rho_r sum_s F_rs B_s (see the module docstring).
 
     ``receivers``, ``sources``: patch indices (or boolean masks over the patches).
-    ``points_per_patch``: receiver quadrature points per patch (about); ``shadow_rays``:
-    visibility rays per receiver point and source (0: no visibility, the unoccluded kernel).
+    ``points_per_patch``: receiver quadrature points per patch (about; phase 1);
+    ``shadow_rays``: visibility rays per receiver point and source (phase 1; 0: no
+    visibility at all, the unoccluded kernel). ``penumbra_points``, ``penumbra_rays``: the
+    jittered receiver points of a pair found in penumbra and the rays from each (phase 2;
+    penumbra_points is rounded to a square; 0: keep the phase-1 estimate).
     ``far_ratio``: pairs farther apart than far_ratio x the larger patch diameter use the
     point kernel (``inf``: never). ``seed``: reproducible for a seed, whatever ``threads``
     (default ``os.cpu_count()``). ``cancel()`` returning True raises formfactors.Cancelled;
     ``progress(fraction)`` is called from the calling thread. ``stats``: an optional dict
-    filled with counts (pairs, kernel evaluations, rays, pairs per level, seconds).
+    filled with counts (pairs, culled, far, pairs per level, clipped_receivers, kernel
+    evaluations, rays, penumbra_pairs, seconds).
+
+    Cost: about pairs x points x (source triangles) contour integrals and pairs x points x
+    shadow_rays + penumbra pairs x penumbra_points x penumbra_rays rays; memory: a few
+    arrays of len(receivers) x len(sources).
     """
     t_start = time.perf_counter()
     P = patches.n_patches
