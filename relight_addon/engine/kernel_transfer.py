@@ -730,10 +730,15 @@ def _sample_patches(g: _Geometry, s, k, rng):
     else:  # strata along the first coordinate, the second random
         u[..., 0] += np.arange(k, dtype=np.float32)
         u[..., 0] *= np.float32(1.0 / k)
-    np.clip(u, np.float32(1e-7), np.float32(1 - 1e-7), out=u)
+    # (u may round to 1.0 in float32: the far edge of the set-in patch, still inside)
+    para = g.para[s]
+    if para.all():  # the common case (grid cells): no per-sample gathers at all
+        G = g.pgeo[s]
+        y = G[:, None, 0:3] + u[..., 0:1] * G[:, None, 3:6]
+        y += u[..., 1:2] * G[:, None, 6:9]
+        return y, np.broadcast_to(G[:, None, 9:12], (m, k, 3))
     y = np.empty((m, k, 3), dtype=np.float32)
     ny = np.empty((m, k, 3), dtype=np.float32)
-    para = g.para[s]
     ip = np.flatnonzero(para)
     if len(ip):
         G = g.pgeo[s[ip]]  # (mp, 12): origin, edge u, edge v, normal
@@ -776,24 +781,36 @@ def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
     r2 *= r2
     np.maximum(r2, np.float32(1e-30), out=r2)
     w = cx * -cy / r2  # (m, k)
-    row, col = np.nonzero(w > 0)
+    live = w > 0
+    n_live = int(np.count_nonzero(live))
     vis = np.zeros((m, k), dtype=np.float32)
-    if len(row):
+    if n_live:
         off = np.float32(g.offset)
-        org = (x32 + off * n32)[row]
-        dv = y[row, col] + off * ny[row, col]
+        xo = x32 + off * n32
+        if n_live > 0.8 * m * k:  # trace them all (a ray with w = 0 counts for nothing)
+            org = np.repeat(xo, k, axis=0)
+            dv = (y + off * ny).reshape(-1, 3)
+            sel = None
+        else:
+            row, col = np.nonzero(live)
+            org = xo[row]
+            dv = y[row, col] + off * ny[row, col]
+            sel = (row, col)
         dv -= org
         length = np.sqrt(np.einsum("ij,ij->i", dv, dv))
         dv /= np.maximum(length, np.float32(1e-30))[:, None]
         tfar = np.maximum(length - off, np.float32(0.5) * length)
         hit = np.asarray(g.scene.run(org, dv, dists=tfar, query="OCCLUDED"))
-        vis[row, col] = hit == -1
+        if sel is None:
+            vis = (hit == -1).reshape(m, k).astype(np.float32)
+        else:
+            vis[sel] = hit == -1
     wsum = w.sum(axis=1, dtype=np.float64)
     wvis = (w * vis).sum(axis=1, dtype=np.float64)
     if sums:
-        return wvis, wsum, len(row)
+        return wvis, wsum, n_live
     V = np.where(wsum > 0, wvis / np.where(wsum > 0, wsum, 1.0), 1.0)
-    return V, len(row)
+    return V, n_live
 
 
 # --------------------------------------------------------------------------------------
