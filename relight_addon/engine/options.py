@@ -11,7 +11,7 @@ DEFAULT_SELECTION = "greedy-swap"  # measured: docs/benchmarks.md "Best k lights
 DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
 DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
-DEFAULT_ESTIMATOR = "raycast"
+DEFAULT_ESTIMATOR = "kernel"
 
 
 @dataclass
