@@ -135,6 +135,8 @@ def build_parser():
                        help=f"stop criterion: at most this many lights (default {o.DEFAULT_MAX_LIGHTS})")
         s.add_argument("--error-threshold", type=float, default=None,
                        help="stop criterion: relative error (Eq. 1 / ||b_P||) at most this")
+        s.add_argument("--tolerance", type=float, default=None,
+                       help="least-power selection: every target within +-this fraction of its painted value")
         s.add_argument("--allow-negative", action="store_true",
                        help="do not require the final configuration to be free of negative exitances")
         s.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
@@ -411,6 +413,7 @@ def run_solve_command(args, progress=None, cancel=None):
                          threads=args.threads, solver=getattr(args, "solver", "reduced"),
                          selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
                          error_threshold=args.error_threshold, require_positive=not args.allow_negative,
+                         tolerance=args.tolerance,
                          patch_model=args.patch_model, light_size=args.light_size,
                          refine_passes=args.refine_passes, estimator=args.estimator).validate()
     mode = "inverse" if args.command == "solve" else "direct"

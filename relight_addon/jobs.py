@@ -19,7 +19,8 @@ import numpy as np
 import scipy.optimize as sopt
 import scipy.sparse as sp
 
-from .engine.cost import estimate_cost, estimate_patches_cost, format_bytes
+from .engine.best_lights import lower_bounds
+from .engine.cost import check_memory, estimate_cost, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
@@ -139,7 +140,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     if patches is None:
         patches = mesh_for_job(faces, options, default_max_patch_size, mode="direct")
     t_mesh = time.perf_counter() - t0
-    cost = check_memory(radiosity_cost(patches, options), f"{patches.n_patches} patches")
+    cost = check_memory(radiosity_cost(patches, options), f"this job ({patches.n_patches} patches)")
     if cancel is not None and cancel():
         raise Cancelled("radiosity cancelled")
     warnings = list(faces.warnings) + [w for w in cost["warnings"] if w not in faces.warnings]
@@ -261,37 +262,34 @@ def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=Non
     return patch_model(options, default_max_patch_size).mesh(faces)
 
 
-def solve_cost(patches: PatchSet, options: JobOptions) -> dict:
+def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0) -> dict:
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
-    return estimate_patches_cost(patches, options.rays_per_patch, options.solver, threads=options.threads)
+    passes = options.refine_passes if PATCH_MODELS[options.patch_model].get("refines") else 0
+    return estimate_patches_cost(patches, options.rays_per_patch, options.solver, n_triangles=n_triangles,
+                                 refine_passes=passes, threads=options.threads)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
     """Memory and time estimate of a forward radiosity job (no inverse problem)."""
     rays = options.rays_per_patch or auto_rays_per_patch(patches.n_patches)
-    return estimate_cost(patches.n_patches, rays, 0, 0, threads=options.threads)
+    return estimate_cost(patches.n_patches, rays, 0, 0, threads=options.threads)  # no inverse terms
 
 
 # ---------------------------------------------------------------------------- memory guard
 
 #: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
 _MAX_COUNT = 1e30
+#: the adaptive model clusters faces below this fraction of their size (its CLUSTER_BELOW)
+_CLUSTER_BELOW = 0.5
 
 
-def machine_memory() -> int | None:
-    """Physical memory of this machine in bytes (None when the platform does not say)."""
-    try:
-        n = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-        return int(n) if n > 0 else None
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> float:
+def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_size=None,
+                         certain: bool = False) -> float:
     """How many patches the job's patch model makes of ``faces``, from the faces alone (no
     meshing): a face no larger than its size is one patch, a larger quad an nu x nv grid, any
-    other face k x k pieces per triangle (engine.scene.split_faces). The adaptive model's
-    candidate faces use the light size; its clustering only makes fewer patches."""
+    other face k x k pieces per triangle (engine.scene.split_faces); exact for the polygon model.
+    The adaptive model's candidate faces use the light size, and its faces below half their size
+    are clustered: ``certain`` counts those as none (a lower bound), else one each (an upper one)."""
     size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
     if size is None:
         size = _default_patch_size(faces.vertices)
@@ -310,6 +308,8 @@ def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_
         face_edge = np.zeros(F)
         np.maximum.at(face_edge, tf, edge)
         count = np.where(face_edge <= s, 1.0, per_tri)
+        if certain and options.patch_model == "adaptive":
+            count[face_edge <= _CLUSTER_BELOW * s] = 0.0
         quad = np.flatnonzero((faces.loop_total == 4) & (face_edge > s))
         if len(quad):
             p = V[faces.loop_vertices[faces.loop_start[quad][:, None] + np.arange(4)]]
@@ -317,34 +317,22 @@ def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_
             nu = np.maximum(np.ceil(np.minimum(np.maximum(d(1, 0), d(2, 3)) / s[quad], _MAX_COUNT)), 1.0)
             nv = np.maximum(np.ceil(np.minimum(np.maximum(d(3, 0), d(2, 1)) / s[quad], _MAX_COUNT)), 1.0)
             count[quad] = np.minimum(nu * nv, _MAX_COUNT)
-    return float(min(count.sum(), _MAX_COUNT))
-
-
-def check_memory(cost: dict, what: str):
-    """Refuse (SceneError) a job whose certain memory need (``memory_floor_bytes``) exceeds this
-    machine's memory, naming the estimate; returns ``cost``."""
-    total = machine_memory()
-    if total is not None and cost["memory_floor_bytes"] > total:
-        raise SceneError(f"this job needs at least {format_bytes(cost['memory_floor_bytes'])} of memory "
-                         f"(estimate {format_bytes(cost['memory_bytes'])}, {cost['seconds']:.3g} s; {what}), more "
-                         f"than this machine has ({format_bytes(total)}): use a larger patch size "
-                         "(--max-patch-size / relight_max_patch_size) or fewer rays per patch")
-    return cost
+    return float(min(max(count.sum(), 1.0), _MAX_COUNT))
 
 
 def check_before_meshing(faces: FaceSet, options: JobOptions, default_max_patch_size=None, mode="inverse") -> dict:
-    """The cost estimate from the patch count the faces will give (``estimate_patch_count``),
-    refused when it cannot fit in memory (``check_memory``), before any allocation."""
-    P = estimate_patch_count(faces, options, default_max_patch_size)
+    """Refuse (engine.cost.check_memory) before any allocation a job that cannot fit in memory:
+    the estimate of the patches the faces certainly give (``estimate_patch_count(certain=True)``;
+    the inverse problem's terms left out: a lower bound of the estimate checked after meshing)."""
+    P = estimate_patch_count(faces, options, default_max_patch_size, certain=True)
     Pi = int(P)
     rays = options.rays_per_patch or auto_rays_per_patch(Pi)
-    frac_c = float(np.mean(~faces.forbidden)) if mode == "inverse" else 0.0
-    frac_t = float(np.mean(faces.target)) if mode == "inverse" else 0.0
-    cost = estimate_cost(Pi, int(rays), int(P * frac_c), int(P * frac_t),
-                         solver=options.solver if mode == "inverse" else "reduced", threads=options.threads)
+    passes = options.refine_passes if (mode == "inverse" and PATCH_MODELS[options.patch_model].get("refines")) else 0
+    cost = estimate_cost(Pi, int(rays), 0, 0, n_triangles=len(faces.triangles), refine_passes=passes,
+                         threads=options.threads)
     size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
-    where = f"about {P:.3g} patches" + (f" at a patch size of {size:g} m" if size is not None else "")
-    return check_memory(cost, f"{where}, {int(rays)} rays per patch")
+    where = f"about {P:.3g} patch(es)" + (f" at a patch size of {size:g} m" if size is not None else "")
+    return check_memory(cost, f"this job ({where}, {int(rays)} rays per patch)")
 
 
 @dataclass
@@ -448,13 +436,17 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
-    cost = check_memory(solve_cost(patches, options), f"{patches.n_patches} patches")
+    cost = check_memory(solve_cost(patches, options, len(faces.triangles)),
+                        f"this solve ({patches.n_patches} patches)")  # refuse before any more work
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
     t_ff = t_problem = 0.0
     history = []
-    # the paper's heuristics redistribute between lights that partition the candidates: single-scale
+    # the paper's heuristics redistribute between lights that partition the candidates: single-scale;
+    # direct-lighting mode reduces the scene's own lamps: one light per emitter polygon
     scales = None if SELECTIONS[options.selection].get("multiscale") else ("cell",)
+    if mode == "direct":
+        scales = ("polygon",)
     for p in range(passes + 1):
         mask = candidate_mask(patches, mode)
         lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
@@ -495,7 +487,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if not pm.refine(faces, patches, importance):
             break
         patches = pm.mesh(faces)
-        check_memory(solve_cost(patches, options), f"{patches.n_patches} patches after refinement pass {p + 1}")
+        check_memory(solve_cost(patches, options, len(faces.triangles)),
+                     f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
     if mode == "inverse" and np.any(background > 0):
         emitting = np.any(patches.exitance > 0, axis=1)
@@ -516,14 +509,44 @@ def solve_stage(model: Model, options: JobOptions) -> tuple:
 
 def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None) -> ReductionResult:
     """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the final point."""
+    by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
     red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
-                        max_lights=options.max_lights, relative_error_threshold=options.error_threshold,
-                        require_positive=options.require_positive,
+                        max_lights=None if by_lp else options.max_lights,
+                        relative_error_threshold=None if by_lp else options.error_threshold,
+                        require_positive=options.require_positive, tolerance=options.tolerance,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
         raise Cancelled("solve cancelled")
     return red
+
+
+#: the certificate (lower bounds) covers the curve up to this many lights; above, the NNLS bound
+CERTIFICATE_LIGHTS = 32
+
+
+def certificate(problem: InverseProblem, red: ReductionResult):
+    """Lower bounds on the best error any non-negative configuration of at most k lights can reach
+    (engine.best_lights.lower_bounds: exact by exhaustive search where small enough, else the
+    all-lights NNLS bound), and per curve point its bound (W/m^2)."""
+    k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
+    bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
+    return bounds, np.array([bounds.at(p.n_lights) for p in red.curve])
+
+
+def certificate_notes(problem, bounds, final) -> list:
+    """How good the final configuration is against the certificate."""
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    k = final.n_lights
+    exact = 1 <= k <= len(bounds.exact) and bool(bounds.exact[k - 1])
+    lb = bounds.at(k) / norm
+    if final.n_negative or final.relative_error <= 1e-9:
+        return []
+    if exact and final.relative_error <= lb * (1 + 1e-6) + 1e-12:
+        return [f"{k} light(s): the best possible with {k} non-negative lights (exhaustive search), "
+                f"relative error {final.relative_error:.3g}"]
+    return [f"{k} light(s): relative error {final.relative_error:.3g}; no {k} non-negative lights can go below "
+            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
 
 
 def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
@@ -574,7 +597,7 @@ def light_records(model: Model, curve: Curve, row: int) -> list:
 
 
 def make_report(model: Model, options: JobOptions, inv: InverseResult | None, red: ReductionResult,
-                curve: Curve, warnings: list, timings: dict) -> dict:
+                curve: Curve, warnings: list, timings: dict, bounds=None, point_bounds=None) -> dict:
     """Stage 5: the JSON report (see README.md)."""
     faces, patches, problem = model.faces, model.patches, model.problem
     fi = curve.final_row
@@ -588,6 +611,7 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
     objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
                for name in radiosity}
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
         "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
@@ -618,14 +642,25 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-                   "n_negative": p.n_negative, "power": float(np.sum(p.exitance.sum(axis=1)
-                                                                     * problem.light_area[p.lights]))}
-                  for p in red.curve],
+                   "n_negative": p.n_negative, "power": _power(problem, p),
+                   "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
+                  for i, p in enumerate(red.curve)],
+        "certificate": None if bounds is None else {
+            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
+            "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
+                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
-                  "n_negative": final.n_negative, "lights": light_records(model, curve, fi)},
+                  "n_negative": final.n_negative, "power": _power(problem, final),
+                  "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
+                  "lights": light_records(model, curve, fi)},
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def _power(problem, point) -> float:
+    """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
+    return float(np.sum(point.exitance.sum(axis=1) * problem.light_area[point.lights]))
 
 
 def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:
@@ -657,6 +692,10 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "curve_error": np.array([p.error for p in pts]),
         "curve_relative_error": np.array([p.relative_error for p in pts]),
         "curve_n_negative": np.array([p.n_negative for p in pts]),
+        "curve_power": np.array([c["power"] for c in report["curve"]]),
+        # -1: no certificate (direct-lighting mode)
+        "curve_bound_relative_error": np.array([-1.0 if c["bound_relative_error"] is None else
+                                                c["bound_relative_error"] for c in report["curve"]]),
         "point_index": keep,
         "n_lights": np.array([pts[i].n_lights for i in keep]),
         "error": np.array([pts[i].error for i in keep]),
@@ -718,15 +757,20 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
     red = reduce_stage(model, e_x, options, progress, cancel)
     t_reduce = time.perf_counter() - t2
     warnings = list(model.warnings)
+    bounds = point_bounds = None
     if mode == "inverse":
+        t3 = time.perf_counter()
+        bounds, point_bounds = certificate(model.problem, red)
+        t_reduce += time.perf_counter() - t3
         warnings.extend(_positivity_notes(model.problem, inv, red.final))
+        warnings.extend(certificate_notes(model.problem, bounds, red.final))
     warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
-    report = make_report(model, options, inv, red, curve, warnings, timings)
+    report = make_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]
@@ -753,8 +797,8 @@ def _positivity_notes(problem, inv, final):
                 f"relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
                 f"is {final.relative_error:.3g}"]
     return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
-            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or try the "
-            "nnls-greedy selection"]
+            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "
+            "greedy-swap selection (Best k Lights)"]
 
 
 def stored_points(n_lights, final_index):

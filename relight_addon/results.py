@@ -202,6 +202,11 @@ def _emitter_material(rid):
         node.location = (-600, 300 - 160 * k)
     out.location = (300, 0)
     mat.diffuse_color = (1.0, 0.9, 0.5, 1.0)
+    cyc = getattr(mat, "cycles", None)
+    if cyc is not None and hasattr(cyc, "emission_sampling"):
+        # the emission is front-only and read from an attribute: tell Cycles to sample it as a
+        # light from the front (Auto cannot estimate attribute-driven emission well)
+        cyc.emission_sampling = "FRONT"
     return mat
 
 

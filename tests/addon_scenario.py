@@ -219,7 +219,8 @@ lit_obj.data.polygons.foreach_get("select", got)
 R["selected_lights"] = [lit_obj.name, np.flatnonzero(got).tolist()]
 R["final_expected"] = expected_lights(k_final)
 R["final_row"] = [settings.curve[k_final].n_lights, settings.curve[k_final].n_negative]
-R["ex_targets"] = target_check(0)["stored_target_radiance"]
+R["final_targets"] = target_check(k_final)["stored_target_radiance"]
+R["final_relative_error"] = float(settings.curve[k_final].relative_error)
 R["active_color"] = floor.data.color_attributes.active_color.name
 R["target_radiance"] = target_radiance.tolist()
 

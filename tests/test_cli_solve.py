@@ -55,7 +55,8 @@ def test_reduce_cornell_direct_lighting_mode(run_cli, tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=str(scene), copy=True)
     area = np.array([p.area for p in light.data.polygons])
     assert len(area) == 9
-    code, r, err = run_cli(["reduce", scene, "--report", tmp_path / "r.json", "--rays-per-patch", "1024"])
+    code, r, err = run_cli(["reduce", scene, "--report", tmp_path / "r.json", "--rays-per-patch", "1024",
+                            "--selection", "exitance-elimination"])
     assert code == 0, err
     assert r["command"] == "reduce" and r["inverse"]["n_candidates"] == 9
     assert r["curve"][0]["relative_error"] < 1e-10
@@ -152,7 +153,7 @@ def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_cle
 
     export.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
     exp = export.export_scene()
-    options = JobOptions(rays_per_patch=1024, max_patch_size=1.0, seed=3)  # every face one patch
+    options = JobOptions(rays_per_patch=1024, max_patch_size=1.0, seed=3, patch_model="polygon")  # a face, a patch
     _, forward = jobs.run_radiosity(exp.faces, options, polygon_counts=exp.polygon_counts)
     faces = exp.faces
     floor = faces.object_names.index("floor")

@@ -1,60 +1,50 @@
 """Memory and time estimate of a solve, before any work (no bpy).
 
-``estimate_cost(n_patches, rays_per_patch, n_candidates, n_targets)`` adds up the big
-terms of a solve (jobs.run_solve) from the sizes alone:
+``estimate_cost(...)`` adds up the big terms of jobs.run_solve from the sizes alone (P patches,
+N rays per patch, C candidate patches, L candidate lights, m targets, T triangles):
 
-- form factors F: float32, dense P x P (4 P^2 bytes) when P <= DENSE_LIMIT, else CSR with at
-  most min(P, rays per patch) non-zeros per row (float32 value + int32 column: 8 bytes
-  each); ray casting time = P x rays per patch / RAYS_PER_SECOND.
-- the radiosity system A = I - rho F per colour channel and its LU factors. Dense (P <=
-  DENSE_LIMIT, scipy lu_factor): 3 x 8 P^2 bytes kept (the three factorisations) plus one
-  8 P^2 working copy; 3 x 2/3 P^3 flops. Sparse (splu): A has nnz = P x min(P, HIT_FRACTION x
-  rays per patch) (the distinct patches a patch's rays hit), its factors about LU_FILL times
-  that (at most P^2): 12 bytes per non-zero (value + index), nnz(LU)^2 / P flops at FLOPS x
-  SPLU_SPEED, per channel. Measured (benchmarks/bench_sparse_lu.py, docs/benchmarks.md "Sparse
-  LU"): nnz(A)/P = 0.53-0.71 x 1024 rays, fill 10.1-14.7, LU memory within 0.7-1.15 x the model,
-  splu's time 0.35-3 x the model on the Cornell box and the staircase at 6-13 k patches (their
-  factors fill to near dense; scenes with much occlusion fill less: pessimistic there).
+- scene and meshing: about BYTES_PER_TRIANGLE per triangle (the FaceSet, the patch triangles,
+  Embree's BVH and the meshing temporaries);
+- form factors: every pass casts P x N rays (the refinement passes of the adaptive model cast
+  N / REFINE_RAY_FRACTION each) at RAYS_PER_SECOND; F is float32, dense P x P up to DENSE_LIMIT
+  patches, else CSR with at most min(P, N) entries per row (8 bytes each);
+- the radiosity system A = I - rho F per distinct reflectance channel group g (1 for grey
+  scenes, up to 3): up to DIRECT_SOLVE_LIMIT patches a dense float64 copy and its LU factors
+  (8 P^2 bytes each, 2/3 P^3 flops); above, no factorisation: iterative sweeps of one sparse
+  product each (ITERATIVE_SWEEPS x nnz(F) x right-hand sides x 2 flops);
+- the transfer matrix T: min(m, C) right-hand sides through A (2 P^2 flops each dense), T itself
+  3 x 8 m L bytes; the solver: reduced/nnls m^2 L + m^3/3 flops per channel; the paper's
+  formulation a P x P Gram matrix (8 P (P - m + L) + 8 P^2 bytes, P^2 (P - m + L) + P^3 / 3 flops);
+- the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
-  formfactors.CHUNK_RAYS) per thread.
-- the transfer matrix T (rows P, columns C of A^-1; solvers registered with cost="transfer"): 3 x 8 m C
-  bytes, 3 x 2 nnz(LU) min(m, C) flops of triangular solves (nnz(LU) = P^2 when dense), and its
-  minimum-norm solve (Gram matrix m x m: m^2 C + m^3/3 flops per channel).
-- the paper's formulation (a solver registered with cost="paper": "svd") instead builds M = [A_U | -I_C] (P x (P - m + C))
-  and its Gram matrix P x P: 8 P (P - m + C) + 8 P^2 bytes, P^2 (P - m + C) + P^3/3 flops
-  per channel.
-The reduction (selection x distribution) and the curve are not counted: they scale with the
-candidates and are small next to the terms above for the paper's scenes.
+  formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
 
-Rates: RAYS_PER_SECOND = 3e6 (docs/benchmarks.md "Form factors": 2.1 to 4.6 M rays/s on
-2 cores under load) and FLOPS = 5e9 (scipy LU of a 2000 x 2000 matrix on the 2-core test
-machine under load: 7 GFLOP/s). The estimate is meant to be right to a factor of a few.
-Thresholds: MEMORY_WARNING_BYTES (4 GB) and SECONDS_WARNING (60 s) give a warning text.
-
-``memory_floor_bytes``: what the solve allocates for sure (the patches, the form factors'
-minimum, dense matrices when P <= DENSE_LIMIT, one patch's rays): the callers refuse a job
-whose floor exceeds the machine's memory, before any work; ``memory_bytes`` (which may be
-pessimistic) only warns.
+Rates measured on the 2-core test machine (docs/benchmarks.md, "Cost estimate": the estimate
+against measured runs): RAYS_PER_SECOND, FLOPS (numpy/LAPACK, dense), and the per-triangle
+costs. The estimate is meant to be right within a factor of 2.
+``check_memory`` refuses a solve whose estimate exceeds the machine's available memory.
 """
 from __future__ import annotations
+
+import os
 
 from .formfactors import DENSE_LIMIT
 from .registry import SOLVERS
 
-__all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "MEMORY_WARNING_BYTES", "SECONDS_WARNING",
-           "RAYS_PER_SECOND", "FLOPS"]
+__all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_memory", "check_memory",
+           "MEMORY_WARNING_BYTES", "SECONDS_WARNING", "RAYS_PER_SECOND", "FLOPS"]
 
 RAYS_PER_SECOND = 3.0e6
 FLOPS = 5.0e9
-#: sparse systems: distinct patches hit per ray cast, fill-in of the LU factors, and splu's
-#: speed relative to FLOPS (measured, see the module docstring)
-HIT_FRACTION = 0.6
-LU_FILL = 12.0
-SPLU_SPEED = 0.5
-#: working memory per ray in flight (origins, directions, hits, sample pool), bytes
+#: meshing + Embree BVH + the scene arrays, per triangle (bytes) and its time (s)
+BYTES_PER_TRIANGLE = 700.0
+SECONDS_PER_TRIANGLE = 4e-6
+DIRECT_SOLVE_LIMIT = 6000  # engine.inverse.DIRECT_SOLVE_LIMIT
+ITERATIVE_SWEEPS = 120
+REFINE_RAY_FRACTION = 4  # jobs.REFINE_RAY_FRACTION
+STORED_POINTS = 72
+#: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
-#: memory per patch of the meshed scene (triangles, attributes, maps), bytes
-PATCH_BYTES = 400
 MEMORY_WARNING_BYTES = 4 * 1024 ** 3
 SECONDS_WARNING = 60.0
 
@@ -79,66 +69,69 @@ def _count(name, value):
 
 
 def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targets: int,
-                  solver: str = "reduced", rays_per_second: float = RAYS_PER_SECOND, flops: float = FLOPS,
-                  memory_limit: float = MEMORY_WARNING_BYTES, seconds_limit: float = SECONDS_WARNING,
-                  dense_limit: int = DENSE_LIMIT, threads: int | None = None) -> dict:
+                  solver: str = "reduced", n_lights: int | None = None, n_triangles: int = 0,
+                  refine_passes: int = 0, channel_groups: int = 3, rays_per_second: float = RAYS_PER_SECOND,
+                  flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
+                  seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
+                  threads: int | None = None) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
-    Returns ``{"memory_bytes", "memory_floor_bytes", "seconds", "warnings": [str], "parts":
-    {name: (bytes, seconds)}}``; ``warnings`` is empty unless memory > ``memory_limit`` or time
-    > ``seconds_limit``. Counts may be floats (estimates before meshing).
+    Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
+    ``warnings`` is empty unless memory > ``memory_limit`` or time > ``seconds_limit``.
     """
     P = _count("n_patches", n_patches)
     N = _count("rays_per_patch", rays_per_patch)
     C = _count("n_candidates", n_candidates)
     m = _count("n_targets", n_targets)
+    L = C if n_lights is None else _count("n_lights", n_lights)
+    tris = _count("n_triangles", n_triangles)
+    passes = _count("refine_passes", refine_passes)
+    g = max(1, min(3, int(channel_groups)))
     kind = SOLVERS[solver].get("cost", "transfer")  # ValueError for an unknown solver
     if not (rays_per_second > 0 and flops > 0):
         raise ValueError("rays_per_second and flops must be positive")
-    import os
-
-    from .formfactors import CHUNK_RAYS
-
     P2 = float(P) * P
     parts = {}
-    dense = P <= dense_limit
-    row = min(float(P), HIT_FRACTION * N + 1.0)  # non-zeros per row of a sparse F (A: + the diagonal)
-    ff_bytes = 4.0 * P2 if dense else 8.0 * P * row + 8.0 * (P + 1)
-    parts["form_factors"] = (ff_bytes, float(P) * N / rays_per_second)
-    if dense:
-        parts["lu"] = (3 * 8.0 * P2 + 8.0 * P2, 3 * (2.0 / 3.0) * P2 * P / flops)
-    else:
-        nnz_lu = min(P2, LU_FILL * P * row)
-        parts["lu"] = (3 * 12.0 * nnz_lu + 12.0 * P * row, 3 * nnz_lu * nnz_lu / max(P, 1) / (flops * SPLU_SPEED))
-    in_flight = float(max(N, CHUNK_RAYS)) * (threads or os.cpu_count() or 1)
-    parts["rays"] = (RAY_BYTES * in_flight, 0.0)
-    parts["patches"] = (PATCH_BYTES * float(P), 0.0)
+    parts["scene"] = (BYTES_PER_TRIANGLE * tris, SECONDS_PER_TRIANGLE * tris * (passes + 1))
+    nnz = P2 if P <= dense_limit else float(P) * min(P, N)
+    ff_bytes = 4.0 * P2 if P <= dense_limit else 8.0 * nnz + 8.0 * (P + 1)
+    rays = float(P) * N * (1.0 + passes / REFINE_RAY_FRACTION)
+    parts["form_factors"] = (ff_bytes, rays / rays_per_second)
     k = min(m, C)
+    if P <= DIRECT_SOLVE_LIMIT:
+        parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)
+        t_rhs = 2.0 * P2
+    else:  # iterative sweeps: F in float64 (and its transpose) plus the iterates
+        parts["lu"] = (16.0 * nnz, 0.0)
+        t_rhs = ITERATIVE_SWEEPS * 2.0 * nnz
     if kind == "paper":
-        cols = P - m + C
-        parts["inverse"] = (8.0 * P * cols + 8.0 * P2, 3 * (P2 * cols + P2 * P / 3.0) / flops)
+        cols = P - m + L
+        parts["inverse"] = (8.0 * P * cols + 8.0 * P2, g * (P2 * cols + P2 * P / 3.0) / flops)
     else:
-        solve = P2 if dense else min(P2, LU_FILL * P * row)  # flops/2 of one solve with the factors
-        parts["inverse"] = (3 * 8.0 * m * C + 8.0 * P * k + 8.0 * m * m,
-                            3 * (2.0 * solve * k + float(m) * m * C + float(m) ** 3 / 3.0) / flops)
+        parts["inverse"] = (3 * 8.0 * m * L + 3 * 8.0 * P * k + 8.0 * m * m,
+                            (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
+    parts["reduction"] = (8.0 * L * L, float(L) * L * max(m, 1) * 8.0 / flops)
+    parts["curve"] = (8.0 * 3 * STORED_POINTS * (P + L), g * STORED_POINTS * t_rhs / flops)
+    from .formfactors import CHUNK_RAYS
+
+    parts["rays"] = (RAY_BYTES * float(max(N, CHUNK_RAYS)) * (threads or os.cpu_count() or 1), 0.0)
     memory = sum(b for b, _ in parts.values())
     seconds = sum(s for _, s in parts.values())
-    floor = PATCH_BYTES * float(P) + RAY_BYTES * float(N) + (4.0 * P2 + 8.0 * P2 if dense else 12.0 * P)
     warnings = []
     if memory > memory_limit:
         warnings.append(f"this solve needs about {format_bytes(memory)} of memory ({P} patches); "
-                        "use a larger patch size (fewer patches) to reduce it")
+                        "use a larger patch size or light size (fewer patches) to reduce it")
     if seconds > seconds_limit:
         warnings.append(f"this solve may take about {seconds:.0f} s ({P} patches, {N} rays per patch); "
                         "use a larger patch size or fewer rays per patch to speed it up")
-    return {"memory_bytes": float(memory), "memory_floor_bytes": float(floor), "seconds": float(seconds),
-            "warnings": warnings, "parts": parts}
+    return {"memory_bytes": float(memory), "seconds": float(seconds), "warnings": warnings, "parts": parts}
 
 
-def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", **kw) -> dict:
-    """:func:`estimate_cost` of a meshed PatchSet: candidates = patches not forbidden and not
-    emitting (engine.lights.candidate_mask), targets = target patches; ``rays_per_patch`` None = the
-    automatic quality, or a formfactors.QUALITY name."""
+def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", n_lights=None,
+                          n_triangles=0, refine_passes=0, **kw) -> dict:
+    """:func:`estimate_cost` of a meshed PatchSet: candidates as engine.lights.candidate_mask,
+    targets = target patches; ``rays_per_patch`` None = the automatic quality, or a
+    formfactors.QUALITY name."""
     import numpy as np
 
     from .formfactors import QUALITY, auto_rays_per_patch
@@ -152,4 +145,33 @@ def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced",
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")
         rays_per_patch = QUALITY[rays_per_patch]
     n_candidates = int(np.sum(candidate_mask(patches, "inverse")))
-    return estimate_cost(P, int(rays_per_patch), n_candidates, int(np.sum(patches.target)), solver=solver, **kw)
+    groups = len({tuple(patches.reflectance[:, c]) for c in range(3)}) if P else 1
+    return estimate_cost(P, int(rays_per_patch), n_candidates, int(np.sum(patches.target)), solver=solver,
+                         n_lights=n_lights, n_triangles=n_triangles, refine_passes=refine_passes,
+                         channel_groups=groups, **kw)
+
+
+def available_memory() -> float:
+    """Bytes of memory available to a new solve: Linux MemAvailable, else the physical memory."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return float("inf")
+
+
+def check_memory(cost: dict, what: str = "this solve"):
+    """Raise ValueError (one line, for the user) when the estimate exceeds the available memory;
+    returns ``cost``."""
+    avail = available_memory()
+    if cost["memory_bytes"] > avail:
+        raise ValueError(f"{what} would need about {format_bytes(cost['memory_bytes'])} of memory "
+                         f"(estimate), more than the {format_bytes(avail)} available: use a larger patch size "
+                         "or light size, or fewer rays per patch")
+    return cost

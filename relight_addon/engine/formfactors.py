@@ -39,6 +39,11 @@ any thread count. Worker threads generate, trace (embree releases the GIL) and
 count hits chunk by chunk, so ray generation of one chunk overlaps tracing of
 another.
 
+Kernel pairs: ``kernel_pairs=(receivers, sources)`` replaces those entries (and their
+reciprocal ones) by the low-variance estimate of kernel_transfer.py (analytic
+point-to-polygon kernel times shadow-ray visibility), for the transport that decides an
+inverse solve: light cells to target patches. The rest of F stays ray cast.
+
 Cancellation: ``cancel()`` returning True makes ``compute_form_factors`` raise
 :class:`Cancelled` (defined here).
 """
@@ -109,6 +114,8 @@ class FormFactors:
     seconds: float
     sampling: str = "sobol"
     symmetrised: bool = False
+    #: receiver x source pairs replaced by the kernel estimator (kernel_transfer.py), 0 if none
+    kernel_pairs: int = 0
 
     @property
     def n_patches(self) -> int:
@@ -465,6 +472,8 @@ def compute_form_factors(
     sampling: str = "sobol",
     symmetrise_reciprocity: bool = False,
     dense_limit: int = DENSE_LIMIT,
+    kernel_pairs=None,
+    kernel_options: dict | None = None,
 ) -> FormFactors:
     """Ray-cast form factors of ``patches`` (see the module docstring).
 
@@ -476,6 +485,11 @@ def compute_form_factors(
     ``cancel()``: optional; returning True aborts with :class:`Cancelled`.
     ``symmetrise_reciprocity``: replace F by (A_i F_ij + A_j F_ji) / (2 A_i)
     (off by default: it no longer guarantees row sums <= 1).
+    ``kernel_pairs=(receivers, sources)``: patch indices or masks; F[receivers, sources]
+    and, by reciprocity, F[sources, receivers] are then replaced by the low-variance
+    kernel estimate of kernel_transfer.kernel_form_factors (``kernel_options``: its
+    keyword arguments; seed and threads are this call's), after any symmetrisation.
+    Progress then runs to 0.5 for the rays and to 1 for the kernel pairs.
     """
     t0 = time.perf_counter()
     if rays_per_patch is None:
@@ -493,6 +507,10 @@ def compute_form_factors(
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
 
+    user_progress = progress
+    if kernel_pairs is not None and progress is not None:
+        def progress(f):
+            user_progress(0.5 * f)
     tr = _Tracer(patches, int(rays_per_patch), seed, sampling)
     P, N = tr.P, tr.N
     dense = P <= dense_limit
@@ -544,6 +562,16 @@ def compute_form_factors(
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
     if symmetrise_reciprocity:
         matrix = symmetrise(matrix, patches.area)
+    n_kernel = 0
+    if kernel_pairs is not None:
+        from .kernel_transfer import apply_kernel_pairs, kernel_form_factors
+
+        rec, src = kernel_pairs
+        K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel,
+                                progress=None if user_progress is None else (lambda f: user_progress(0.5 + 0.5 * f)),
+                                **(kernel_options or {}))
+        matrix = apply_kernel_pairs(matrix, patches.area, rec, src, K)
+        n_kernel = K.size
     data = matrix if dense else matrix.data
     if not np.all(np.isfinite(data)):
         raise SceneError("form factors contain NaN or infinite values (degenerate geometry?)")
@@ -554,4 +582,5 @@ def compute_form_factors(
         seconds=time.perf_counter() - t0,
         sampling=sampling,
         symmetrised=bool(symmetrise_reciprocity),
+        kernel_pairs=int(n_kernel),
     )

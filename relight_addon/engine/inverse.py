@@ -58,6 +58,11 @@ __all__ = [
 
 #: the Gram-matrix route of the pseudo-inverse is used below this condition number of M
 GRAM_MAX_COND = 1e5
+#: above this many patches A is never factorised: its solves are iterative on the sparse F
+#: (engine.radiosity's dense/sparse limits for F itself are separate)
+DIRECT_SOLVE_LIMIT = 6000
+#: relative residual of the iterative solves
+ITERATIVE_TOL = 1e-10
 #: condition-number estimate of A above which the problem warns
 ILL_CONDITIONED = 1e8
 #: condition-number estimate treated as singular (about 1 / machine epsilon / 100)
@@ -118,6 +123,43 @@ class _Factor:
         if self.sparse:
             return self.lu.solve(np.asarray(rhs, dtype=np.float64), trans="T" if trans else "N")
         return sla.lu_solve(self.lu, rhs, trans=1 if trans else 0, check_finite=False)
+
+
+class _Iterative:
+    """Solves of A = I - diag(rho) F without factorising A (large models): block Jacobi / Neumann
+    iteration X <- R + rho o (F X) (transposed: Y <- R + F^T (rho o Y)) on all right-hand sides at
+    once, one sparse matrix product per sweep. It converges because rho < 1 and F's rows sum to
+    at most 1 (rate <= max rho_i sum_j F_ij, reported as ``rate``)."""
+
+    def __init__(self, F, rho):
+        self.F = F.tocsr() if sp.issparse(F) else np.asarray(F)
+        self.FT = self.F.T.tocsr() if sp.issparse(F) else self.F.T
+        self.rho = np.asarray(rho, dtype=np.float64)
+        rows = np.asarray(self.F.sum(axis=1)).reshape(-1)
+        self.rate = float(np.max(self.rho * rows))
+        if not self.rate < 1.0:
+            raise InverseError(f"the radiosity system does not converge (reflectance x form-factor row sum "
+                               f"reaches {self.rate:.4g}); a closed scene with reflectance 1?")
+        self.cond = float((1 + self.rate) / (1 - self.rate))  # bound on cond_inf(A) for row sums <= 1
+        self.sparse = True
+        self.max_iter = int(np.ceil(np.log(ITERATIVE_TOL) / np.log(max(self.rate, 1e-3)))) + 10
+
+    def solve(self, rhs, trans=False):
+        R = np.asarray(rhs, dtype=np.float64)
+        one = R.ndim == 1
+        R = R.reshape(len(R), -1)
+        rho = self.rho[:, None]
+        X = R.copy()
+        scale = max(float(np.abs(R).max()), 1e-300)
+        for _ in range(self.max_iter):
+            Xn = R + (self.FT @ (rho * X) if trans else rho * (self.F @ X))
+            done = float(np.abs(Xn - X).max()) <= ITERATIVE_TOL * scale
+            X = Xn
+            if done:
+                break
+        else:
+            raise InverseError(f"the iterative radiosity solve did not converge in {self.max_iter} sweeps")
+        return X[:, 0] if one else X
 
 
 @dataclass
@@ -273,11 +315,14 @@ class InverseProblem:
         return len(self.targets)
 
     def factors(self):
-        """LU factors of A per channel (channels with identical reflectance share one)."""
+        """Solvers of A per channel (channels with identical reflectance share one): LU factors up
+        to DIRECT_SOLVE_LIMIT patches, iterative sweeps on the sparse F above."""
         if self._factors is None:
             factors = [None] * 3
             for g in _channel_groups(self.reflectance):
-                fac = _Factor(radiosity_matrix(self.F, self.reflectance[:, g[0]]))  # may raise
+                rho = self.reflectance[:, g[0]]
+                fac = (_Iterative(self.F, rho) if self.n_patches > DIRECT_SOLVE_LIMIT
+                       else _Factor(radiosity_matrix(self.F, rho)))  # may raise
                 for c in g:
                     factors[c] = fac
             self._factors = factors  # only once every channel is factorised

@@ -7,11 +7,11 @@ from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVE
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
 DEFAULT_SOLVER = "reduced"
-DEFAULT_SELECTION = "exitance-elimination"  # the paper's choice (section 5)
+DEFAULT_SELECTION = "greedy-swap"  # measured: docs/benchmarks.md "Best k lights"; the paper's is exitance-elimination
 DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
-DEFAULT_PATCH_MODEL = "polygon"
-DEFAULT_ESTIMATOR = "raycast"
+DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
+DEFAULT_ESTIMATOR = "kernel"
 
 
 @dataclass
@@ -25,10 +25,11 @@ class JobOptions:
     distribution: str = DEFAULT_DISTRIBUTION
     max_lights: int | None = DEFAULT_MAX_LIGHTS  # stop criterion: number of lights
     error_threshold: float | None = None  # stop criterion: relative error (Eq. 1 / ||b_P||)
+    tolerance: float | None = None  # least-power selection: every target within +-tolerance (relative)
     require_positive: bool = True  # stop criterion: no negatives
     patch_model: str = DEFAULT_PATCH_MODEL
     light_size: float | None = None  # None: the patch size (adaptive model's light cells)
-    refine_passes: int = 2  # adaptive model: refinement passes after the first solve (0 = none)
+    refine_passes: int = 0  # adaptive model: refinement passes after a first solve (measured: docs/benchmarks.md)
     refine_tolerance: float = 0.02  # ... stop when the predicted target radiosity moves less than this (relative)
     estimator: str = DEFAULT_ESTIMATOR
 
@@ -42,6 +43,10 @@ class JobOptions:
             raise ValueError("rays per patch must be at least 1 (0 = automatic)")
         if self.max_patch_size is not None and not self.max_patch_size > 0:
             raise ValueError("max patch size must be a positive length")
+        if SELECTIONS[self.selection].get("needs_tolerance") and self.tolerance is None:
+            raise ValueError(f"the {self.selection} selection needs a tolerance (e.g. 0.1 for +-10 %)")
+        if self.tolerance is not None and not (self.tolerance >= 0 and self.tolerance < float("inf")):
+            raise ValueError("the tolerance must be a non-negative number")
         if self.light_size is not None and not self.light_size > 0:
             raise ValueError("light size must be a positive length")
         if self.refine_passes < 0:

@@ -177,6 +177,8 @@ class Selection:
     record: object
     step: object
     max_steps: int | None = None
+    max_lights: int | None = None  # the stop criterion (selections that build a curve per k use it)
+    tolerance: float | None = None  # the least-power selection's band (relative)
 
 
 class _ErrorEval:
@@ -269,7 +271,7 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
 def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination", distribution="distance",
                   max_lights=None, error_threshold=None, relative_error_threshold=None,
                   require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
-                  gs_compare_cold=False, progress=None, cancel=None):
+                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
     The whole curve is computed (eliminations down to one light, constructions
@@ -323,11 +325,12 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         return cancelled
 
     dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
-    method(Selection(problem, e_x, dist, record, step_hook, max_steps))
+    notes = method(Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance)) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")
     idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
                               relative_error_threshold, require_positive)
+    warns = list(notes) + warns
     if cancelled:
         warns.append("cancelled: the curve is incomplete")
     return ReductionResult(curve=curve, final_index=idx, selection=selection,

@@ -2,4 +2,4 @@
 ``estimate(patches, options, progress=None, cancel=None, pairs=None) -> FormFactors``;
 ``pairs`` = (receivers, sources) patch indices whose transfer decides the answer (targets x
 candidate lights), for estimators that treat them specially."""
-from . import raycast  # noqa: F401
+from . import kernel, raycast  # noqa: F401  (registration order = UI order)

@@ -85,7 +85,7 @@ def _ids(rows) -> np.ndarray:
 
 @PATCH_MODELS.register("adaptive", "Adaptive",
                        "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
-                       "whole polygons), reflectors refined where the targets need it")
+                       "whole polygons), reflectors refined where the targets need it", refines=True)
 class AdaptiveModel:
     scales = ("cell", "group", "polygon")
 
@@ -115,7 +115,9 @@ class AdaptiveModel:
         size, cand, emit, reflector = self._sizes(faces)
         T, ok, face_edge = face_triangles(faces)
         tf = faces.triangle_face
-        small = face_edge <= CLUSTER_BELOW * size  # much smaller than its size: clustered
+        # much smaller than its size: clustered (never the scene's emitters: they are lamps the
+        # direct-lighting mode reduces one polygon at a time)
+        small = (face_edge <= CLUSTER_BELOW * size) & ~emit
         whole = (face_edge <= size) & ~small  # about its size: a patch of its own
         # per face: area-weighted normal and centroid
         cr = triangle_cross(T)
@@ -217,6 +219,8 @@ class AdaptiveModel:
         """Split the reflector patches of highest ``importance`` (P,) (psi_j A_j B_j) and merge
         those of lowest: their faces go one level finer / coarser. Returns False when nothing
         changed."""
+        if self.level is None:  # the patches were meshed by another instance with the same options
+            self._sizes(faces)
         refl = patches.level >= 0
         eta = np.where(refl, np.maximum(importance, 0.0), 0.0)
         total = eta.sum()

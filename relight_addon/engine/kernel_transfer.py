@@ -1,0 +1,870 @@
+"""Form factors of chosen (receiver, source) pairs with low variance: the analytic
+point-to-polygon kernel times visibility from shadow rays (Baum, Rushmeier & Winget 1989,
+"Improving radiosity solutions through the use of analytically determined form-factors";
+Wallace, Elmquist & Haines 1989, "A ray tracing algorithm for progressive radiosity").
+
+Hemisphere ray casting (formfactors.py) estimates F[r, s] by the fraction of N rays from r
+that land on s: for a small or distant source (F of 0.001 to 0.01) that is a handful of
+hits and a relative error of several per cent, which the inverse solve then turns into
+wrong light intensities. Here, for the pairs that decide the answer (light cells to target
+patches), F is integrated instead:
+
+    F_rs = (1 / A_r) * integral over x in r of  F_pt(x, s) * V(x, s)  dA(x)
+
+- ``F_pt(x, s)``: the form factor from the point x (normal n_x) to the source polygon, by
+  Lambert's contour integral, per source triangle:
+  ``F = -1/(2 pi) * sum_k angle_k * (n_x . unit(R_k x R_k+1))``, ``R_k`` = vertex k - x,
+  ``angle_k = atan2(|R_k x R_k+1|, R_k . R_k+1)`` (exact for tiny angles). The triangle is
+  first clipped to the half-space in front of x (the part behind x's tangent plane is cut
+  away: the clipped polygon gains an edge in that plane) and counts only when x is in
+  front of it (one-sided sources, as in formfactors.py). Double precision throughout.
+- ``V(x, s)``: the visible fraction of s seen from x, weighted by the point-to-point kernel:
+  ``sum_j w_j v_j / sum_j w_j`` over shadow rays from x to stratified points y_j on s
+  (a jittered g x g grid over the source's area, triangles picked by area),
+  ``w_j = cos_x cos_y / r^4`` (zero behind either surface), ``v_j`` from an Embree
+  occlusion query (robust mode, the same triangles and ray offsets as formfactors.py).
+- Phase 1, every pair: the integral over the receiver is a quadrature (not Monte Carlo):
+  each receiver triangle gets a collapsed (Duffy) Gauss rule, Gauss-Jacobi along the
+  triangle's length and Gauss-Legendre across it, with about ``points_per_patch`` points
+  per patch in all, shared among its triangles by area (a long thin triangle gets its
+  points along its length). Every point is strictly inside its triangle (set in from the
+  edges); the normal at a point is its own triangle's (a patch may be several non-coplanar
+  triangles). Each point casts ``shadow_rays`` rays. A pair whose rays all reach the source
+  gets the unoccluded integral exactly (no noise at all); a pair whose rays are all blocked
+  gets 0.
+- Phase 2, pairs in penumbra (some rays blocked, some not): a Gauss rule is no good across a
+  shadow edge, so the pair's visible fraction is estimated again from ``penumbra_points``
+  jittered receiver points (stratified over the receiver's area) with ``penumbra_rays`` rays
+  each, as the ratio sum w v / sum w over all these rays, and multiplies the phase-1
+  unoccluded integral (a ratio estimator: the kernel's variation is exact, only the
+  visibility is sampled).
+- Near pairs are refined in phase 1: when the receiver is large compared with the source's
+  width (area / diameter) or with the gap between the two, the receiver's rule is made
+  finer (level L: node spacing / 2^L, L <= MAX_LEVEL), and each point then casts
+  ``shadow_rays / 4^L`` rays (at least 1), so the rays per pair stay about the same.
+- Far pairs (centre distance > ``far_ratio`` x the larger patch diameter) use the
+  point-to-point kernel ``a_t cos cos / (pi r^2)`` to each source triangle's centroid
+  instead of the contour integral (relative error about (diameter / distance)^2 / 4).
+- A receiver that crosses a (planar) source's plane gets its rule on the part in front of
+  that plane only (the integrand jumps to 0 behind it; the source crossing the receiver's
+  plane is handled exactly by the clipped contour integral).
+- Pairs where one patch lies entirely behind the other's plane (planar patches) are 0
+  without any work; a pair (r, r) is 0 (a patch's transfer to itself is left to the
+  hemisphere estimate).
+
+Errors: the receiver quadrature is deterministic (below 0.5 % on the closed-form
+configurations of tests/test_engine_kernel_transfer.py at the default settings, 0.01 %
+for small or distant sources); the noise is that of the visibility of pairs in penumbra.
+An occluder that none of a pair's phase-1 rays meets (one covering a few per cent of the
+pair's ray bundle or less) is missed: that pair is then taken as unoccluded.
+Accuracy against time on the staircase and a furnished room: benchmarks/bench_kernel_transfer.py.
+
+Determinism: the pairs are processed in fixed chunks, each with its own random stream
+``np.random.default_rng([seed, chunk])``; the result is the same for any thread count.
+Worker threads evaluate the kernel (numpy) and trace the shadow rays (embree releases the
+GIL) chunk by chunk.
+
+Storage in a FormFactors matrix: ``apply_kernel_pairs`` writes F[r, s] and, by reciprocity,
+F[s, r] = A_r F[r, s] / A_s (one estimate serves both directions).
+"""
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.special
+
+from .formfactors import RAY_OFFSET, Cancelled
+from .scene import PatchSet, SceneError
+
+__all__ = [
+    "DEFAULT_POINTS_PER_PATCH",
+    "DEFAULT_SHADOW_RAYS",
+    "DEFAULT_PENUMBRA_POINTS",
+    "DEFAULT_PENUMBRA_RAYS",
+    "DEFAULT_FAR_RATIO",
+    "MAX_LEVEL",
+    "kernel_form_factors",
+    "apply_kernel_pairs",
+    "point_polygon_form_factor",
+]
+
+#: receiver quadrature points per patch (about: the rule is rounded per triangle).
+DEFAULT_POINTS_PER_PATCH = 16
+#: shadow rays per receiver point and source patch (phase 1: they find the pairs in penumbra).
+DEFAULT_SHADOW_RAYS = 4
+#: jittered receiver points of a pair in penumbra (phase 2), and rays from each.
+DEFAULT_PENUMBRA_POINTS = 256
+DEFAULT_PENUMBRA_RAYS = 4
+#: pairs farther apart than this many times the larger patch diameter use the point kernel.
+DEFAULT_FAR_RATIO = 10.0
+#: the finest refinement level of near pairs (node spacing / 2^level).
+MAX_LEVEL = 3
+#: a near pair is refined when the receiver's diameter exceeds LEVEL_SPAN x the source's
+#: width (area / diameter) or the gap between the patches: level = ceil(log2(ratio / span)).
+LEVEL_SPAN = 4.0
+#: at most this many Gauss nodes along either direction of one receiver triangle.
+MAX_NODES = 24
+#: kernel evaluations (receiver point x source triangle) per work chunk.
+CHUNK_EVALS = 1 << 15
+#: at most about this many penumbra rays are generated at once.
+CHUNK_RAYS = 1 << 18
+
+
+# --------------------------------------------------------------------------------------
+# the analytic kernel
+
+def _dot(a, b):
+    return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
+
+
+def _cross(a, b):
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _edge_term(p, q, n):
+    """angle(p, q) * n . unit(p x q), by atan2 (accurate for tiny angles); 0 for p || q."""
+    c = _cross(p, q)
+    cn = np.sqrt(_dot(c, c))
+    ang = np.arctan2(cn, _dot(p, q))
+    return ang * _dot(c, n) / np.where(cn > 0, cn, 1.0)
+
+
+def _lambert(x, n, v, ns):
+    """Point-to-triangle form factors, (E,): points x (E, 3) with unit normals n (E, 3),
+    triangles v (E, 3, 3) with unit front normals ns (E, 3) (the winding's normal).
+
+    The triangle is clipped to the half-space n . (y - x) > 0 (Sutherland-Hodgman, edge by
+    edge: the clipped polygon's edges are the kept parts of the triangle's edges plus one
+    edge in the plane, from the exit point to the entry point), then Lambert's formula.
+    A point behind (or in) the triangle's plane gets 0.
+    """
+    E = len(x)
+    r = [v[:, k] - x for k in range(3)]
+    d = [_dot(rk, n) for rk in r]
+    total = np.zeros(E)
+    exit_p = np.zeros((E, 3))
+    entry_p = np.zeros((E, 3))
+    clipped = np.zeros(E, dtype=bool)
+    for k in range(3):
+        a, b = r[k], r[(k + 1) % 3]
+        da, db = d[k], d[(k + 1) % 3]
+        ina, inb = da > 0, db > 0
+        leaves, enters = ina & ~inb, ~ina & inb
+        cut = leaves | enters
+        t = np.zeros(E)
+        np.divide(da, da - db, out=t, where=cut)
+        p = a + t[:, None] * (b - a)
+        start = np.where(enters[:, None], p, a)
+        end = np.where(leaves[:, None], p, b)
+        total += np.where(ina | inb, _edge_term(start, end, n), 0.0)
+        exit_p[leaves] = p[leaves]
+        entry_p[enters] = p[enters]
+        clipped |= leaves
+    if clipped.any():
+        total[clipped] += _edge_term(exit_p[clipped], entry_p[clipped], n[clipped])
+    front = _dot(x - v[:, 0], ns) > 0
+    return np.where(front, np.maximum(-total, 0.0) * (0.5 / np.pi), 0.0)
+
+
+def point_polygon_form_factor(x, n, polygon) -> float:
+    """Form factor from a point x with unit normal n to a planar convex polygon (k, 3)
+    (fan-triangulated; its front is the side its winding's normal points to), clipped to
+    x's hemisphere. A convenience for tests and checks."""
+    poly = np.asarray(polygon, dtype=np.float64).reshape(-1, 3)
+    tris = np.stack([np.repeat(poly[:1], len(poly) - 2, axis=0), poly[1:-1], poly[2:]], axis=1)
+    ns = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    ns /= np.linalg.norm(ns, axis=1)[:, None]
+    k = len(tris)
+    x = np.tile(np.asarray(x, dtype=np.float64).reshape(1, 3), (k, 1))
+    n = np.tile(np.asarray(n, dtype=np.float64).reshape(1, 3), (k, 1))
+    return float(_lambert(x, n, tris, ns).sum())
+
+
+def _point_kernel(x, n, c, nc, a):
+    """a cos_x cos_c / (pi r^2): the far-pair kernel from points x (normal n) to small
+    areas a at c (normal nc); 0 behind either."""
+    r = c - x
+    r2 = _dot(r, r)
+    cx = np.maximum(_dot(r, n), 0.0)
+    cc = np.maximum(-_dot(r, nc), 0.0)
+    return a * cx * cc / (np.pi * r2 * r2)
+
+
+# --------------------------------------------------------------------------------------
+# receiver quadrature
+
+_RULES = {}
+
+
+def _gauss(n):
+    """Nodes/weights on [0, 1]: Gauss-Jacobi (weight xi, total 1/2) and Gauss-Legendre (total 1)."""
+    if n not in _RULES:
+        xj, wj = scipy.special.roots_jacobi(n, 0.0, 1.0)
+        xl, wl = np.polynomial.legendre.leggauss(n)
+        _RULES[n] = ((1 + xj) / 2, wj / 4, (1 + xl) / 2, wl / 2)
+    return _RULES[n]
+
+
+def _triangle_rule(v, h):
+    """Collapsed Gauss rule on triangle v (3, 3) with node spacing about h: points (q, 3)
+    and weights (q,) summing to the triangle's area. The collapsed vertex is the one
+    opposite the shortest edge; n_xi nodes along the triangle's height from it (at least
+    2), n_eta along the shortest edge (at least 2, or 1 for a sliver)."""
+    e = np.array([np.linalg.norm(v[2] - v[1]), np.linalg.norm(v[0] - v[2]), np.linalg.norm(v[1] - v[0])])
+    c = int(np.argmin(e))
+    a, b, d = v[c], v[(c + 1) % 3], v[(c + 2) % 3]
+    area = 0.5 * np.linalg.norm(np.cross(b - a, d - a))
+    length = 2 * area / max(e[c], 1e-300)
+    n_xi = int(min(MAX_NODES, max(2, math.ceil(length / h - 1e-9))))
+    # across: at least 2 nodes, but 1 for a sliver (short edge < h / 4, e.g. a fan-triangulated disk)
+    n_eta = 1 if e[c] < 0.25 * h else int(min(MAX_NODES, max(2, math.ceil(e[c] / h - 1e-9))))
+    xi, wxi, _, _ = _gauss(n_xi)
+    _, _, eta, weta = _gauss(n_eta)
+    XI, ETA = np.meshgrid(xi, eta, indexing="ij")
+    XI, ETA = XI.reshape(-1, 1), ETA.reshape(-1, 1)
+    pts = (1 - XI) * a + XI * (1 - ETA) * b + XI * ETA * d
+    w = (wxi[:, None] * weta[None, :]).reshape(-1) * (2 * area)
+    return pts, w
+
+
+# --------------------------------------------------------------------------------------
+# geometry
+
+class _Geometry:
+    """Per-patch triangle data, sampling tables and the Embree scene of a PatchSet."""
+
+    def __init__(self, patches: PatchSet, points_per_patch: int):
+        from embreex import rtcore as rtc
+        from embreex import rtcore_scene as rtcs
+        from embreex.mesh_construction import TriangleMesh
+
+        tv = np.asarray(patches.tri_vertices, dtype=np.float64)
+        if tv.ndim != 3 or tv.shape[1:] != (3, 3) or len(tv) == 0:
+            raise SceneError("the patch set has no triangles")
+        if not np.all(np.isfinite(tv)):
+            raise SceneError("the scene has NaN or infinite vertex coordinates")
+        P = patches.n_patches
+        tri_patch = np.asarray(patches.tri_patch, dtype=np.int64)
+        if len(tri_patch) != len(tv) or tri_patch.min() < 0 or tri_patch.max() >= P:
+            raise SceneError("tri_patch does not match the patches")
+        self.P = P
+        self.M = int(points_per_patch)
+        order = np.argsort(tri_patch, kind="stable")
+        self.tv = tv = tv[order]
+        self.tri_patch = tri_patch[order]
+        self.tstart = np.searchsorted(self.tri_patch, np.arange(P), side="left")
+        self.tcount = np.bincount(self.tri_patch, minlength=P)
+        e1 = tv[:, 1] - tv[:, 0]
+        e2 = tv[:, 2] - tv[:, 0]
+        cr = np.cross(e1, e2)
+        ta = 0.5 * np.linalg.norm(cr, axis=1)
+        if np.any(np.bincount(self.tri_patch, weights=ta, minlength=P) <= 0):
+            raise SceneError("some patches have zero area")
+        ok = ta > 0
+        self.tn = np.zeros_like(cr)
+        self.tn[ok] = cr[ok] / (2 * ta[ok, None])
+        self.ta = ta
+        self.tc = tv.mean(axis=1)
+        self.area = np.bincount(self.tri_patch, weights=ta, minlength=P)
+        self.center = np.stack([np.bincount(self.tri_patch, weights=self.tc[:, k] * ta, minlength=P)
+                                for k in range(3)], axis=1) / self.area[:, None]
+        dist = np.linalg.norm(tv - self.center[self.tri_patch][:, None, :], axis=2).max(axis=1)
+        self.radius = np.zeros(P)
+        np.maximum.at(self.radius, self.tri_patch, dist)
+        self.diam = 2 * self.radius
+        self.width = self.area / np.maximum(self.diam, 1e-300)
+        nsum = np.stack([np.bincount(self.tri_patch, weights=cr[:, k], minlength=P) for k in range(3)], axis=1)
+        self.normal = nsum / np.maximum(np.linalg.norm(nsum, axis=1), 1e-300)[:, None]
+        # planar: every triangle's normal is the patch's and every vertex lies in its plane
+        tol = 1e-9 * np.maximum(self.diam, 1e-300)
+        dn = np.linalg.norm(self.tn - self.normal[self.tri_patch], axis=1)
+        off = np.abs(np.einsum("tkj,tj->tk", tv - self.center[self.tri_patch][:, None, :],
+                               self.normal[self.tri_patch])).max(axis=1)
+        bad = (dn > 1e-9) | (off > tol[self.tri_patch])
+        self.planar = np.bincount(self.tri_patch, weights=bad.astype(float), minlength=P) == 0
+
+        lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
+        diag = float(np.linalg.norm(hi - lo))
+        # the origin offset of formfactors.py (its _Tracer): along the normal, relative to the scene
+        self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
+        # source sample points: each triangle shrunk about its incentre so that its edges move
+        # inward by 2 * offset (as formfactors.py does for ray origins)
+        el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
+                        np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)
+        perim = np.maximum(el3.sum(axis=1), 1e-300)
+        incentre = np.einsum("tk,tkj->tj", el3, tv) / perim[:, None]
+        r_in = 2 * ta / perim
+        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, 1e-300))
+        self.s_v0 = incentre + shrink[:, None] * (tv[:, 0] - incentre)
+        self.s_e1 = e1 * shrink[:, None]
+        self.s_e2 = e2 * shrink[:, None]
+        # within-patch area CDF (the triangle pick of a source sample), as formfactors.py
+        cum = np.cumsum(ta)
+        before = np.concatenate([[0.0], cum])[self.tstart]
+        cdf_hi = (cum - before[self.tri_patch]) / self.area[self.tri_patch]
+        cdf_hi[np.r_[self.tstart[1:] - 1, len(ta) - 1]] = 1.0
+        self.cdf_lo = np.concatenate([[0.0], cdf_hi[:-1]])
+        self.cdf_lo[self.tstart] = 0.0
+        self.cdf_w = np.maximum(cdf_hi - self.cdf_lo, 1e-300)
+        self.key = self.tri_patch + cdf_hi
+
+        self.tgeo = np.concatenate([self.s_v0, self.s_e1, self.s_e2, self.tn], axis=1).astype(np.float32)
+        self._parallelograms()
+
+        self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
+        self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
+        self._rules = {}
+        self._lock = threading.Lock()
+
+    def _parallelograms(self):
+        """Patches of two triangles that share an edge and make a planar parallelogram (grid
+        cells, quads): ``para`` flags them, ``pgeo`` (P, 12) float32 holds origin, edge u,
+        edge v (set in from the edges by 2 * offset) and the normal."""
+        P = self.P
+        self.para = np.zeros(P, dtype=bool)
+        self.pgeo = np.zeros((P, 12), dtype=np.float32)
+        two = np.flatnonzero((self.tcount == 2) & self.planar)
+        if len(two) == 0:
+            return
+        t0 = self.tv[self.tstart[two]]  # (m, 3, 3)
+        t1 = self.tv[self.tstart[two] + 1]
+        tol = 1e-9 * self.diam[two]
+        same = np.linalg.norm(t0[:, :, None, :] - t1[:, None, :, :], axis=3) <= tol[:, None, None]  # (m, 3, 3)
+        shared0 = same.any(axis=2)  # vertices of t0 also in t1
+        shared1 = same.any(axis=1)
+        ok = (shared0.sum(axis=1) == 2) & (shared1.sum(axis=1) == 2)
+        m = np.arange(len(two))
+        i0 = np.argmin(shared0, axis=1)  # the vertex of t0 not in t1
+        i1 = np.argmin(shared1, axis=1)
+        o1, o2 = t0[m, i0], t1[m, i1]
+        sv = t0[m, (i0 + 1) % 3], t0[m, (i0 + 2) % 3]  # the shared edge
+        ok &= np.linalg.norm(o1 + o2 - sv[0] - sv[1], axis=1) <= tol
+        eu, ev = sv[0] - o1, sv[1] - o1
+        area = np.linalg.norm(np.cross(eu, ev), axis=1)
+        ok &= area > 0
+        area = np.where(area > 0, area, 1.0)
+        ea = np.minimum(0.25, 2 * self.offset * np.linalg.norm(ev, axis=1) / area)
+        eb = np.minimum(0.25, 2 * self.offset * np.linalg.norm(eu, axis=1) / area)
+        org = o1 + ea[:, None] * eu + eb[:, None] * ev
+        geo = np.concatenate([org, (1 - 2 * ea)[:, None] * eu, (1 - 2 * eb)[:, None] * ev,
+                              self.normal[two]], axis=1)
+        self.para[two[ok]] = True
+        self.pgeo[two[ok]] = geo[ok]
+
+    def receiver_points(self, r: int, level: int):
+        """(points (q, 3), normals (q, 3), weights (q,) summing to 1) of receiver r at a level."""
+        key = (int(r), int(level))
+        got = self._rules.get(key)
+        if got is not None:
+            return got
+        t0, t1 = self.tstart[r], self.tstart[r] + self.tcount[r]
+        # node spacing: a patch of area A gets about M points (a triangle of area a gets
+        # about 2 a / h^2 nodes, so h^2 = 2 A / M), then / 2^level
+        h = math.sqrt(2 * self.area[r] / max(self.M, 1)) / 2 ** level
+        pts, nrm, wts = [], [], []
+        for t in range(t0, t1):
+            if self.ta[t] <= 0:
+                continue
+            p, w = _triangle_rule(self.tv[t], h)
+            pts.append(p)
+            wts.append(w)
+            nrm.append(np.repeat(self.tn[t][None], len(p), axis=0))
+        got = (np.concatenate(pts), np.concatenate(nrm), np.concatenate(wts) / self.area[r])
+        with self._lock:
+            self._rules[key] = got
+        return got
+
+
+def _clipped_receiver_points(g, r, level, s):
+    """Receiver r's rule restricted to the part in front of planar source s's plane (the
+    kernel is 0 behind it, a jump the Gauss rule would straddle); weights / A_r."""
+    h = math.sqrt(2 * g.area[r] / max(g.M, 1)) / 2 ** level
+    pts, nrm, wts = [], [], []
+    for t in range(g.tstart[r], g.tstart[r] + g.tcount[r]):
+        for part in _clip_triangle(g.tv[t], g.normal[s], g.center[s]):
+            if np.linalg.norm(np.cross(part[1] - part[0], part[2] - part[0])) <= 0:
+                continue
+            p, w = _triangle_rule(part, h)
+            pts.append(p)
+            wts.append(w)
+            nrm.append(np.repeat(g.tn[t][None], len(p), axis=0))
+    if not pts:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0)
+    return np.concatenate(pts), np.concatenate(nrm), np.concatenate(wts) / g.area[r]
+
+
+def _ragged(starts, counts):
+    """Concatenation of arange(s, s + c) for each (s, c)."""
+    counts = np.asarray(counts, dtype=np.int64)
+    total = int(counts.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64)
+    ends = np.cumsum(counts)
+    idx = np.arange(total, dtype=np.int64)
+    return idx - np.repeat(ends - counts, counts) + np.repeat(np.asarray(starts, dtype=np.int64), counts)
+
+
+def _signed_range(g: _Geometry, a, b):
+    """Per pair: (min, max) over patch b's vertices of the signed distance to planar patch
+    a's plane (NaN where a is not planar), and the tolerance for 'in the plane'."""
+    mn = np.full(len(a), np.nan)
+    mx = np.full(len(a), np.nan)
+    tol = 1e-9 * np.maximum(g.diam[a], g.diam[b])
+    sel = np.flatnonzero(g.planar[a])
+    if len(sel) == 0:
+        return mn, mx, tol
+    ta, tb = a[sel], b[sel]
+    cnt = g.tcount[tb]
+    tri = _ragged(g.tstart[tb], cnt)
+    pair = np.repeat(np.arange(len(sel)), cnt)
+    h = np.einsum("kij,kj->ki", g.tv[tri] - g.center[ta][pair][:, None, :], g.normal[ta][pair])
+    lo = np.full(len(sel), np.inf)
+    hi = np.full(len(sel), -np.inf)
+    np.minimum.at(lo, pair, h.min(axis=1))
+    np.maximum.at(hi, pair, h.max(axis=1))
+    mn[sel], mx[sel] = lo, hi
+    return mn, mx, tol
+
+
+def _clip_triangle(v, n, p0):
+    """The part of triangle v (3, 3) strictly in front of the plane n . (x - p0) = 0, as a
+    list of 0 to 2 triangles."""
+    d = (v - p0) @ n
+    poly = []
+    for k in range(3):
+        a, b, da, db = v[k], v[(k + 1) % 3], d[k], d[(k + 1) % 3]
+        if da > 0:
+            poly.append(a)
+        if (da > 0) != (db > 0):
+            poly.append(a + (da / (da - db)) * (b - a))
+    return [np.array([poly[0], poly[i], poly[i + 1]]) for i in range(1, len(poly) - 1)]
+
+
+# --------------------------------------------------------------------------------------
+# the estimator
+
+def kernel_form_factors(
+    patches: PatchSet,
+    receivers,
+    sources,
+    points_per_patch: int = DEFAULT_POINTS_PER_PATCH,
+    shadow_rays: int = DEFAULT_SHADOW_RAYS,
+    seed: int = 0,
+    threads: int | None = None,
+    far_ratio: float = DEFAULT_FAR_RATIO,
+    penumbra_points: int = DEFAULT_PENUMBRA_POINTS,
+    penumbra_rays: int = DEFAULT_PENUMBRA_RAYS,
+    cancel=None,
+    progress=None,
+    stats: dict | None = None,
+) -> np.ndarray:
+    """F[receiver -> source] for every receiver x source pair, (len(receivers), len(sources)) float64.
+
+    ``F[i, j]`` is the form factor from patch ``receivers[i]`` to patch ``sources[j]``: the
+    fraction of the power leaving the receiver that reaches the front of the source, i.e.
+    the gathering weight of B_r = E_r + rho_r sum_s F_rs B_s (see the module docstring).
+
+    ``receivers``, ``sources``: patch indices (or boolean masks over the patches).
+    ``points_per_patch``: receiver quadrature points per patch (about; phase 1);
+    ``shadow_rays``: visibility rays per receiver point and source (phase 1; 0: no
+    visibility at all, the unoccluded kernel). ``penumbra_points``, ``penumbra_rays``: the
+    jittered receiver points of a pair found in penumbra and the rays from each (phase 2;
+    penumbra_points is rounded to a square; 0: keep the phase-1 estimate).
+    ``far_ratio``: pairs farther apart than far_ratio x the larger patch diameter use the
+    point kernel (``inf``: never). ``seed``: reproducible for a seed, whatever ``threads``
+    (default ``os.cpu_count()``). ``cancel()`` returning True raises formfactors.Cancelled;
+    ``progress(fraction)`` is called from the calling thread. ``stats``: an optional dict
+    filled with counts (pairs, culled, far, pairs per level, clipped_receivers, kernel
+    evaluations, rays, penumbra_pairs, seconds).
+
+    Cost: about pairs x points x (source triangles) contour integrals and pairs x points x
+    shadow_rays + penumbra pairs x penumbra_points x penumbra_rays rays; memory: a few
+    arrays of len(receivers) x len(sources).
+    """
+    t_start = time.perf_counter()
+    P = patches.n_patches
+
+    def indices(x, name):
+        x = np.asarray(x)
+        if x.dtype == bool:
+            if x.shape != (P,):
+                raise ValueError(f"{name} mask must have {P} entries, got shape {x.shape}")
+            return np.flatnonzero(x)
+        x = x.astype(np.int64).reshape(-1)
+        if len(x) and (x.min() < 0 or x.max() >= P):
+            raise ValueError(f"{name} must be patch indices in [0, {P})")
+        return x
+
+    rec = indices(receivers, "receivers")
+    src = indices(sources, "sources")
+    if not (isinstance(points_per_patch, (int, np.integer)) and points_per_patch >= 1):
+        raise ValueError(f"points per patch must be a positive integer, got {points_per_patch!r}")
+    if not (isinstance(shadow_rays, (int, np.integer)) and shadow_rays >= 0):
+        raise ValueError(f"shadow rays must be a non-negative integer, got {shadow_rays!r}")
+    if not (isinstance(penumbra_points, (int, np.integer)) and penumbra_points >= 0):
+        raise ValueError(f"penumbra points must be a non-negative integer, got {penumbra_points!r}")
+    if not (isinstance(penumbra_rays, (int, np.integer)) and penumbra_rays >= 1):
+        raise ValueError(f"penumbra rays must be a positive integer, got {penumbra_rays!r}")
+    if not far_ratio > 0:
+        raise ValueError(f"far ratio must be positive, got {far_ratio!r}")
+    if threads is None:
+        threads = os.cpu_count() or 1
+    if not (isinstance(threads, (int, np.integer)) and threads >= 1):
+        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    out = np.zeros((len(rec), len(src)))
+    info = {"pairs": 0, "culled": 0, "far": 0, "levels": [0] * (MAX_LEVEL + 1), "clipped_receivers": 0,
+            "evaluations": 0, "rays": 0, "penumbra_pairs": 0}
+    if len(rec) == 0 or len(src) == 0:
+        if stats is not None:
+            stats.update(info, seconds=time.perf_counter() - t_start)
+        return out
+
+    g = _Geometry(patches, int(points_per_patch))
+    # all pairs, receiver-major; drop (r, r) and pairs with one patch behind the other
+    ii = np.repeat(np.arange(len(rec)), len(src))
+    jj = np.tile(np.arange(len(src)), len(rec))
+    pr, ps = rec[ii], src[jj]
+    keep = pr != ps
+    ii, jj, pr, ps = ii[keep], jj[keep], pr[keep], ps[keep]
+    # one patch entirely in or behind the other's plane: 0. A receiver crossing the source's
+    # plane: its rule is clipped to the source's front (the source crossing the receiver's
+    # plane is clipped exactly by the contour integral).
+    _, mx_sr, tol_sr = _signed_range(g, pr, ps)  # source vertices vs the receiver's plane
+    mn_rs, mx_rs, tol_rs = _signed_range(g, ps, pr)  # receiver vertices vs the source's plane
+    culled = (mx_sr <= tol_sr) | (mx_rs <= tol_rs)  # False where NaN (not planar)
+    straddle = (mn_rs < -tol_rs) & (mx_rs > tol_rs)
+    info["culled"] = int(culled.sum())
+    ii, jj, pr, ps, straddle = ii[~culled], jj[~culled], pr[~culled], ps[~culled], straddle[~culled]
+    dist = np.linalg.norm(g.center[pr] - g.center[ps], axis=1)
+    far = dist > far_ratio * np.maximum(g.diam[pr], g.diam[ps])
+    gap = np.maximum(dist - g.radius[pr] - g.radius[ps], 0.0)
+    scale = np.maximum(gap, g.width[ps])
+    with np.errstate(divide="ignore"):
+        lev = np.ceil(np.log2(g.diam[pr] / (LEVEL_SPAN * np.maximum(scale, 1e-300))))
+    lev = np.where(far, 0, np.clip(lev, 0, MAX_LEVEL)).astype(np.int64)
+    info["pairs"] = int(len(pr))
+    info["far"] = int(far.sum())
+    info["levels"] = np.bincount(lev, minlength=MAX_LEVEL + 1).tolist()
+    if len(pr) == 0:
+        if stats is not None:
+            stats.update(info, seconds=time.perf_counter() - t_start)
+        return out
+
+    # receiver point sets: one array of all (receiver, level) rules
+    need = np.unique(pr * (MAX_LEVEL + 1) + lev)
+    sets = {}
+    xs, ns, ws = [], [], []
+    base = 0
+    for k in need:
+        r, L = divmod(int(k), MAX_LEVEL + 1)
+        x, n, w = g.receiver_points(r, L)
+        sets[int(k)] = (base, len(x))
+        xs.append(x)
+        ns.append(n)
+        ws.append(w)
+        base += len(x)
+    rule_key = pr * (MAX_LEVEL + 1) + lev
+    lookup = np.array([sets[int(k)] for k in need], dtype=np.int64)
+    pos = np.searchsorted(need, rule_key)
+    pstart, pcount = lookup[pos, 0], lookup[pos, 1]
+    # pairs whose receiver crosses the source's plane: a rule of their own
+    info["clipped_receivers"] = int(straddle.sum())
+    for k in np.flatnonzero(straddle):
+        x, n, w = _clipped_receiver_points(g, pr[k], lev[k], ps[k])
+        pstart[k], pcount[k] = base, len(x)
+        xs.append(x)
+        ns.append(n)
+        ws.append(w)
+        base += len(x)
+    X, N, W = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
+
+    # chunks: contiguous pair ranges of about CHUNK_EVALS kernel evaluations
+    evals = pcount * g.tcount[ps]
+    info["evaluations"] = int(evals.sum())
+    cum = np.cumsum(evals)
+    cuts = np.searchsorted(cum, np.arange(CHUNK_EVALS, int(cum[-1]), CHUNK_EVALS), side="left") + 1
+    bounds = np.unique(np.concatenate([[0], cuts, [len(pr)]]))
+    chunks = list(zip(bounds[:-1], bounds[1:]))
+    values = np.zeros(len(pr))
+    partial = np.zeros(len(pr), dtype=bool)
+    rays = np.zeros(len(chunks), dtype=np.int64)
+    stop = threading.Event()
+    S = int(shadow_rays)
+    Q = int(round(math.sqrt(penumbra_points))) ** 2  # a square: a jittered grid
+    K2 = int(penumbra_rays)
+
+    def work(ci):
+        if stop.is_set():
+            return ci
+        a, b = chunks[ci]
+        rng = np.random.default_rng([int(seed), ci])
+        cps, clev, cfar = ps[a:b], lev[a:b], far[a:b]
+        # phase 1: the quadrature rule of every pair's receiver (at the pair's level)
+        npp = pcount[a:b]
+        pp_pair = np.repeat(np.arange(b - a), npp)
+        pp_pt = _ragged(pstart[a:b], npp)
+        fpt = _source_kernel(g, X[pp_pt], N[pp_pt], cps[pp_pair], cfar[pp_pair])
+        vis = np.ones(len(pp_pair))
+        n_rays = 0
+        if S > 0:
+            for L in np.unique(clev):
+                sel = np.flatnonzero((fpt > 0) & (clev[pp_pair] == L))
+                if len(sel) == 0:
+                    continue
+                k = max(1, S >> (2 * int(L)))
+                vis[sel], nr = _visibility(g, X[pp_pt[sel]], N[pp_pt[sel]], cps[pp_pair[sel]], k, rng)
+                n_rays += nr
+        values[a:b] = np.bincount(pp_pair, weights=W[pp_pt] * fpt * vis, minlength=b - a)
+        unoccluded = np.bincount(pp_pair, weights=W[pp_pt] * fpt, minlength=b - a)
+        # phase 2: pairs partly in shadow (some visibility ray blocked, some not) again, with
+        # jittered receiver points (the Gauss rule is no good across a shadow edge)
+        if S > 0 and Q > 0:
+            live = fpt > 0
+            vmin = np.ones(b - a)
+            vmax = np.zeros(b - a)
+            np.minimum.at(vmin, pp_pair[live], vis[live])
+            np.maximum.at(vmax, pp_pair[live], vis[live])
+            part = np.flatnonzero((vmin < 1) & (vmax > 0))
+            partial[a + part] = True
+            per = max(1, CHUNK_RAYS // (Q * K2))
+            for q0 in range(0, len(part), per):
+                sub = part[q0:q0 + per]
+                x, n = _sample_patches(g, pr[a + sub], Q, rng)
+                x, n = x.reshape(-1, 3), n.reshape(-1, 3)
+                wv, ws, nr = _visibility(g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
+                n_rays += nr
+                # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
+                # fraction of the point-to-point kernel over all the rays of the pair
+                fv = wv.reshape(len(sub), Q).sum(axis=1)
+                fs = ws.reshape(len(sub), Q).sum(axis=1)
+                values[a + sub] = unoccluded[sub] * fv / np.where(fs > 0, fs, 1.0)
+        rays[ci] = n_rays
+        return ci
+
+    def check_cancel():
+        if cancel is not None and cancel():
+            stop.set()
+            raise Cancelled("form-factor computation cancelled")
+
+    check_cancel()
+    done = 0
+    if threads == 1 or len(chunks) == 1:
+        for ci in range(len(chunks)):
+            work(ci)
+            done += 1
+            if progress is not None:
+                progress(done / len(chunks))
+            check_cancel()
+    else:
+        with ThreadPoolExecutor(max_workers=int(threads)) as ex:
+            pending = {ex.submit(work, ci) for ci in range(len(chunks))}
+            try:
+                while pending:
+                    finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                    for f in finished:
+                        f.result()
+                        done += 1
+                    if finished and progress is not None:
+                        progress(done / len(chunks))
+                    check_cancel()
+            except BaseException:
+                stop.set()
+                for f in pending:
+                    f.cancel()
+                raise
+    if not np.all(np.isfinite(values)):
+        raise SceneError("kernel form factors contain NaN or infinite values (degenerate geometry?)")
+    out[ii, jj] = values
+    info["rays"] = int(rays.sum())
+    info["penumbra_pairs"] = int(partial.sum())
+    if stats is not None:
+        stats.update(info, seconds=time.perf_counter() - t_start)
+    return out
+
+
+def _source_kernel(g: _Geometry, x, n, s, far):
+    """F_pt from points x (normals n) to source patches s, one source per point, (m,):
+    the clipped contour integral per source triangle, or the point kernel where ``far``."""
+    m = len(x)
+    ntri = g.tcount[s]
+    ev = np.repeat(np.arange(m), ntri)
+    tri = _ragged(g.tstart[s], ntri)
+    kval = np.zeros(len(ev))
+    fe = far[ev]
+    near = np.flatnonzero(~fe)
+    if len(near):
+        e, t = ev[near], tri[near]
+        kval[near] = _lambert(x[e], n[e], g.tv[t], g.tn[t])
+    fars = np.flatnonzero(fe)
+    if len(fars):
+        e, t = ev[fars], tri[fars]
+        kval[fars] = _point_kernel(x[e], n[e], g.tc[t], g.tn[t], g.ta[t])
+    return np.bincount(ev, weights=kval, minlength=m)
+
+
+def _sample_patches(g: _Geometry, s, k, rng):
+    """k stratified points on each patch s[i] (float32): a jittered grid (k a square) or
+    strata along the first coordinate. A parallelogram patch (two triangles, e.g. a grid
+    cell) maps the grid affinely onto itself; any other patch picks triangles by area
+    (the first coordinate through its area CDF). Points are set in from the edges by
+    2 * offset. Returns points (m, k, 3) and their normals (m, k, 3)."""
+    m = len(s)
+    s = np.asarray(s, dtype=np.int64)
+    gk = int(math.isqrt(k))
+    u = rng.random((m, k, 2), dtype=np.float32)
+    if gk * gk == k:
+        ia, ib = np.divmod(np.arange(k, dtype=np.float32), np.float32(gk))
+        u[..., 0] += ia
+        u[..., 1] += ib
+        u *= np.float32(1.0 / gk)
+    else:  # strata along the first coordinate, the second random
+        u[..., 0] += np.arange(k, dtype=np.float32)
+        u[..., 0] *= np.float32(1.0 / k)
+    # (u may round to 1.0 in float32: the far edge of the set-in patch, still inside)
+    para = g.para[s]
+    if para.all():  # the common case (grid cells): no per-sample gathers at all
+        G = g.pgeo[s]
+        y = G[:, None, 0:3] + u[..., 0:1] * G[:, None, 3:6]
+        y += u[..., 1:2] * G[:, None, 6:9]
+        return y, np.broadcast_to(G[:, None, 9:12], (m, k, 3))
+    y = np.empty((m, k, 3), dtype=np.float32)
+    ny = np.empty((m, k, 3), dtype=np.float32)
+    ip = np.flatnonzero(para)
+    if len(ip):
+        G = g.pgeo[s[ip]]  # (mp, 12): origin, edge u, edge v, normal
+        up = u[ip]
+        yp = G[:, None, 0:3] + up[..., 0:1] * G[:, None, 3:6]
+        yp += up[..., 1:2] * G[:, None, 6:9]
+        y[ip] = yp
+        ny[ip] = G[:, None, 9:12]
+    ig = np.flatnonzero(~para)
+    if len(ig):
+        ug = u[ig].reshape(-1, 2).astype(np.float64)
+        src = np.repeat(s[ig], k)
+        tri = np.searchsorted(g.key, src + ug[:, 0], side="right")
+        np.minimum(tri, len(g.key) - 1, out=tri)
+        sv = np.clip((ug[:, 0] - g.cdf_lo[tri]) / g.cdf_w[tri], 0.0, 1.0)
+        su = np.sqrt(sv)
+        b2 = su * ug[:, 1]
+        b1 = su - b2
+        G = g.tgeo[tri]  # (n, 12): shrunk v0, e1, e2, normal
+        yg = G[:, 0:3] + b1[:, None].astype(np.float32) * G[:, 3:6] + b2[:, None].astype(np.float32) * G[:, 6:9]
+        y[ig] = yg.reshape(len(ig), k, 3)
+        ny[ig] = G[:, 9:12].reshape(len(ig), k, 3)
+    return y, ny
+
+
+def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
+    """Kernel-weighted visible fraction of source patch s[i] from point x[i] (normal n[i]),
+    from k shadow rays each (stratified over the source). Returns (V (m,), rays), or with
+    ``sums`` (sum w v (m,), sum w (m,), rays)."""
+    m = len(x)
+    y, ny = _sample_patches(g, s, k, rng)
+    x32 = np.asarray(x, dtype=np.float32)
+    n32 = np.asarray(n, dtype=np.float32)
+    d = y - x32[:, None, :]
+    r2 = np.einsum("mkj,mkj->mk", d, d)
+    cx = np.einsum("mkj,mj->mk", d, n32)
+    cy = np.einsum("mkj,mkj->mk", d, ny)
+    np.maximum(cx, 0, out=cx)
+    np.minimum(cy, 0, out=cy)
+    r2 *= r2
+    np.maximum(r2, np.float32(1e-30), out=r2)
+    w = cx * -cy / r2  # (m, k)
+    live = w > 0
+    n_live = int(np.count_nonzero(live))
+    vis = np.zeros((m, k), dtype=np.float32)
+    if n_live:
+        off = np.float32(g.offset)
+        xo = x32 + off * n32
+        if n_live > 0.8 * m * k:  # trace them all (a ray with w = 0 counts for nothing)
+            org = np.repeat(xo, k, axis=0)
+            dv = (y + off * ny).reshape(-1, 3)
+            sel = None
+        else:
+            row, col = np.nonzero(live)
+            org = xo[row]
+            dv = y[row, col] + off * ny[row, col]
+            sel = (row, col)
+        dv -= org
+        length = np.sqrt(np.einsum("ij,ij->i", dv, dv))
+        dv /= np.maximum(length, np.float32(1e-30))[:, None]
+        tfar = np.maximum(length - off, np.float32(0.5) * length)
+        hit = np.asarray(g.scene.run(org, dv, dists=tfar, query="OCCLUDED"))
+        if sel is None:
+            vis = (hit == -1).reshape(m, k).astype(np.float32)
+        else:
+            vis[sel] = hit == -1
+    wsum = w.sum(axis=1, dtype=np.float64)
+    wvis = (w * vis).sum(axis=1, dtype=np.float64)
+    if sums:
+        return wvis, wsum, n_live
+    V = np.where(wsum > 0, wvis / np.where(wsum > 0, wsum, 1.0), 1.0)
+    return V, n_live
+
+
+# --------------------------------------------------------------------------------------
+# storing the estimates in a form-factor matrix
+
+def apply_kernel_pairs(F, area, rows, cols, values):
+    """Replace F[rows, cols] by ``values`` (len(rows), len(cols)) (receiver x source form
+    factors, e.g. from kernel_form_factors) and, by reciprocity, F[cols, rows] by
+    A_r F_rs / A_s: one estimate serves both directions.
+
+    ``F``: a FormFactors (its matrix is replaced) or a (P, P) matrix: a dense ndarray is
+    modified in place, a scipy.sparse matrix is replaced by a new CSR matrix; the result
+    is returned either way (same dtype). ``area``: (P,) patch areas (or a PatchSet).
+    A pair estimated in both directions (a patch in both rows and cols) gets the mean of
+    the two power estimates A_r F_rs. Diagonal entries (r, r) are left as they are.
+    ``rows``, ``cols``: patch indices or boolean masks over the patches.
+    """
+    holder = None
+    if hasattr(F, "matrix"):
+        holder, F = F, F.matrix
+    if hasattr(area, "area"):
+        area = area.area
+    area = np.asarray(area, dtype=np.float64).reshape(-1)
+    P = F.shape[0]
+    if F.shape != (P, P) or len(area) != P:
+        raise ValueError(f"F must be (P, P) with P = len(area) = {len(area)}, got {F.shape}")
+    rows, cols = np.asarray(rows), np.asarray(cols)
+    rows = (np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.int64)).reshape(-1)
+    cols = (np.flatnonzero(cols) if cols.dtype == bool else cols.astype(np.int64)).reshape(-1)
+    values = np.asarray(values, dtype=np.float64).reshape(len(rows), len(cols))
+    r = np.repeat(rows, len(cols))
+    c = np.tile(cols, len(rows))
+    G = area[r] * values.reshape(-1)  # power-exchange estimates A_r F_rs
+    off = r != c
+    r, c, G = r[off], c[off], G[off]
+    # both directions of every pair, duplicates (pairs estimated twice) averaged
+    i = np.concatenate([r, c])
+    j = np.concatenate([c, r])
+    key = i * P + j
+    uk, inv = np.unique(key, return_inverse=True)
+    gsum = np.bincount(inv, weights=np.concatenate([G, G]))
+    cnt = np.bincount(inv)
+    ui, uj = np.divmod(uk, P)
+    val = gsum / cnt / area[ui]
+    if sp.issparse(F):
+        dtype = F.dtype
+        F = F.tocsr()
+        mask = sp.csr_matrix((np.ones(len(ui)), (ui, uj)), shape=(P, P))
+        new = sp.csr_matrix((val, (ui, uj)), shape=(P, P))
+        F = (F - F.multiply(mask) + new).tocsr().astype(dtype)
+        F.eliminate_zeros()
+    else:
+        F[ui, uj] = val
+    if holder is not None:
+        holder.matrix = F
+        return holder
+    return F

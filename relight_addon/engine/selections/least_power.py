@@ -1,0 +1,27 @@
+"""Least power within a tolerance (after Castro, del Acebo and Sbert): the non-negative lights
+that keep every target within +-tolerance of its painted value with the least total power
+(sum over lights and channels of exitance x area, W), a linear programme solved by scipy's
+HiGHS (engine.best_lights.least_power_within_tolerance). When no non-negative lights can, the
+min-max deviation programme says which tolerance is reachable, and that configuration is kept."""
+from __future__ import annotations
+
+import numpy as np
+
+from ..best_lights import least_power_within_tolerance
+from ..registry import SELECTIONS
+
+
+@SELECTIONS.register("least-power", "Least Power within Tolerance",
+                     "The non-negative lights with the least total power that keep every target within "
+                     "the tolerance of its painted value (a linear programme)",
+                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True)
+def least_power(s):
+    p = s.problem
+    if s.tolerance is None:
+        raise ValueError("the least-power selection needs a tolerance (e.g. --tolerance 0.1 for +-10 %)")
+    s.step(0, 1)
+    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_area, s.tolerance)
+    on = np.flatnonzero(res.exitance.max(axis=1) > 0)
+    s.record(on, res.exitance[on])
+    s.step(1, 1)
+    return [res.message] if res.message else []
