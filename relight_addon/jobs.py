@@ -266,7 +266,8 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0) -> 
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
     passes = options.refine_passes if PATCH_MODELS[options.patch_model].get("refines") else 0
     return estimate_patches_cost(patches, options.rays_per_patch, options.solver, n_triangles=n_triangles,
-                                 refine_passes=passes, threads=options.threads)
+                                 refine_passes=passes, kernel=options.estimator == "kernel",
+                                 threads=options.threads)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -530,7 +531,9 @@ def certificate(problem: InverseProblem, red: ReductionResult):
     (engine.best_lights.lower_bounds: exact by exhaustive search where small enough, else the
     all-lights NNLS bound), and per curve point its bound (W/m^2)."""
     k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
-    bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
+    bounds = getattr(problem, "certificate", None)  # the greedy-swap selection computed it already
+    if bounds is None or len(bounds.bound) < k_top:
+        bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
     return bounds, np.array([bounds.at(p.n_lights) for p in red.curve])
 
 
@@ -704,6 +707,8 @@ def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict
         "exitance": curve.exitance,
         "radiosity": curve.radiosity,
         "final": np.array(red.final_index),
+        "target_patch": model.problem.targets,  # the painted patches and their painted radiosity (W/m^2)
+        "target_value": patches.target_radiosity[model.problem.targets],
         "target_norm": np.array(model.problem.target_norm),
         "meta": {"command": report["command"], "options": _json_safe(report["options"])},
     }

@@ -221,6 +221,10 @@ R["final_expected"] = expected_lights(k_final)
 R["final_row"] = [settings.curve[k_final].n_lights, settings.curve[k_final].n_negative]
 R["final_targets"] = target_check(k_final)["stored_target_radiance"]
 R["final_relative_error"] = float(settings.curve[k_final].relative_error)
+# Eq. 1 from what the file stores: the final configuration's radiosity on the painted patches
+b_k = data["radiosity"][k_final][data["target_patch"]].astype(float)
+want_b = data["target_value"].astype(float)
+R["stored_eq1_relative"] = float(np.linalg.norm(b_k - want_b) / np.linalg.norm(want_b))
 R["active_color"] = floor.data.color_attributes.active_color.name
 R["target_radiance"] = target_radiance.tolist()
 

@@ -100,11 +100,13 @@ def test_solve_fills_the_curve_and_ends_as_the_stop_criteria_say(scenario):
 
 def test_stored_radiosity_on_targets_gives_the_rows_error(scenario):
     """Eq. 1 recomputed from what the file stores (the final configuration's radiosity on the
-    painted faces, through the polygon weights) against the painted radiance: the row's error."""
+    painted patches against their painted radiosity) is the row's error; per painted polygon
+    (through the polygon weights) it is close to it."""
+    assert scenario["stored_eq1_relative"] == pytest.approx(scenario["final_relative_error"], rel=1e-4)
     got = np.array(scenario["final_targets"])
     want = np.array(scenario["target_radiance"])
     rel = np.linalg.norm(got - want[None, :]) / np.linalg.norm(np.broadcast_to(want, got.shape))
-    assert rel == pytest.approx(scenario["final_relative_error"], rel=2e-3)
+    assert rel == pytest.approx(scenario["final_relative_error"], rel=0.25)
 
 
 def _compare(state, expected):

@@ -465,17 +465,16 @@ def staircase():
 def test_staircase_quality(staircase):
     T, b, area = staircase
     assert T[0].shape == (44, 693)
-    curve = bl.best_k_curve(T, b, 32, area)  # default settings
+    curve, lb = bl.best_k_with_certificate(T, b, 32, area)  # as the greedy-swap selection runs it
     check_curve(curve, T, b, area, 32)
     assert curve[2].relative_error <= 0.125  # issue 8: <= 0.125 at 3 lights (paper default 0.581)
     assert curve[0].n_lights == 1 and curve[2].n_lights == 3
-    lb = bl.lower_bounds(T, b, 32)
     assert lb.exact[0] and lb.exact[1] and not lb.exact[2]  # C(693, 2) subsets: exact up to 2 lights
     for p in curve:
         assert lb.at(p.k) <= p.error
     assert curve[0].error == pytest.approx(lb.bound[0] / (1 - bl.BOUND_MARGIN), rel=1e-9)  # k = 1 optimal
-    # the margin to the certified optimum at 2 lights, and to the NNLS floor at 32
-    assert curve[1].error <= 1.05 * lb.bound[1]
+    # optimal at 2 lights (seeded with the certificate's optimum), near the NNLS floor at 32
+    assert curve[1].error == pytest.approx(lb.bound[1] / (1 - bl.BOUND_MARGIN), rel=1e-9)
     assert curve[31].error <= 1.05 * lb.nnls
     # the plain greedy path (error-scored) already meets the target at 3 lights; correlation-scored does not
     g = bl.best_k_curve(T, b, 3, area, swap=False)

@@ -253,8 +253,9 @@ def folded_patch_scene():
     normal = nsum / np.linalg.norm(nsum, axis=1)[:, None]
     center = np.stack([np.bincount(tri_patch, weights=tv.mean(axis=1)[:, k] * ta_) for k in range(3)], 1) / area[:, None]
     z = np.zeros((2, 3))
-    ps = PatchSet(tri_vertices=tv, tri_patch=tri_patch, area=area, normal=normal, center=center,
-                  face=np.arange(2), reflectance=z + 0.5, exitance=z, target=np.zeros(2, bool),
+    ps = PatchSet(tri_vertices=tv, tri_patch=tri_patch, tri_face=tri_patch, area=area, normal=normal,
+                  center=center, face=np.arange(2), object=np.zeros(2, np.int64), reflectance=z + 0.5,
+                  exitance=z, target=np.zeros(2, bool),
                   target_radiosity=z, forbidden=np.zeros(2, bool), n_faces=2, max_patch_size=10.0)
     return ps, rec, (ta, tb), unit(cr[2]), unit(cr[3])
 

@@ -6,7 +6,6 @@ radiosity of a plate lit by a non-reflecting emitter (B = rho e F exactly for si
 patches), and measured time/memory of a small solve for the cost estimate.
 """
 import math
-import time
 import tracemalloc
 
 import numpy as np
@@ -304,8 +303,8 @@ def test_cost_thresholds():
 
 
 def test_cost_estimate_matches_a_measured_solve():
-    """A 1000-patch room: measured time and traced peak memory of run_solve within a
-    factor of a few of the estimate (the estimate is an order of magnitude)."""
+    """A 1000-patch room: the traced peak memory of run_solve within a factor of 3 of the estimate.
+    (Time against the estimate is a benchmark, not a timed test: benchmarks/bench_cost.py.)"""
     from relight_addon.engine.scene import polygon_faceset
 
     faces = polygon_faceset(cf.box_polygons((4.0, 3.0, 2.5)), reflectance=0.6)
@@ -313,18 +312,16 @@ def test_cost_estimate_matches_a_measured_solve():
     faces.target_radiosity[0] = 10.0
     faces.forbidden[:] = True
     faces.forbidden[1] = False  # the ceiling holds the candidates
-    opts = JobOptions(rays_per_patch=1024, max_patch_size=0.25, seed=0, max_lights=3)
+    opts = JobOptions(rays_per_patch=1024, max_patch_size=0.25, seed=0, max_lights=3, patch_model="polygon",
+                      estimator="raycast")
     patches = mesh_patches(faces, 0.25)
     P = patches.n_patches
     assert 700 < P < 1500
     est = estimate_cost(P, 1024, int(candidate_mask(patches).sum()), int(patches.target.sum()), channel_groups=1)
     assert estimate_patches_cost(patches, 1024) == est
     tracemalloc.start()
-    t0 = time.perf_counter()
     out = jobs.run_solve(faces, opts)
-    seconds = time.perf_counter() - t0
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert out.report["scene"]["patches"] == P
     assert est["memory_bytes"] / 3 < peak < 3 * est["memory_bytes"], (peak, est)
-    assert est["seconds"] / 10 < seconds < 10 * est["seconds"], (seconds, est)

@@ -26,7 +26,9 @@ STAIRCASE = os.path.join(SAMPLES, "staircase_targets.blend")
 
 def test_staircase_paper_experiment(run_cli, bpy_clean, tmp_path):
     rep, out = tmp_path / "r.json", tmp_path / "out.blend"
-    code, report, err = run_cli(["solve", STAIRCASE, "--report", rep, "--out", out])
+    # the paper's experiment: a patch and a light per polygon, ExitanceElimination x Distance
+    code, report, err = run_cli(["solve", STAIRCASE, "--report", rep, "--out", out, "--patch-model", "polygon",
+                                 "--selection", "exitance-elimination"])
     assert code == 0, err
     inv, curve = report["inverse"], report["curve"]
     assert inv["solver"] == "reduced" and report["reduction"]["selection"] == "exitance-elimination"

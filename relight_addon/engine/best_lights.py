@@ -707,6 +707,15 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
     return curve
 
 
+def best_k_with_certificate(T, b, k_max, light_area=None, exhaustive_limit=300_000, **kw):
+    """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
+    best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
+    exact, and the swap search starts from there above. Returns (curve, bounds)."""
+    bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit)
+    initial = [s for s in bounds.optimum_lights if s is not None] + list(kw.pop("initial", None) or [])
+    return best_k_curve(T, b, k_max, light_area, initial=initial or None, **kw), bounds
+
+
 def best_k_for_problem(problem, k_max, **kw):
     """best_k_curve on an InverseProblem: its transfer matrices, targets and light areas."""
     return best_k_curve(problem.transfer, problem.b_target, k_max, problem.light_area, **kw)

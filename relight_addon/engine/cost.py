@@ -15,6 +15,7 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
 - the transfer matrix T: min(m, C) right-hand sides through A (2 P^2 flops each dense), T itself
   3 x 8 m L bytes; the solver: reduced/nnls m^2 L + m^3/3 flops per channel; the paper's
   formulation a P x P Gram matrix (8 P (P - m + L) + 8 P^2 bytes, P^2 (P - m + L) + P^3 / 3 flops);
+- the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR;
 - the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
@@ -42,6 +43,7 @@ SECONDS_PER_TRIANGLE = 4e-6
 DIRECT_SOLVE_LIMIT = 6000  # engine.inverse.DIRECT_SOLVE_LIMIT
 ITERATIVE_SWEEPS = 120
 REFINE_RAY_FRACTION = 4  # jobs.REFINE_RAY_FRACTION
+KERNEL_SECONDS_PER_PAIR = 4e-5
 STORED_POINTS = 72
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
@@ -70,7 +72,8 @@ def _count(name, value):
 
 def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targets: int,
                   solver: str = "reduced", n_lights: int | None = None, n_triangles: int = 0,
-                  refine_passes: int = 0, channel_groups: int = 3, rays_per_second: float = RAYS_PER_SECOND,
+                  refine_passes: int = 0, channel_groups: int = 3, kernel: bool = False,
+                  rays_per_second: float = RAYS_PER_SECOND,
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
                   threads: int | None = None) -> dict:
@@ -97,6 +100,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     ff_bytes = 4.0 * P2 if P <= dense_limit else 8.0 * nnz + 8.0 * (P + 1)
     rays = float(P) * N * (1.0 + passes / REFINE_RAY_FRACTION)
     parts["form_factors"] = (ff_bytes, rays / rays_per_second)
+    if kernel:
+        pairs = float(m) * C
+        parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
     k = min(m, C)
     if P <= DIRECT_SOLVE_LIMIT:
         parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)
@@ -128,7 +134,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
 
 
 def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced", n_lights=None,
-                          n_triangles=0, refine_passes=0, **kw) -> dict:
+                          n_triangles=0, refine_passes=0, kernel=False, **kw) -> dict:
     """:func:`estimate_cost` of a meshed PatchSet: candidates as engine.lights.candidate_mask,
     targets = target patches; ``rays_per_patch`` None = the automatic quality, or a
     formfactors.QUALITY name."""
@@ -148,7 +154,7 @@ def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced",
     groups = len({tuple(patches.reflectance[:, c]) for c in range(3)}) if P else 1
     return estimate_cost(P, int(rays_per_patch), n_candidates, int(np.sum(patches.target)), solver=solver,
                          n_lights=n_lights, n_triangles=n_triangles, refine_passes=refine_passes,
-                         channel_groups=groups, **kw)
+                         channel_groups=groups, kernel=kernel, **kw)
 
 
 def available_memory() -> float:

@@ -1,13 +1,14 @@
 """Best k lights (beyond the paper): for every number of lights k = 1 .. max(32, max lights), the
 best non-negative configuration found by greedy pursuit on the true error (each candidate
 scored from the Gram matrix T^T T, the promising ones refitted exactly by NNLS per channel),
-then local search swapping one light at a time while the error drops (engine.best_lights).
+then local search swapping one light at a time while the error drops (engine.best_lights),
+seeded with the exact optima of the certificate where the subsets are few enough to enumerate.
 The curve is monotone (never worse with more lights), every point non-negative; among equal
 errors the least total power wins. Works over the multi-scale candidates (cells, groups, whole
 polygons), so a light is as large or as small as the targets need."""
 from __future__ import annotations
 
-from ..best_lights import best_k_curve
+from ..best_lights import best_k_with_certificate
 from ..registry import SELECTIONS
 
 #: the curve covers at least this many lights
@@ -26,8 +27,9 @@ def greedy_swap(s):
     def progress(done, total):
         stop["cancel"] = s.step(done, total)
 
-    curve = best_k_curve(p.transfer, p.b_target, k_max, p.light_area, cancel=lambda: stop["cancel"],
-                         progress=progress)
+    curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_area,
+                                            cancel=lambda: stop["cancel"], progress=progress)
+    p.certificate = bounds  # jobs.certificate reuses it
     for pt in curve:
         on = pt.exitance.max(axis=1) > 0
         s.record(pt.lights[on], pt.exitance[on], pt.changed)
