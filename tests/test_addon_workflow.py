@@ -119,7 +119,13 @@ def test_final_configuration_is_shown_by_the_emitters_object(scenario):
     want = sorted({p for o, polys in scenario["final_lights"] if o == name for p in polys})
     assert selected == want and selected
     assert scenario["active_color"] == "relight_radiosity"
-    assert scenario["chart"] is not None
+    chart = scenario["chart"]
+    assert chart["shape"] == [204, 240, 4] and chart["marker"]
+    assert chart["current"] == chart["final_curve_index"]  # the marker is on the configuration shown
+    summary, warnings = scenario["summary"]
+    n = scenario["final_row"][0]
+    assert summary.startswith(f"{n} lights, relative error ")  # what the Results panel shows
+    assert isinstance(warnings, str)
 
 
 def test_apply_configuration_k_matches_its_row(scenario):

@@ -34,6 +34,18 @@ ENVS = {
         "python": ["/root/.pyenv/versions/3.11.7/bin/python3.11", "python3.11"],
         "requirements": ["bpy==4.2.23", "numpy==1.26.4", *_BUNDLED],
     },
+    "bpy45": {
+        "dir": ROOT / ".venv-bpy45",
+        "python": ["/root/.pyenv/versions/3.11.7/bin/python3.11", "python3.11"],
+        # Blender 4.5 LTS: still Python 3.11 and numpy 1.26
+        "requirements": ["bpy==4.5.15", "numpy==1.26.4", *_BUNDLED],
+    },
+    "bpy53": {
+        "dir": ROOT / ".venv-bpy53",
+        "python": ["/root/.pyenv/versions/3.13.0/bin/python3.13", "python3.13"],
+        # Blender 5.1+: Python 3.13 and numpy 2.x (the cp313 wheels of the extension)
+        "requirements": ["bpy==5.3.0", "numpy==2.3.5", *_BUNDLED],
+    },
     "py313": {
         "dir": ROOT / ".venv-py313",
         "python": ["/root/.pyenv/versions/3.13.0/bin/python3.13", "python3.13"],
