@@ -150,9 +150,10 @@ class RELIGHT_PT_main(RELIGHT_PT_base, bpy.types.Panel):
         t, c, f, notes = _counts(context)
         col = layout.column(align=True)
         col.label(text=f"{'?' if t is None else t} target faces", icon="BRUSH_DATA")
-        col.label(text=f"{'?' if c is None else c} of {f} faces may be lights", icon="LIGHT_AREA")
-        for note in notes:
-            _wrap(col, note, context, icon="INFO")
+        # two lines whatever the mode, so that nothing below moves; a clock when the count of
+        # an object in Edit Mode is the one from Object Mode (the Light Candidates panel says so)
+        col.label(text=f"{'?' if c is None else c} of {f} faces may be lights",
+                  icon="TIME" if notes else "LIGHT_AREA")
 
 
 def _mesh(context):
@@ -204,7 +205,11 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         row.operator("relight.forbid_faces", text="Forbid Selected").allow = False
         row.operator("relight.forbid_faces", text="Allow Selected").allow = True
         if context.mode == "EDIT_MESH" and obj is not None:
-            layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
+            note = object_counts(obj)[3]
+            if note:
+                layout.label(text="Counted again on leaving Edit Mode", icon="TIME")
+            else:
+                layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
         else:
             layout.label(text="Edit Mode: forbid selected faces", icon="EDITMODE_HLT")
         layout.operator("relight.select_faces", text="Select Forbidden").kind = "FORBIDDEN"
