@@ -557,7 +557,9 @@ def update_chart(scene) -> None:
     for window in wm.windows if wm is not None else ():
         for area in window.screen.areas:
             if area.type == "VIEW_3D":
-                area.tag_redraw()
+                for region in area.regions:
+                    if region.type == "UI":
+                        region.tag_redraw()
 
 
 def chart_data(scene) -> dict | None:

@@ -29,6 +29,7 @@ OUT = ARGS[0] if ARGS else "/tmp/relight-gui"
 PKG = "bl_ext.user_default.relight"
 SENTINEL = "<relight-gui-probe>"
 XFAIL_CLEAR = "integrator: results tracked by identity"
+PAUSE_LIMIT = 2.5  # s: the longest main-thread pause allowed while a solve runs or cancels
 
 RESULT = {"checks": [], "shots": [], "timings": {}, "blender": bpy.app.version_string}
 BEAT = []
@@ -220,8 +221,21 @@ def press(found, command, settle=1.2):
     return sx, sy
 
 
+PAUSES = []  # (seconds since start, pause, solve stage before -> after)
+_STAGE = [None]
+
+
 def heartbeat():
-    BEAT.append(time.monotonic())
+    now = time.monotonic()
+    try:
+        state = sys.modules[PKG + ".blender_ui.operators"].solve_state(bpy.context.scene)
+        stage = None if state is None else f"{state['stage']} {state['fraction']:.2f}"
+    except Exception:  # noqa: BLE001  (not loaded yet, or an older add-on)
+        stage = None
+    if BEAT and now - BEAT[-1] > 0.5:
+        PAUSES.append((round(BEAT[-1] - T0, 2), round(now - BEAT[-1], 2), f"{_STAGE[0]} -> {stage}"))
+    _STAGE[0] = stage
+    BEAT.append(now)
     if len(BEAT) > 50000:
         del BEAT[:25000]
     return 0.05
@@ -498,7 +512,9 @@ def scenario():
         RESULT["timings"]["solve_pauses_s"] = {"start (export, meshing)": round(max_gap(t_click, t_first), 2),
                                                "while solving": round(gap, 2),
                                                "finish (apply the result)": round(max_gap(t_last, t_done), 2)}
-        check("the UI stays responsive while solving", gap < 1.0,
+        # the worker shares the GIL and 2 busy cores with Blender's software OpenGL: pauses of
+        # a second happen; a solve run on the main thread would pause it for the whole solve
+        check("the UI stays responsive while solving", gap < PAUSE_LIMIT,
               f"longest main-thread pause {gap:.2f} s over {t_last - t_first:.0f} s of solving; "
               f"{RESULT['timings']['solve_pauses_s']}")
     yield 2.0
@@ -547,7 +563,6 @@ def scenario():
     # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
     settings.rays_per_patch = 262144
     yield 1.0
-    beat0 = len(BEAT)
     yield from press(found, "bpy.ops.relight.solve()", settle=2.0)
     shot("12_cost_question")
     asked = operators.solve_state(scene) is None
@@ -565,10 +580,13 @@ def scenario():
         yield 0.1
     t_end = time.monotonic()
     gap = max_gap(t_esc, t_end)
+    beats = len([t for t in BEAT if t_esc < t < t_end])
     RESULT["timings"]["cancel_s"] = round(t_end - t_esc, 2)
-    check("ESC cancels without freezing the UI", operators.solve_state(scene) is None and gap < 1.0,
-          f"cancelled in {t_end - t_esc:.2f} s, longest main-thread pause {gap:.2f} s "
-          f"({len(BEAT) - beat0} heartbeats)")
+    # waiting for the worker on the main thread (the old modal's join) gives no heartbeat at
+    # all between ESC and the end of the cancel
+    check("ESC cancels without freezing the UI", operators.solve_state(scene) is None and gap < PAUSE_LIMIT
+          and (beats >= 2 or t_end - t_esc < 0.3),
+          f"cancelled in {t_end - t_esc:.2f} s, {beats} heartbeats meanwhile, longest main-thread pause {gap:.2f} s")
     check("the cancelled solve leaves the previous result", scene.get("relight_result") == result_before
           and len(settings.curve) == n_rows)
     shot("14_cancelled")
@@ -600,6 +618,7 @@ def scenario():
 
 def finish(code=None):
     RESULT["timings"]["total_s"] = round(time.monotonic() - T0, 1)
+    RESULT["pauses"] = PAUSES
     failed = [c for c in RESULT["checks"] if c["status"] == "FAIL"]
     RESULT["passed"] = not failed and code is None
     with open(os.path.join(OUT, "result.json"), "w") as fh:
