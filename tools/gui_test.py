@@ -38,12 +38,11 @@ RUN = "/relight-gui-run"            # inside the chroot
 DISPLAY = ":97"
 SCREEN = (1600, 1000)
 SCENE = "staircase_targets.blend"
-# screenshot -> (docs name, crop box (left, top, right, bottom) or None)
-DOCS = {
-    "08_solved": ("gui_solved.png", None),
-    "11_results": ("gui_results.png", (900, 60, 1340, 880)),
-    "04_edit_mode": ("gui_edit_mode.png", (900, 60, 1340, 700)),
-    "13_large_solve_running": ("gui_progress.png", (900, 60, 1340, 1000)),
+DOCS = {  # screenshot -> (docs name, crop box (left, top, right, bottom), scale)
+    "08_solved": ("gui_solved.png", (0, 40, 1340, 1000), 0.6),
+    "11_results": ("gui_results.png", (1020, 60, 1340, 905), 1.0),
+    "04_edit_mode": ("gui_edit_mode.png", (1020, 60, 1340, 700), 1.0),
+    "13_large_solve_running": ("gui_progress.png", (1020, 60, 1340, 905), 1.0),
 }
 ERROR_RE = re.compile(r"Traceback|Error")
 # harmless lines of a minbase chroot / Xvfb session (see /work/shared/gui-blender.md)
@@ -128,13 +127,13 @@ def crop_to_docs(out: Path):
     except ImportError:
         print("test-gui: Pillow missing, docs/img/gui_*.png not updated")
         return
-    for name, (doc, box) in DOCS.items():
+    for name, (doc, box, scale) in DOCS.items():
         src = out / f"{name}.png"
         if not src.exists():
             continue
-        img = Image.open(src).convert("RGB")
-        if box:
-            img = img.crop(box)
+        img = Image.open(src).convert("RGB").crop(box)
+        if scale != 1:
+            img = img.resize((round(img.width * scale), round(img.height * scale)), Image.LANCZOS)
         img.save(ROOT / "docs" / "img" / doc, optimize=True)
         print(f"test-gui: docs/img/{doc} <- {src.relative_to(ROOT) if src.is_relative_to(ROOT) else src}")
 

@@ -394,12 +394,20 @@ class RELIGHT_OT_solve(bpy.types.Operator):
 
     def _end_ui(self, context):
         wm = context.window_manager
-        wm.event_timer_remove(self._timer)
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
         wm.progress_end()
         if context.workspace is not None:
             context.workspace.status_text_set(None)
         _SOLVING.clear()
         _tag_sidebar_redraw(context)
+
+    def cancel(self, context):
+        """Blender stops the modal (a file is opened, the window closes): stop the worker, free
+        the UI (the worker's result, if any, is dropped)."""
+        self._cancel.set()
+        self._end_ui(context)
 
     def _status(self, context, text):
         if context.workspace is not None:

@@ -446,6 +446,7 @@ def scenario():
     yield 1.5
     t1, c1, f1, notes = counts()
     check("counts in Edit Mode (from the edit mesh)", (t1, f1) == (t0, f0), f"{(t1, c1, f1)} vs {(t0, c0, f0)} {notes}")
+    yield from scroll_sidebar(-40)
     shot("04_edit_mode")
     yield from press(found, "bpy.ops.relight.fill_targets(unpaint=False)", settle=1.5)
     t2 = counts()[0]
