@@ -150,7 +150,15 @@ def scroll_sidebar(notches):
     yield 0.3
     if notches:
         xdo("click", "--repeat", abs(notches), "--delay", "30", "5" if notches > 0 else "4")
-    yield 0.8
+    # Blender redraws the sidebar (software OpenGL) for each notch: wait until it has settled
+    last, still = None, 0
+    for _ in range(40):
+        yield 0.25
+        top = ui_region().view2d.region_to_view(0, 0)[1]
+        still = still + 1 if last is not None and abs(top - last) < 0.5 else 0
+        last = top
+        if still >= 2:
+            break
 
 
 def probe_page(hits):
@@ -406,6 +414,9 @@ def scenario():
     shot("01_no_active_object")
     hints = panels.hints(bpy.context)
     check("without an active mesh the panel says why buttons are greyed", "Select a mesh object" in hints, hints)
+    size = panels.effective_max_patch_size(scene)
+    check("Max Patch Size 0 stands for the scene's relight_max_patch_size (shown as Auto)",
+          settings.max_patch_size == 0 and size[0] == scene.get("relight_max_patch_size") and size[1] == "scene", size)
     found0 = yield from probe_sidebar()
     for cmd in ("bpy.ops.relight.paint_targets()", "bpy.ops.relight.fill_targets(unpaint=False)",
                 "bpy.ops.relight.fill_targets(unpaint=True)", "bpy.ops.relight.forbid_faces(allow=False)",
@@ -518,7 +529,8 @@ def scenario():
         check("the UI stays responsive while solving", gap < PAUSE_LIMIT,
               f"longest main-thread pause {gap:.2f} s over {t_last - t_first:.0f} s of solving; "
               f"{RESULT['timings']['solve_pauses_s']}")
-    yield 2.0
+    yield from scroll_sidebar(40)
+    shot("08_solved")  # while the status bar still shows the last report
     n_rows = len(settings.curve)
     final = settings.curve[settings.curve_index] if n_rows else None
     check("the solve fills the curve and ends at <= 3 positive lights",
@@ -536,8 +548,6 @@ def scenario():
     want = warnings[-1][:60] if warnings else settings.last_summary[:60]
     check("the solve's key message is the last report (the status bar shows it)", want in last, last[:300])
     result_before = scene.get("relight_result")
-    yield from scroll_sidebar(40)
-    shot("08_solved")
 
     # 8. rows of the list: the chart marker follows the row picked
     found = yield from probe_sidebar()
