@@ -10,7 +10,9 @@
   stretching a log axis over 14 decades;
 - the curve in blue, segments between configurations with negative exitances in orange;
 - the shown configuration: a yellow vertical line and a yellow dot;
-- the best any non-negative lights can do (the NNLS bound), when known: a dashed green line;
+- the best any non-negative lights can do, when the result holds it: the NNLS bound (one number,
+  a dashed green line) or, per configuration, the lower bound for its number of lights (the
+  solve's certificate, a green line);
 - tick labels and axis titles in a built-in 5 x 7 pixel font.
 
 The image is returned with row 0 at the bottom (Blender's pixel order), with a ``geometry`` dict
@@ -186,9 +188,10 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
            size=(240, 192), scale=1):
     """The chart as (pixels (h, w, 4) float32, row 0 at the bottom; geometry dict).
 
-    ``current``: index into the curve of the configuration shown; ``bound``: the NNLS relative
-    error (the best any non-negative lights can do), a number or None; ``bound_n_lights``: its
-    number of lights, if known. ``scale``: integer font/line scale (2 on high-DPI screens).
+    ``current``: index into the curve of the configuration shown; ``bound``: the best relative
+    error non-negative lights can reach: one number (the NNLS bound), or an array aligned with the
+    curve (per point, the bound for its number of lights; NaN = none), or None; ``bound_n_lights``:
+    the NNLS bound's number of lights, if known. ``scale``: integer font/line scale (2 on high-DPI screens).
     """
     w, h = int(size[0]), int(size[1])
     s = max(1, int(scale))
@@ -273,15 +276,35 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     _line(img, x0, y0, x0, y1, COLORS["axis"])
     _line(img, x0, y1, x1, y1, COLORS["axis"])
 
-    # the NNLS bound
-    if bound is not None and np.isfinite(bound):
-        by = float(py(bound))
+    # the best achievable: a lower bound of the error (the NNLS bound, or per point the certificate)
+    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
+    label = "best possible"
+    if b is not None and b.size == 1 and np.isfinite(b[0]):
+        by = float(py(b[0]))
         _line(img, x0 + 1, by, x1, by, COLORS["bound"], width=s, dash=4 * s)
-        label = "NNLS best"
         _draw_text(img, x1 - text_width(label, s) - 2 * s, int(round(by)) - ch - 2 * s, label, COLORS["bound"], s)
         geometry["bound_y"] = by
         if bound_n_lights is not None and bound_n_lights >= 1:
             _disc(img, float(px(bound_n_lights)), by, 2 * s, COLORS["bound"])
+    elif b is not None and b.size == len(n_lights):
+        okb = ok & np.isfinite(b)
+        idx = np.flatnonzero(okb)
+        idx = idx[np.argsort(n_lights[idx], kind="stable")]
+        if len(idx):
+            bx, byy = px(n_lights[idx]), py(b[idx])
+            for k in range(len(idx) - 1):
+                _line(img, bx[k], byy[k], bx[k + 1], byy[k + 1], COLORS["bound"], width=max(1, s + (s == 1)))
+            if len(idx) == 1:
+                _disc(img, float(bx[0]), float(byy[0]), 2 * s, COLORS["bound"])
+            # legend in the top-right corner (few lights have the large errors: it is the left
+            # part of the plot that fills up)
+            lx = x1 - text_width(label, s) - 3 * s
+            ly = y0 + 3 * s
+            _line(img, lx - 9 * s, ly + ch // 2, lx - 3 * s, ly + ch // 2, COLORS["bound"], width=max(1, s + (s == 1)))
+            _draw_text(img, lx, ly, label, COLORS["bound"], s)
+            if current is not None and 0 <= current < len(b) and okb[current]:
+                geometry["bound_y"] = float(py(b[current]))
+            geometry["bound_points"] = int(len(idx))
 
     # the curve, sorted by number of lights
     idx = np.flatnonzero(ok)

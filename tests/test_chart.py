@@ -106,3 +106,22 @@ def test_degenerate_inputs():
     img, g = chart.render([3, 2], [float("nan"), 0.3], current=0, size=(100, 80))
     assert g["marker"] is None and g["points"] == 1
     assert chart.nice_ceil(0.581) == pytest.approx(0.6) and chart.nice_ceil(1.3) == pytest.approx(1.5)
+
+
+def test_per_point_bound_is_a_line_through_each_configurations_bound():
+    """The stored certificate: per configuration, a lower bound for its number of lights (NaN
+    where there is none); drawn as a green line, at the current point's bound."""
+    lights, err, neg = _staircase_like()
+    bound = 0.5 * err
+    bound[lights > 32] = 0.05   # above 32 lights: the all-lights NNLS bound
+    bound[0] = np.nan           # e_x: no certificate
+    k = len(lights) - 3
+    img, g = chart.render(lights, err, neg, current=k, bound=bound, size=(228, 182))
+    x0, y0, x1, y1 = g["plot"]
+    assert g["bound_points"] == len(lights) - 1
+    assert g["bound_y"] == pytest.approx(y1 - bound[k] / g["y_max"] * (y1 - y0))
+    # green at the bound of the shown configuration, at its x
+    assert _has(_topdown(img), g["marker"][0], g["bound_y"], C["bound"], r=2)
+    # an all-NaN bound draws nothing
+    img2, g2 = chart.render(lights, err, neg, current=k, bound=np.full(len(lights), np.nan), size=(228, 182))
+    assert g2["bound_y"] is None and not np.any(np.all(np.abs(img2[..., :3] - C["bound"]) < 1e-6, axis=-1))

@@ -75,7 +75,7 @@ def _counts(context):
     targets = candidates = faces = 0
     notes = []
     for obj in context.scene.objects:
-        if obj.type != "MESH" or obj.hide_render:
+        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
             continue
         t, c, f, note = object_counts(obj)
         faces += f
@@ -95,7 +95,7 @@ def effective_max_patch_size(scene):
     lo = [math.inf] * 3
     hi = [-math.inf] * 3
     for obj in scene.objects:
-        if obj.type != "MESH" or obj.hide_render:
+        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
             continue
         for corner in obj.bound_box:
             p = obj.matrix_world @ Vector(corner)
@@ -298,7 +298,7 @@ def chart_pixels(scene, width, height, scale=1):
     if d is None:
         return None
     return chart.render(d["n_lights"], d["relative_error"], d["n_negative"], current=d["current"],
-                        bound=d["bound"], bound_n_lights=d["bound_n_lights"], size=(width, height), scale=scale)
+                        bound=d["bound"], size=(width, height), scale=scale)
 
 
 def chart_icon(context):
@@ -313,11 +313,11 @@ def chart_icon(context):
     if d is None:
         return 0
     key = (id(d["n_lights"]), len(d["n_lights"]), float(np.nansum(d["relative_error"])), d["current"],
-           d["bound"], w, h, s)
+           None if d["bound"] is None else float(np.nansum(d["bound"])), w, h, s)
     preview = pcoll.get("chart") or pcoll.new("chart")
     if _chart["key"] != key:
         pixels, geometry = chart.render(d["n_lights"], d["relative_error"], d["n_negative"], current=d["current"],
-                                        bound=d["bound"], bound_n_lights=d["bound_n_lights"], size=(w, h), scale=s)
+                                        bound=d["bound"], size=(w, h), scale=s)
         preview.image_size = (w, h)
         preview.image_pixels_float = pixels.ravel()
         _chart["key"] = key
