@@ -2,8 +2,8 @@
 
 ``render(...)`` draws relative error against number of lights, as the Results panel shows it:
 
-- x: number of lights, logarithmic (1, 10, 100, ... labelled) when the curve spans more than a
-  decade, linear otherwise;
+- x: number of lights, logarithmic (1, 10, 100, ... labelled) when the curve spans more than
+  ``LOG_X_ABOVE`` times its fewest, linear otherwise;
 - y: relative error (Eq. 1 / ||b_P||), *linear* from 0, up to a rounded maximum of the curve
   (at most ``CLIP`` unless the shown configuration is above it; points above are drawn at the
   top edge). The exact e_x point (relative error ~1e-14) sits on the x axis instead of
@@ -28,6 +28,8 @@ __all__ = ["render", "nice_ceil", "y_ticks", "x_ticks", "COLORS", "CLIP"]
 
 #: the y axis ends at a rounded max of the curve, but not above this unless the shown point is
 CLIP = 1.5
+#: the lights axis is logarithmic when the most lights exceed the fewest by this factor
+LOG_X_ABOVE = 40
 
 COLORS = {
     "background": (0.075, 0.075, 0.095, 1.0),   # distinctive: the GUI test finds the chart by it
@@ -223,7 +225,7 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     # x range
     xv = np.maximum(n_lights[ok], 1.0)
     xlo, xhi = float(xv.min()), float(xv.max())
-    log = xhi / xlo > 10
+    log = xhi / xlo > LOG_X_ABOVE
     if log:
         xlo = 10.0 ** math.floor(math.log10(xlo) + 1e-9)
     elif xhi == xlo:
@@ -257,7 +259,7 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
         _line(img, x0 - 2 * s, yy, x0, yy, COLORS["axis"])
         _draw_text(img, x0 - 3 * s - text_width(t, s), int(round(yy)) - ch // 2, t, COLORS["text"], s)
     title = "lights"
-    title_x = x1 - text_width(title, s)
+    title_x = w - 2 * s - text_width(title, s)   # top right, beside the y title
     for v in xmin_:
         xx = float(px(v))
         _line(img, xx, y1, xx, y1 + 2 * s, COLORS["axis"])
@@ -269,10 +271,10 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
         t = _fmt(v)
         tx = int(round(xx - text_width(t, s) / 2))
         tx = min(max(tx, x0 - text_width(t, s) // 2), w - text_width(t, s))
-        if tx + text_width(t, s) < title_x - 3 * s:
-            _draw_text(img, tx, y1 + 4 * s, t, COLORS["text"], s)
-    _draw_text(img, title_x, y1 + 4 * s, title, COLORS["text"], s)
+        _draw_text(img, tx, y1 + 4 * s, t, COLORS["text"], s)
     _draw_text(img, 2 * s, 2 * s, "relative error", COLORS["text"], s)
+    if title_x > 2 * s + text_width("relative error", s) + 6 * s:
+        _draw_text(img, title_x, 2 * s, title, COLORS["text"], s)
     _line(img, x0, y0, x0, y1, COLORS["axis"])
     _line(img, x0, y1, x1, y1, COLORS["axis"])
 
