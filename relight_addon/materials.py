@@ -14,8 +14,7 @@ All or Cycles), read through reroutes and muted nodes:
   Coat, Sheen, Subsurface, Alpha, thin film and anisotropy by the approximations of
   engine/principled.py, each named in the note. Emission Color x Emission Strength (attenuated
   by the coat).
-- **Diffuse BSDF**: Color (Lambert; a Roughness > 0 is Cycles' energy-conserving Oren-Nayar,
-  taken as Lambert).
+- **Diffuse BSDF**: Color (Lambert), or its Oren-Nayar albedo when Roughness > 0.
 - **Emission**: reflectance 0, L_e = Color x Strength.
 - **Mix Shader**: (1 - Fac) x first + Fac x second, Fac clamped to [0, 1]; a linked Fac is
   taken as 0.5, with a note. **Add Shader**: the sum.
@@ -34,7 +33,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from .engine.principled import PrincipledParams, principled_albedo
+from .engine.principled import PrincipledParams, oren_nayar_albedo, principled_albedo
 
 __all__ = ["material_properties", "surface_node", "Closure", "surface_closure"]
 
@@ -129,7 +128,7 @@ _ALWAYS = {"roughness": ("Roughness", 0.5), "ior": ("IOR", 1.5), "specular_ior_l
            "transmission": ("Transmission Weight", 0.0), "coat_weight": ("Coat Weight", 0.0),
            "sheen_weight": ("Sheen Weight", 0.0), "subsurface_weight": ("Subsurface Weight", 0.0),
            "alpha": ("Alpha", 1.0), "thin_film_thickness": ("Thin Film Thickness", 0.0),
-           "anisotropic": ("Anisotropic", 0.0)}
+           "anisotropic": ("Anisotropic", 0.0), "diffuse_roughness": ("Diffuse Roughness", 0.0)}
 _LAYERS = {"coat_weight": {"coat_roughness": ("Coat Roughness", 0.03), "coat_ior": ("Coat IOR", 1.5),
                            "coat_tint": ("Coat Tint", (1.0,) * 3)}}
 
@@ -171,7 +170,8 @@ def _eval(node, mat, depth=0) -> Closure:
         c = node.inputs["Color"]
         if _linked(c):
             return Closure(_viewport(mat), notes=[f"{node.name}: Color is linked, using the viewport colour"])
-        return Closure(np.maximum(_rgb(c), 0.0))
+        sigma = _value(node, "Roughness", 0.0, notes := [])
+        return Closure(oren_nayar_albedo(_rgb(c), sigma), notes=notes)
     if kind == "ShaderNodeEmission":
         c, s = node.inputs["Color"], node.inputs["Strength"]
         if _linked(c) or _linked(s):

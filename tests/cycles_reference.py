@@ -407,3 +407,116 @@ def face_areas(obj) -> np.ndarray:
     me.polygons.foreach_get("area", a)
     s = np.abs(np.linalg.det(np.array(obj.matrix_world)[:3, :3])) ** (2.0 / 3.0)
     return a * s
+
+
+# ---------------------------------------------------------------------------
+# White furnace: a material's albedo as Cycles renders it.
+
+@dataclass
+class FurnaceResult:
+    """Per material: what Cycles renders of a unit sphere in a uniform white world."""
+
+    albedo: np.ndarray  # (3,) mean radiance over the projected disk = cosine-weighted hemispherical albedo
+    normal: np.ndarray  # (3,) mean radiance of the pixels whose normal is within ~11 deg of the view
+    std_error: np.ndarray  # (3,) Monte-Carlo standard error of ``albedo`` (adjacent-pixel differences)
+    mu: np.ndarray  # (n,) cosine between the view and the normal at each covered pixel (perfect sphere)
+    pixels: np.ndarray  # (n, 3) those pixels' radiance
+
+
+def furnace_albedos(setups, px=48, samples=32, seed=0, threads=0, workdir=None) -> list:
+    """Render every material of ``setups`` (callables ``setup(material)`` that build its node
+    tree on a fresh node material) on its own unit sphere under a uniform white world of
+    radiance 1, in ONE orthographic Cycles render, and return a FurnaceResult per material.
+
+    Why this measures the white-furnace albedo: seen by an orthographic camera, the pixels of a
+    sphere sample the cosine mu between view and normal with density 2 mu dmu (the projected
+    area of a ring is 2 pi r dr = 2 pi mu dmu), so the mean pixel over the disk is
+    2 int R(mu) mu dmu, the hemispherical (cosine-weighted) albedo the radiosity engine uses.
+    Each sphere (UV sphere 128 x 64, smooth) is visible to camera rays only, so the spheres
+    neither shadow nor light each other; film transparent (alpha = coverage), a 0.01 px pixel
+    filter (each pixel samples its centre), no clamping, 8 bounces. Resets Blender first.
+    """
+    import os
+    import tempfile
+
+    import bmesh
+
+    reset_blender()
+    scene = bpy.context.scene
+    n = len(setups)
+    cols = max(1, math.ceil(math.sqrt(n)))
+    rows = math.ceil(n / cols)
+    spacing, scale = 2.2, 2.2  # sphere centres 2.2 apart, each in a 2.2 x 2.2 square tile
+    me = bpy.data.meshes.new("furnace_sphere")
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=128, v_segments=64, radius=1.0)
+    bm.to_mesh(me)
+    bm.free()
+    me.shade_smooth()
+    centres = []
+    for k, setup in enumerate(setups):
+        mat = bpy.data.materials.new(f"furnace_{k}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            mat.use_nodes = True
+        setup(mat)
+        m = me.copy()
+        m.materials.append(mat)
+        ob = bpy.data.objects.new(f"sphere_{k}", m)
+        r, c = divmod(k, cols)
+        ob.location = (c * spacing, -r * spacing, 0.0)
+        for attr in ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_shadow",
+                     "visible_volume_scatter"):
+            setattr(ob, attr, False)
+        scene.collection.objects.link(ob)
+        centres.append((r, c))
+    cam = bpy.data.cameras.new("furnace_cam")
+    cam.type = "ORTHO"
+    cam.ortho_scale = scale * max(cols, rows)
+    cam_ob = bpy.data.objects.new("furnace_cam", cam)
+    cam_ob.location = ((cols - 1) * spacing / 2, -(rows - 1) * spacing / 2, 10.0)
+    scene.collection.objects.link(cam_ob)
+    scene.camera = cam_ob
+    configure_cycles(scene, samples, seed, threads)
+    c = scene.cycles
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = 8
+    c.filter_width = 0.01
+    world = scene.world
+    bg = next(nd for nd in world.node_tree.nodes if nd.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bg.inputs["Strength"].default_value = 1.0
+    r = scene.render
+    r.film_transparent = True
+    r.resolution_x, r.resolution_y = px * cols, px * rows
+    if cols != rows:  # ortho_scale spans the larger side
+        pass
+    r.resolution_percentage = 100
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    d = workdir or tempfile.mkdtemp(prefix="relight_furnace_")
+    path = os.path.join(d, "furnace.exr")
+    r.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    try:
+        W, H = img.size
+        pix = np.array(img.pixels[:], dtype=np.float64).reshape(H, W, 4)[::-1]  # row 0 = top
+    finally:
+        bpy.data.images.remove(img)
+    out = []
+    tile = px * max(cols, rows) / max(cols, rows)  # pixels per 2.2 m tile
+    for (rr, cc) in centres:
+        cell = pix[rr * px:(rr + 1) * px, cc * px:(cc + 1) * px]
+        a = cell[..., 3]
+        rgb = cell[..., :3]
+        x = ((np.arange(px) + 0.5) / tile - 0.5) * scale
+        X, Y = np.meshgrid(x, x)
+        rad = np.sqrt(X ** 2 + Y ** 2)
+        inside = (a > 0.5) & (rad < 1.0)
+        mu = np.sqrt(np.clip(1.0 - rad ** 2, 0.0, 1.0))
+        pair = inside[:, 1:] & inside[:, :-1]
+        diff = (rgb[:, 1:] - rgb[:, :-1])[pair]
+        sigma = np.sqrt(0.5 * (diff ** 2).mean(axis=0))
+        out.append(FurnaceResult(albedo=rgb[inside].mean(axis=0), normal=rgb[inside & (rad < 0.2)].mean(axis=0),
+                                 std_error=sigma / np.sqrt(inside.sum()), mu=mu[inside], pixels=rgb[inside]))
+    return out
