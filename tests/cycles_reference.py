@@ -23,8 +23,9 @@ sqrt(texel count). ``FaceRadiance.rel_noise`` is that error relative to the mean
 Units: Blender's emission Color x Strength is radiance L (W m^-2 sr^-1); a
 COMBINED bake of a diffuse surface is its outgoing radiance, i.e. radiosity/pi.
 
-The Cycles scene is made Lambertian to match the radiosity model
-(``make_lambertian``): Principled BSDFs get Specular IOR Level, Metallic, Coat,
+By default the Cycles scene is made Lambertian to match the radiosity model
+(``make_lambertian``; ``keep_materials`` and ``keep_light_paths`` bake the file as an artist
+renders it instead): Principled BSDFs get Specular IOR Level, Metallic, Coat,
 Sheen, Transmission and Diffuse Roughness 0 (the Principled diffuse lobe is then
 Lambert with albedo Base Color); Principled emission one-sided
 (``one_sided_emission``); world black; no clamping, no glossy filter,
@@ -59,8 +60,12 @@ class FaceRadiance:
         return np.where(m > 0, self.std_error / np.where(m > 0, m, 1.0), 0.0)
 
 
-def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
-    """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake."""
+def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_light_paths: bool = False):
+    """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake.
+
+    ``keep_light_paths``: leave the scene's own clamping, bounce limits, caustics, glossy
+    filter and light threshold as they are (what an artist renders with); only the device,
+    samples, seed, denoising/adaptive sampling, view transform and the black world are set."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -69,18 +74,8 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
     c.use_animated_seed = False
     c.use_adaptive_sampling = False
     c.use_denoising = False
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = True
-    c.caustics_refractive = True
-    c.max_bounces = 64
-    c.diffuse_bounces = 64
-    c.glossy_bounces = 64
-    c.transmission_bounces = 64
-    c.transparent_max_bounces = 64
-    c.min_light_bounces = 0
-    c.light_sampling_threshold = 0.0
+    if not keep_light_paths:
+        _unbiased_light_paths(c)
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.view_settings.exposure = 0.0
@@ -99,6 +94,21 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
         bg.inputs["Strength"].default_value = 0.0
         bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
     world.color = (0.0, 0.0, 0.0)
+
+
+def _unbiased_light_paths(c):
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = True
+    c.caustics_refractive = True
+    c.max_bounces = 64
+    c.diffuse_bounces = 64
+    c.glossy_bounces = 64
+    c.transmission_bounces = 64
+    c.transparent_max_bounces = 64
+    c.min_light_bounces = 0
+    c.light_sampling_threshold = 0.0
 
 
 def make_lambertian(materials=None):
@@ -214,23 +224,33 @@ def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
 
 
 def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
-                         blend_path: str | None = None, threads: int = 0) -> dict:
+                         blend_path: str | None = None, threads: int = 0, keep_materials: bool = False,
+                         keep_light_paths: bool = False) -> dict:
     """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
 
     Works on the current Blender data, or opens ``blend_path`` first. Modifies
     the open file (UV maps, materials made Lambertian, Cycles settings): use
     it on a throw-away copy. Returns {object name: FaceRadiance}.
+
+    ``keep_materials``: bake the file's materials as they are (not made Lambertian; the
+    bake views each face along its normal, so a glossy layer shows its normal-view
+    radiance); ``keep_light_paths``: keep the file's clamping and bounce limits
+    (``configure_cycles``). Emission is made one-sided in every case (the radiosity model's).
     """
     if blend_path is not None:
         bpy.ops.wm.open_mainfile(filepath=str(blend_path))
     scene = bpy.context.scene
-    configure_cycles(scene, samples, seed, threads)
-    make_lambertian()
+    configure_cycles(scene, samples, seed, threads, keep_light_paths=keep_light_paths)
+    if not keep_materials:
+        make_lambertian()
     one_sided_emission()  # Cycles' mesh emission is two-sided; the radiosity model's is not
     if objects is None:
         objects = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
-    # Direct + indirect, diffuse + emission: everything a Lambertian surface sends out.
+    # Direct + indirect, diffuse + emission (+ glossy, transmission when the materials are
+    # kept): everything the surface sends out.
     pass_filter = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
+    if keep_materials:
+        pass_filter |= {"GLOSSY", "TRANSMISSION"}
     out = {}
     for obj in objects:
         if len(obj.data.polygons) == 0:

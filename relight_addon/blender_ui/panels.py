@@ -116,6 +116,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.relight
+        layout.operator("relight.match_light_paths", icon="LIGHT")
         if len(s.curve) == 0:
             layout.label(text="No result yet")
             return
