@@ -14,6 +14,8 @@ import os
 import sys
 import time
 
+import numpy as np
+
 PROG = "relight"
 
 
@@ -156,7 +158,7 @@ def _write_outputs(args, report, exp, apply, t0):
 def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
-    from . import export, jobs, light_paths, results
+    from . import export, jobs, light_paths, results, viewing
     from .engine.options import JobOptions
 
     t0 = time.perf_counter()
@@ -170,12 +172,32 @@ def run_radiosity_command(args, progress=None, cancel=None):
     block, warns = light_paths.assess_radiosity(bpy.context.scene, result)
     report["render_settings"] = light_paths._json(block)
     report["warnings"].extend(w for w in warns if w not in report["warnings"])
+    if result.form_factors is not None and result.patches.n_patches <= viewing.MAX_PATCHES // 4:
+        rad = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
+                                      exp.face_material, exp.material_lobes, exp.polygon_counts)
+        for name, rows in rad.items():
+            report["objects"][name]["radiance_normal"] = rows
 
     def apply():
         results.write_radiosity(exp.objects, result.polygon_radiosity, result.polygon_area)
         _match_light_paths(args, report)
 
     return _write_outputs(args, report, exp, apply, t0)
+
+
+def _add_normal_radiance(outcome, exp):
+    """objects.<name>.radiance_normal: what a bake shows on the target faces (viewing.py)."""
+    from . import viewing
+
+    prob = outcome.problem
+    mask = getattr(prob, "target_mask", outcome.patches.target)
+    if not np.any(mask) or np.sum(mask) > viewing.MAX_PATCHES:
+        return
+    B = np.asarray(outcome.stored["radiosity"][outcome.final_index], dtype=np.float64)
+    rad = viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, exp.face_material, exp.material_lobes,
+                                  exp.polygon_counts, mask)
+    for name, rows in rad.items():
+        outcome.report["objects"][name]["radiance_normal"] = rows
 
 
 def _match_light_paths(args, report):
@@ -217,6 +239,7 @@ def run_solve_command(args, progress=None, cancel=None):
     from . import light_paths
 
     light_paths.add_to_outcome(bpy.context.scene, outcome)
+    _add_normal_radiance(outcome, exp)
 
     def apply():
         shown = results.show_outcome(bpy.context.scene, outcome, exp.fingerprints)

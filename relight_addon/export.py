@@ -96,15 +96,24 @@ def open_blend(path: str):
 def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo
     and emitted radiance as Cycles renders it (materials.py; see the module docstring)."""
-    from .materials import material_properties as read
+    return material_closure(mat)[:3]
+
+
+def material_closure(mat):
+    """``material_properties`` and the material's BSDFs (materials.Closure.lobes, for
+    view-dependent radiance): (reflectance, radiance, note, lobes)."""
+    from .materials import surface_closure
 
     if mat is not None and mat.get("relight_generated"):
         # a Relight emissive variant shown by an earlier solve: the scene's own material is
         # its source (the variant's emission is Relight's result, not the scene's light)
         mat = bpy.data.materials.get(mat.get("relight_source", "")) or None
     if mat is None:
-        return np.full(3, DEFAULT_REFLECTANCE), np.zeros(3), None
-    return read(mat)
+        grey = np.full(3, DEFAULT_REFLECTANCE)
+        return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))]
+    c = surface_closure(mat)
+    note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
+    return c.reflectance, c.radiance, note, c.lobes
 
 
 # ------------------------------------------------------------------ export
@@ -117,6 +126,8 @@ class ExportedScene:
     settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
     seconds: float = 0.0
     fingerprints: dict = field(default_factory=dict)  # object name -> mesh_fingerprint (stale-result check)
+    face_material: np.ndarray = None  # (F,) index into ``material_lobes`` of every FaceSet face
+    material_lobes: list = field(default_factory=list)  # per material: its BSDFs (materials.Closure.lobes)
 
 
 #: positions are compared within this fraction of the object's size (times sqrt(vertices))
@@ -307,19 +318,26 @@ class _Builder:
         self.f_obj, self.f_idx, self.rho, self.e, self.tgt, self.tgt_b, self.forb = [], [], [], [], [], [], []
         self.warnings = []
         self.mat_cache = {}
+        self.mat_ids = {}  # material name (None: no material) -> index into self.lobes
+        self.lobes = []
+        self.f_mat = []
         self.nf = self.nv = self.nl = 0
 
     def materials(self, slots, mat_index):
-        props = []
+        props, ids = [], []
         for mi in range(max(len(slots), 1)):
             mat = slots[mi] if mi < len(slots) else None
             key = mat.name if mat is not None else None
             if key not in self.mat_cache:
-                self.mat_cache[key] = material_properties(mat)
+                self.mat_cache[key] = material_closure(mat)
+                self.mat_ids[key] = len(self.lobes)
+                self.lobes.append(self.mat_cache[key][3])
                 if self.mat_cache[key][2]:
                     self.warnings.append(self.mat_cache[key][2])
             props.append(self.mat_cache[key])
+            ids.append(self.mat_ids[key])
         mi = np.clip(mat_index, 0, len(props) - 1)
+        self.f_mat.append(np.asarray(ids, dtype=np.int64)[mi])
         return np.array([p[0] for p in props])[mi], math.pi * np.array([p[1] for p in props])[mi]
 
     def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
@@ -471,7 +489,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings=warnings,
     )
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
-    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints)
+    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
+                         np.concatenate(b.f_mat), b.lobes)
 
 
 def job_inputs(exp: ExportedScene) -> dict:

@@ -6,7 +6,9 @@ defaults render less: 4 diffuse bounces (Blender's default) cut the tail of the 
 cuts the samples brighter than it, which small bright lights produce.
 
 - ``matched_settings(rho_max)``: no direct or indirect clamping, reflective caustics on (a
-  Principled BSDF's specular layer is otherwise dropped after a diffuse bounce), and Diffuse,
+  Principled BSDF's specular layer is otherwise dropped after a diffuse bounce), Filter Glossy
+  off (it widens glossy lobes after a diffuse bounce without their energy compensation, so
+  they lose light: measured ~4 % on floor targets of default Principled materials), and Diffuse,
   Glossy and Total bounces at least ``engine.bounces.required_bounces(rho_max)``, the limit
   after which less than 0.5 % of the light is left (rho_max^(limit + 2), Cycles keeping
   limit + 1 reflections; rho_max: the scene's largest effective reflectance, its white-furnace
@@ -25,13 +27,14 @@ import numpy as np
 
 from .engine.bounces import TAIL, bounce_deficit, kept_terms, required_bounces
 
-__all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_max_reflectance",
+__all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_materials",
+           "scene_max_reflectance",
            "assess", "assess_solve", "assess_radiosity"]
 
 #: a difference on the targets above this (relative) is worth a warning
 NOTICEABLE = 0.01
 _KEYS = ("max_bounces", "diffuse_bounces", "glossy_bounces", "sample_clamp_direct", "sample_clamp_indirect",
-         "caustics_reflective")
+         "caustics_reflective", "blur_glossy")
 
 
 def current_settings(scene) -> dict:
@@ -54,7 +57,7 @@ def matched_settings(rho_max: float, settings: dict | None = None) -> dict:
     docstring); ``settings``: the current ones (higher bounce limits are kept)."""
     n = required_bounces(rho_max)
     cur = settings or {}
-    return {"sample_clamp_direct": 0.0, "sample_clamp_indirect": 0.0, "caustics_reflective": True,
+    return {"sample_clamp_direct": 0.0, "sample_clamp_indirect": 0.0, "caustics_reflective": True, "blur_glossy": 0.0,
             "diffuse_bounces": max(n, int(cur.get("diffuse_bounces", 0))),
             "glossy_bounces": max(n, int(cur.get("glossy_bounces", 0))),
             "max_bounces": max(n, int(cur.get("max_bounces", 0)))}
@@ -76,42 +79,55 @@ def match_light_paths(scene, rho_max: float) -> dict:
 def describe(changed: dict) -> str:
     names = {"max_bounces": "Total bounces", "diffuse_bounces": "Diffuse bounces", "glossy_bounces": "Glossy bounces",
              "sample_clamp_direct": "Clamp Direct", "sample_clamp_indirect": "Clamp Indirect",
-             "caustics_reflective": "Reflective Caustics"}
+             "caustics_reflective": "Reflective Caustics", "blur_glossy": "Filter Glossy"}
     if not changed:
         return "the light paths already match"
     return ", ".join(f"{names.get(k, k)} {old:g} -> {new:g}" if not isinstance(new, bool) else
                      f"{names.get(k, k)} {'on' if new else 'off'}" for k, (old, new) in changed.items())
 
 
-def scene_max_reflectance(context=None) -> float:
-    """The largest effective reflectance (white-furnace albedo, any channel) among the materials
-    of the objects Relight exports (no material: the default grey)."""
+def scene_materials(context=None) -> dict:
+    """{"max_reflectance", "max_glossy"}: the largest effective reflectance (white-furnace
+    albedo, any channel) and the largest glossy share of it among the materials of the objects
+    Relight exports (no material: the default grey)."""
     import bpy
 
-    from .export import DEFAULT_REFLECTANCE, MAX_REFLECTANCE, exported_objects, material_properties
+    from .export import DEFAULT_REFLECTANCE, MAX_REFLECTANCE, exported_objects
+    from .materials import surface_closure
 
     context = context or bpy.context
-    seen, rho = set(), 0.0
+    seen, rho, glossy = set(), 0.0, 0.0
     for ob in exported_objects(context):
-        slots = [s.material for s in ob.material_slots] or [None]
-        for mat in slots:
+        for mat in [s.material for s in ob.material_slots] or [None]:
             key = None if mat is None else mat.name
             if key in seen:
                 continue
             seen.add(key)
-            r = DEFAULT_REFLECTANCE if mat is None else float(np.max(material_properties(mat)[0]))
+            if mat is None or mat.get("relight_generated"):
+                r = DEFAULT_REFLECTANCE if mat is None else 0.0
+            else:
+                c = surface_closure(mat)
+                r = float(np.max(c.reflectance))
+                glossy = max(glossy, float(np.max(c.specular)))
             rho = max(rho, min(r, MAX_REFLECTANCE))
-    return rho
+    return {"max_reflectance": rho, "max_glossy": glossy}
+
+
+def scene_max_reflectance(context=None) -> float:
+    """The largest effective reflectance among the exported objects' materials (``scene_materials``)."""
+    return scene_materials(context)["max_reflectance"]
 
 
 def _matvec(F, x):
     return F.matvec(x) if hasattr(F, "matvec") else np.asarray(F @ x, dtype=np.float64)
 
 
-def assess(scene, F, reflectance, B, mask=None, area=None, what="targets") -> tuple:
+def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", glossy_share=None) -> tuple:
     """(render_settings block, warnings) for radiosity ``B`` (P, 3) W/m^2 on patches of
     ``reflectance`` with form factors ``F``, if the scene is rendered with its current settings.
-    ``mask``: the patches the difference is reported on (``what`` names them)."""
+    ``mask``: the patches the difference is reported on (``what`` names them);
+    ``glossy_share``: the largest glossy part of the materials' reflectance (whether Filter
+    Glossy matters; default: read from the scene's materials)."""
     cur = current_settings(scene)
     rho = np.asarray(reflectance, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
@@ -120,7 +136,7 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets") -> tu
     n_eff = effective_bounces(cur)
     block = {"scene": cur, "max_reflectance": rho_max, "tail": TAIL, "required_bounces": n_req,
              "matched": all(cur[k] == v for k, v in matched_settings(rho_max, cur).items()),
-             "estimated_difference": None, "clamping": None, "written": None}
+             "estimated_difference": None, "clamping": None, "filter_glossy": None, "written": None}
     warnings = []
     if cur["render_engine"] != "CYCLES":
         warnings.append(f"the scene renders with {cur['render_engine']}: the prediction is for Cycles (EEVEE "
@@ -140,6 +156,14 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets") -> tu
                 f"truncated after {kept_terms(n_eff)} reflections); {n_req} bounces are needed for reflectance "
                 f"{rho_max:.2f}: "
                 "use Match Cycles Light Paths (--out writes them)")
+    if glossy_share is None:
+        glossy_share = scene_materials()["max_glossy"]
+    if cur["blur_glossy"] > 0 and glossy_share > 0.005:
+        block["filter_glossy"] = {"setting": cur["blur_glossy"], "estimated": False}
+        warnings.append(f"Filter Glossy is {cur['blur_glossy']:g}: Cycles widens glossy reflections after a diffuse "
+                        "bounce without keeping their energy, so the specular layers render darker in indirect light "
+                        "(measured ~4 % on targets of default Principled materials; not estimated here); use Match "
+                        "Cycles Light Paths (--out turns it off)")
     e = B - rho * _matvec(F, B)  # the exitance that gives B
     radiance_max = float(max(e.max(), 0.0) / np.pi)
     clamps = {k: cur[k] for k in ("sample_clamp_direct", "sample_clamp_indirect") if cur[k] > 0}

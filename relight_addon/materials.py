@@ -48,13 +48,17 @@ class Closure:
     radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     specular: np.ndarray = field(default_factory=lambda: np.zeros(3))  # glossy share of reflectance
     notes: list = field(default_factory=list)
+    #: the BSDFs it sums, for view-dependent radiance (engine.principled.lobes_brdf):
+    #: (weight, "principled", PrincipledParams) | (weight, "diffuse", (colour, roughness))
+    lobes: list = field(default_factory=list)
 
     def scaled(self, k):
-        return Closure(self.reflectance * k, self.radiance * k, self.specular * k, list(self.notes))
+        return Closure(self.reflectance * k, self.radiance * k, self.specular * k, list(self.notes),
+                       [(w * k, kind, d) for w, kind, d in self.lobes])
 
     def __add__(self, other):
         return Closure(self.reflectance + other.reflectance, self.radiance + other.radiance,
-                       self.specular + other.specular, _merge(self.notes, other.notes))
+                       self.specular + other.specular, _merge(self.notes, other.notes), self.lobes + other.lobes)
 
 
 def _merge(a, b):
@@ -155,7 +159,7 @@ def _principled(node, mat) -> Closure:
         notes.append(f"{node.name}: linked emission inputs are ignored")
     else:
         radiance = _rgb(ec) * float(es.default_value) * res.emission
-    return Closure(res.albedo, radiance, res.specular, notes)
+    return Closure(res.albedo, radiance, res.specular, notes, [(1.0, "principled", params)])
 
 
 def _eval(node, mat, depth=0) -> Closure:
@@ -169,9 +173,10 @@ def _eval(node, mat, depth=0) -> Closure:
     if kind == "ShaderNodeBsdfDiffuse":
         c = node.inputs["Color"]
         if _linked(c):
-            return Closure(_viewport(mat), notes=[f"{node.name}: Color is linked, using the viewport colour"])
+            return _fallback(mat, f"{node.name}: Color is linked, using the viewport colour")
         sigma = _value(node, "Roughness", 0.0, notes := [])
-        return Closure(oren_nayar_albedo(_rgb(c), sigma), notes=notes)
+        color = np.maximum(_rgb(c), 0.0)
+        return Closure(oren_nayar_albedo(color, sigma), notes=notes, lobes=[(1.0, "diffuse", (color, sigma))])
     if kind == "ShaderNodeEmission":
         c, s = node.inputs["Color"], node.inputs["Strength"]
         if _linked(c) or _linked(s):
@@ -197,7 +202,12 @@ def _eval(node, mat, depth=0) -> Closure:
     if kind == "ShaderNodeHoldout":
         return Closure(notes=[f"{node.name}: a holdout reflects nothing"])
     label = getattr(node, "bl_label", kind) or kind
-    return Closure(_viewport(mat), notes=[f"{label} is not read, using the viewport colour"])
+    return _fallback(mat, f"{label} is not read, using the viewport colour")
+
+
+def _fallback(mat, note=None):
+    c = np.maximum(_viewport(mat), 0.0)
+    return Closure(c, notes=[note] if note else [], lobes=[(1.0, "diffuse", (c, 0.0))])
 
 
 def surface_closure(mat) -> Closure:
@@ -205,8 +215,8 @@ def surface_closure(mat) -> Closure:
     node = surface_node(mat)
     if node is None:
         if getattr(mat, "node_tree", None) is None:
-            return Closure(_viewport(mat))  # a plain (non-node) material: its colour
-        return Closure(_viewport(mat), notes=["no surface shader, using the viewport colour"])
+            return _fallback(mat)  # a plain (non-node) material: its colour
+        return _fallback(mat, "no surface shader, using the viewport colour")
     return _eval(node, mat)
 
 

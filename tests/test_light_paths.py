@@ -86,10 +86,11 @@ def test_solve_reports_and_out_writes_light_paths(run_cli, tmp_path):
     written = rs["written"]["settings"]
     bpy.ops.wm.open_mainfile(filepath=str(out))
     c = bpy.context.scene.cycles
-    assert c.sample_clamp_indirect == 0 and c.sample_clamp_direct == 0 and c.caustics_reflective
+    assert c.sample_clamp_indirect == 0 and c.sample_clamp_direct == 0 and c.caustics_reflective and c.blur_glossy == 0
     assert c.diffuse_bounces == c.glossy_bounces == c.max_bounces == need == written["diffuse_bounces"]
     assert set(rs["written"]["changed"]) == {"sample_clamp_indirect", "diffuse_bounces", "glossy_bounces",
-                                             "max_bounces"}
+                                             "max_bounces", "blur_glossy"}
+    assert rs["filter_glossy"] is None  # the sample's materials have no specular layer: no warning
 
 
 def test_match_light_paths_operator(bpy_clean):
@@ -106,7 +107,7 @@ def test_match_light_paths_operator(bpy_clean):
         c = bpy.context.scene.cycles
         n = bounces.required_bounces(rho)
         assert (c.diffuse_bounces, c.glossy_bounces, c.max_bounces) == (n, n, n)
-        assert c.sample_clamp_indirect == 0 and c.sample_clamp_direct == 0
+        assert c.sample_clamp_indirect == 0 and c.sample_clamp_direct == 0 and c.blur_glossy == 0
         c.max_bounces = 100  # higher limits are kept
         assert light_paths.match_light_paths(bpy.context.scene, rho) == {}
         assert c.max_bounces == 100

@@ -75,7 +75,7 @@ import numpy as np
 
 __all__ = ["F0_from_ior", "ior_from_F0", "fresnel_dielectric", "hemispherical_fresnel", "PrincipledParams",
            "PrincipledAlbedo", "principled_albedo", "ggx_albedo", "oren_nayar_directional",
-           "oren_nayar_albedo", "MU_NODES"]
+           "oren_nayar_albedo", "view_brdf", "lobes_brdf", "MU_NODES"]
 
 #: VNDF quadrature resolution (points per axis of the unit square)
 GRID_R, GRID_PHI = 48, 48
@@ -288,6 +288,9 @@ class _Lobe:
 
     albedo: np.ndarray  # (n_mu, 3): what it reflects
     layering: np.ndarray  # (n_mu, 3): what Cycles subtracts from the layers under it
+    scale: np.ndarray = None  # (n_mu, 3): energy compensation on the single-scattering BRDF
+    fresnel: tuple = None  # ("gs", f0 (3,), eta) | ("diel", eta) | ("f82", f0 (3,), b (3,))
+    alpha: float = 0.0
 
 
 def _dielectric_lobe(rough, eta, f0_rgb, mu, multiscatter, real_fresnel=False):
@@ -306,11 +309,13 @@ def _dielectric_lobe(rough, eta, f0_rgb, mu, multiscatter, real_fresnel=False):
         est = f0[None, :] + (1 - f0[None, :]) * s_ior_table(rough, mu, eta)[:, None]
         s_avg = np.clip((hemispherical_fresnel(eta) - F0r) / (1 - F0r), 0.0, 1.0) if F0r < 1 else 1.0
         Fss = f0 + (1 - f0) * s_avg
+    fres = ("diel", float(eta)) if real_fresnel else ("gs", f0, float(eta))
     if not multiscatter:
-        return _Lobe(EF, est)
+        return _Lobe(EF, est, np.ones_like(EF), fres, max(rough, _MU_MIN) ** 2)
     E = np.clip(E_table(rough, mu), 1e-6, 1.0)[:, None]
     Fms = _fms(Fss, Eavg_table(rough))[None, :]
-    return _Lobe(EF * (1.0 + Fms * (1.0 - E) / E), est * (E + Fms * (1.0 - E)))
+    scale = 1.0 + Fms * (1.0 - E) / E
+    return _Lobe(EF * scale, est * (E + Fms * (1.0 - E)), scale, fres, max(rough, _MU_MIN) ** 2)
 
 
 def f82_b(f0, tint):
@@ -328,13 +333,15 @@ def _metal_lobe(rough, f0_rgb, tint_rgb, mu, multiscatter):
     b = f82_b(f0, np.minimum(tint_rgb, 1.0)) if not np.allclose(tint_rgb, 1.0) else np.zeros(3)
     EF = f0 * t["E"][:, None] + (1 - f0) * t["EB5"][:, None] - b * t["EB6"][:, None]
     est = f0 + (1 - f0) * s_schlick5_table(rough, mu)[:, None]
+    fres = ("f82", f0, b)
     if not multiscatter:
-        return _Lobe(EF, est)
+        return _Lobe(EF, est, np.ones_like(EF), fres, max(rough, _MU_MIN) ** 2)
     # hemispherical averages: 2 int mu (1-mu)^5 = 1/21, 2 int mu^2 (1-mu)^6 = 1/126
     Fss = np.clip(f0 + (1 - f0) / 21.0 - b / 126.0, 0.0, 1.0)
     E = np.clip(E_table(rough, mu), 1e-6, 1.0)[:, None]
     Fms = _fms(Fss, Eavg_table(rough))[None, :]
-    return _Lobe(EF * (1.0 + Fms * (1.0 - E) / E), est * (E + Fms * (1.0 - E)))
+    scale = 1.0 + Fms * (1.0 - E) / E
+    return _Lobe(EF * scale, est * (E + Fms * (1.0 - E)), scale, fres, max(rough, _MU_MIN) ** 2)
 
 
 # ------------------------------------------------------------------ rough diffuse
@@ -416,8 +423,11 @@ class PrincipledAlbedo:
         return _directional(self._params, np.atleast_1d(np.asarray(mu, dtype=np.float64)))[0]
 
 
-def _directional(p: PrincipledParams, mu):
-    """(R(mu) (n,3), glossy share (n,3), emission factor (n,3), notes) for view cosines mu."""
+def _directional(p: PrincipledParams, mu, lobes: list | None = None):
+    """(R(mu) (n,3), glossy share (n,3), emission factor (n,3), notes) for view cosines mu.
+    ``lobes``: a list that receives the BSDF's closures at these mu, as (kind, weight (n,3),
+    details): ("ggx", multiplier of the single-scattering BRDF, _Lobe) and ("diffuse", weight,
+    (colour, sigma)), for ``view_brdf``."""
     mu = np.clip(np.asarray(mu, dtype=np.float64), _MU_MIN, 1.0)
     n = len(mu)
     base = np.maximum(np.asarray(p.base_color, dtype=np.float64), 0.0)
@@ -441,6 +451,8 @@ def _directional(p: PrincipledParams, mu):
         crough = float(np.clip(p.coat_roughness, 0.0, 1.0))
         if cior > 1.0:
             lobe = _dielectric_lobe(crough, cior, None, mu, True, real_fresnel=True)
+            if lobes is not None:
+                lobes.append(("ggx", cw * w * lobe.scale, lobe))
             R += cw * w * lobe.albedo
             gloss += cw * w * lobe.albedo
             w = w * np.clip(1.0 - cw * lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
@@ -453,6 +465,8 @@ def _directional(p: PrincipledParams, mu):
     metallic = float(np.clip(p.metallic, 0.0, 1.0))
     if metallic > 0:
         lobe = _metal_lobe(rough, cbase, tint, mu, p.multiscatter)
+        if lobes is not None:
+            lobes.append(("ggx", metallic * w * lobe.scale, lobe))
         R += metallic * w * lobe.albedo
         gloss += metallic * w * lobe.albedo
         w = w * (1.0 - metallic)
@@ -465,6 +479,9 @@ def _directional(p: PrincipledParams, mu):
         if eta > 1.0:
             f0 = np.clip(F0_from_ior(ior) * tint, 0.0, 1.0)
             est = f0[None, :] + (1 - f0[None, :]) * s_ior_table(rough, mu, eta)[:, None]
+            if lobes is not None:  # its reflection, scaled to reflect the estimated albedo
+                lobe = _dielectric_lobe(rough, eta, f0, mu, False)
+                lobes.append(("ggx", trans * w * est / np.maximum(lobe.albedo, 1e-9), lobe))
             R += trans * w * est
             gloss += trans * w * est
         w = w * (1.0 - trans)
@@ -481,6 +498,8 @@ def _directional(p: PrincipledParams, mu):
             eta = 1.0 / eta
     if eta != 1.0:
         lobe = _dielectric_lobe(rough, eta, np.clip(f0 * tint, 0.0, 1.0), mu, p.multiscatter)
+        if lobes is not None:
+            lobes.append(("ggx", w * lobe.scale, lobe))
         R += w * lobe.albedo
         gloss += w * lobe.albedo
         w = w * np.clip(1.0 - lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
@@ -488,9 +507,15 @@ def _directional(p: PrincipledParams, mu):
     sigma = float(np.clip(p.diffuse_roughness, 0.0, 1.0))
     if sigma < 1e-5:
         R += w * base[None, :]
+        if lobes is not None:
+            lobes.append(("diffuse", w * base[None, :], (base, 0.0)))
     else:  # Oren-Nayar's weight is Base Color x (1 - subsurface) x w; the subsurface part stays Lambert
         ss = float(np.clip(p.subsurface_weight, 0.0, 1.0))
         R += w * base[None, :] * ((1.0 - ss) * oren_nayar_directional(base, sigma, mu) + ss)
+        if lobes is not None:
+            lobes.append(("diffuse", (1.0 - ss) * w * base[None, :], (base, sigma)))
+            if ss > 0:
+                lobes.append(("diffuse", ss * w * base[None, :], (base, 0.0)))
     if p.subsurface_weight > 0:
         notes.append(f"subsurface {p.subsurface_weight:g}: treated as diffuse with Base Color (Cycles' random "
                      "walk reflects a few % less)")
@@ -499,6 +524,101 @@ def _directional(p: PrincipledParams, mu):
     if p.anisotropic > 0:
         notes.append("anisotropy: ignored (isotropic roughness)")
     return R, gloss, emission, notes
+
+
+# ------------------------------------------------------------------ view-dependent BRDF
+#: lobes narrower than this (alpha = roughness^2) are widened when the BRDF is evaluated at a
+#: few directions (patch centres): a mirror cannot be sampled that way
+VIEW_ALPHA_MIN = 0.05
+
+
+def _fresnel_eval(fres, c):
+    c = np.clip(c, 0.0, 1.0)[:, None]
+    if fres[0] == "gs":
+        _, f0, eta = fres
+        F0 = float(F0_from_ior(eta))
+        s = np.clip((fresnel_dielectric(c, eta) - F0) / (1.0 - F0), 0.0, 1.0) if F0 < 1 else np.ones_like(c)
+        return f0[None, :] + (1.0 - f0[None, :]) * s
+    if fres[0] == "diel":
+        return np.repeat(fresnel_dielectric(c, fres[1]), 3, axis=1)
+    _, f0, b = fres
+    return np.clip(f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5 - b[None, :] * c * (1.0 - c) ** 6, 0.0, 1.0)
+
+
+def _ggx_eval(alpha, fres, v, l):
+    """Single-scattering GGX BRDF f(l, v) (k, 3) for a unit view v (3,) and unit incident
+    directions l (k, 3), local frame (normal z); 0 below the horizon."""
+    alpha = max(alpha, VIEW_ALPHA_MIN)
+    a2 = alpha * alpha
+    mu_v = max(v[2], _MU_MIN)
+    mu_l = l[:, 2]
+    ok = mu_l > 0
+    h = l + v[None, :]
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
+    c_nh = np.clip(h[:, 2], 0.0, 1.0)
+    D = a2 / (np.pi * ((1.0 - c_nh ** 2) + a2 * c_nh ** 2) ** 2)
+    G2 = 1.0 / (1.0 + _lambda(a2, mu_v) + _lambda(a2, np.where(ok, mu_l, 1.0)))
+    F = _fresnel_eval(fres, h @ v)
+    f = F * (D * G2 / (4.0 * mu_v * np.where(ok, mu_l, 1.0)))[:, None]
+    return np.where(ok[:, None], f, 0.0)
+
+
+def _oren_nayar_eval(color, sigma, v, l):
+    """Cycles' rough diffuse BRDF (per unit weight), Fujii + OpenPBR multiple scattering."""
+    mu_l = l[:, 2]
+    ok = mu_l > 0
+    if sigma < 1e-5:
+        return np.where(ok[:, None], 1.0 / np.pi, 0.0) * np.ones((1, 3))
+    A = 1.0 / (np.pi + sigma * (np.pi / 2 - 2.0 / 3.0))
+    B = sigma * A
+    nv = max(v[2], 0.0)
+    t = l @ v - mu_l * nv
+    t = np.where(t > 0, t / np.maximum(np.maximum(mu_l, nv), 1e-30), t)
+    c = np.clip(np.asarray(color, dtype=np.float64), 0.0, 1.0)
+    E_fit = A * np.pi + (2 * np.pi - 5.6) / 3.0 * B
+    ms = c * c * (E_fit / (1.0 - E_fit)) / (1.0 - c * (1.0 - E_fit)) / np.pi
+    Ev = A * np.pi + B * float(_fujii_G(np.array([nv]))[0])
+    El = A * np.pi + B * _fujii_G(np.where(ok, mu_l, 1.0))
+    f = (A + B * t)[:, None] + ms[None, :] * (1.0 - Ev) * (1.0 - El)[:, None]
+    return np.where(ok[:, None], f, 0.0)
+
+
+def view_brdf(params: PrincipledParams, view, directions) -> np.ndarray:
+    """(k, 3) the Principled BSDF f(l, v) as Cycles evaluates it (1/sr, without the cosine)
+    for a view direction ``view`` and incident directions ``directions`` (k, 3), both unit
+    vectors in the surface's local frame (normal = +z). The radiance seen along v under
+    incident radiance L(l) is sum f(l, v) L(l) cos(l) dw. Glossy lobes narrower than
+    VIEW_ALPHA_MIN are widened (evaluated at a few directions)."""
+    v = np.asarray(view, dtype=np.float64)
+    v = v / np.linalg.norm(v)
+    lobes = []
+    _directional(params, np.array([v[2]]), lobes)
+    l = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+    out = np.zeros((len(l), 3))
+    for kind, weight, detail in lobes:
+        if kind == "ggx":
+            out += weight[0][None, :] * _ggx_eval(detail.alpha, detail.fresnel, v, l)
+        else:
+            color, sigma = detail
+            out += weight[0][None, :] * _oren_nayar_eval(color, sigma, v, l)
+    return out
+
+
+def lobes_brdf(lobes, view, directions) -> np.ndarray:
+    """(k, 3) sum of weight x BRDF over ``lobes`` [(weight, "principled", PrincipledParams) |
+    (weight, "diffuse", (colour (3,), roughness))] (a material's Mix/Add of BSDFs)."""
+    l = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+    v = np.asarray(view, dtype=np.float64)
+    v = v / np.linalg.norm(v)
+    out = np.zeros((len(l), 3))
+    for w, kind, d in lobes:
+        if kind == "principled":
+            out += w * view_brdf(d, v, l)
+        else:
+            color, sigma = d
+            color = np.maximum(np.asarray(color, dtype=np.float64), 0.0)
+            out += w * color[None, :] * _oren_nayar_eval(color, float(sigma), v, l)
+    return out
 
 
 @lru_cache(maxsize=1024)
