@@ -264,13 +264,17 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
 # ---------------------------------------------------------------------------
 # Scenes built in Python (bpy), shared by the tests.
 
-def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0):
+def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0, lambertian=False):
+    """A Principled BSDF (defaults but Base Color / emission); ``lambertian``: Specular IOR
+    Level 0, so that it is Lambert with albedo Base Color for Relight as well as for Cycles."""
     mat = bpy.data.materials.new(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         mat.use_nodes = True
     p = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     p.inputs["Base Color"].default_value = (*base_color, 1.0)
+    if lambertian:
+        p.inputs["Specular IOR Level"].default_value = 0.0
     p.inputs["Emission Color"].default_value = (*emission, 1.0)
     p.inputs["Emission Strength"].default_value = strength
     return mat

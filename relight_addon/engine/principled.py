@@ -75,7 +75,7 @@ import numpy as np
 
 __all__ = ["F0_from_ior", "ior_from_F0", "fresnel_dielectric", "hemispherical_fresnel", "PrincipledParams",
            "PrincipledAlbedo", "principled_albedo", "ggx_albedo", "oren_nayar_directional",
-           "oren_nayar_albedo", "view_brdf", "lobes_brdf", "MU_NODES"]
+           "oren_nayar_albedo", "view_brdf", "lobes_brdf", "BRDFTable", "MU_NODES"]
 
 #: VNDF quadrature resolution (points per axis of the unit square)
 GRID_R, GRID_PHI = 48, 48
@@ -545,42 +545,90 @@ def _fresnel_eval(fres, c):
     return np.clip(f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5 - b[None, :] * c * (1.0 - c) ** 6, 0.0, 1.0)
 
 
+def _rows(v, n):
+    v = np.asarray(v, dtype=np.float64)
+    return np.broadcast_to(v, (n, 3)) if v.ndim == 1 else v
+
+
 def _ggx_eval(alpha, fres, v, l):
-    """Single-scattering GGX BRDF f(l, v) (k, 3) for a unit view v (3,) and unit incident
-    directions l (k, 3), local frame (normal z); 0 below the horizon."""
+    """Single-scattering GGX BRDF f(l, v) (k, 3) for unit views v ((3,) or (k, 3)) and unit
+    incident directions l (k, 3), local frame (normal z); 0 below the horizon."""
     alpha = max(alpha, VIEW_ALPHA_MIN)
     a2 = alpha * alpha
-    mu_v = max(v[2], _MU_MIN)
+    v = _rows(v, len(l))
+    mu_v = np.maximum(v[:, 2], _MU_MIN)
     mu_l = l[:, 2]
-    ok = mu_l > 0
-    h = l + v[None, :]
+    ok = (mu_l > 0) & (v[:, 2] > 0)
+    h = l + v
     h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
     c_nh = np.clip(h[:, 2], 0.0, 1.0)
     D = a2 / (np.pi * ((1.0 - c_nh ** 2) + a2 * c_nh ** 2) ** 2)
     G2 = 1.0 / (1.0 + _lambda(a2, mu_v) + _lambda(a2, np.where(ok, mu_l, 1.0)))
-    F = _fresnel_eval(fres, h @ v)
+    F = _fresnel_eval(fres, np.einsum("ij,ij->i", h, v))
     f = F * (D * G2 / (4.0 * mu_v * np.where(ok, mu_l, 1.0)))[:, None]
     return np.where(ok[:, None], f, 0.0)
 
 
 def _oren_nayar_eval(color, sigma, v, l):
-    """Cycles' rough diffuse BRDF (per unit weight), Fujii + OpenPBR multiple scattering."""
+    """Cycles' rough diffuse BRDF (per unit weight), Fujii + OpenPBR multiple scattering;
+    views v (3,) or (k, 3)."""
     mu_l = l[:, 2]
-    ok = mu_l > 0
+    v = _rows(v, len(l))
+    ok = (mu_l > 0) & (v[:, 2] > 0)
     if sigma < 1e-5:
         return np.where(ok[:, None], 1.0 / np.pi, 0.0) * np.ones((1, 3))
     A = 1.0 / (np.pi + sigma * (np.pi / 2 - 2.0 / 3.0))
     B = sigma * A
-    nv = max(v[2], 0.0)
-    t = l @ v - mu_l * nv
+    nv = np.maximum(v[:, 2], 0.0)
+    t = np.einsum("ij,ij->i", l, v) - mu_l * nv
     t = np.where(t > 0, t / np.maximum(np.maximum(mu_l, nv), 1e-30), t)
     c = np.clip(np.asarray(color, dtype=np.float64), 0.0, 1.0)
     E_fit = A * np.pi + (2 * np.pi - 5.6) / 3.0 * B
     ms = c * c * (E_fit / (1.0 - E_fit)) / (1.0 - c * (1.0 - E_fit)) / np.pi
-    Ev = A * np.pi + B * float(_fujii_G(np.array([nv]))[0])
+    Ev = A * np.pi + B * _fujii_G(np.maximum(nv, 1e-6))
     El = A * np.pi + B * _fujii_G(np.where(ok, mu_l, 1.0))
-    f = (A + B * t)[:, None] + ms[None, :] * (1.0 - Ev) * (1.0 - El)[:, None]
+    f = (A + B * t)[:, None] + ms[None, :] * ((1.0 - Ev) * (1.0 - El))[:, None]
     return np.where(ok[:, None], f, 0.0)
+
+
+#: view cosines at which a material's layer weights are tabulated (BRDFTable)
+VIEW_MU = np.linspace(_MU_MIN, 1.0, 65)
+
+
+class BRDFTable:
+    """A material's BSDF as Cycles evaluates it, for many (view, light) pairs at once: its
+    closures (engine.principled._directional) with their weights tabulated over the view
+    cosine (VIEW_MU, linear interpolation). ``lobes``: [(weight, "principled",
+    PrincipledParams) | (weight, "diffuse", (colour (3,), roughness))] (a Mix/Add of BSDFs)."""
+
+    def __init__(self, lobes):
+        self.terms = []  # (kind, weight table (n_mu, 3), detail)
+        for w, kind, d in lobes:
+            if kind == "principled":
+                closures = []
+                _directional(d, VIEW_MU, closures)
+                for k, weight, detail in closures:
+                    self.terms.append((k, w * weight, detail))
+            else:
+                color, sigma = d
+                color = np.maximum(np.asarray(color, dtype=np.float64), 0.0)
+                self.terms.append(("diffuse", w * np.broadcast_to(color, (len(VIEW_MU), 3)), (color, float(sigma))))
+
+    def __call__(self, v, l) -> np.ndarray:
+        """(k, 3) f(l, v) (1/sr, without the cosine) for unit views ``v`` ((3,) or (k, 3)) and
+        unit incident directions ``l`` (k, 3) in the surface's local frame (normal +z)."""
+        l = np.atleast_2d(np.asarray(l, dtype=np.float64))
+        v = _rows(v, len(l))
+        mu = np.clip(v[:, 2], _MU_MIN, 1.0)
+        out = np.zeros((len(l), 3))
+        for kind, table, detail in self.terms:
+            wt = np.stack([np.interp(mu, VIEW_MU, table[:, c]) for c in range(3)], axis=1)
+            if kind == "ggx":
+                out += wt * _ggx_eval(detail.alpha, detail.fresnel, v, l)
+            else:
+                color, sigma = detail
+                out += wt * _oren_nayar_eval(color, sigma, v, l)
+        return out
 
 
 def view_brdf(params: PrincipledParams, view, directions) -> np.ndarray:
@@ -606,7 +654,7 @@ def view_brdf(params: PrincipledParams, view, directions) -> np.ndarray:
 
 def lobes_brdf(lobes, view, directions) -> np.ndarray:
     """(k, 3) sum of weight x BRDF over ``lobes`` [(weight, "principled", PrincipledParams) |
-    (weight, "diffuse", (colour (3,), roughness))] (a material's Mix/Add of BSDFs)."""
+    (weight, "diffuse", (colour (3,), roughness))] (a material's Mix/Add of BSDFs), one view."""
     l = np.atleast_2d(np.asarray(directions, dtype=np.float64))
     v = np.asarray(view, dtype=np.float64)
     v = v / np.linalg.norm(v)
