@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import export, jobs, results
+from .. import export, jobs, light_paths, results
 from . import viewport
 from ..engine.options import JobOptions
 from ..engine.scene import SceneError
@@ -325,6 +325,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
 
     def _finish(self, context, outcome, fingerprints=None):
         try:
+            light_paths.add_to_outcome(context.scene, outcome)  # warns when Cycles would render darker
             skipped = store_outcome(context, outcome, fingerprints)
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))

@@ -337,6 +337,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.relight
+        layout.operator("relight.match_light_paths", icon="LIGHT")
         if len(s.curve) == 0:
             _wrap(layout, "No result yet: paint targets, then Solve & Reduce", context, icon="INFO")
             return
