@@ -33,3 +33,4 @@ bench: setup
 clean:
 	rm -rf $(OUT) build dist wheels .pytest_cache
 include mk/extension.mk
+include mk/gui.mk

@@ -23,6 +23,8 @@ import sys
 import threading
 import time
 
+import numpy as np
+
 PROG = "relight"
 
 
@@ -91,7 +93,8 @@ def build_parser():
     r = sub.add_parser("radiosity", help="forward radiosity from the scene's own emissive materials")
     r.add_argument("scene", help="input .blend file (never modified)")
     r.add_argument("--report", required=True, help="JSON report to write")
-    r.add_argument("--out", help="write a copy of the scene with the relight_radiosity colour attribute")
+    r.add_argument("--out", help="write a copy of the scene with the relight_radiosity colour attribute and "
+                                 "Cycles light paths that render the prediction (no clamping, enough bounces)")
     r.add_argument("--rays-per-patch", type=_positive_int, default=None,
                    help="rays shot per patch for the form factors (default: the engine's)")
     r.add_argument("--max-patch-size", type=_positive_length, default=None,
@@ -111,7 +114,8 @@ def build_parser():
         s.add_argument("scene", help="input .blend file (never modified)")
         s.add_argument("--report", required=True, help="JSON report to write")
         s.add_argument("--out", help="write a copy with the final lights as emissive materials, the "
-                                     "relight_radiosity layer and the whole curve")
+                                     "relight_radiosity layer, the whole curve and Cycles light paths "
+                                     "that render the prediction (no clamping, enough bounces)")
         s.add_argument("--rays-per-patch", type=_positive_int, default=None)
         s.add_argument("--max-patch-size", type=_positive_length, default=None)
         s.add_argument("--patch-model", choices=PATCH_MODELS.names(), default=o.DEFAULT_PATCH_MODEL,
@@ -374,7 +378,9 @@ def _blender_message(exc):
 
 
 def run_radiosity_command(args, progress=None, cancel=None):
-    from . import export, jobs, results
+    import bpy
+
+    from . import export, jobs, light_paths, results, viewing
     from .engine.options import JobOptions
 
     t0 = time.perf_counter()
@@ -395,8 +401,52 @@ def run_radiosity_command(args, progress=None, cancel=None):
         exp.faces, options, progress=progress, cancel=cancel, patches=patches, **inputs))
     report["timings_s"]["export"] = exp.seconds
     report["input"] = os.path.abspath(args.scene)
-    return _save_outputs(args, report, report["timings_s"], t0, lambda: results.write_radiosity(
-        exp.objects, result.polygon_radiosity, result.polygon_area, report["warnings"]))
+    block, warns = light_paths.assess_radiosity(bpy.context.scene, result)
+    report["render_settings"] = light_paths._json(block)
+    report["warnings"].extend(w for w in warns if w not in report["warnings"])
+    if result.form_factors is not None and result.patches.n_patches <= viewing.MAX_PATCHES // 4:
+        rad = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
+                                      exp.face_material, exp.material_lobes, inputs["polygon_counts"])
+        for name, rows in rad.items():
+            if name in report["objects"]:  # the reported objects (instance groups are not)
+                report["objects"][name]["radiance_normal"] = rows
+
+    def apply():
+        results.write_radiosity(exp.objects, result.polygon_radiosity, result.polygon_area, report["warnings"])
+        _match_light_paths(args, report)
+
+    return _save_outputs(args, report, report["timings_s"], t0, apply)
+
+
+def _add_normal_radiance(outcome, exp):
+    """objects.<name>.radiance_normal: what a bake shows on the target faces (viewing.py)."""
+    from . import export, viewing
+
+    prob = outcome.problem
+    mask = getattr(prob, "target_mask", outcome.patches.target)
+    if not np.any(mask) or np.sum(mask) > viewing.MAX_PATCHES:
+        return
+    B = np.asarray(outcome.stored["radiosity"][outcome.final_index], dtype=np.float64)
+    rad = viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, exp.face_material, exp.material_lobes,
+                                  export.job_inputs(exp)["polygon_counts"], mask)
+    for name, rows in rad.items():
+        if name in outcome.report["objects"]:  # the reported objects (instance groups are not)
+            outcome.report["objects"][name]["radiance_normal"] = rows
+
+
+def _match_light_paths(args, report):
+    """--out: the copy renders with light paths that show the prediction (light_paths.py)."""
+    if not args.out:
+        return
+    import bpy
+
+    from . import light_paths
+
+    scene = bpy.context.scene
+    block = report["render_settings"]
+    changed = light_paths.match_light_paths(scene, block["max_reflectance"])
+    block["written"] = {"settings": light_paths.current_settings(scene),
+                        "changed": {k: list(v) for k, v in changed.items()}}
 
 
 def run_solve_command(args, progress=None, cancel=None):
@@ -432,11 +482,17 @@ def run_solve_command(args, progress=None, cancel=None):
     report["timings_s"]["export"] = exp.seconds
     report["input"] = os.path.abspath(args.scene)
 
-    def apply():
-        import bpy
+    import bpy
 
+    from . import light_paths
+
+    light_paths.add_to_outcome(bpy.context.scene, outcome)
+    _add_normal_radiance(outcome, exp)
+
+    def apply():
         shown = results.show_outcome(bpy.context.scene, outcome, exp.fingerprints)
         report["warnings"].extend(w for w in shown["skipped"] if w not in report["warnings"])
+        _match_light_paths(args, report)
 
     return _save_outputs(args, report, report["timings_s"], t0, apply)
 

@@ -28,13 +28,13 @@ What is exported
   not exported as objects: what they evaluate to comes in as instances (geometry only, above),
   with a warning naming them (convert them to meshes to paint or light them).
 
-Materials (per face, through ``material_index`` and the object's material slots)
-- Principled BSDF connected to the active Material Output: reflectance = Base Color
-  (linear RGB), emitted radiance L_e = Emission Color x Emission Strength.
-- Emission shader: reflectance 0, L_e = Color x Strength.
-- Diffuse BSDF: reflectance = Color, no emission.
-- Anything else (other shaders, linked colour inputs, no node tree): the material's
-  viewport colour ``Material.diffuse_color``, no emission, and a warning.
+Materials (per face, through ``material_index`` and the object's material slots): materials.py
+- reflectance = the material's white-furnace albedo as Cycles renders it (a Principled BSDF's
+  specular layer included: engine/principled.py), emitted radiance L_e (linear RGB);
+  Principled BSDF, Diffuse BSDF, Emission, Mix Shader and Add Shader are read, the
+  approximations (metallic, transmission, coat, sheen, subsurface, alpha) and anything not
+  read (other shaders and node groups, linked colours: the viewport colour
+  ``Material.diffuse_color``) are named in a warning.
 - No material: reflectance 0.8 grey.
 - Exitance e = pi * L_e (W/m^2). Reflectance is clamped to [0, MAX_REFLECTANCE] and
   negative emission to 0, with a warning.
@@ -119,57 +119,27 @@ def open_blend(path: str):
 
 
 # ------------------------------------------------------------------ materials
-def _linear_rgb(socket):
-    return np.asarray(socket.default_value[:3], dtype=np.float64)
-
-
-def _surface_node(mat):
-    tree = getattr(mat, "node_tree", None)
-    if tree is None:
-        return None
-    if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
-        return None
-    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
-    if not outputs:
-        return None
-    active = [n for n in outputs if n.is_active_output] or outputs
-    out = next((n for n in active if n.target in ("ALL", "CYCLES")), active[0])
-    links = out.inputs["Surface"].links
-    return links[0].from_node if links else None
-
-
 def material_properties(mat):
-    """(reflectance (3,), radiance (3,), note or None) of a material (see module docstring)."""
+    """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo
+    and emitted radiance as Cycles renders it (materials.py; see the module docstring)."""
+    return material_closure(mat)[:3]
+
+
+def material_closure(mat):
+    """``material_properties`` and the material's BSDFs (materials.Closure.lobes, for
+    view-dependent radiance): (reflectance, radiance, note, lobes)."""
+    from .materials import surface_closure
+
     if mat is not None and mat.get("relight_generated"):
         # a Relight emissive variant shown by an earlier solve: the scene's own material is
         # its source (the variant's emission is Relight's result, not the scene's light)
         mat = bpy.data.materials.get(mat.get("relight_source", "")) or None
     if mat is None:
-        return np.full(3, DEFAULT_REFLECTANCE), np.zeros(3), None
-    fallback = np.asarray(mat.diffuse_color[:3], dtype=np.float64)
-    node = _surface_node(mat)
-    kind = node.bl_idname if node is not None else None
-    if kind == "ShaderNodeBsdfPrincipled":
-        base, ec, es = node.inputs["Base Color"], node.inputs["Emission Color"], node.inputs["Emission Strength"]
-        note = None
-        rho = _linear_rgb(base)
-        if base.is_linked:
-            rho, note = fallback, f"material {mat.name!r}: Base Color is linked, using the viewport colour"
-        if ec.is_linked or es.is_linked:
-            note = f"material {mat.name!r}: linked emission inputs are ignored"
-            return rho, np.zeros(3), note
-        return rho, _linear_rgb(ec) * float(es.default_value), note
-    if kind == "ShaderNodeEmission":
-        c, s = node.inputs["Color"], node.inputs["Strength"]
-        if c.is_linked or s.is_linked:
-            return np.zeros(3), np.zeros(3), f"material {mat.name!r}: linked emission inputs are ignored"
-        return np.zeros(3), _linear_rgb(c) * float(s.default_value), None
-    if kind == "ShaderNodeBsdfDiffuse" and not node.inputs["Color"].is_linked:
-        return _linear_rgb(node.inputs["Color"]), np.zeros(3), None
-    if node is None and getattr(mat, "node_tree", None) is None:
-        return fallback, np.zeros(3), None  # a plain (non-node) material: its colour
-    what = kind or "no surface shader"
-    return fallback, np.zeros(3), f"material {mat.name!r}: {what} is not read, using the viewport colour"
+        grey = np.full(3, DEFAULT_REFLECTANCE)
+        return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))]
+    c = surface_closure(mat)
+    note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
+    return c.reflectance, c.radiance, note, c.lobes
 
 
 # ------------------------------------------------------------------ export
@@ -182,6 +152,8 @@ class ExportedScene:
     settings: dict = field(default_factory=dict)  # target_scale, max_patch_size (None = engine default)
     seconds: float = 0.0
     fingerprints: dict = field(default_factory=dict)  # object name -> mesh_fingerprint (stale-result check)
+    face_material: np.ndarray = None  # (F,) index into ``material_lobes`` of every FaceSet face
+    material_lobes: list = field(default_factory=list)  # per material: its BSDFs (materials.Closure.lobes)
     #: what an error about the scene should also say (jobs.check_solvable): "target": target layers
     #: found but not used, the target scale 0; "candidates": objects not exported, without area
     notes: dict = field(default_factory=dict)
@@ -462,19 +434,26 @@ class _Builder:
         self.f_obj, self.f_idx, self.rho, self.e, self.tgt, self.tgt_b, self.forb = [], [], [], [], [], [], []
         self.warnings = []
         self.mat_cache = {}
+        self.mat_ids = {}  # material name (None: no material) -> index into self.lobes
+        self.lobes = []
+        self.f_mat = []
         self.nf = self.nv = self.nl = 0
 
     def materials(self, slots, mat_index):
-        props = []
+        props, ids = [], []
         for mi in range(max(len(slots), 1)):
             mat = slots[mi] if mi < len(slots) else None
             key = mat.name if mat is not None else None
             if key not in self.mat_cache:
-                self.mat_cache[key] = material_properties(mat)
+                self.mat_cache[key] = material_closure(mat)
+                self.mat_ids[key] = len(self.lobes)
+                self.lobes.append(self.mat_cache[key][3])
                 if self.mat_cache[key][2]:
                     self.warnings.append(self.mat_cache[key][2])
             props.append(self.mat_cache[key])
+            ids.append(self.mat_ids[key])
         mi = np.clip(mat_index, 0, len(props) - 1)
+        self.f_mat.append(np.asarray(ids, dtype=np.int64)[mi])
         return np.array([p[0] for p in props])[mi], math.pi * np.array([p[1] for p in props])[mi]
 
     def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
@@ -646,7 +625,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings=warnings,
     )
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
-    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints, notes)
+    return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
+                         np.concatenate(b.f_mat), b.lobes, notes=notes)
 
 
 def _no_area(geo, M) -> bool:

@@ -586,39 +586,37 @@ def make_area_lights(scene, index) -> int:
 
 # --- the chart ---------------------------------------------------------------------------------
 def update_chart(scene) -> None:
-    """Redraw the error-curve chart image, marking the shown configuration. Call it after a
-    solve or a change of configuration, never from a panel's draw (no ID writes there)."""
-    from .curve_store import error_chart
+    """Ask the Results panel to redraw its chart. The chart is drawn on demand by the panel
+    (blender_ui.panels, from ``chart_data``) at the sidebar's width; nothing is written here."""
+    wm = getattr(bpy.context, "window_manager", None)
+    for window in wm.windows if wm is not None else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                for region in area.regions:
+                    if region.type == "UI":
+                        region.tag_redraw()
 
+
+def chart_data(scene) -> dict | None:
+    """What the error chart shows, or None without a result: the whole curve (``n_lights``,
+    ``relative_error``, ``n_negative``), ``current`` (index on it of the configuration shown)
+    and ``bound``: per curve point, the lower bound of the relative error any non-negative
+    lights as many as that point's can reach (the stored certificate: exact where the search
+    was exhaustive, else NNLS; NaN where there is none), or None when the result has none."""
     settings = scene.relight
     if len(settings.curve) == 0 or RESULT_PROP not in scene.keys():
-        return
+        return None
     data = load_result(scene)
-    current = int(data["point_index"][settings.curve_index]) if settings.curve_index < len(data["point_index"]) else None
-    pixels = error_chart(data["curve_n_lights"], data["curve_relative_error"], data["curve_n_negative"],
-                         current=current)
-    h, w = pixels.shape[:2]
-    img = bpy.data.images.get(CHART_IMAGE)
-    if img is None or tuple(img.size) != (w, h):
-        if img is not None:
-            bpy.data.images.remove(img)
-        img = bpy.data.images.new(CHART_IMAGE, w, h, alpha=True, float_buffer=True)
-    img.pixels.foreach_set(pixels.ravel())
-    img.update()
-    img.preview_ensure()
-    img.preview.reload()
-
-
-def chart_icon(scene) -> int:
-    """icon_value of the error-curve chart, 0 when there is none (safe in draw())."""
-    img = bpy.data.images.get(CHART_IMAGE)
-    if img is None or img.preview is None:
-        return 0
-    return img.preview.icon_id
-
-
-# --- the radiosity colour layer, saving and rendering ----------------------------------
-
+    k = settings.curve_index
+    current = int(data["point_index"][k]) if 0 <= k < len(data["point_index"]) else None
+    bound = data.get("curve_bound_relative_error")
+    if bound is not None:
+        bound = np.asarray(bound, dtype=np.float64)
+        bound = np.where(bound >= 0, bound, np.nan)  # -1: no certificate for that point
+        if len(bound) != len(data["curve_n_lights"]) or not np.isfinite(bound).any():
+            bound = None
+    return {"n_lights": data["curve_n_lights"], "relative_error": data["curve_relative_error"],
+            "n_negative": data["curve_n_negative"], "current": current, "bound": bound}
 
 
 # --- the radiosity colour layer, saving and rendering ----------------------------------

@@ -1,6 +1,12 @@
-"""Generate Relight's sample scenes (deterministic; run with the project's venv).
+"""Generate Relight's sample scenes (deterministic).
 
-    .venv/bin/python sample_blends/generate.py [OUTDIR]
+    make samples                                     # = the line below, in the bpy 4.2 LTS venv
+    .venv-bpy42/bin/python sample_blends/generate.py [OUTDIR]
+
+The committed files are written by the oldest Blender the extension supports (bpy 4.2 LTS,
+the `make compat-envs` venv): Blender reads files of older versions, never those of a newer
+file format (Blender 4.2-4.5 cannot open a file saved by 5.0). Any bpy can generate scenes into
+another OUTDIR (the tests do); writing this folder with bpy 5.0+ is refused.
 
 Writes, into OUTDIR (default: this folder):
 
@@ -386,6 +392,9 @@ def make_closed_form(outdir, kind, param):
 
 
 def main(outdir=HERE):
+    if os.path.abspath(outdir) == HERE and bpy.app.version >= (5, 0, 0):
+        sys.exit(f"generate.py: Blender {bpy.app.version_string} would write the shipped samples in a format "
+                 "Blender 4.2-4.5 cannot read; run `make samples` (bpy 4.2 LTS) instead")
     os.makedirs(outdir, exist_ok=True)
     make_cornell(outdir)
     make_staircase(outdir)

@@ -238,9 +238,13 @@ R["k_row"] = [settings.curve[k].n_lights, settings.curve[k].n_negative]
 settings.curve_index = k_final  # clicking a row in the list applies it
 R["back_to_final_state"] = emitting_state()
 
-# the chart image shown in the Results panel, with the shown configuration marked
-chart = bpy.data.images.get(results.CHART_IMAGE)
-R["chart"] = None if chart is None else list(chart.size)
+# the chart the Results panel draws, with the shown configuration marked
+panels = sys.modules[pkg + ".blender_ui.panels"]
+drawn = panels.chart_pixels(scene, 240, 204)
+R["chart"] = None if drawn is None else {
+    "shape": list(drawn[0].shape), "marker": drawn[1]["marker"] is not None,
+    "current": results.chart_data(scene)["current"], "final_curve_index": int(data["point_index"][k_final])}
+R["summary"] = [settings.last_summary, settings.last_warnings]
 
 # 6. area lights (one per emitting cell, the same power), then clear: the area lights stay (they
 # are the artist's, as the button says), so do the artist's own objects in a collection that

@@ -23,8 +23,9 @@ sqrt(texel count). ``FaceRadiance.rel_noise`` is that error relative to the mean
 Units: Blender's emission Color x Strength is radiance L (W m^-2 sr^-1); a
 COMBINED bake of a diffuse surface is its outgoing radiance, i.e. radiosity/pi.
 
-The Cycles scene is made Lambertian to match the radiosity model
-(``make_lambertian``): Principled BSDFs get Specular IOR Level, Metallic, Coat,
+By default the Cycles scene is made Lambertian to match the radiosity model
+(``make_lambertian``; ``keep_materials`` and ``keep_light_paths`` bake the file as an artist
+renders it instead): Principled BSDFs get Specular IOR Level, Metallic, Coat,
 Sheen, Transmission and Diffuse Roughness 0 (the Principled diffuse lobe is then
 Lambert with albedo Base Color); Principled emission one-sided
 (``one_sided_emission``); world black; no clamping, no glossy filter,
@@ -59,8 +60,12 @@ class FaceRadiance:
         return np.where(m > 0, self.std_error / np.where(m > 0, m, 1.0), 0.0)
 
 
-def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
-    """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake."""
+def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_light_paths: bool = False):
+    """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake.
+
+    ``keep_light_paths``: leave the scene's own clamping, bounce limits, caustics, glossy
+    filter and light threshold as they are (what an artist renders with); only the device,
+    samples, seed, denoising/adaptive sampling, view transform and the black world are set."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -69,18 +74,8 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
     c.use_animated_seed = False
     c.use_adaptive_sampling = False
     c.use_denoising = False
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
-    c.caustics_reflective = True
-    c.caustics_refractive = True
-    c.max_bounces = 64
-    c.diffuse_bounces = 64
-    c.glossy_bounces = 64
-    c.transmission_bounces = 64
-    c.transparent_max_bounces = 64
-    c.min_light_bounces = 0
-    c.light_sampling_threshold = 0.0
+    if not keep_light_paths:
+        _unbiased_light_paths(c)
     scene.view_settings.view_transform = "Standard"
     scene.view_settings.look = "None"
     scene.view_settings.exposure = 0.0
@@ -99,6 +94,21 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0):
         bg.inputs["Strength"].default_value = 0.0
         bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
     world.color = (0.0, 0.0, 0.0)
+
+
+def _unbiased_light_paths(c):
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = True
+    c.caustics_refractive = True
+    c.max_bounces = 64
+    c.diffuse_bounces = 64
+    c.glossy_bounces = 64
+    c.transmission_bounces = 64
+    c.transparent_max_bounces = 64
+    c.min_light_bounces = 0
+    c.light_sampling_threshold = 0.0
 
 
 def make_lambertian(materials=None):
@@ -214,23 +224,33 @@ def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
 
 
 def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
-                         blend_path: str | None = None, threads: int = 0) -> dict:
+                         blend_path: str | None = None, threads: int = 0, keep_materials: bool = False,
+                         keep_light_paths: bool = False) -> dict:
     """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
 
     Works on the current Blender data, or opens ``blend_path`` first. Modifies
     the open file (UV maps, materials made Lambertian, Cycles settings): use
     it on a throw-away copy. Returns {object name: FaceRadiance}.
+
+    ``keep_materials``: bake the file's materials as they are (not made Lambertian; the
+    bake views each face along its normal, so a glossy layer shows its normal-view
+    radiance); ``keep_light_paths``: keep the file's clamping and bounce limits
+    (``configure_cycles``). Emission is made one-sided in every case (the radiosity model's).
     """
     if blend_path is not None:
         bpy.ops.wm.open_mainfile(filepath=str(blend_path))
     scene = bpy.context.scene
-    configure_cycles(scene, samples, seed, threads)
-    make_lambertian()
+    configure_cycles(scene, samples, seed, threads, keep_light_paths=keep_light_paths)
+    if not keep_materials:
+        make_lambertian()
     one_sided_emission()  # Cycles' mesh emission is two-sided; the radiosity model's is not
     if objects is None:
         objects = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
-    # Direct + indirect, diffuse + emission: everything a Lambertian surface sends out.
+    # Direct + indirect, diffuse + emission (+ glossy, transmission when the materials are
+    # kept): everything the surface sends out.
     pass_filter = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
+    if keep_materials:
+        pass_filter |= {"GLOSSY", "TRANSMISSION"}
     out = {}
     for obj in objects:
         if len(obj.data.polygons) == 0:
@@ -244,13 +264,17 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
 # ---------------------------------------------------------------------------
 # Scenes built in Python (bpy), shared by the tests.
 
-def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0):
+def _material(name, base_color, emission=(0.0, 0.0, 0.0), strength=0.0, lambertian=False):
+    """A Principled BSDF (defaults but Base Color / emission); ``lambertian``: Specular IOR
+    Level 0, so that it is Lambert with albedo Base Color for Relight as well as for Cycles."""
     mat = bpy.data.materials.new(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         mat.use_nodes = True
     p = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     p.inputs["Base Color"].default_value = (*base_color, 1.0)
+    if lambertian:
+        p.inputs["Specular IOR Level"].default_value = 0.0
     p.inputs["Emission Color"].default_value = (*emission, 1.0)
     p.inputs["Emission Strength"].default_value = strength
     return mat
@@ -407,3 +431,116 @@ def face_areas(obj) -> np.ndarray:
     me.polygons.foreach_get("area", a)
     s = np.abs(np.linalg.det(np.array(obj.matrix_world)[:3, :3])) ** (2.0 / 3.0)
     return a * s
+
+
+# ---------------------------------------------------------------------------
+# White furnace: a material's albedo as Cycles renders it.
+
+@dataclass
+class FurnaceResult:
+    """Per material: what Cycles renders of a unit sphere in a uniform white world."""
+
+    albedo: np.ndarray  # (3,) mean radiance over the projected disk = cosine-weighted hemispherical albedo
+    normal: np.ndarray  # (3,) mean radiance of the pixels whose normal is within ~11 deg of the view
+    std_error: np.ndarray  # (3,) Monte-Carlo standard error of ``albedo`` (adjacent-pixel differences)
+    mu: np.ndarray  # (n,) cosine between the view and the normal at each covered pixel (perfect sphere)
+    pixels: np.ndarray  # (n, 3) those pixels' radiance
+
+
+def furnace_albedos(setups, px=48, samples=32, seed=0, threads=0, workdir=None) -> list:
+    """Render every material of ``setups`` (callables ``setup(material)`` that build its node
+    tree on a fresh node material) on its own unit sphere under a uniform white world of
+    radiance 1, in ONE orthographic Cycles render, and return a FurnaceResult per material.
+
+    Why this measures the white-furnace albedo: seen by an orthographic camera, the pixels of a
+    sphere sample the cosine mu between view and normal with density 2 mu dmu (the projected
+    area of a ring is 2 pi r dr = 2 pi mu dmu), so the mean pixel over the disk is
+    2 int R(mu) mu dmu, the hemispherical (cosine-weighted) albedo the radiosity engine uses.
+    Each sphere (UV sphere 128 x 64, smooth) is visible to camera rays only, so the spheres
+    neither shadow nor light each other; film transparent (alpha = coverage), a 0.01 px pixel
+    filter (each pixel samples its centre), no clamping, 8 bounces. Resets Blender first.
+    """
+    import os
+    import tempfile
+
+    import bmesh
+
+    reset_blender()
+    scene = bpy.context.scene
+    n = len(setups)
+    cols = max(1, math.ceil(math.sqrt(n)))
+    rows = math.ceil(n / cols)
+    spacing, scale = 2.2, 2.2  # sphere centres 2.2 apart, each in a 2.2 x 2.2 square tile
+    me = bpy.data.meshes.new("furnace_sphere")
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=128, v_segments=64, radius=1.0)
+    bm.to_mesh(me)
+    bm.free()
+    me.shade_smooth()
+    centres = []
+    for k, setup in enumerate(setups):
+        mat = bpy.data.materials.new(f"furnace_{k}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)
+            mat.use_nodes = True
+        setup(mat)
+        m = me.copy()
+        m.materials.append(mat)
+        ob = bpy.data.objects.new(f"sphere_{k}", m)
+        r, c = divmod(k, cols)
+        ob.location = (c * spacing, -r * spacing, 0.0)
+        for attr in ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_shadow",
+                     "visible_volume_scatter"):
+            setattr(ob, attr, False)
+        scene.collection.objects.link(ob)
+        centres.append((r, c))
+    cam = bpy.data.cameras.new("furnace_cam")
+    cam.type = "ORTHO"
+    cam.ortho_scale = scale * max(cols, rows)
+    cam_ob = bpy.data.objects.new("furnace_cam", cam)
+    cam_ob.location = ((cols - 1) * spacing / 2, -(rows - 1) * spacing / 2, 10.0)
+    scene.collection.objects.link(cam_ob)
+    scene.camera = cam_ob
+    configure_cycles(scene, samples, seed, threads)
+    c = scene.cycles
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = 8
+    c.filter_width = 0.01
+    world = scene.world
+    bg = next(nd for nd in world.node_tree.nodes if nd.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bg.inputs["Strength"].default_value = 1.0
+    r = scene.render
+    r.film_transparent = True
+    r.resolution_x, r.resolution_y = px * cols, px * rows
+    if cols != rows:  # ortho_scale spans the larger side
+        pass
+    r.resolution_percentage = 100
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    d = workdir or tempfile.mkdtemp(prefix="relight_furnace_")
+    path = os.path.join(d, "furnace.exr")
+    r.filepath = path
+    bpy.ops.render.render(write_still=True)
+    img = bpy.data.images.load(path)
+    try:
+        W, H = img.size
+        pix = np.array(img.pixels[:], dtype=np.float64).reshape(H, W, 4)[::-1]  # row 0 = top
+    finally:
+        bpy.data.images.remove(img)
+    out = []
+    tile = px * max(cols, rows) / max(cols, rows)  # pixels per 2.2 m tile
+    for (rr, cc) in centres:
+        cell = pix[rr * px:(rr + 1) * px, cc * px:(cc + 1) * px]
+        a = cell[..., 3]
+        rgb = cell[..., :3]
+        x = ((np.arange(px) + 0.5) / tile - 0.5) * scale
+        X, Y = np.meshgrid(x, x)
+        rad = np.sqrt(X ** 2 + Y ** 2)
+        inside = (a > 0.5) & (rad < 1.0)
+        mu = np.sqrt(np.clip(1.0 - rad ** 2, 0.0, 1.0))
+        pair = inside[:, 1:] & inside[:, :-1]
+        diff = (rgb[:, 1:] - rgb[:, :-1])[pair]
+        sigma = np.sqrt(0.5 * (diff ** 2).mean(axis=0))
+        out.append(FurnaceResult(albedo=rgb[inside].mean(axis=0), normal=rgb[inside & (rad < 0.2)].mean(axis=0),
+                                 std_error=sigma / np.sqrt(inside.sum()), mu=mu[inside], pixels=rgb[inside]))
+    return out

@@ -58,8 +58,8 @@ WALLS_TARGETS = {3 * N + 2: (0.2, 0.1, 0.07), 3 * N + 3: (0.2, 0.1, 0.07)}  # Wa
 
 
 def build_room(path: Path) -> None:
-    """Write the test room to ``path``: 6 walls (N x N quads each, Principled, plain base
-    colours, no emission), a 0.5 m block on the floor, targets painted in the
+    """Write the test room to ``path``: 6 walls (N x N quads each, Principled with Specular IOR
+    Level 0 -- Lambert, as the bake below makes every material -- plain base colours, no emission), a 0.5 m block on the floor, targets painted in the
     ``relight_target`` corner layer, floor and block forbidden as light positions."""
     cr.reset_blender()
     bpy.context.scene.world = bpy.data.worlds.new("World")
@@ -74,12 +74,12 @@ def build_room(path: Path) -> None:
     objs = {}
     for name, o, du, dv in walls:
         v, f = cr.grid_quads(o, du, dv, N, N)
-        objs[name] = cr.add_mesh_object(name, v, f, cr._material(name.lower(), COLOURS[name]))
+        objs[name] = cr.add_mesh_object(name, v, f, cr._material(name.lower(), COLOURS[name], lambertian=True))
     x0, y0, s = 1.1, 1.1, 0.5  # block away from the targets (floor's x, y < 1.5 corner)
     verts = [(x0, y0, 0), (x0 + s, y0, 0), (x0 + s, y0 + s, 0), (x0, y0 + s, 0),
              (x0, y0, s), (x0 + s, y0, s), (x0 + s, y0 + s, s), (x0, y0 + s, s)]
     faces = [(4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)]  # outward
-    objs["Block"] = cr.add_mesh_object("Block", verts, faces, cr._material("block", COLOURS["Block"]))
+    objs["Block"] = cr.add_mesh_object("Block", verts, faces, cr._material("block", COLOURS["Block"], lambertian=True))
     objs["Block"]["relight_no_lights"] = True
     for name, targets in (("Floor", FLOOR_TARGETS), ("WallW", WALLS_TARGETS)):
         me = objs[name].data

@@ -6,6 +6,7 @@ import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 from relight_addon import export, results  # noqa: E402
+from relight_addon.engine.principled import principled_albedo  # noqa: E402
 
 
 def add_mesh(bpy, name, verts, faces, mat=None):
@@ -112,11 +113,15 @@ def test_materials_and_fallbacks(bpy_clean):
     row = {n: i for i, n in enumerate(names)}
     assert f.reflectance[row["none"]] == pytest.approx([0.8] * 3)
     assert f.exitance[row["none"]] == pytest.approx([0, 0, 0])
-    assert f.reflectance[row["lamp"]] == pytest.approx([0.2, 0.3, 0.4])
+    # a default Principled BSDF: its white-furnace albedo, specular layer included (engine/principled.py)
+    lamp = principled_albedo(base_color=(0.2, 0.3, 0.4)).albedo
+    assert np.all(lamp > [0.2, 0.3, 0.4])
+    assert f.reflectance[row["lamp"]] == pytest.approx(lamp)
     assert f.exitance[row["lamp"]] == pytest.approx(math.pi * 4.0 * np.array([1, 0.5, 0.25]))
     assert f.exitance[row["emit"]] == pytest.approx([2 * math.pi] * 3)
     assert f.reflectance[row["emit"]] == pytest.approx([0, 0, 0])
-    assert f.reflectance[row["hot"]] == pytest.approx([export.MAX_REFLECTANCE, 0.5, 0.5])
+    hot = principled_albedo(base_color=(1.5, 0.5, 0.5)).albedo
+    assert f.reflectance[row["hot"]] == pytest.approx([export.MAX_REFLECTANCE, hot[1], hot[2]])
     assert any("clamped" in w for w in f.warnings)
 
 

@@ -46,6 +46,7 @@ def diffuse(bpy, name, rho):
         m.use_nodes = True
     p = next(n for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     p.inputs["Base Color"].default_value = (rho, rho, rho, 1)
+    p.inputs["Specular IOR Level"].default_value = 0.0  # no specular layer: Lambert, albedo rho
     return m
 
 

@@ -52,23 +52,25 @@ _classes = (RelightPreferences,)
 
 
 def register():
-    from . import operators, panels, properties
+    from . import operators, panels, properties, render_settings
 
     for cls in _classes:
         bpy.utils.register_class(cls)
     properties.register()
     operators.register()
+    render_settings.register()
     prefs = preferences()
     panels.register(prefs.sidebar_tab if prefs is not None and prefs.sidebar_tab else "Relight")
     bpy.app.handlers.load_post.append(_sync_curve_on_load)
 
 
 def unregister():
-    from . import operators, panels, properties
+    from . import operators, panels, properties, render_settings
 
     if _sync_curve_on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(_sync_curve_on_load)
     panels.unregister()
+    render_settings.unregister()
     operators.unregister()
     properties.unregister()
     for cls in reversed(_classes):

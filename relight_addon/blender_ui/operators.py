@@ -2,6 +2,7 @@
 work in ``jobs`` (the same code path as the CLI)."""
 from __future__ import annotations
 
+import textwrap
 import threading
 
 import bmesh
@@ -9,7 +10,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import export, jobs, results
+from .. import export, jobs, light_paths, results
+from . import viewport
 from ..engine.options import JobOptions
 from ..engine.scene import SceneError
 
@@ -315,12 +317,43 @@ def apply_curve_point(context, index):
         print(f"Relight: cannot apply configuration {index}: {exc}")
 
 
+#: the interactive solve in progress (at most one): scene name, stage, fraction, cancelling.
+#: Plain Python values, written by the modal handler on the main thread, read by the panels.
+_SOLVING = {}
+
+
+def solve_state(scene):
+    """{"stage", "fraction", "cancelling"} of the interactive solve running on ``scene``, or None."""
+    return _SOLVING if _SOLVING.get("scene") == scene.name else None
+
+
+def _tag_sidebar_redraw(context):
+    """Redraw the 3D Views' sidebars (the progress bar), not the viewports themselves."""
+    wm = context.window_manager
+    for window in wm.windows if wm is not None else ():
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                for region in area.regions:
+                    if region.type == "UI":
+                        region.tag_redraw()
+
+
+def _summary(outcome):
+    f = outcome.curve[outcome.final_index]
+    neg = f"{f['n_negative']} negative" if f["n_negative"] else "no negatives"
+    return (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}, {neg} "
+            f"({len(outcome.curve)} configurations on the curve)")
+
+
 class RELIGHT_OT_solve(bpy.types.Operator):
     """Solve the inverse lighting problem for the painted targets and reduce it to a few
     positive lights. ESC cancels and leaves the scene untouched"""
     bl_idname = "relight.solve"
     bl_label = "Solve & Reduce"
     bl_options = {"REGISTER", "UNDO"}
+
+    confirmed: BoolProperty(name="Confirmed", default=False, options={"HIDDEN", "SKIP_SAVE"},
+                            description="The cost warning was shown and accepted: solve without asking")
 
     _thread = None
     _timer = None
@@ -345,20 +378,29 @@ class RELIGHT_OT_solve(bpy.types.Operator):
 
     def _finish(self, context, outcome, fingerprints=None):
         try:
+            light_paths.add_to_outcome(context.scene, outcome)  # warns when Cycles would render darker
             skipped = store_outcome(context, outcome, fingerprints)
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        for w in list(outcome.warnings) + skipped:
-            self.report({"WARNING"}, w)
-        f = outcome.curve[outcome.final_index]
-        self.report({"INFO"}, f"Relight: {f['n_lights']} light(s), relative error {f['relative_error']:.3g}, "
-                              f"{f['n_negative']} negative(s); {len(outcome.curve)} configurations on the curve")
+        warnings = list(outcome.warnings) + list(skipped or [])
+        settings = context.scene.relight
+        settings.last_summary = _summary(outcome)
+        settings.last_warnings = "\n".join(warnings)
+        if not bpy.app.background:
+            viewport.show_radiosity(context)  # the lights and the predicted radiosity
+        # the status bar shows the last report: the summary first, then the warnings
+        self.report({"INFO"}, "Relight: " + settings.last_summary)
+        for w in warnings:
+            self.report({"WARNING"}, "Relight: " + w)
         return {"FINISHED"}
 
     def invoke(self, context, event):
         if bpy.app.background:
             return self.execute(context)
+        if _SOLVING:
+            self.report({"ERROR"}, "A Relight solve is already running (ESC cancels it)")
+            return {"CANCELLED"}
         try:
             exp, options = self._export(context)
             inputs = export.job_inputs(exp)
@@ -367,10 +409,11 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         cost = jobs.solve_cost(patches, options)
-        if cost["warnings"]:
-            # a large solve: ask first; if the user agrees, execute() runs it (synchronously)
-            return context.window_manager.invoke_confirm(
-                self, event, title="Relight: a large solve", message=" ".join(cost["warnings"]))
+        if cost["warnings"] and not self.confirmed:
+            # a large solve: ask first. "Solve Anyway" invokes this operator again with
+            # confirmed=True, so the solve still runs in the background with progress and ESC.
+            _ask_to_confirm(context, cost["warnings"])
+            return {"CANCELLED"}
         return self._start(context, exp, options, inputs, patches)
 
     def _start(self, context, exp, options, inputs, patches):
@@ -392,7 +435,10 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         wm = context.window_manager
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.1, window=context.window)
+        _SOLVING.clear()
+        _SOLVING.update(scene=context.scene.name, stage="starting", fraction=0.0, cancelling=False)
         wm.modal_handler_add(self)
+        _tag_sidebar_redraw(context)
         return {"RUNNING_MODAL"}
 
     def _set_progress(self, stage, fraction):
@@ -402,35 +448,67 @@ class RELIGHT_OT_solve(bpy.types.Operator):
 
     def _end_ui(self, context):
         wm = context.window_manager
-        wm.event_timer_remove(self._timer)
+        if self._timer is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
         wm.progress_end()
         if context.workspace is not None:
             context.workspace.status_text_set(None)
+        _SOLVING.clear()
+        _tag_sidebar_redraw(context)
+
+    def cancel(self, context):
+        """Blender stops the modal (a file is opened, the window closes): stop the worker, free
+        the UI (the worker's result, if any, is dropped)."""
+        self._cancel.set()
+        self._end_ui(context)
+
+    def _status(self, context, text):
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
 
     def modal(self, context, event):
-        if event.type == "ESC":
-            self._cancel.set()
-            self._thread.join()
-            self._end_ui(context)
-            self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
-            return {"CANCELLED"}
+        # Never wait for the worker here: ESC only asks it to stop; the timer below notices
+        # when it has, while the UI keeps running.
+        if event.type == "ESC" and event.value == "PRESS":
+            if not self._cancel.is_set():
+                self._cancel.set()
+                _SOLVING["cancelling"] = True
+                self._status(context, "Relight: cancelling...")
+                _tag_sidebar_redraw(context)
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         frac, text = self._progress
-        context.window_manager.progress_update(int(100 * frac))
-        if context.workspace is not None:
-            context.workspace.status_text_set(f"Relight: {text} ({100 * frac:.0f} %) - ESC to cancel")
         if self._thread.is_alive():
+            context.window_manager.progress_update(int(100 * frac))
+            _SOLVING.update(stage=text, fraction=frac)
+            if not self._cancel.is_set():
+                self._status(context, f"Relight: {text} ({100 * frac:.0f} %) - ESC to cancel")
+            _tag_sidebar_redraw(context)
             return {"RUNNING_MODAL"}
         self._end_ui(context)
-        if "error" in self._result:
-            exc = self._result["error"]
-            if isinstance(exc, jobs.Cancelled):
+        if "error" in self._result or self._cancel.is_set():
+            exc = self._result.get("error")
+            if exc is None or isinstance(exc, jobs.Cancelled):
                 self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
             else:
                 self.report({"ERROR"}, f"Relight: {exc}")
             return {"CANCELLED"}
         return self._finish(context, self._result["outcome"], self._fingerprints)
+
+
+def _ask_to_confirm(context, warnings):
+    def draw(menu, _context):
+        layout = menu.layout
+        for w in warnings:
+            for k, line in enumerate(textwrap.wrap(w, 60)):
+                layout.label(text=line, icon="ERROR" if k == 0 else "BLANK1")
+        layout.separator()
+        layout.operator_context = "INVOKE_DEFAULT"
+        layout.operator("relight.solve", text="Solve Anyway", icon="LIGHT_SUN").confirmed = True
+
+    context.window_manager.popup_menu(draw, title="Relight: a large solve", icon="QUESTION")
 
 
 # --- results --------------------------------------------------------------------------
@@ -477,6 +555,7 @@ class RELIGHT_OT_clear_results(bpy.types.Operator):
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
         n = results.clear_results(context.scene)
+        viewport.restore(context)  # the viewports' shading from before Show Radiosity
         settings = context.scene.relight
         settings.curve.clear()
         set_curve_index(settings, 0)
@@ -501,17 +580,23 @@ class RELIGHT_OT_make_area_lights(bpy.types.Operator):
 
 
 class RELIGHT_OT_show_radiosity(bpy.types.Operator):
-    """Show the baked relight_radiosity layer: Solid shading with Color: Attribute"""
+    """Show the predicted radiosity (Solid shading, Color: Attribute, the relight_radiosity
+    layer) in the 3D Viewports, or, when it is shown, give the viewports their shading back"""
     bl_idname = "relight.show_radiosity"
     bl_label = "Show Radiosity"
 
+    action: EnumProperty(items=[("TOGGLE", "Toggle", ""), ("SHOW", "Show", ""), ("HIDE", "Hide", "")],
+                         default="TOGGLE", options={"SKIP_SAVE"})
+
     def execute(self, context):
-        space = context.space_data
-        if space is None or space.type != "VIEW_3D":
-            self.report({"ERROR"}, "Run this from a 3D Viewport")
+        hide = self.action == "HIDE" or (self.action == "TOGGLE" and viewport.is_shown(context.scene))
+        if hide:
+            n = viewport.restore(context)
+            self.report({"INFO"}, f"Relight: viewport shading restored ({n} view(s))")
+            return {"FINISHED"}
+        if not viewport.show_radiosity(context):
+            self.report({"ERROR"}, "No 3D Viewport to show the radiosity in")
             return {"CANCELLED"}
-        space.shading.type = "SOLID"
-        space.shading.color_type = "VERTEX"
         return {"FINISHED"}
 
 

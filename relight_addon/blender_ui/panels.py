@@ -1,20 +1,137 @@
-"""The "Relight" sidebar tab of the 3D View: Targets, Light Candidates, Solve, Results."""
-import bpy
+"""The "Relight" sidebar tab of the 3D View: Targets, Light Candidates, Solve, Results.
 
-from .. import export, results
+Written for the sidebar's default width (about 290 px): no label shares a row with a field
+that would clip it, two buttons at most per row, hints say why a button is greyed out, and
+the rows stay in place when a mesh becomes active. Every count also works in Edit Mode (read
+from the edit BMesh). The error chart is rasterised by ``relight_addon.chart`` at the panel's
+width into a preview icon (never a data-block) and drawn with ``template_icon``.
+"""
+import math
+import textwrap
+
+import bmesh
+import bpy
+import bpy.utils.previews
+import numpy as np
+from mathutils import Vector
+
+from .. import chart, export, results
+from ..engine.formfactors import auto_rays_per_patch
+from . import viewport
+
+#: beyond this many faces in Edit Mode, counts are not read from the BMesh on every redraw
+EDIT_COUNT_LIMIT = 200_000
+
+_last_object_mode_counts = {}  # object name -> (targets, candidates, faces), for Blender < 4.5
+
+
+def _bmesh_counts(obj):
+    """(targets, candidates or None, faces) of a mesh in Edit Mode, read from its BMesh.
+    Candidates are None when this Blender's BMesh cannot read boolean layers (before 4.5)."""
+    bm = bmesh.from_edit_mesh(obj.data)
+    faces = len(bm.faces)
+    if faces > EDIT_COUNT_LIMIT:
+        return None, None, faces
+    layers = bm.loops.layers
+    tl = layers.float_color.get(export.TARGET_ATTRIBUTE) or layers.color.get(export.TARGET_ATTRIBUTE)
+    targets = 0
+    if tl is not None:
+        for f in bm.faces:
+            loops = f.loops
+            if sum(loop[tl][3] for loop in loops) >= 0.5 * len(loops):
+                targets += 1
+    if export.no_lights(obj):
+        return targets, 0, faces
+    bool_layers = getattr(bm.faces.layers, "bool", None)
+    if bool_layers is None:
+        return targets, (faces if export.FORBIDDEN_ATTRIBUTE not in obj.data.attributes else None), faces
+    fl = bool_layers.get(export.FORBIDDEN_ATTRIBUTE)
+    forbidden = sum(1 for f in bm.faces if f[fl]) if fl is not None else 0
+    return targets, faces - forbidden, faces
+
+
+def object_counts(obj):
+    """(targets, candidates, faces, note) of one mesh object; None counts are unknown."""
+    if obj.mode == "EDIT" and obj.data.is_editmode:
+        t, c, f = _bmesh_counts(obj)
+        note = None
+        if t is None:
+            note = f"{obj.name}: too large to count in Edit Mode"
+        elif c is None:
+            old = _last_object_mode_counts.get(obj.name)
+            c = old[1] if old is not None and old[2] == f else None
+            note = "Light candidates are counted again on leaving Edit Mode"
+        return t, c, f, note
+    t = int(export.face_flags(obj, "target").sum())
+    c = int(export.face_flags(obj, "candidate").sum())
+    f = len(obj.data.polygons)
+    _last_object_mode_counts[obj.name] = (t, c, f)
+    return t, c, f, None
 
 
 def _counts(context):
-    """(target faces, candidate faces, faces) over the scene's mesh objects, from the base meshes."""
+    """(target faces, candidate faces, faces, notes) over the scene's rendered mesh objects;
+    a count is None when some object's share is unknown (see object_counts)."""
     targets = candidates = faces = 0
+    notes = []
     for obj in context.scene.objects:
-        if obj.type != "MESH" or obj.hide_render:
+        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
             continue
-        n = len(obj.data.polygons)
-        faces += n
-        targets += int(export.face_flags(obj, "target").sum())
-        candidates += int(export.face_flags(obj, "candidate").sum())
-    return targets, candidates, faces
+        t, c, f, note = object_counts(obj)
+        faces += f
+        targets = None if targets is None or t is None else targets + t
+        candidates = None if candidates is None or c is None else candidates + c
+        if note and note not in notes:
+            notes.append(note)
+    return targets, candidates, faces, notes
+
+
+def effective_max_patch_size(scene):
+    """(metres, source) the solve uses when Max Patch Size is 0: the scene's
+    ``relight_max_patch_size``, else the rendered meshes' bounding-box diagonal / 20."""
+    size = export.scene_settings(scene).get("max_patch_size")
+    if size:
+        return float(size), "scene"
+    lo = [math.inf] * 3
+    hi = [-math.inf] * 3
+    for obj in scene.objects:
+        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
+            continue
+        for corner in obj.bound_box:
+            p = obj.matrix_world @ Vector(corner)
+            lo = [min(a, b) for a, b in zip(lo, p)]
+            hi = [max(a, b) for a, b in zip(hi, p)]
+    if lo[0] == math.inf:
+        return None, "auto"
+    return math.dist(lo, hi) / 20.0, "auto"
+
+
+def _fmt_length(m):
+    if m is None:
+        return "?"
+    return f"{m * 100:.3g} cm" if m < 1 else f"{m:.3g} m"
+
+
+def hints(context):
+    """The hint texts the panels show for the current context (used by the GUI test)."""
+    out = []
+    obj = context.active_object
+    if obj is None or obj.type != "MESH":
+        out.append("Select a mesh object")
+    if context.mode != "EDIT_MESH":
+        out.append("Tab into Edit Mode to fill or forbid selected faces")
+    return out
+
+
+def _wrap(layout, text, context, icon="NONE", width_px=None):
+    """Labels wrapped to the region's width (Blender's labels do not wrap)."""
+    ui = context.preferences.system.ui_scale
+    width_px = width_px or context.region.width - 50 * ui
+    chars = max(16, int(width_px / (6.3 * ui)))
+    col = layout.column(align=True)
+    for k, line in enumerate(textwrap.wrap(text, chars) or [""]):
+        col.label(text=line, icon=icon if k == 0 else "BLANK1" if icon != "NONE" else "NONE")
+    return col
 
 
 class RELIGHT_PT_base:
@@ -30,10 +147,18 @@ class RELIGHT_PT_main(RELIGHT_PT_base, bpy.types.Panel):
         layout = self.layout
         if context.mode not in {"OBJECT", "EDIT_MESH", "PAINT_VERTEX"}:
             layout.label(text="Object, Edit or Vertex Paint mode", icon="INFO")
-        t, c, f = _counts(context)
-        row = layout.row()
-        row.label(text=f"{t} target(s)", icon="BRUSH_DATA")
-        row.label(text=f"{c} / {f} candidates", icon="LIGHT_AREA")
+        t, c, f, notes = _counts(context)
+        col = layout.column(align=True)
+        col.label(text=f"{'?' if t is None else t} target faces", icon="BRUSH_DATA")
+        # two lines whatever the mode, so that nothing below moves; a clock when the count of
+        # an object in Edit Mode is the one from Object Mode (the Light Candidates panel says so)
+        col.label(text=f"{'?' if c is None else c} of {f} faces may be lights",
+                  icon="TIME" if notes else "LIGHT_AREA")
+
+
+def _mesh(context):
+    obj = context.active_object
+    return obj if obj is not None and obj.type == "MESH" else None
 
 
 class RELIGHT_PT_targets(RELIGHT_PT_base, bpy.types.Panel):
@@ -43,15 +168,26 @@ class RELIGHT_PT_targets(RELIGHT_PT_base, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         settings = context.scene.relight
+        obj = _mesh(context)
+        edit = context.mode == "EDIT_MESH"
+        if obj is None:
+            layout.label(text="Select a mesh object", icon="INFO")
+        else:
+            t = object_counts(obj)[0]
+            layout.label(text=f"{obj.name}: {'?' if t is None else t} targets", icon="MESH_DATA")
         layout.prop(settings, "target_scale")
         layout.operator("relight.paint_targets", icon="BRUSH_DATA")
+        layout.prop(settings, "paint_color", text="Fill Colour")
         row = layout.row(align=True)
-        row.prop(settings, "paint_color", text="")
         row.operator("relight.fill_targets", text="Fill Selected").unpaint = False
         row.operator("relight.fill_targets", text="Unpaint").unpaint = True
+        if edit and obj is not None:
+            layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
+        else:
+            layout.label(text="Edit Mode: fill selected faces", icon="EDITMODE_HLT")
         row = layout.row(align=True)
-        row.operator("relight.select_faces", text="Select Targets", icon="RESTRICT_SELECT_OFF").kind = "TARGET"
-        row.operator("relight.clear_targets", icon="X")
+        row.operator("relight.select_faces", text="Select Targets").kind = "TARGET"
+        row.operator("relight.clear_targets", text="Clear Targets")
 
 
 class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
@@ -60,13 +196,23 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
-        obj = context.active_object
-        if obj is not None and obj.type == "MESH":
+        obj = _mesh(context)
+        if obj is not None:
             layout.prop(obj, "relight_no_lights")
+        else:
+            layout.label(text="Select a mesh object", icon="INFO")
         row = layout.row(align=True)
         row.operator("relight.forbid_faces", text="Forbid Selected").allow = False
         row.operator("relight.forbid_faces", text="Allow Selected").allow = True
-        layout.operator("relight.select_faces", text="Select Forbidden", icon="RESTRICT_SELECT_OFF").kind = "FORBIDDEN"
+        if context.mode == "EDIT_MESH" and obj is not None:
+            note = object_counts(obj)[3]
+            if note:
+                layout.label(text="Counted again on leaving Edit Mode", icon="TIME")
+            else:
+                layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
+        else:
+            layout.label(text="Edit Mode: forbid selected faces", icon="EDITMODE_HLT")
+        layout.operator("relight.select_faces", text="Select Forbidden").kind = "FORBIDDEN"
 
 
 class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
@@ -74,15 +220,26 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
     bl_parent_id = "RELIGHT_PT_main"
 
     def draw(self, context):
+        from . import operators
+
         layout = self.layout
         s = context.scene.relight
         col = layout.column(align=True)
-        col.prop(s, "rays_per_patch")
-        col.prop(s, "max_patch_size")
+        if s.rays_per_patch == 0:
+            f = _counts(context)[2]
+            col.prop(s, "rays_per_patch", text=f"Rays: Auto (~{auto_rays_per_patch(max(f, 1))})")
+        else:
+            col.prop(s, "rays_per_patch")
+        if s.max_patch_size == 0:
+            size, _source = effective_max_patch_size(context.scene)
+            col.prop(s, "max_patch_size", text=f"Max Patch: Auto ({_fmt_length(size)})")
+        else:
+            col.prop(s, "max_patch_size")
         col.prop(s, "seed")
-        layout.prop(s, "solver")
-        layout.prop(s, "selection")
-        layout.prop(s, "distribution")
+        col = layout.column(align=True)
+        for name in ("solver", "selection", "distribution"):
+            col.label(text=s.bl_rna.properties[name].name)
+            col.prop(s, name, text="")
         box = layout.box()
         box.label(text="Stop when")
         row = box.row(align=True)
@@ -96,17 +253,81 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         sub.active = s.use_error_threshold
         sub.prop(s, "error_threshold")
         box.prop(s, "require_positive")
-        layout.operator("relight.solve", icon="LIGHT_SUN")
+        state = operators.solve_state(context.scene)
+        if state is not None:
+            layout.progress(factor=state["fraction"], type="BAR",
+                            text=f"{state['stage']} {100 * state['fraction']:.0f} %")
+            layout.label(text="Cancelling..." if state["cancelling"] else "ESC cancels", icon="CANCEL")
+        else:
+            row = layout.row()
+            row.scale_y = 1.4
+            row.operator("relight.solve", icon="LIGHT_SUN")
 
 
 class RELIGHT_UL_curve(bpy.types.UIList):
     """The configurations of the error curve: lights, relative error, negatives."""
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index):
-        row = layout.row(align=True)
-        row.label(text=f"{item.n_lights} lights", icon="LIGHT_AREA" if item.n_negative == 0 else "ERROR")
-        row.label(text=f"err {item.relative_error:.3g}")
-        row.label(text=f"{item.n_negative} neg")
+        split = layout.split(factor=0.36)
+        split.label(text=f"{item.n_lights}", icon="LIGHT_AREA" if item.n_negative == 0 else "ERROR")
+        split = split.split(factor=0.55)
+        split.label(text=f"{item.relative_error:.3f}")
+        split.label(text=f"{item.n_negative} neg" if item.n_negative else "")
+
+
+# --- the chart ---------------------------------------------------------------------------
+
+_chart = {"previews": None, "key": None, "geometry": None}
+
+#: chart height / width
+CHART_ASPECT = 0.85
+
+
+def chart_size(region_width, ui_scale):
+    """(width, height, scale) of the chart image for a sidebar region this wide: the panel's
+    inner width less template_icon's padding (measured in Blender 4.3: inner = region - 55 x
+    UI scale; padding 0.15 UI units a side), so that the image is drawn about 1:1."""
+    inner = region_width - 55 * ui_scale
+    w = int(max(120, inner - 2 * 0.15 * 20 * ui_scale))
+    return w, int(w * CHART_ASPECT), 2 if ui_scale >= 1.75 else 1
+
+
+def chart_pixels(scene, width, height, scale=1):
+    """(pixels, geometry) of the scene's error chart at this size, or None without a result."""
+    d = results.chart_data(scene)
+    if d is None:
+        return None
+    return chart.render(d["n_lights"], d["relative_error"], d["n_negative"], current=d["current"],
+                        bound=d["bound"], size=(width, height), scale=scale)
+
+
+def chart_icon(context):
+    """icon_value of the chart preview at this region's width (re-rasterised only when the
+    curve, the shown configuration or the width change); 0 without a result."""
+    pcoll = _chart["previews"]
+    if pcoll is None:
+        return 0
+    ui = context.preferences.system.ui_scale
+    w, h, s = chart_size(context.region.width, ui)
+    d = results.chart_data(context.scene)
+    if d is None:
+        return 0
+    key = (id(d["n_lights"]), len(d["n_lights"]), float(np.nansum(d["relative_error"])), d["current"],
+           None if d["bound"] is None else float(np.nansum(d["bound"])), w, h, s)
+    preview = pcoll.get("chart") or pcoll.new("chart")
+    if _chart["key"] != key:
+        pixels, geometry = chart.render(d["n_lights"], d["relative_error"], d["n_negative"], current=d["current"],
+                                        bound=d["bound"], size=(w, h), scale=s)
+        preview.image_size = (w, h)
+        preview.image_pixels_float = pixels.ravel()
+        _chart["key"] = key
+        _chart["geometry"] = dict(geometry, current=d["current"])
+    return preview.icon_id
+
+
+def last_chart_geometry():
+    """Geometry of the chart last drawn (chart.render's, plus ``current``), for the GUI test."""
+    return _chart["geometry"]
 
 
 class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
@@ -116,20 +337,41 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.relight
+        layout.operator("relight.match_light_paths", icon="LIGHT")
         if len(s.curve) == 0:
-            layout.label(text="No result yet")
+            _wrap(layout, "No result yet: paint targets, then Solve & Reduce", context, icon="INFO")
             return
-        icon = results.chart_icon(context.scene)
+        box = layout.box()
+        summary = s.last_summary
+        if not summary and 0 <= s.curve_index < len(s.curve):
+            p = s.curve[s.curve_index]
+            summary = f"{p.n_lights} lights, relative error {p.relative_error:.3g}"
+        _wrap(box, summary, context, icon="CHECKMARK", width_px=context.region.width - 70)
+        for w in filter(None, s.last_warnings.split("\n")):
+            _wrap(box, w, context, icon="ERROR", width_px=context.region.width - 70)
+        icon = chart_icon(context)
         if icon:
-            layout.template_icon(icon_value=icon, scale=8.0)
+            ui = context.preferences.system.ui_scale
+            layout.template_icon(icon_value=icon, scale=(context.region.width - 55 * ui) / (20 * ui))
+        if 0 <= s.curve_index < len(s.curve):
+            p = s.curve[s.curve_index]
+            neg = f", {p.n_negative} negative" if p.n_negative else ""
+            layout.label(text=f"Shown: {p.n_lights} lights, error {p.relative_error:.3f}{neg}", icon="HIDE_OFF")
+        split = layout.split(factor=0.36)
+        split.label(text="Lights")
+        split = split.split(factor=0.55)
+        split.label(text="Error")
+        split.label(text="Neg.")
         layout.template_list("RELIGHT_UL_curve", "", s, "curve", s, "curve_index", rows=6)
         row = layout.row(align=True)
         row.operator("relight.apply_configuration", text="Apply", icon="CHECKMARK").index = -1
-        row.operator("relight.clear_results", icon="X")
-        layout.operator("relight.select_faces", text="Select Light Faces", icon="RESTRICT_SELECT_OFF").kind = "LIGHT"
-        row = layout.row(align=True)
-        row.operator("relight.make_area_lights", icon="LIGHT_AREA")
-        row.operator("relight.show_radiosity", icon="SHADING_SOLID")
+        row.operator("relight.clear_results", text="Clear", icon="X")
+        col = layout.column(align=True)
+        col.operator("relight.select_faces", text="Select Light Faces", icon="RESTRICT_SELECT_OFF").kind = "LIGHT"
+        col.operator("relight.make_area_lights", icon="LIGHT_AREA")
+        shown = viewport.is_shown(context.scene)
+        col.operator("relight.show_radiosity", text="Hide Radiosity" if shown else "Show Radiosity",
+                     icon="HIDE_ON" if shown else "SHADING_SOLID")
 
 
 CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_solve,
@@ -142,8 +384,15 @@ def register(category="Relight"):
         cls.bl_category = category
     for cls in CLASSES:
         bpy.utils.register_class(cls)
+    if _chart["previews"] is None:
+        _chart["previews"] = bpy.utils.previews.new()
+        _chart["key"] = None
 
 
 def unregister():
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
+    if _chart["previews"] is not None:
+        bpy.utils.previews.remove(_chart["previews"])
+        _chart["previews"] = None
+        _chart["key"] = None

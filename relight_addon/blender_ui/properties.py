@@ -72,6 +72,14 @@ class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
     curve_index: IntProperty(name="Configuration", default=0, update=_apply_curve_point,
                              description="The configuration shown in the scene")
     status: StringProperty(name="Status", default="")
+    # display: what the panel shows about the last solve, and the viewport shading to give back
+    last_summary: StringProperty(name="Last Solve", default="",
+                                 description="Summary of the last Solve & Reduce (shown in the Results panel)")
+    last_warnings: StringProperty(name="Warnings", default="",
+                                  description="Warnings of the last Solve & Reduce, one per line")
+    view_restore: StringProperty(name="Viewport Shading to Restore", default="",
+                                 description="The 3D Viewports' shading before Relight showed its radiosity "
+                                             "(JSON); restored by Hide Radiosity and Clear Results")
 
 
 CLASSES = (RELIGHT_CurvePoint, RELIGHT_SceneSettings)

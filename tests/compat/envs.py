@@ -1,13 +1,13 @@
 """Side virtual environments for the compatibility runs (used by tests/test_compat.py).
 
-    python tests/compat/envs.py --create all|bpy42|py313
+    python tests/compat/envs.py --create all|bpy42|bpy45|bpy53
     python tests/compat/envs.py --newest-bpy
 
 - ``bpy42``: Blender 4.2 LTS as a module (bpy 4.2.23, the newest 4.2.x on PyPI), Python 3.11,
   numpy 1.26.4 (what Blender 4.2 ships; the bpy wheel itself leaves numpy unpinned),
   plus the scipy/embreex versions the extension bundles.
-- ``py313``: Python 3.13 with numpy 2.x + the bundled scipy/embreex versions, for the pure
-  engine tests: the closest available check of the Blender 5.1+ side (bpy 5.1+/5.2 is not on PyPI).
+- ``bpy45``: Blender 4.5 LTS (bpy 4.5.15), Python 3.11, numpy 1.26.4.
+- ``bpy53``: Blender 5.3 (bpy 5.3.0), Python 3.13, numpy 2.3.5 (bpy 5.3 requires numpy >= 2.2).
 
 An environment is (re)built only when its requirement list changed (stamp file inside it).
 """
@@ -34,11 +34,17 @@ ENVS = {
         "python": ["/root/.pyenv/versions/3.11.7/bin/python3.11", "python3.11"],
         "requirements": ["bpy==4.2.23", "numpy==1.26.4", *_BUNDLED],
     },
-    "py313": {
-        "dir": ROOT / ".venv-py313",
+    "bpy45": {
+        "dir": ROOT / ".venv-bpy45",
+        "python": ["/root/.pyenv/versions/3.11.7/bin/python3.11", "python3.11"],
+        # Blender 4.5 LTS: still Python 3.11 and numpy 1.26
+        "requirements": ["bpy==4.5.15", "numpy==1.26.4", *_BUNDLED],
+    },
+    "bpy53": {
+        "dir": ROOT / ".venv-bpy53",
         "python": ["/root/.pyenv/versions/3.13.0/bin/python3.13", "python3.13"],
-        # Blender 5.1+ ships numpy 2.x with Python 3.13; scipy 1.17.1 accepts numpy <2.7.
-        "requirements": ["numpy==2.3.5", *_BUNDLED],
+        # Blender 5.1+: Python 3.13 and numpy 2.x (the cp313 wheels of the extension)
+        "requirements": ["bpy==5.3.0", "numpy==2.3.5", *_BUNDLED],
     },
 }
 
@@ -89,8 +95,13 @@ def ensure_env(name: str) -> Path:
 
 
 def newest_bpy_versions() -> list[str]:
-    """bpy versions on PyPI, newest first (one `pip index versions` look-up)."""
-    proc = subprocess.run([sys.executable, "-m", "pip", "index", "versions", "bpy",
+    """bpy versions on PyPI for the newest Python here, newest first (one `pip index versions`
+    look-up; pip lists only the versions with a wheel for the Python that runs it)."""
+    try:
+        python = base_python("bpy53")
+    except EnvUnavailable:
+        python = sys.executable
+    proc = subprocess.run([python, "-m", "pip", "index", "versions", "bpy",
                            "--disable-pip-version-check"], capture_output=True, text=True, timeout=60)
     m = re.search(r"Available versions:\s*(.+)", proc.stdout)
     if proc.returncode != 0 or not m:

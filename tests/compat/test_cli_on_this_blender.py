@@ -1,7 +1,6 @@
 """The whole headless chain (.blend -> export -> engine -> report) on whichever bpy runs this
-file, with the scene written by that same Blender: the shipped sample .blend files are saved
-by Blender 5.0, whose file format Blender 4.2 cannot read, so tests/test_compat.py's 4.2 run
-relies on this test for the CLI path.
+file, with the scene written by that same Blender (sample_blends/generate.py into a temporary
+folder): the CLI path on each Blender of tests/test_compat.py, on a file that Blender wrote.
 
 Reference: a black emitter (exitance pi W/m^2) facing a grey receiver (reflectance 0.5),
 unit squares 1 m apart: B_r = rho_r * F * e with Howell's closed form F (engine.closed_forms).

@@ -1,0 +1,120 @@
+"""The radiance a surface shows along a view direction, from the radiosity solution and its
+material's BSDF (pure math, no bpy).
+
+The radiosity engine models every surface as Lambertian with its white-furnace albedo: B/pi is
+the cosine-weighted mean of the radiance it sends over the hemisphere. A glossy material
+(a Principled BSDF's specular layer) sends more towards the mirror directions of its incident
+light and less elsewhere, so what one view shows differs from B/pi: a bake (every face viewed
+along its normal) shows less than B/pi on a face lit at grazing incidence (measured: 8 % on a
+red wall lit from the ceiling next to it) and more on one lit from straight above.
+
+``view_radiance`` gathers a patch's incident light from the form factors: patch i receives
+the radiance L_j(v_ji) that patch j sends towards it over a cosine-weighted solid angle
+pi F_ij, so the radiance seen along v is
+
+    L_i(v) = e_i/pi + sum_j f_i(l_ij, v) F_ij pi L_j(v_ji),
+
+f_i the material's BSDF as Cycles evaluates it (engine.principled.BRDFTable: the layering
+weights at the view direction, the GGX lobes with their energy compensation) at the direction
+l_ij of patch j's centre, e = B - rho F B the configuration's exitance. A source sends its own
+emission, its reflection of the emitters' light through its BSDF towards i (a wall lit at
+grazing incidence by a ceiling lamp mirrors it down to the floor), and the rest of its light
+as the Lambertian model does:
+
+    L_j(v) = e_j/pi + sum_(k emits) f_j(l_jk, v) F_jk e_k + rho_j (H_j - sum_(k emits) F_jk e_k)/pi,
+
+H_j = (F B)_j its irradiance. For Lambertian materials f = rho/pi and L = B/pi exactly. Left
+out: the direction of light after two reflections, and glossy lobes narrower than the patches
+seen (engine.principled.VIEW_ALPHA_MIN). Checked against Cycles bakes in
+tests/test_cycles_principled.py (a floor under a lamp, a Cornell box, a furnished room;
+docs/validation.md).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from .principled import BRDFTable
+
+__all__ = ["view_radiance", "HORIZON"]
+
+#: smallest cosine of a source direction: a patch seen by i (F_ij > 0) may have its centre
+#: behind i's plane (a large patch reaching under i); it is taken just above the horizon
+HORIZON = 0.02
+#: largest (target patch, source patch, emitter patch) triples for the sources' glossy reflection
+MAX_PAIRS = 40_000_000
+
+
+def _frame(n):
+    n = n / np.linalg.norm(n)
+    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t1 = np.cross(n, a)
+    t1 /= np.linalg.norm(t1)
+    return np.stack([t1, np.cross(n, t1), n])  # rows: local x, y, z
+
+
+def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
+                  source_glossy=True, max_pairs=MAX_PAIRS) -> np.ndarray:
+    """(len(patches), 3) radiance (W m^-2 sr^-1) seen along ``view`` (world unit vectors
+    (len(patches), 3); default: each patch's normal, what a bake shows) on ``patches``.
+
+    ``F``: form factors (FormFactors or a (P, P) array / sparse matrix), ``B`` (P, 3) the
+    radiosity solved with the Lambertian ``reflectance`` (P, 3), ``center`` and ``normal``
+    (P, 3), ``material`` (P,) indexes ``material_lobes`` (each a material's BSDFs,
+    engine.principled.BRDFTable). ``source_glossy``: the sources' reflection of the emitters'
+    light through their own BSDF towards the patch (module docstring); skipped when
+    patches x sources x emitters exceeds ``max_pairs``."""
+    M = getattr(F, "matrix", F)
+    P = M.shape[0]
+    B = np.asarray(B, dtype=np.float64)
+    rho = np.asarray(reflectance, dtype=np.float64)
+    material = np.asarray(material, dtype=np.int64)
+    patches = np.asarray(patches, dtype=np.int64)
+    FB = np.asarray(M @ B, dtype=np.float64)
+    e = B - rho * FB
+    tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
+    frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
+    E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), 1e-300), axis=1))
+    rows = M[patches]
+    rows = rows.tocsr() if sp.issparse(rows) else np.asarray(rows)
+    nnz = rows.nnz if sp.issparse(rows) else int(np.count_nonzero(rows))
+    glossy = source_glossy and len(E) > 0 and nnz * len(E) <= max_pairs
+    if glossy:
+        FE = M[:, E]
+        FE = (FE.toarray() if sp.issparse(FE) else np.asarray(FE)).astype(np.float64)  # (P, |E|)
+        dE = center[None, E, :] - center[:, None, :]
+        dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), 1e-300)
+        lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
+        H_direct = FE @ e[E]
+        indirect = rho * (FB - H_direct) / np.pi  # the rest of the light, sent Lambertian
+    out = np.empty((len(patches), 3))
+    for k, i in enumerate(patches):
+        if sp.issparse(rows):
+            js, fij = rows.indices[rows.indptr[k]:rows.indptr[k + 1]], rows.data[rows.indptr[k]:rows.indptr[k + 1]]
+        else:
+            js = np.flatnonzero(rows[k])
+            fij = rows[k, js]
+        R = frames[i]
+        v = np.array([0.0, 0.0, 1.0]) if view is None else R @ np.asarray(view[k], dtype=np.float64)
+        d = center[js] - center[i]
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+        f = tables[int(material[i])](v, _above(d @ R.T))
+        if glossy:
+            src = e[js] / np.pi + indirect[js]
+            vj = _above(np.einsum("jab,jb->ja", frames[js], -d))  # towards i, in each source's frame
+            for m in np.unique(material[js]):
+                sel = np.flatnonzero(material[js] == m)
+                n, nE = len(sel), len(E)
+                g = tables[int(m)](np.repeat(vj[sel], nE, axis=0), lE[js[sel]].reshape(-1, 3)).reshape(n, nE, 3)
+                src[sel] += np.einsum("jkc,jk,kc->jc", g, FE[js[sel]], e[E])
+        else:
+            src = B[js] / np.pi
+        out[k] = e[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
+    return out
+
+
+def _above(loc):
+    """Unit local directions lifted to at least HORIZON above the tangent plane."""
+    loc = np.array(loc, dtype=np.float64)
+    loc[..., 2] = np.maximum(loc[..., 2], HORIZON)
+    return loc / np.linalg.norm(loc, axis=-1, keepdims=True)

@@ -1,0 +1,227 @@
+"""Blender materials -> the engine's Lambertian reflectance and emission, as Cycles renders them (bpy).
+
+``material_properties(mat)`` returns ``(reflectance (3,), radiance (3,), note or None)``:
+the effective Lambertian reflectance is the material's **white-furnace albedo** in Cycles (how
+much of the light falling on it, uniformly from every direction, it sends back, per RGB channel;
+see engine/principled.py for the Principled BSDF's layers), and ``radiance`` the emitted
+radiance L_e (W m^-2 sr^-1; the engine's exitance is pi L_e, one-sided).
+
+The surface shader is the node linked to the active Material Output's Surface (output target
+All or Cycles), read through reroutes and muted nodes:
+
+- **Principled BSDF**: Base Color, Roughness, IOR, Specular IOR Level, Specular Tint and the
+  distribution (Multiscatter GGX / GGX) exactly as Cycles layers them; Metallic, Transmission,
+  Coat, Sheen, Subsurface, Alpha, thin film and anisotropy by the approximations of
+  engine/principled.py, each named in the note. Emission Color x Emission Strength (attenuated
+  by the coat).
+- **Diffuse BSDF**: Color (Lambert), or its Oren-Nayar albedo when Roughness > 0.
+- **Emission**: reflectance 0, L_e = Color x Strength.
+- **Mix Shader**: (1 - Fac) x first + Fac x second, Fac clamped to [0, 1]; a linked Fac is
+  taken as 0.5, with a note. **Add Shader**: the sum.
+- **Transparent BSDF** and **Holdout**: reflect nothing here (light through a transparent
+  surface is treated as lost), with a note.
+- Anything else (other shaders, node groups), and a linked Base Color / Color: the material's
+  viewport colour ``Material.diffuse_color`` (as a Lambertian reflectance, or as the Principled
+  BSDF's Base Color), with a note. Other linked inputs (a texture on Roughness, ...) use the
+  socket's own unlinked value, with a note.
+- A material without a node tree: its viewport colour. No material: handled by the caller.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import bpy
+import numpy as np
+
+from .engine.principled import PrincipledParams, oren_nayar_albedo, principled_albedo
+
+__all__ = ["material_properties", "surface_node", "Closure", "surface_closure"]
+
+_MAX_DEPTH = 64
+
+
+@dataclass
+class Closure:
+    """What a shader (sub)tree amounts to for the radiosity engine."""
+
+    reflectance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    radiance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    specular: np.ndarray = field(default_factory=lambda: np.zeros(3))  # glossy share of reflectance
+    notes: list = field(default_factory=list)
+    #: the BSDFs it sums, for view-dependent radiance (engine.principled.lobes_brdf):
+    #: (weight, "principled", PrincipledParams) | (weight, "diffuse", (colour, roughness))
+    lobes: list = field(default_factory=list)
+
+    def scaled(self, k):
+        return Closure(self.reflectance * k, self.radiance * k, self.specular * k, list(self.notes),
+                       [(w * k, kind, d) for w, kind, d in self.lobes])
+
+    def __add__(self, other):
+        return Closure(self.reflectance + other.reflectance, self.radiance + other.radiance,
+                       self.specular + other.specular, _merge(self.notes, other.notes), self.lobes + other.lobes)
+
+
+def _merge(a, b):
+    return list(a) + [n for n in b if n not in a]
+
+
+def _rgb(socket):
+    return np.asarray(socket.default_value[:3], dtype=np.float64)
+
+
+def _value(node, name, default, notes):
+    """An input's unlinked value (float or RGB tuple); a linked input is noted."""
+    sock = node.inputs.get(name)
+    if sock is None:
+        return default
+    if _linked(sock):
+        notes.append(f"{node.name}: {name} is linked, using its unlinked value")
+    v = sock.default_value
+    try:
+        return tuple(float(x) for x in v[:3])
+    except TypeError:
+        return float(v)
+
+
+def _linked(sock) -> bool:
+    return any(not link.is_muted for link in sock.links)
+
+
+def _source(sock):
+    """The node feeding ``sock`` through reroutes (None when unlinked)."""
+    for _ in range(_MAX_DEPTH):
+        links = [link for link in sock.links if not link.is_muted]
+        if not links:
+            return None
+        node = links[0].from_node
+        if node.bl_idname == "NodeReroute":
+            sock = node.inputs[0]
+            continue
+        if node.mute:  # a muted node passes its first linked input of the same kind through
+            passed = next((l.from_socket for l in node.internal_links if l.to_socket == links[0].from_socket), None)
+            if passed is None:
+                return None
+            sock = passed
+            continue
+        return node
+    return None
+
+
+def surface_node(mat):
+    """The shader node linked to the material's active output (All or Cycles), or None."""
+    tree = getattr(mat, "node_tree", None)
+    if tree is None:
+        return None
+    if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
+        return None
+    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    if not outputs:
+        return None
+    active = [n for n in outputs if n.is_active_output] or outputs
+    out = next((n for n in active if n.target in ("ALL", "CYCLES")), active[0])
+    return _source(out.inputs["Surface"])
+
+
+def _viewport(mat):
+    return np.asarray(mat.diffuse_color[:3], dtype=np.float64)
+
+
+#: Principled inputs read (keyword of PrincipledParams: (socket name, default))
+_ALWAYS = {"roughness": ("Roughness", 0.5), "ior": ("IOR", 1.5), "specular_ior_level": ("Specular IOR Level", 0.5),
+           "specular_tint": ("Specular Tint", (1.0,) * 3), "metallic": ("Metallic", 0.0),
+           "transmission": ("Transmission Weight", 0.0), "coat_weight": ("Coat Weight", 0.0),
+           "sheen_weight": ("Sheen Weight", 0.0), "subsurface_weight": ("Subsurface Weight", 0.0),
+           "alpha": ("Alpha", 1.0), "thin_film_thickness": ("Thin Film Thickness", 0.0),
+           "anisotropic": ("Anisotropic", 0.0), "diffuse_roughness": ("Diffuse Roughness", 0.0)}
+_LAYERS = {"coat_weight": {"coat_roughness": ("Coat Roughness", 0.03), "coat_ior": ("Coat IOR", 1.5),
+                           "coat_tint": ("Coat Tint", (1.0,) * 3)}}
+
+
+def _principled(node, mat) -> Closure:
+    notes = []
+    base_sock = node.inputs["Base Color"]
+    if _linked(base_sock):
+        base = tuple(_viewport(mat))
+        notes.append(f"{node.name}: Base Color is linked, using the viewport colour")
+    else:
+        base = tuple(float(x) for x in base_sock.default_value[:3])
+    kw = {k: _value(node, name, d, notes) for k, (name, d) in _ALWAYS.items()}
+    for gate, inputs in _LAYERS.items():  # a layer's other inputs only matter when it is on
+        if kw[gate] > 0:
+            kw.update({k: _value(node, name, d, notes) for k, (name, d) in inputs.items()})
+    params = PrincipledParams(base_color=base, multiscatter=getattr(node, "distribution", "MULTI_GGX") != "GGX",
+                              **kw)
+    res = principled_albedo(params)
+    notes.extend(res.notes)
+    radiance = np.zeros(3)
+    ec, es = node.inputs["Emission Color"], node.inputs["Emission Strength"]
+    if _linked(ec) or _linked(es):
+        notes.append(f"{node.name}: linked emission inputs are ignored")
+    else:
+        radiance = _rgb(ec) * float(es.default_value) * res.emission
+    return Closure(res.albedo, radiance, res.specular, notes, [(1.0, "principled", params)])
+
+
+def _eval(node, mat, depth=0) -> Closure:
+    if node is None:
+        return Closure()
+    if depth > _MAX_DEPTH:
+        return Closure(notes=["the shader tree is too deep, the rest is ignored"])
+    kind = node.bl_idname
+    if kind == "ShaderNodeBsdfPrincipled":
+        return _principled(node, mat)
+    if kind == "ShaderNodeBsdfDiffuse":
+        c = node.inputs["Color"]
+        if _linked(c):
+            return _fallback(mat, f"{node.name}: Color is linked, using the viewport colour")
+        sigma = _value(node, "Roughness", 0.0, notes := [])
+        color = np.maximum(_rgb(c), 0.0)
+        return Closure(oren_nayar_albedo(color, sigma), notes=notes, lobes=[(1.0, "diffuse", (color, sigma))])
+    if kind == "ShaderNodeEmission":
+        c, s = node.inputs["Color"], node.inputs["Strength"]
+        if _linked(c) or _linked(s):
+            return Closure(notes=[f"{node.name}: linked emission inputs are ignored"])
+        return Closure(radiance=_rgb(c) * float(s.default_value))
+    if kind == "ShaderNodeMixShader":
+        fac_sock = node.inputs[0]
+        notes = []
+        if _linked(fac_sock):
+            fac = 0.5
+            notes.append(f"{node.name}: its factor is linked, taken as 0.5")
+        else:
+            fac = float(np.clip(fac_sock.default_value, 0.0, 1.0))
+        a = _eval(_source(node.inputs[1]), mat, depth + 1).scaled(1.0 - fac)
+        b = _eval(_source(node.inputs[2]), mat, depth + 1).scaled(fac)
+        out = a + b
+        out.notes = _merge(notes, out.notes)
+        return out
+    if kind == "ShaderNodeAddShader":
+        return _eval(_source(node.inputs[0]), mat, depth + 1) + _eval(_source(node.inputs[1]), mat, depth + 1)
+    if kind == "ShaderNodeBsdfTransparent":
+        return Closure(notes=[f"{node.name}: light passing through is treated as lost"])
+    if kind == "ShaderNodeHoldout":
+        return Closure(notes=[f"{node.name}: a holdout reflects nothing"])
+    label = getattr(node, "bl_label", kind) or kind
+    return _fallback(mat, f"{label} is not read, using the viewport colour")
+
+
+def _fallback(mat, note=None):
+    c = np.maximum(_viewport(mat), 0.0)
+    return Closure(c, notes=[note] if note else [], lobes=[(1.0, "diffuse", (c, 0.0))])
+
+
+def surface_closure(mat) -> Closure:
+    """The material's Closure (see the module docstring); ``mat`` must not be None."""
+    node = surface_node(mat)
+    if node is None:
+        if getattr(mat, "node_tree", None) is None:
+            return _fallback(mat)  # a plain (non-node) material: its colour
+        return _fallback(mat, "no surface shader, using the viewport colour")
+    return _eval(node, mat)
+
+
+def material_properties(mat):
+    """(reflectance (3,), radiance (3,), note or None) of a non-None material."""
+    c = surface_closure(mat)
+    note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
+    return c.reflectance, c.radiance, note

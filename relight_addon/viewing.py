@@ -1,0 +1,42 @@
+"""What a bake (a view along each face's normal) shows, for the reports (no bpy).
+
+``normal_radiance(...)``: per base-mesh polygon, the radiance seen along the polygon's normal
+(engine/view_radiance.py: the radiosity's incident light through the material's BSDF), for
+the chosen patches' polygons;
+written in the reports as ``objects.<name>.radiance_normal`` (W m^-2 sr^-1, None where not
+computed; not computed above MAX_PATCHES patches). For Lambertian materials it is B/pi; for
+glossy ones it predicts what a Cycles COMBINED bake shows, while B/pi is the Lambertian
+model's average over view directions.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .engine.view_radiance import view_radiance
+
+#: above this many chosen patches it is not computed (work: chosen patches x all patches)
+MAX_PATCHES = 20000
+
+
+def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None) -> dict:
+    """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
+    a patch in ``mask`` (default: all), its patches' area-weighted mean."""
+    from .jobs import PolygonMap
+
+    P = patches.n_patches
+    mask = np.ones(P, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+    sel = np.flatnonzero(mask)
+    material = np.asarray(face_material)[patches.face]
+    L = np.zeros((P, 3))
+    L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes)
+    pmap = PolygonMap(faces, patches, polygon_counts)
+    W = pmap.weights
+    covered = np.asarray(W @ mask.astype(np.float64)).reshape(-1)
+    full = np.asarray(W @ np.ones(P)).reshape(-1)
+    vals = np.asarray(W @ L)
+    ok = (full > 0) & (covered >= full - 1e-9)  # every patch of the polygon was computed
+    out = {}
+    for oi, name in enumerate(pmap.names):
+        a, b = pmap.offset[oi], pmap.offset[oi + 1]
+        out[name] = [vals[k].tolist() if ok[k] else None for k in range(a, b)]
+    return out

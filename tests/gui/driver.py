@@ -1,0 +1,667 @@
+"""Drives the Relight add-on in a real Blender window, as an artist would (not a pytest module).
+
+Run by tools/gui_test.py inside the Debian trixie chroot (Blender 4.3.2 under Xvfb):
+
+    blender -p 0 0 1600 1000 staircase_targets.blend --python driver.py -- OUT_DIR
+
+The extension is already installed in that Blender's user directory (tests/gui/prep.py, with
+Preferences > Install from Disk's operator). Every step is a ``bpy.app.timers`` tick of one
+generator; buttons are found by hovering them and pressing Ctrl+C (Blender copies an operator
+button's Python command), then pressed with real xdotool clicks. Screenshots come from outside
+Blender (ImageMagick ``import``). A heartbeat timer measures whether the UI stays responsive.
+
+Checks are printed as ``GUI-CHECK <status> <name>: <detail>`` and written to OUT_DIR/result.json;
+Blender exits with os._exit(0) when every check passed (xfail allowed), 1 otherwise.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+import traceback
+
+import bmesh
+import bpy
+import numpy as np
+
+ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+OUT = ARGS[0] if ARGS else "/tmp/relight-gui"
+PKG = "bl_ext.user_default.relight"
+SENTINEL = "<relight-gui-probe>"
+PAUSE_LIMIT = 2.5  # s: the longest main-thread pause allowed while a solve runs or cancels
+
+RESULT = {"checks": [], "shots": [], "timings": {}, "blender": bpy.app.version_string}
+BEAT = []
+T0 = time.monotonic()
+
+
+def log(*a):
+    print("GUI-LOG", *a, flush=True)
+
+
+def check(name, ok, detail="", xfail=None):
+    ok = bool(ok)
+    status = ("XPASS" if xfail else "pass") if ok else ("xfail" if xfail else "FAIL")
+    RESULT["checks"].append({"name": name, "status": status, "detail": str(detail)[:800], "xfail": xfail})
+    print(f"GUI-CHECK {status} {name}: {detail}", flush=True)
+    return ok
+
+
+# --- windows, regions, coordinates -------------------------------------------------------
+
+def window():
+    return bpy.context.window_manager.windows[0]
+
+
+def area3d():
+    return next(a for a in window().screen.areas if a.type == "VIEW_3D")
+
+
+def region(kind, area=None):
+    return next(r for r in (area or area3d()).regions if r.type == kind)
+
+
+def screen_h():
+    return window().height
+
+
+def to_screen(reg, rx, ry):
+    """Region pixel (from its bottom-left) -> X screen pixel (from the top-left)."""
+    win = window()
+    return int(win.x + reg.x + rx), int(screen_h() - (win.y + reg.y + ry))
+
+
+def to_region(reg, sx, sy):
+    win = window()
+    return sx - win.x - reg.x, (screen_h() - sy) - win.y - reg.y
+
+
+def override():
+    a = area3d()
+    return bpy.context.temp_override(window=window(), area=a, region=region("WINDOW", a))
+
+
+def mods():
+    return {k: sys.modules[f"{PKG}.{k}"] for k in ("results", "blender_ui.panels", "blender_ui.operators",
+                                                   "blender_ui.viewport", "export")}
+
+
+# --- input ----------------------------------------------------------------------------------
+
+def xdo(*args):
+    subprocess.run(["xdotool", *map(str, args)], check=True, timeout=30)
+
+
+def move(x, y):
+    xdo("mousemove", int(x), int(y))
+
+
+def shot(name, wait=True):
+    path = os.path.join(OUT, name + ".png")
+    proc = subprocess.Popen(["import", "-window", "root", path])
+    if wait:
+        proc.wait(timeout=60)
+    RESULT["shots"].append(name)
+    return path
+
+
+def viewport_center():
+    a = area3d()
+    r = region("WINDOW", a)
+    ui = region("UI", a)
+    return to_screen(r, (ui.x - r.x) // 2, r.height // 2)
+
+
+def key_in_viewport(key):
+    move(*viewport_center())
+    yield 0.4
+    xdo("key", key)
+    yield 1.0
+
+
+def click(x, y, settle=1.0):
+    move(x, y)
+    yield 0.5
+    xdo("click", "1")
+    yield settle
+
+
+# --- finding buttons: hover + Ctrl+C, positions kept in the sidebar's view coordinates ----------
+
+def ui_region():
+    return region("UI")
+
+
+def hover_copy(sx, sy, wait=0.15):
+    wm = bpy.context.window_manager
+    wm.clipboard = SENTINEL
+    move(sx, sy)
+    xdo("key", "ctrl+c")
+    yield wait
+    got = wm.clipboard
+    return None if got == SENTINEL else got
+
+
+def scroll_sidebar(notches):
+    """Mouse-wheel the sidebar (positive = down)."""
+    r = ui_region()
+    move(*to_screen(r, r.width // 2, r.height // 2))
+    yield 0.3
+    if notches:
+        xdo("click", "--repeat", abs(notches), "--delay", "30", "5" if notches > 0 else "4")
+    # Blender redraws the sidebar (software OpenGL) for each notch: wait until it has settled
+    last, still = None, 0
+    for _ in range(40):
+        yield 0.25
+        top = ui_region().view2d.region_to_view(0, 0)[1]
+        still = still + 1 if last is not None and abs(top - last) < 0.5 else 0
+        last = top
+        if still >= 2:
+            break
+
+
+def probe_page(hits):
+    """Probe the visible sidebar every 10 px: a column at 30 % of the width, and at 75 % on rows
+    where the first column found a button (rows of two buttons)."""
+    r = ui_region()
+    v2d = r.view2d
+    inner = r.width - 40
+    rows = []
+    for ry in range(r.height - 6, 6, -10):
+        sx, sy = to_screen(r, 10 + 0.30 * inner, ry)
+        got = yield from hover_copy(sx, sy)
+        if got:
+            rows.append(ry)
+            hits.setdefault(got, set()).add(tuple(round(v, 1) for v in v2d.region_to_view(10 + 0.30 * inner, ry)))
+    for ry in rows:
+        sx, sy = to_screen(r, 10 + 0.75 * inner, ry)
+        got = yield from hover_copy(sx, sy)
+        if got:
+            hits.setdefault(got, set()).add(tuple(round(v, 1) for v in v2d.region_to_view(10 + 0.75 * inner, ry)))
+
+
+def probe_sidebar(max_pages=4):
+    """Every copyable button of the sidebar: {python command or value: (view x, view y)} (the
+    middle of the places where it answered), scrolling down page by page."""
+    t = time.monotonic()
+    hits = {}
+    yield from scroll_sidebar(-60)
+    for page in range(max_pages):
+        yield from probe_page(hits)
+        top = ui_region().view2d.region_to_view(0, 0)[1]
+        yield from scroll_sidebar(30)
+        if abs(ui_region().view2d.region_to_view(0, 0)[1] - top) < 2:
+            break  # the bottom of the sidebar is visible
+    found = {}
+    for k, pts in hits.items():
+        x = min(p[0] for p in pts)  # the first column that answered
+        ys = [p[1] for p in pts if p[0] == x]
+        found[k] = (x, sum(ys) / len(ys))
+    RESULT["timings"].setdefault("probe_s", []).append(round(time.monotonic() - t, 1))
+    log("probe found", json.dumps({k: [round(v[0]), round(v[1])] for k, v in found.items()}))
+    return found
+
+
+def press(found, command, settle=1.2):
+    """Scroll the button into view, check by hover that it is the one, click it."""
+    if command not in found:
+        raise AssertionError(f"button {command} not found in the sidebar (probe saw {sorted(found)})")
+    vx, vy = found[command]
+    for _ in range(12):
+        r = ui_region()
+        rx, ry = r.view2d.view_to_region(vx, vy, clip=False)
+        if 20 <= ry <= r.height - 20:
+            break
+        yield from scroll_sidebar(3 if ry < 20 else -3)
+    sx, sy = to_screen(r, rx, ry)
+    got = None
+    for wait in (0.3, 0.6, 1.0):
+        got = yield from hover_copy(sx, sy, wait)
+        if got == command:
+            break
+    if got != command:
+        RESULT.setdefault("layout_moved", []).append(command)
+        log(f"at the place of {command} (region {rx}, {ry}) the sidebar has {got!r}: probing again")
+        found.update((yield from probe_sidebar()))
+        return (yield from press(found, command, settle))
+    yield from click(sx, sy, settle)
+    return sx, sy
+
+
+PAUSES = []  # (seconds since start, pause, solve stage before -> after)
+_STAGE = [None]
+
+
+def heartbeat():
+    now = time.monotonic()
+    try:
+        state = sys.modules[PKG + ".blender_ui.operators"].solve_state(bpy.context.scene)
+        stage = None if state is None else f"{state['stage']} {state['fraction']:.2f}"
+    except Exception:  # noqa: BLE001  (not loaded yet, or an older add-on)
+        stage = None
+    if BEAT and now - BEAT[-1] > 0.5:
+        PAUSES.append((round(BEAT[-1] - T0, 2), round(now - BEAT[-1], 2), f"{_STAGE[0]} -> {stage}"))
+    _STAGE[0] = stage
+    BEAT.append(now)
+    if len(BEAT) > 50000:
+        del BEAT[:25000]
+    return 0.05
+
+
+def max_gap(t0, t1):
+    ts = [t0] + [t for t in BEAT if t0 <= t <= t1] + [t1]
+    return max(b - a for a, b in zip(ts[:-1], ts[1:]))
+
+
+# --- scene state ---------------------------------------------------------------------------
+
+def counts():
+    return mods()["blender_ui.panels"]._counts(bpy.context)
+
+
+def mesh_objects():
+    return [o for o in bpy.context.scene.objects if o.type == "MESH"]
+
+
+def set_active(obj):
+    vl = bpy.context.view_layer
+    for o in bpy.context.scene.objects:
+        o.select_set(o == obj)
+    vl.objects.active = obj
+
+
+def edit_select(obj, faces):
+    bm = bmesh.from_edit_mesh(obj.data)
+    bm.faces.ensure_lookup_table()
+    for f in bm.faces:
+        f.select_set(False)
+    for k in faces:
+        bm.faces[k].select_set(True)
+    bm.select_flush_mode()
+    bmesh.update_edit_mesh(obj.data)
+
+
+def shading():
+    s = area3d().spaces.active.shading
+    return s.type, s.color_type
+
+
+def relight_traces():
+    """Relight's results left in the scene (what Clear must remove): the stored curve, anything
+    carrying ``relight_owner`` (the emitters object, its mesh and material), radiosity layers."""
+    out = []
+    scene = bpy.context.scene
+    if "relight_result" in scene.keys():
+        out.append("scene relight_result")
+    for kind in ("objects", "meshes", "materials", "collections", "images"):
+        out += [f"{kind}:{b.name}" for b in getattr(bpy.data, kind) if b.get("relight_owner")]
+    for o in mesh_objects():
+        if "relight_radiosity" in o.data.attributes:
+            out.append(f"{o.name}.relight_radiosity")
+    return out
+
+
+def reports():
+    """The session's reports, oldest first, read through an Info editor (the timeline area
+    turned into one for a moment): select all, Copy, read the clipboard."""
+    area = next(a for a in window().screen.areas if a.type in ("DOPESHEET_EDITOR", "TIMELINE", "INFO")
+                and a != area3d())
+    old = area.ui_type
+    area.ui_type = "INFO"
+    yield 0.5
+    wm = bpy.context.window_manager
+    wm.clipboard = SENTINEL
+    with bpy.context.temp_override(window=window(), area=area, region=region("WINDOW", area)):
+        bpy.ops.info.select_all(action="SELECT")
+        bpy.ops.info.report_copy()
+    text = wm.clipboard
+    area.ui_type = old
+    yield 0.3
+    return [] if text == SENTINEL else [ln for ln in text.splitlines() if ln.strip()]
+
+
+# --- the chart as seen on screen ---------------------------------------------------------
+
+def load_shot(path):
+    img = bpy.data.images.load(path, check_existing=False)
+    w, h = img.size
+    px = np.empty(w * h * 4, dtype=np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)[::-1, :, :3]  # top-down rows, like X screen coordinates
+
+
+def chart_on_screen(path):
+    """(x0, y0, x1, y1) of the chart in the screenshot (its distinctive background colour
+    inside the sidebar), and the x of its marker line, or None."""
+    chart = sys.modules[PKG + ".chart"]
+    a = load_shot(path)
+    r = ui_region()
+    x_lo, x_hi = r.x, r.x + r.width
+    bg = np.array(chart.COLORS["background"][:3], dtype=np.float32)
+    mask = np.all(np.abs(a[:, x_lo:x_hi] - bg) < 1.5 / 255, axis=-1)
+    if mask.sum() < 500:
+        return None
+    ys, xs = np.nonzero(mask)
+    box = [int(xs.min()) + x_lo, int(ys.min()), int(xs.max()) + x_lo, int(ys.max())]
+    sub = a[box[1]:box[3] + 1, box[0]:box[2] + 1]
+    mk = np.array(chart.COLORS["marker"][:3], dtype=np.float32)
+    mmask = np.all(np.abs(sub - mk) < 0.08, axis=-1)
+    if not mmask.any():
+        return box, None
+    col_counts = mmask.sum(axis=0)
+    return box, float(box[0] + np.argmax(col_counts))
+
+
+def check_marker(name, path):
+    panels = mods()["blender_ui.panels"]
+    geo = panels.last_chart_geometry()
+    seen = chart_on_screen(path)
+    if seen is None or geo is None or geo.get("marker") is None:
+        return check(name, False, f"chart on screen {seen}, geometry {geo}")
+    box, mx = seen
+    w_img = geo["size"][0]
+    scale = (box[2] - box[0] + 1) / w_img
+    want = box[0] + geo["marker"][0] * scale
+    current = mods()["results"].chart_data(bpy.context.scene)["current"]
+    ok = mx is not None and abs(mx - want) <= 3 and geo["current"] == current
+    return check(name, ok, f"marker at x={mx}, expected {want:.1f} (chart {box}, drawn at {scale:.3f} x), "
+                           f"curve point {geo['current']} (shown {current})")
+
+
+# --- the scenario ---------------------------------------------------------------------------
+
+def scenario():
+    yield 3.0
+    prefs = bpy.context.preferences
+    check("the extension is installed and enabled", PKG in prefs.addons, sorted(prefs.addons.keys()))
+    m = mods()
+    panels, operators, results = m["blender_ui.panels"], m["blender_ui.operators"], m["results"]
+    scene = bpy.context.scene
+    settings = scene.relight
+    initial_shading = shading()
+    RESULT["initial_shading"] = initial_shading
+
+    # the camera view and the sidebar, with keys an artist uses
+    yield from key_in_viewport("KP_0")
+    r3d = area3d().spaces.active.region_3d
+    if r3d.view_perspective != "CAMERA":
+        r3d.view_perspective = "CAMERA"
+        log("KP_0 did not switch to the camera; set from Python")
+    yield from key_in_viewport("n")
+    check("N opens the sidebar", area3d().spaces.active.show_region_ui)
+    if not area3d().spaces.active.show_region_ui:
+        area3d().spaces.active.show_region_ui = True
+        yield 1.0
+
+    # 1. the Relight tab, opened by clicking down the tab strip
+    r = ui_region()
+    tab_y = 6
+    while r.active_panel_category != "Relight" and tab_y < r.height:
+        tab_y += 14
+        yield from click(*to_screen(r, r.width - 10, r.height - tab_y), settle=0.6)
+        r = ui_region()
+    check("the Relight tab opens with a click", r.active_panel_category == "Relight", r.active_panel_category)
+
+    # 2. no active object: hints instead of unexplained greyed-out buttons
+    with override():
+        if bpy.context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+    for o in scene.objects:
+        o.select_set(False)
+    bpy.context.view_layer.objects.active = None
+    yield 1.5
+    shot("01_no_active_object")
+    hints = panels.hints(bpy.context)
+    check("without an active mesh the panel says why buttons are greyed", "Select a mesh object" in hints, hints)
+    size = panels.effective_max_patch_size(scene)
+    check("Max Patch Size 0 stands for the scene's relight_max_patch_size (shown as Auto)",
+          settings.max_patch_size == 0 and size[0] == scene.get("relight_max_patch_size") and size[1] == "scene", size)
+    found0 = yield from probe_sidebar()
+    for cmd in ("bpy.ops.relight.paint_targets()", "bpy.ops.relight.fill_targets(unpaint=False)",
+                "bpy.ops.relight.fill_targets(unpaint=True)", "bpy.ops.relight.forbid_faces(allow=False)",
+                "bpy.ops.relight.forbid_faces(allow=True)", "bpy.ops.relight.solve()"):
+        check(f"button {cmd} is in the sidebar", cmd in found0)
+
+    # 3. a mesh becomes active: the rows stay where they were
+    floor = scene.objects["floor_0"]
+    set_active(floor)
+    yield 1.5
+    found = yield from probe_sidebar()
+    moved = {k: (found0[k][1], found[k][1]) for k in found0 if k.startswith("bpy.ops") and k in found
+             and abs(found0[k][1] - found[k][1]) > 8}
+    check("the panel does not jump when a mesh becomes active", not moved, moved)
+    shot("02_tab")
+
+    # 4. Paint Targets
+    yield from press(found, "bpy.ops.relight.paint_targets()", settle=2.0)
+    active = floor.data.color_attributes.active_color
+    check("Paint Targets enters Vertex Paint on the target layer",
+          bpy.context.mode == "PAINT_VERTEX" and active is not None and active.name == "relight_target",
+          (bpy.context.mode, active.name if active else None))
+    shot("03_paint_targets")
+
+    # 5. Edit Mode: the panel keeps working (defect 1); Fill Selected then Unpaint
+    t0, c0, f0, _ = counts()
+    targets0 = m["export"].face_flags(floor, "target")
+    fill = [int(k) for k in np.flatnonzero(~targets0)[:4]]
+    yield from key_in_viewport("Tab")
+    check("Tab enters Edit Mode", bpy.context.mode == "EDIT_MESH", bpy.context.mode)
+    if bpy.context.mode != "EDIT_MESH":
+        with override():
+            bpy.ops.object.mode_set(mode="EDIT")
+        yield 1.0
+    with override():
+        bpy.ops.mesh.select_mode(type="FACE")
+    edit_select(floor, fill)
+    yield 1.5
+    t1, c1, f1, notes = counts()
+    check("counts in Edit Mode (from the edit mesh)", (t1, f1) == (t0, f0), f"{(t1, c1, f1)} vs {(t0, c0, f0)} {notes}")
+    yield from scroll_sidebar(-40)
+    shot("04_edit_mode")
+    yield from press(found, "bpy.ops.relight.fill_targets(unpaint=False)", settle=1.5)
+    t2 = counts()[0]
+    check("Fill Selected paints the 4 selected faces", t2 == t0 + 4, f"{t0} -> {t2}")
+    shot("05_fill_selected")
+    yield from press(found, "bpy.ops.relight.fill_targets(unpaint=True)", settle=1.5)
+    t3 = counts()[0]
+    check("Unpaint makes them non-targets again", t3 == t0, f"{t2} -> {t3}")
+
+    # 6. Forbid / Allow Selected in Edit Mode on a wall
+    yield from key_in_viewport("Tab")
+    wall = scene.objects["wall_east"] if "wall_east" in scene.objects else \
+        next(o for o in mesh_objects() if o.name.startswith("wall"))
+    with override():
+        if bpy.context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+    set_active(wall)
+    cand = np.flatnonzero(m["export"].face_flags(wall, "candidate"))[:6]
+    c_before = counts()[1]
+    yield from key_in_viewport("Tab")
+    if bpy.context.mode != "EDIT_MESH":
+        with override():
+            bpy.ops.object.mode_set(mode="EDIT")
+        yield 1.0
+    with override():
+        bpy.ops.mesh.select_mode(type="FACE")
+    edit_select(wall, [int(k) for k in cand])
+    yield 1.0
+    yield from press(found, "bpy.ops.relight.forbid_faces(allow=False)", settle=1.5)
+    shot("06_forbid_selected")
+    in_edit = bpy.context.mode == "EDIT_MESH"
+    yield from key_in_viewport("Tab")
+    c_after = counts()[1]
+    check("Forbid Selected removes the 6 faces from the candidates", in_edit and c_after == c_before - 6,
+          f"{c_before} -> {c_after}, still in Edit Mode: {in_edit}")
+    yield from key_in_viewport("Tab")
+    yield from press(found, "bpy.ops.relight.forbid_faces(allow=True)", settle=1.5)
+    yield from key_in_viewport("Tab")
+    check("Allow Selected gives them back", counts()[1] == c_before, f"{c_after} -> {counts()[1]}")
+    check("back in Object Mode", bpy.context.mode == "OBJECT", bpy.context.mode)
+
+    # 7. Solve & Reduce, modal, with progress
+    t_click = time.monotonic()
+    yield from press(found, "bpy.ops.relight.solve()", settle=0.3)
+    running_seen, k, t_first, t_last = False, 0, None, None
+    deadline = time.monotonic() + 900
+    while time.monotonic() < deadline:
+        state = operators.solve_state(scene)
+        if state is not None:
+            running_seen = True
+            t_last = time.monotonic()
+            t_first = t_first or t_last
+            if k < 3 and state["fraction"] >= 0.25 * k:
+                shot(f"07_solving_{k}", wait=False)
+                k += 1
+        elif running_seen or len(settings.curve):
+            break
+        yield 0.5
+    t_done = time.monotonic()
+    RESULT["timings"]["solve_s"] = round(t_done - t_click, 1)
+    check("the solve runs in the background with progress", running_seen and k >= 1, f"progress shots: {k}")
+    if running_seen:
+        gap = max_gap(t_first, t_last)
+        RESULT["timings"]["solve_pauses_s"] = {"start (export, meshing)": round(max_gap(t_click, t_first), 2),
+                                               "while solving": round(gap, 2),
+                                               "finish (apply the result)": round(max_gap(t_last, t_done), 2)}
+        # the worker shares the GIL and 2 busy cores with Blender's software OpenGL: pauses of
+        # a second happen; a solve run on the main thread would pause it for the whole solve
+        check("the UI stays responsive while solving", gap < PAUSE_LIMIT,
+              f"longest main-thread pause {gap:.2f} s over {t_last - t_first:.0f} s of solving; "
+              f"{RESULT['timings']['solve_pauses_s']}")
+    yield from scroll_sidebar(40)
+    shot("08_solved")  # while the status bar still shows the last report
+    n_rows = len(settings.curve)
+    final = settings.curve[settings.curve_index] if n_rows else None
+    check("the solve fills the curve and ends at <= 3 positive lights",
+          n_rows >= 2 and final is not None and final.n_negative == 0 and 1 <= final.n_lights <= 3,
+          f"{n_rows} rows, final {final.n_lights if final else None} lights")
+    check("the summary is kept for the panel", settings.last_summary.startswith(f"{final.n_lights} lights"),
+          settings.last_summary)
+    RESULT["warnings"] = settings.last_warnings
+    check("after the solve the viewport shows the predicted radiosity",
+          shading() == ("SOLID", "VERTEX") and floor.data.color_attributes.active_color.name == "relight_radiosity",
+          (shading(), floor.data.color_attributes.active_color.name))
+    text = yield from reports()
+    last = text[-1] if text else ""
+    warnings = [w for w in settings.last_warnings.split("\n") if w]
+    want = warnings[-1][:60] if warnings else settings.last_summary[:60]
+    check("the solve's key message is the last report (the status bar shows it)", want in last, last[:300])
+    result_before = scene.get("relight_result")
+
+    # 8. rows of the list: the chart marker follows the row picked
+    found = yield from probe_sidebar()
+    apply_cmd = "bpy.ops.relight.apply_configuration(index=-1)"
+    if check("the Results panel has its buttons", apply_cmd in found, sorted(found)):
+        yield from scroll_sidebar(40)
+        r = ui_region()
+        ax, ay = r.view2d.view_to_region(*found[apply_cmd], clip=False)
+        path = shot("09_chart_final")
+        check_marker("the chart marks the final configuration", path)
+        picked = set()
+        ui = bpy.context.preferences.system.ui_scale
+        for j in (1, 3, 5):
+            sx, sy = to_screen(r, r.width * 0.35, ay + (30 + 20.8 * j) * ui / 1.0417)
+            before = settings.curve_index
+            yield from click(sx, sy, settle=2.0)
+            picked.add(settings.curve_index)
+            path = shot(f"10_row_{j}")
+            check_marker(f"after picking row {settings.curve_index} the chart marker follows", path)
+            log("row click", j, before, "->", settings.curve_index)
+        check("clicking rows picks different configurations", len(picked) >= 3, sorted(picked))
+        shot("11_results")
+
+    # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
+    settings.rays_per_patch = 262144
+    yield 1.0
+    yield from press(found, "bpy.ops.relight.solve()", settle=2.0)
+    shot("12_cost_question")
+    asked = operators.solve_state(scene) is None
+    xdo("key", "Down")
+    yield 0.5
+    xdo("key", "Return")
+    yield 5.0
+    state = operators.solve_state(scene)
+    check("a large solve asks first, then still runs modally", asked and state is not None, state)
+    shot("13_large_solve_running")
+    t_esc = time.monotonic()
+    move(*viewport_center())
+    xdo("key", "Escape")
+    while operators.solve_state(scene) is not None and time.monotonic() - t_esc < 120:
+        yield 0.1
+    t_end = time.monotonic()
+    gap = max_gap(t_esc, t_end)
+    beats = len([t for t in BEAT if t_esc < t < t_end])
+    RESULT["timings"]["cancel_s"] = round(t_end - t_esc, 2)
+    # waiting for the worker on the main thread (the old modal's join) gives no heartbeat at
+    # all between ESC and the end of the cancel
+    check("ESC cancels without freezing the UI", operators.solve_state(scene) is None and gap < PAUSE_LIMIT
+          and (beats >= 2 or t_end - t_esc < 0.3),
+          f"cancelled in {t_end - t_esc:.2f} s, {beats} heartbeats meanwhile, longest main-thread pause {gap:.2f} s")
+    check("the cancelled solve leaves the previous result", scene.get("relight_result") == result_before
+          and len(settings.curve) == n_rows)
+    shot("14_cancelled")
+    settings.rays_per_patch = 0
+    yield 1.0
+
+    # 10. Show / Hide Radiosity, Make Area Lights, Clear
+    yield from press(found, "bpy.ops.relight.show_radiosity()", settle=1.5)
+    check("Hide Radiosity gives the viewport its shading back", shading() == initial_shading,
+          f"{shading()} vs {initial_shading}")
+    shot("15_radiosity_hidden")
+    yield from press(found, "bpy.ops.relight.show_radiosity()", settle=1.5)
+    check("Show Radiosity shows it again", shading() == ("SOLID", "VERTEX"), shading())
+    row = settings.curve[settings.curve_index]
+    data = results.load_result(scene)
+    power = float(data["curve_power"][int(data["point_index"][settings.curve_index])]) \
+        if "curve_power" in data else None
+    yield from press(found, "bpy.ops.relight.make_area_lights()", settle=2.0)
+    lights = [o.name for o in scene.objects if o.type == "LIGHT"]
+    energy = sum(scene.objects[n].data.energy for n in lights)
+    check("Make Area Lights: area lights carrying the configuration's power",
+          lights and (power is None or row.n_negative or abs(energy - power) <= 1e-3 * power),
+          f"{len(lights)} lights for {row.n_lights} light(s), {energy:.4g} W (configuration: {power} W)")
+    shot("16_area_lights")
+    yield from press(found, "bpy.ops.relight.clear_results()", settle=2.0)
+    traces = relight_traces()
+    check("Clear removes Relight's results", not traces and len(settings.curve) == 0, traces)
+    check("Clear gives the viewport its shading back", shading() == initial_shading, shading())
+    left = [n for n in lights if n in scene.objects]
+    check("the area lights Make Area Lights made survive Clear (as its tooltip says)", left == lights,
+          f"{len(left)} of {len(lights)} left")
+    yield from scroll_sidebar(-40)
+    shot("17_cleared")
+
+
+def finish(code=None):
+    RESULT["timings"]["total_s"] = round(time.monotonic() - T0, 1)
+    RESULT["pauses"] = PAUSES
+    failed = [c for c in RESULT["checks"] if c["status"] == "FAIL"]
+    RESULT["passed"] = not failed and code is None
+    with open(os.path.join(OUT, "result.json"), "w") as fh:
+        json.dump(RESULT, fh, indent=1)
+    print(f"GUI-DONE {len(RESULT['checks'])} checks, {len(failed)} failed", flush=True)
+    os._exit(0 if RESULT["passed"] else 1)
+
+
+GEN = scenario()
+
+
+def tick():
+    try:
+        return max(0.01, float(next(GEN)))
+    except StopIteration:
+        finish()
+    except Exception:
+        traceback.print_exc()
+        check("the scenario ran to its end", False, traceback.format_exc().strip().splitlines()[-1])
+        try:
+            shot("zz_failure")
+        finally:
+            finish(1)
+    return None
+
+
+os.makedirs(OUT, exist_ok=True)
+bpy.app.timers.register(heartbeat, first_interval=0.05, persistent=True)
+bpy.app.timers.register(tick, first_interval=2.0, persistent=True)
