@@ -24,6 +24,7 @@ from relight_addon.engine.options import JobOptions  # noqa: E402
 IMG = os.path.join(ROOT, "docs", "img")
 os.makedirs(IMG, exist_ok=True)
 SAMPLES = 32
+VIEW = "AgX"  # compresses the lights' highlights (the add-on's own renders use Standard: radiance 1 = white)
 
 export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
 scene = bpy.context.scene
@@ -54,7 +55,7 @@ for ob in exp.objects:
     col[:, 3] = 1.0
     tmp = me.color_attributes.new("relight_target_view", "FLOAT_COLOR", "CORNER")
     tmp.data.foreach_set("color", col.ravel())
-results.render_radiosity(os.path.join(IMG, "targets.png"), samples=SAMPLES, attribute="relight_target_view")
+results.render_radiosity(os.path.join(IMG, "targets.png"), samples=SAMPLES, attribute="relight_target_view", view_transform=VIEW)
 for ob in exp.objects:
     ob.data.color_attributes.remove(ob.data.color_attributes["relight_target_view"])
 
@@ -62,12 +63,12 @@ for ob in exp.objects:
 results.show_outcome(scene, paper, exp.fingerprints)
 paper_data = results.load_result(scene)
 results.apply_stored_point(scene, 0)
-results.render_radiosity(os.path.join(IMG, "e_x.png"), samples=SAMPLES)
+results.render_radiosity(os.path.join(IMG, "e_x.png"), samples=SAMPLES, view_transform=VIEW)
 results.apply_stored_point(scene, paper.final_index)
-results.render_radiosity(os.path.join(IMG, "reduced_paper.png"), samples=SAMPLES)
+results.render_radiosity(os.path.join(IMG, "reduced_paper.png"), samples=SAMPLES, view_transform=VIEW)
 # 4: the default's final configuration
 results.show_outcome(scene, outcome, exp.fingerprints)
-results.render_radiosity(os.path.join(IMG, "reduced.png"), samples=SAMPLES)
+results.render_radiosity(os.path.join(IMG, "reduced.png"), samples=SAMPLES, view_transform=VIEW)
 
 # 5. Cycles path tracing with the emitters object as the only light
 scene.render.engine = "CYCLES"
@@ -77,7 +78,7 @@ scene.cycles.use_denoising = False
 world = bpy.data.worlds.new("black")
 world.color = (0, 0, 0)
 scene.world = world
-scene.view_settings.view_transform = "Standard"
+scene.view_settings.view_transform = VIEW
 scene.render.image_settings.file_format = "PNG"
 scene.render.filepath = os.path.join(IMG, "reduced_cycles.png")
 bpy.ops.render.render(write_still=True)

@@ -730,12 +730,14 @@ def write_radiosity(objects, radiosity, areas, skipped=None):
         write_radiosity_layer(ob, values, areas[ob.name])
 
 
-def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE):
+def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE,
+                     view_transform="Standard"):
     """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
 
     Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
     override: Attribute ``relight_radiosity`` -> Emission, strength 1), on a black world,
-    from the scene camera, with the Standard view transform: a face of radiance 1 is white.
+    from the scene camera, with the Standard view transform (a face of radiance 1 is white) unless
+    ``view_transform`` says otherwise (e.g. "AgX", which compresses the lights' highlights).
     The scene's materials and world are restored afterwards.
     """
     context = context or bpy.context
@@ -771,7 +773,7 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
         scene.cycles.max_bounces = 0
         if resolution is not None:
             r.resolution_x, r.resolution_y = resolution
-        scene.view_settings.view_transform = "Standard"
+        scene.view_settings.view_transform = view_transform
         scene.view_settings.look = "None"
         scene.view_settings.exposure = 0.0
         r.image_settings.file_format = "PNG"
