@@ -202,9 +202,14 @@ def probe_sidebar(max_pages=4):
     return found
 
 
-def press(found, command, settle=1.2):
-    """Scroll the button into view, check by hover that it is the one, click it."""
+def press(found, command, settle=1.2, retries=2):
+    """Scroll the button into view, check by hover that it is the one, click it. A button the
+    probe missed (a hover whose copy came too late under load) is probed for again, twice."""
     if command not in found:
+        if retries > 0:
+            log(f"{command} not among the probed buttons: probing again")
+            found.update((yield from probe_sidebar()))
+            return (yield from press(found, command, settle, retries - 1))
         raise AssertionError(f"button {command} not found in the sidebar (probe saw {sorted(found)})")
     vx, vy = found[command]
     for _ in range(12):
