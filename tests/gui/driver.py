@@ -162,7 +162,7 @@ def scroll_sidebar(notches):
 
 def probe_page(hits):
     """Probe the visible sidebar every 10 px: a column at 30 % of the width, and at 75 % on rows
-    where the first column found a button (rows of two buttons)."""
+    where the first column found a button (rows of two buttons), 4 px off when it misses."""
     r = ui_region()
     v2d = r.view2d
     inner = r.width - 40
@@ -174,10 +174,13 @@ def probe_page(hits):
             rows.append(ry)
             hits.setdefault(got, set()).add(tuple(round(v, 1) for v in v2d.region_to_view(10 + 0.30 * inner, ry)))
     for ry in rows:
-        sx, sy = to_screen(r, 10 + 0.75 * inner, ry)
-        got = yield from hover_copy(sx, sy)
-        if got:
-            hits.setdefault(got, set()).add(tuple(round(v, 1) for v in v2d.region_to_view(10 + 0.75 * inner, ry)))
+        for dy in (0, -4, 4):  # a hover on a button's edge may not answer: 4 px above and below
+            sx, sy = to_screen(r, 10 + 0.75 * inner, ry + dy)
+            got = yield from hover_copy(sx, sy)
+            if got:
+                hits.setdefault(got, set()).add(
+                    tuple(round(v, 1) for v in v2d.region_to_view(10 + 0.75 * inner, ry + dy)))
+                break
 
 
 def probe_sidebar(max_pages=4):
