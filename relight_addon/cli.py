@@ -406,7 +406,8 @@ def run_radiosity_command(args, progress=None, cancel=None):
     report["warnings"].extend(w for w in warns if w not in report["warnings"])
     if result.form_factors is not None and result.patches.n_patches <= viewing.MAX_PATCHES // 4:
         rad = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
-                                      exp.face_material, exp.material_lobes, inputs["polygon_counts"])
+                                      exp.face_material, exp.material_lobes, inputs["polygon_counts"],
+                                      exitance=result.patches.exitance)
         for name, rows in rad.items():
             if name in report["objects"]:  # the reported objects (instance groups are not)
                 report["objects"][name]["radiance_normal"] = rows
@@ -427,8 +428,11 @@ def _add_normal_radiance(outcome, exp):
     if not np.any(mask) or np.sum(mask) > viewing.MAX_PATCHES:
         return
     B = np.asarray(outcome.stored["radiosity"][outcome.final_index], dtype=np.float64)
+    e = prob.patch_exitance(outcome.stored["exitance"][outcome.final_index])
+    if outcome.report.get("command") == "solve":
+        e = e + outcome.patches.exitance  # the scene's own emitters (fixed background)
     rad = viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, exp.face_material, exp.material_lobes,
-                                  export.job_inputs(exp)["polygon_counts"], mask)
+                                  export.job_inputs(exp)["polygon_counts"], mask, exitance=e)
     for name, rows in rad.items():
         if name in outcome.report["objects"]:  # the reported objects (instance groups are not)
             outcome.report["objects"][name]["radiance_normal"] = rows

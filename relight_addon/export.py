@@ -623,6 +623,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         target_radiosity=np.concatenate(b.tgt_b),
         forbidden=np.concatenate(b.forb),
         warnings=warnings,
+        face_material=np.concatenate(b.f_mat),
+        material_lobes=b.lobes,
     )
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,

@@ -22,6 +22,7 @@ import scipy.sparse as sp
 from .engine.best_lights import lower_bounds
 from .engine.cost import check_memory, estimate_cost, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
+from .engine.incidence import first_bounce_matrices, incidence_tables
 from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
 from .engine.options import JobOptions
@@ -158,7 +159,11 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         if cancel is not None and cancel():
             raise Cancelled("radiosity cancelled")
         t1 = time.perf_counter()
-        B, info = solve_radiosity(F, patches.reflectance, patches.exitance)
+        source = patches.exitance
+        D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
+        if D is not None:  # the emitters' first reflection with the albedo of its incidence
+            source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
+        B, info = solve_radiosity(F, patches.reflectance, source)
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
         if not info.get("converged", True):
@@ -468,6 +473,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if mode == "inverse":
             problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                                      mask, patches.center, patches.normal, light_basis=lights.basis)
+            problem.first_bounce = first_bounce(faces, patches, F, mask | np.any(patches.exitance > 0, axis=1))
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
                 background = patches.exitance.copy()
@@ -475,7 +481,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                 problem.b_target = problem.b_target - B_background[problem.targets]
         else:
             problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                                       patches.center, patches.normal, light_basis=lights.basis)
+                                                       patches.center, patches.normal, light_basis=lights.basis,
+                                                       first_bounce=first_bounce(faces, patches, F, mask))
         t_problem += time.perf_counter() - t1
         if p == passes:
             break
@@ -552,6 +559,17 @@ def certificate_notes(problem, bounds, final) -> list:
             f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
 
 
+def first_bounce(faces: FaceSet, patches: PatchSet, F, sources):
+    """engine.incidence's D per channel for the light leaving ``sources`` (a patch mask), from the
+    faces' materials; None when the FaceSet has none or none depends on the incidence."""
+    if faces.face_material is None or not faces.material_lobes:
+        return None
+    tables = incidence_tables(faces.material_lobes)
+    material = np.asarray(faces.face_material, dtype=np.int64)[patches.face]
+    return first_bounce_matrices(F, patches.center, patches.normal, material, tables,
+                                 np.flatnonzero(sources))
+
+
 def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
     """Stage 4: the kept configurations and the radiosity each gives, B = B_background + A^-1 e
     (one LU solve for all the points at once), and the patches -> polygons map."""
@@ -570,7 +588,10 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
     facs = problem.factors()
     B = np.empty((n_pts, P, 3))
     for c in range(3):
-        B[:, :, c] = (facs[c].solve(E_patch[:, :, c]) + model.background_radiosity[:, c:c + 1]).T
+        src = E_patch[:, :, c]
+        if problem.first_bounce is not None:
+            src = src + problem.first_bounce[c] @ src
+        B[:, :, c] = (facs[c].solve(src) + model.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
     pmap = PolygonMap(model.faces, patches, polygon_counts)

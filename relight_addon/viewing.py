@@ -18,9 +18,11 @@ from .engine.view_radiance import view_radiance
 MAX_PATCHES = 20000
 
 
-def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None) -> dict:
+def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None,
+                    exitance=None) -> dict:
     """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
-    a patch in ``mask`` (default: all), its patches' area-weighted mean."""
+    a patch in ``mask`` (default: all), its patches' area-weighted mean. ``exitance`` (P, 3):
+    the emitters' (view_radiance's)."""
     from .jobs import PolygonMap
 
     P = patches.n_patches
@@ -28,7 +30,8 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
     sel = np.flatnonzero(mask)
     material = np.asarray(face_material)[patches.face]
     L = np.zeros((P, 3))
-    L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes)
+    L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
+                           exitance=exitance)
     pmap = PolygonMap(faces, patches, polygon_counts)
     W = pmap.weights
     covered = np.asarray(W @ mask.astype(np.float64)).reshape(-1)

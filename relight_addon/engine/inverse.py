@@ -263,6 +263,9 @@ class InverseProblem:
         self._transfer = None
         self.transfer_seconds = None
         self.warnings = []
+        #: optional per channel: D (P, P) sparse, the first reflection of the lights' light with
+        #: the albedo of its incidence (engine.incidence): B = A^-1 (e + D e); None: B = A^-1 e
+        self.first_bounce = None
 
     def _init_lights(self, light_groups, light_basis):
         C = self.candidates
@@ -351,29 +354,47 @@ class InverseProblem:
             n, P, C = self.n_patches, self.targets, self.candidates
             T = [None] * 3
             done = {}
+            D = self.first_bounce
             for c in range(3):
-                if id(facs[c]) in done:
-                    T[c] = done[id(facs[c])]
+                key = (id(facs[c]), None if D is None else self._same_first_bounce(c))
+                if key in done:
+                    T[c] = done[key]
                     continue
                 if len(P) <= len(C):
                     rhs = np.zeros((n, len(P)))
                     rhs[P, np.arange(len(P))] = 1.0
                     Y = facs[c].solve(rhs, trans=True)  # Y^T = rows P of A^-1
+                    if D is not None:  # rows P of A^-1 (I + D): Y + D^T Y
+                        Y = Y + np.asarray(D[c].T @ Y)
                     T[c] = np.ascontiguousarray(Y[C].T)
                 else:
                     rhs = np.zeros((n, len(C)))
                     rhs[C, np.arange(len(C))] = 1.0
-                    X = facs[c].solve(rhs)  # columns C of A^-1
+                    if D is not None:
+                        rhs += D[c][:, C].toarray()
+                    X = facs[c].solve(rhs)  # columns C of A^-1 (I + D)
                     T[c] = np.ascontiguousarray(X[P])
                 if self.grouped:  # one column per light: the sum of its patches' columns
                     T[c] = np.ascontiguousarray(np.asarray(self.light_basis.T @ T[c].T).T)
                 if not np.all(np.isfinite(T[c])):
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
-                done[id(facs[c])] = T[c]
+                done[key] = T[c]
             self._transfer = T
             self.transfer_seconds = time.perf_counter() - t0
             self._check_reachable()
         return self._transfer
+
+    def _same_first_bounce(self, c):
+        """The first channel whose D equals channel c's (grey materials: one transfer for all)."""
+        D = self.first_bounce
+        return next(k for k in range(c + 1) if k == c or (D[k] != D[c]).nnz == 0)
+
+    def source(self, e_full):
+        """e + D e (P, 3): the exitance with the first reflection's correction (``first_bounce``)."""
+        e_full = np.asarray(e_full, dtype=np.float64).reshape(self.n_patches, 3)
+        if self.first_bounce is None:
+            return e_full
+        return e_full + np.stack([self.first_bounce[c] @ e_full[:, c] for c in range(3)], axis=1)
 
     def _check_reachable(self):
         T = self._transfer
@@ -412,9 +433,9 @@ class InverseProblem:
         return out
 
     def forward_radiosity(self, e_full):
-        """Exact forward solution B (P, 3) of A B = e through the LU factors."""
-        e_full = np.asarray(e_full, dtype=np.float64).reshape(self.n_patches, 3)
-        return np.stack([self.factors()[c].solve(e_full[:, c]) for c in range(3)], axis=1)
+        """Exact forward solution B (P, 3) of A B = e (+ D e, ``first_bounce``) through the LU factors."""
+        s = self.source(e_full)
+        return np.stack([self.factors()[c].solve(s[:, c]) for c in range(3)], axis=1)
 
     @classmethod
     def from_patches(cls, patches, F, lights_per_face=True):
@@ -429,13 +450,14 @@ class InverseProblem:
 
 
 def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None,
-                            light_basis=None):
+                            light_basis=None, first_bounce=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
     channel); every other patch is a target at the radiosity the full
     configuration gives it. Returns ``(problem, e_x)`` with e_x the lights'
-    exitances (|C|, 3), the starting configuration of a reduction.
+    exitances (|C|, 3), the starting configuration of a reduction. ``first_bounce``: the
+    problem's D (InverseProblem.first_bounce).
     """
     exitance = np.asarray(exitance, dtype=np.float64)
     n = exitance.shape[0] if exitance.ndim == 2 else -1
@@ -450,6 +472,7 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
     prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal,
                           light_groups=light_groups, light_basis=light_basis)
+    prob.first_bounce = first_bounce
     B = prob.forward_radiosity(exitance)
     prob.b_target = B[prob.targets].copy()
     prob.target_norm = float(np.linalg.norm(prob.b_target))

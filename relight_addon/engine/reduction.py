@@ -203,11 +203,11 @@ class _ErrorEval:
         full = np.zeros((self.p.n_lights, 3))
         full[lights] = e
         e_full = self.p.patch_exitance(full)
-        B, info = solve_radiosity(self.p.F, self.p.reflectance, e_full, method="gauss-seidel",
+        B, info = solve_radiosity(self.p.F, self.p.reflectance, self.p.source(e_full), method="gauss-seidel",
                                   tol=self.gs_tol, max_iter=10000, x0=self.x)
         self.iters.append(int(sum(info["iterations"])))
         if self.cold is not None:
-            _, info0 = solve_radiosity(self.p.F, self.p.reflectance, e_full, method="gauss-seidel",
+            _, info0 = solve_radiosity(self.p.F, self.p.reflectance, self.p.source(e_full), method="gauss-seidel",
                                        tol=self.gs_tol, max_iter=10000)
             self.cold.append(int(sum(info0["iterations"])))
         self.x = B

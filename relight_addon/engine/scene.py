@@ -58,6 +58,10 @@ class FaceSet:
     target_radiosity: np.ndarray = None  # (F, 3) W/m^2, zeros where not a target
     forbidden: np.ndarray = None  # (F,) bool
     warnings: list = field(default_factory=list)
+    #: optional: per face, an index into ``material_lobes`` (each material's BSDFs, the
+    #: direction-dependent reflection of engine.incidence); None: every material is Lambertian
+    face_material: np.ndarray = None
+    material_lobes: list = None
 
     def __post_init__(self):
         self.loop_vertices = np.asarray(self.loop_vertices, dtype=np.int64).reshape(-1)

@@ -54,7 +54,7 @@ def _frame(n):
 
 
 def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
-                  source_glossy=True, max_pairs=MAX_PAIRS) -> np.ndarray:
+                  source_glossy=True, max_pairs=MAX_PAIRS, exitance=None) -> np.ndarray:
     """(len(patches), 3) radiance (W m^-2 sr^-1) seen along ``view`` (world unit vectors
     (len(patches), 3); default: each patch's normal, what a bake shows) on ``patches``.
 
@@ -63,7 +63,9 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     (P, 3), ``material`` (P,) indexes ``material_lobes`` (each a material's BSDFs,
     engine.principled.BRDFTable). ``source_glossy``: the sources' reflection of the emitters'
     light through their own BSDF towards the patch (module docstring); skipped when
-    patches x sources x emitters exceeds ``max_pairs``."""
+    patches x sources x emitters exceeds ``max_pairs``. ``exitance`` (P, 3): the emitters'
+    exitance e; default B - rho F B (right when B was solved without engine.incidence's
+    first-reflection term, which B - rho F B would count as emission)."""
     M = getattr(F, "matrix", F)
     P = M.shape[0]
     B = np.asarray(B, dtype=np.float64)
@@ -71,7 +73,7 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     material = np.asarray(material, dtype=np.int64)
     patches = np.asarray(patches, dtype=np.int64)
     FB = np.asarray(M @ B, dtype=np.float64)
-    e = B - rho * FB
+    e = B - rho * FB if exitance is None else np.asarray(exitance, dtype=np.float64)
     tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
     frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
     E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), 1e-300), axis=1))

@@ -83,10 +83,12 @@ def solve_paper(problem, rcond=None, svd_driver="auto"):
     n = problem.n_patches
     C, P = problem.candidates, problem.targets
     U = np.flatnonzero(~problem.target_mask)
-    structured = _PaperGram(problem, U) if svd_driver == "auto" else None
+    D = problem.first_bounce  # the lights' first reflection (engine.incidence): A b = (I + D) S e
+    structured = _PaperGram(problem, U) if svd_driver == "auto" and D is None else None
     e = np.zeros((problem.n_lights, 3))
     ranks, used = [], None
-    for g in _channel_groups(problem.reflectance):
+    groups = _channel_groups(problem.reflectance) if D is None else [[0], [1], [2]]
+    for g in groups:
         if structured is not None:
             used = default_rcond(rcond, (n, len(U) + problem.n_lights))
             e_g = structured.solve(problem.reflectance[:, g[0]], problem.b_target[:, g])
@@ -100,6 +102,8 @@ def solve_paper(problem, rcond=None, svd_driver="auto"):
         M = np.zeros((n, len(U) + problem.n_lights), order="F")  # Fortran order for BLAS
         M[:, :len(U)] = A[:, U]
         M[np.ix_(C, len(U) + np.arange(problem.n_lights))] = -problem.light_basis.toarray()
+        if D is not None:
+            M[:, len(U):] -= (D[g[0]][:, C] @ problem.light_basis).toarray()
         R = -(A[:, P] @ problem.b_target[:, g])
         used = default_rcond(rcond, M.shape)
         X, rank = _lstsq_min_norm(M, R, used, svd_driver)
