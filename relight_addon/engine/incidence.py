@@ -9,7 +9,8 @@ less of light from above, so the energy a patch j reflects of emitter k's light 
     R_j(mu_jk) F_jk e_k,     R(mu_i) = integral f(l_i, v) cos_v dv
 
 (the directional-hemispherical reflectance for light incident at cosine mu_i; for Cycles'
-layering: Base Color x (1 - mean specular albedo) + the specular albedo at mu_i). Its
+layering: Base Color x (1 - mean specular albedo) + the specular albedo at mu_i, by
+reciprocity of the glossy lobes). Its
 cosine-weighted mean over mu_i is rho, so the correction has no effect on light from every
 direction. The transport with it (the light's first reflection only; later reflections have
 no single direction):
@@ -34,60 +35,51 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp
 
-from .principled import BRDFTable
+from .principled import _directional, oren_nayar_albedo, principled_albedo
 
 __all__ = ["INCIDENCE_MU", "incidence_tables", "first_bounce_matrices"]
 
 #: incidence cosines of the tables (linear interpolation between them)
 INCIDENCE_MU = np.linspace(0.0, 1.0, 41)
-_N_MU, _N_PHI = 48, 96  # outgoing-direction quadrature
 #: a table whose variation is below this (relative to its mean) is taken as constant (Lambert)
-FLAT = 1e-4
+FLAT = 1e-6
 
 
-def _outgoing():
-    x, w = np.polynomial.legendre.leggauss(_N_MU)
-    mu, wmu = (x + 1) / 2, w / 2
-    phi = (np.arange(_N_PHI) + 0.5) * (2 * np.pi / _N_PHI)
-    MU, PHI = np.meshgrid(mu, phi, indexing="ij")
-    s = np.sqrt(1 - MU ** 2)
-    V = np.stack([s * np.cos(PHI), s * np.sin(PHI), MU], axis=-1).reshape(-1, 3)
-    W = (wmu[:, None] * MU * (2 * np.pi / _N_PHI)).reshape(-1)
-    return V, W
-
-
-@lru_cache(maxsize=256)
-def _table(lobes) -> np.ndarray | None:
-    brdf = BRDFTable(lobes)
-    V, W = _outgoing()
-    rows = []
-    for mu in np.maximum(INCIDENCE_MU, 0.01):
-        l = np.array([np.sqrt(1 - mu * mu), 0.0, mu])
-        rows.append((brdf(V, np.broadcast_to(l, V.shape)) * W[:, None]).sum(axis=0))
-    R = np.array(rows)
-    mean = np.maximum(np.abs(R).mean(axis=0), 1e-12)
-    if np.all((R.max(axis=0) - R.min(axis=0)) <= FLAT * mean):
-        return None
-    return R
-
-
-def _hashable(lobes):
-    return tuple((float(w), kind, d if kind == "principled" else (tuple(np.asarray(d[0], float).ravel()), float(d[1])))
-                 for w, kind, d in lobes)
+@lru_cache(maxsize=1024)
+def _glossy(params) -> np.ndarray:
+    return _directional(params, INCIDENCE_MU)[1]
 
 
 def incidence_tables(material_lobes) -> list:
-    """Per material: R(mu) (len(INCIDENCE_MU), 3) for light incident at cosine mu, or None when it
-    does not depend on mu (a Lambertian material). By quadrature over the outgoing directions:
-    a lobe sharper than the quadrature loses a little (0.01 at Roughness 0.3), which
-    ``first_bounce_matrices`` cancels by taking the excess over the table's own mean."""
+    """Per material: R(mu) (len(INCIDENCE_MU), 3), the albedo for light incident at cosine mu, or
+    None when it does not depend on mu (no glossy lobe). The glossy lobes reflect of light
+    incident at mu what they send along mu under uniform light (reciprocity; engine.principled's
+    glossy share G(mu)); the diffuse layer under them reflects its cosine-weighted mean whatever
+    the incidence (Cycles weights it by the outgoing direction): R(mu) = rho + G(mu) - mean G,
+    rho the white-furnace albedo. Checked against the BSDF integrated over the outgoing
+    directions in tests/test_engine_incidence.py. Left out: Oren-Nayar's dependence on the
+    incidence (Diffuse Roughness)."""
     out = []
     for lobes in material_lobes:
-        try:
-            out.append(_table(_hashable(lobes)))
-        except TypeError:  # parameters that cannot be hashed: not cached
-            out.append(_table.__wrapped__(lobes))
+        G = np.zeros((len(INCIDENCE_MU), 3))
+        rho = np.zeros(3)
+        for w, kind, d in lobes:
+            if kind == "principled":
+                G += w * _glossy(d)
+                rho += w * principled_albedo(d).albedo
+            else:
+                rho += w * np.asarray(oren_nayar_albedo(np.asarray(d[0], dtype=np.float64), float(d[1])), dtype=np.float64)
+        span = G.max(axis=0) - G.min(axis=0)
+        if np.all(span <= FLAT * np.maximum(np.abs(rho), 1e-12)):
+            out.append(None)
+            continue
+        out.append(rho + G - _mean(G))
     return out
+
+
+def _mean(table):
+    """The cosine-weighted mean over incidences, 2 integral R(mu) mu dmu (3,)."""
+    return 2 * np.trapz(table * INCIDENCE_MU[:, None], INCIDENCE_MU, axis=0)
 
 
 def first_bounce_matrices(F, center, normal, material, tables, sources):
@@ -113,9 +105,9 @@ def first_bounce_matrices(F, center, normal, material, tables, sources):
     for m in np.unique(material[j]):
         s = material[j] == m
         R[s] = np.stack([np.interp(mu[s], INCIDENCE_MU, tables[m][:, c]) for c in range(3)], axis=1)
-    # the excess over the table's cosine-weighted mean (the white-furnace albedo, rho, up to the
-    # quadrature's loss on sharp lobes): zero on average over incidences, whatever that loss
-    mean = {m: 2 * np.trapz(tables[m] * INCIDENCE_MU[:, None], INCIDENCE_MU, axis=0) for m in np.unique(material[j])}
+    # the excess over the table's cosine-weighted mean (the white-furnace albedo rho): zero on
+    # average over incidences
+    mean = {int(m): _mean(tables[m]) for m in np.unique(material[j])}
     R -= np.stack([mean[int(m)] for m in material[j]]) if len(j) else 0.0
     vals = R * f[:, None]
     return [sp.csr_matrix((vals[:, c], (j, k)), shape=(P, P)) for c in range(3)]
