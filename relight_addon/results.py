@@ -588,6 +588,11 @@ def make_area_lights(scene, index) -> int:
 def update_chart(scene) -> None:
     """Ask the Results panel to redraw its chart. The chart is drawn on demand by the panel
     (blender_ui.panels, from ``chart_data``) at the sidebar's width; nothing is written here."""
+    redraw_sidebars()
+
+
+def redraw_sidebars() -> None:
+    """Redraw the 3D Views' sidebars (the chart, the progress bar), not the viewports themselves."""
     wm = getattr(bpy.context, "window_manager", None)
     for window in wm.windows if wm is not None else ():
         for area in window.screen.areas:

@@ -327,17 +327,6 @@ def solve_state(scene):
     return _SOLVING if _SOLVING.get("scene") == scene.name else None
 
 
-def _tag_sidebar_redraw(context):
-    """Redraw the 3D Views' sidebars (the progress bar), not the viewports themselves."""
-    wm = context.window_manager
-    for window in wm.windows if wm is not None else ():
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                for region in area.regions:
-                    if region.type == "UI":
-                        region.tag_redraw()
-
-
 def _summary(outcome):
     f = outcome.curve[outcome.final_index]
     neg = f"{f['n_negative']} negative" if f["n_negative"] else "no negatives"
@@ -438,7 +427,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         _SOLVING.clear()
         _SOLVING.update(scene=context.scene.name, stage="starting", fraction=0.0, cancelling=False)
         wm.modal_handler_add(self)
-        _tag_sidebar_redraw(context)
+        results.redraw_sidebars()
         return {"RUNNING_MODAL"}
 
     def _set_progress(self, stage, fraction):
@@ -455,7 +444,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         if context.workspace is not None:
             context.workspace.status_text_set(None)
         _SOLVING.clear()
-        _tag_sidebar_redraw(context)
+        results.redraw_sidebars()
 
     def cancel(self, context):
         """Blender stops the modal (a file is opened, the window closes): stop the worker, free
@@ -475,7 +464,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
                 self._cancel.set()
                 _SOLVING["cancelling"] = True
                 self._status(context, "Relight: cancelling...")
-                _tag_sidebar_redraw(context)
+                results.redraw_sidebars()
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
@@ -485,7 +474,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             _SOLVING.update(stage=text, fraction=frac)
             if not self._cancel.is_set():
                 self._status(context, f"Relight: {text} ({100 * frac:.0f} %) - ESC to cancel")
-            _tag_sidebar_redraw(context)
+            results.redraw_sidebars()
             return {"RUNNING_MODAL"}
         self._end_ui(context)
         if "error" in self._result or self._cancel.is_set():

@@ -60,7 +60,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg.norm)
 from scipy.stats import qmc
 
-from .scene import PatchSet, SceneError
+from .scene import PatchSet, SceneError, patch_triangles
 
 __all__ = [
     "QUALITY",
@@ -211,15 +211,8 @@ class _Tracer:
         from embreex import rtcore_scene as rtcs
         from embreex.mesh_construction import TriangleMesh
 
-        tv = np.asarray(patches.tri_vertices, dtype=np.float64)
-        if tv.ndim != 3 or tv.shape[1:] != (3, 3) or len(tv) == 0:
-            raise SceneError("the patch set has no triangles")
-        if not np.all(np.isfinite(tv)):
-            raise SceneError("the scene has NaN or infinite vertex coordinates")
+        tv, tri_patch = patch_triangles(patches)
         P = patches.n_patches
-        tri_patch = np.asarray(patches.tri_patch, dtype=np.int64)
-        if len(tri_patch) != len(tv) or tri_patch.min() < 0 or tri_patch.max() >= P:
-            raise SceneError("tri_patch does not match the patches")
         self.P = P
         self.N = N = int(rays_per_patch)
         self.seed = int(seed)

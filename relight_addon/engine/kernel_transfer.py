@@ -80,7 +80,7 @@ import scipy.sparse as sp
 import scipy.special
 
 from .formfactors import RAY_OFFSET, Cancelled
-from .scene import PatchSet, SceneError
+from .scene import PatchSet, SceneError, patch_triangles
 
 __all__ = [
     "DEFAULT_POINTS_PER_PATCH",
@@ -248,15 +248,8 @@ class _Geometry:
         from embreex import rtcore_scene as rtcs
         from embreex.mesh_construction import TriangleMesh
 
-        tv = np.asarray(patches.tri_vertices, dtype=np.float64)
-        if tv.ndim != 3 or tv.shape[1:] != (3, 3) or len(tv) == 0:
-            raise SceneError("the patch set has no triangles")
-        if not np.all(np.isfinite(tv)):
-            raise SceneError("the scene has NaN or infinite vertex coordinates")
+        tv, tri_patch = patch_triangles(patches)
         P = patches.n_patches
-        tri_patch = np.asarray(patches.tri_patch, dtype=np.int64)
-        if len(tri_patch) != len(tv) or tri_patch.min() < 0 or tri_patch.max() >= P:
-            raise SceneError("tri_patch does not match the patches")
         self.P = P
         self.M = int(points_per_patch)
         order = np.argsort(tri_patch, kind="stable")

@@ -24,6 +24,7 @@ __all__ = [
     "default_max_patch_size",
     "polygon_faceset",
     "loops_csr",
+    "patch_triangles",
     "SceneError",
 ]
 
@@ -95,6 +96,20 @@ class FaceSet:
         """Per face, its vertex indices in polygon order (a list of lists; prefer the arrays)."""
         lv = self.loop_vertices
         return [lv[s:s + n].tolist() for s, n in zip(self.loop_start, self.loop_total)]
+
+
+def patch_triangles(patches) -> tuple:
+    """(triangle vertices (T, 3, 3) float64, tri_patch (T,) int64) of a PatchSet, checked: finite,
+    at least one triangle, every triangle on a patch (what the ray casters build on)."""
+    tv = np.asarray(patches.tri_vertices, dtype=np.float64)
+    if tv.ndim != 3 or tv.shape[1:] != (3, 3) or len(tv) == 0:
+        raise SceneError("the patch set has no triangles")
+    if not np.all(np.isfinite(tv)):
+        raise SceneError("the scene has NaN or infinite vertex coordinates")
+    tri_patch = np.asarray(patches.tri_patch, dtype=np.int64)
+    if len(tri_patch) != len(tv) or tri_patch.min() < 0 or tri_patch.max() >= patches.n_patches:
+        raise SceneError("tri_patch does not match the patches")
+    return tv, tri_patch
 
 
 def loops_csr(loops):
