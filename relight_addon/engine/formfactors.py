@@ -448,6 +448,44 @@ class _Tracer:
         return key
 
 
+def run_chunks(work, total, threads, stop, cancel=None, progress=None):
+    """Run ``work(ci)`` for ci in range(total) on ``threads`` worker threads (in this thread when
+    1), calling ``progress(done / total)`` and checking ``cancel()`` here between chunks: on
+    cancel (Cancelled) or any error ``stop`` is set (work checks it) and the rest is dropped."""
+
+    def check_cancel():
+        if cancel is not None and cancel():
+            stop.set()
+            raise Cancelled("form-factor computation cancelled")
+
+    check_cancel()
+    done = 0
+    if threads == 1 or total == 1:
+        for ci in range(total):
+            work(ci)
+            done += 1
+            if progress is not None:
+                progress(done / total)
+            check_cancel()
+        return
+    with ThreadPoolExecutor(max_workers=int(threads)) as ex:
+        pending = {ex.submit(work, ci) for ci in range(total)}
+        try:
+            while pending:
+                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
+                for f in finished:
+                    f.result()
+                    done += 1
+                if finished and progress is not None:
+                    progress(done / total)
+                check_cancel()
+        except BaseException:
+            stop.set()
+            for f in pending:
+                f.cancel()
+            raise
+
+
 def auto_rays_per_patch(n_patches: int) -> int:
     """Rays per patch of the automatic quality (see RAY_BUDGET)."""
     want = RAY_BUDGET / max(int(n_patches), 1)
@@ -528,30 +566,7 @@ def compute_form_factors(
             blocks[ci] = sp.csr_matrix(((cnt[keep] * inv_n).astype(np.float32), (row[keep], col[keep])), shape=(k, P))
         return ci
 
-    def check_cancel():
-        if cancel is not None and cancel():
-            stop.set()
-            raise Cancelled("form-factor computation cancelled")
-
-    check_cancel()
-    total = len(tr.chunks)
-    done = 0
-    with ThreadPoolExecutor(max_workers=int(threads)) as ex:
-        pending = {ex.submit(work, ci) for ci in range(total)}
-        try:
-            while pending:
-                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    f.result()
-                    done += 1
-                if finished and progress is not None:
-                    progress(done / total)
-                check_cancel()
-        except BaseException:
-            stop.set()
-            for f in pending:
-                f.cancel()
-            raise
+    run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
     if symmetrise_reciprocity:
         matrix = symmetrise(matrix, patches.area)

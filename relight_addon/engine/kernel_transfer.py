@@ -73,13 +73,12 @@ import math
 import os
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.special
 
-from .formfactors import RAY_OFFSET, Cancelled
+from .formfactors import RAY_OFFSET, run_chunks
 from .scene import PatchSet, SceneError, patch_triangles
 
 __all__ = [
@@ -644,37 +643,7 @@ def kernel_form_factors(
         rays[ci] = n_rays
         return ci
 
-    def check_cancel():
-        if cancel is not None and cancel():
-            stop.set()
-            raise Cancelled("form-factor computation cancelled")
-
-    check_cancel()
-    done = 0
-    if threads == 1 or len(chunks) == 1:
-        for ci in range(len(chunks)):
-            work(ci)
-            done += 1
-            if progress is not None:
-                progress(done / len(chunks))
-            check_cancel()
-    else:
-        with ThreadPoolExecutor(max_workers=int(threads)) as ex:
-            pending = {ex.submit(work, ci) for ci in range(len(chunks))}
-            try:
-                while pending:
-                    finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                    for f in finished:
-                        f.result()
-                        done += 1
-                    if finished and progress is not None:
-                        progress(done / len(chunks))
-                    check_cancel()
-            except BaseException:
-                stop.set()
-                for f in pending:
-                    f.cancel()
-                raise
+    run_chunks(work, len(chunks), threads, stop, cancel, progress)
     if not np.all(np.isfinite(values)):
         raise SceneError("kernel form factors contain NaN or infinite values (degenerate geometry?)")
     out[ii, jj] = values
