@@ -10,8 +10,9 @@ forward; the radiosity of the painted target polygons (floor and table top) is c
 - a fine uniform reference: the polygon model at a quarter of the default patch size with
   8192 rays per patch (iterative solves on the sparse F);
 - Cycles: the rectangles as one-sided emitting quads (the wall's reflectance) 1 mm in front of
-  the walls, materials made Lambertian, no clamping, 64 bounces (tests/cycles_reference.py),
-  a per-face bake of the target polygons.
+  the walls, no clamping, 64 bounces (tests/cycles_reference.py), a per-face bake of the target
+  polygons. With Cycles, every material is made Lambertian first (Specular IOR Level 0,
+  cycles_reference.make_lambertian), for the engine as for the bake.
 
 Models: adaptive (refinement passes 0, 1, 2; light size and patch size the defaults, and 2x /
 0.5x), uniform polygon models at 1x and 2x the default patch size. Time = meshing + form
@@ -130,6 +131,10 @@ def main():
     args = ap.parse_args()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     artist_scenes.living_room(args.detail)
+    if not args.no_cycles:  # Lambertian for the engine as for the bake: the comparison is of the models
+        import cycles_reference as cr
+
+        cr.make_lambertian()
     tris = artist_scenes.triangle_count()
     exp = export.export_scene()
     s = float(np.linalg.norm(np.ptp(exp.faces.vertices, axis=0))) / 20  # the default patch size
@@ -165,6 +170,7 @@ def main():
               f"{cyc['Floor_noise']:.4f}/{cyc['Table_noise']:.4f})", flush=True)
         bpy.ops.wm.read_factory_settings(use_empty=True)
         artist_scenes.living_room(args.detail)
+        cr.make_lambertian()
         exp = export.export_scene()
         for row in rows:
             r = run_model(exp, **row["options"])

@@ -105,6 +105,9 @@ def build_parser():
     r.add_argument("--threads", type=_positive_int, default=None, help="worker threads (default: all cores)")
     r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
     r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
+    r.add_argument("--view-transform", choices=("AgX", "Standard", "Filmic"), default="AgX",
+                   help="view transform of --render (default AgX, Blender's: it compresses the lights' "
+                        "highlights; Standard shows a radiance of 1 as white)")
     from .engine import options as o
     from .engine.registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS
 
@@ -145,6 +148,8 @@ def build_parser():
                        help="do not require the final configuration to be free of negative exitances")
         s.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
         s.add_argument("--render-samples", type=_positive_int, default=16)
+        s.add_argument("--view-transform", choices=("AgX", "Standard", "Filmic"), default="AgX",
+                       help="view transform of --render (default AgX, Blender's)")
     return p
 
 
@@ -362,7 +367,7 @@ def _save_outputs(args, report, timings, t0, apply):
     if args.render:
         t2 = time.perf_counter()
         try:
-            results.render_radiosity(args.render, samples=args.render_samples)
+            results.render_radiosity(args.render, samples=args.render_samples, view_transform=args.view_transform)
         except RuntimeError as exc:
             raise OSError(f"cannot render --render {args.render}: {_blender_message(exc)}") from None
         timings["render"] = time.perf_counter() - t2
