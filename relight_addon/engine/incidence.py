@@ -82,32 +82,49 @@ def _mean(table):
     return 2 * np.trapz(table * INCIDENCE_MU[:, None], INCIDENCE_MU, axis=0)
 
 
+#: about this many form-factor entries are turned into D entries at a time (bounds the memory)
+CHUNK_ENTRIES = 1 << 20
+
+
 def first_bounce_matrices(F, center, normal, material, tables, sources):
-    """D per channel (3 sparse (P, P) CSR matrices, nonzero in the ``sources`` columns only), or
-    None when no receiving material has a direction-dependent albedo. ``F`` (P, P) form factors
-    (dense or sparse), ``material`` (P,) indexes ``tables`` (incidence_tables). D_jk =
-    (R_j(mu_jk) - mean R_j) F_jk, the mean over incidences being rho_j."""
+    """D per channel (3 sparse (P, P) CSC matrices sharing one index structure, float32, nonzero
+    in the ``sources`` columns only), or None when no receiving material has a
+    direction-dependent albedo. ``F`` (P, P) form factors (dense or sparse), ``material`` (P,)
+    indexes ``tables`` (incidence_tables). D_jk = (R_j(mu_jk) - mean R_j) F_jk, the mean over
+    incidences being rho_j. Work by chunks of source columns (CHUNK_ENTRIES)."""
     material = np.asarray(material, dtype=np.int64)
     glossy = np.array([t is not None for t in tables], dtype=bool)
     if not glossy.any() or not glossy[material].any():
         return None
     M = getattr(F, "matrix", F)
     P = M.shape[0]
-    sources = np.asarray(sources, dtype=np.int64)
-    cols = sp.csc_matrix(M)[:, sources].tocoo() if sp.issparse(M) else sp.coo_matrix(np.asarray(M)[:, sources])
-    j, k, f = cols.row, sources[cols.col], cols.data
-    keep = glossy[material[j]] & (f > 0)
-    j, k, f = j[keep], k[keep], f[keep]
-    d = center[k] - center[j]
-    d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
-    mu = np.clip(np.einsum("ij,ij->i", d, normal[j]), 0.0, 1.0)
-    R = np.empty((len(j), 3))
-    for m in np.unique(material[j]):
-        s = material[j] == m
-        R[s] = np.stack([np.interp(mu[s], INCIDENCE_MU, tables[m][:, c]) for c in range(3)], axis=1)
-    # the excess over the table's cosine-weighted mean (the white-furnace albedo rho): zero on
-    # average over incidences
-    mean = {int(m): _mean(tables[m]) for m in np.unique(material[j])}
-    R -= np.stack([mean[int(m)] for m in material[j]]) if len(j) else 0.0
-    vals = R * f[:, None]
-    return [sp.csr_matrix((vals[:, c], (j, k)), shape=(P, P)) for c in range(3)]
+    sources = np.sort(np.asarray(sources, dtype=np.int64))
+    cols = sp.csc_matrix(M) if sp.issparse(M) else None
+    # per material: R(mu) - mean R (the table's cosine-weighted mean is rho: zero on average)
+    excess = {m: tables[m] - _mean(tables[m]) for m in np.flatnonzero(glossy)}
+    per_col = np.diff(cols.indptr)[sources] if cols is not None else np.full(len(sources), P)
+    bounds = np.searchsorted(np.cumsum(per_col), np.arange(CHUNK_ENTRIES, int(per_col.sum()), CHUNK_ENTRIES))
+    rows, counts, data = [], np.zeros(P, dtype=np.int64), []
+    for src in np.split(sources, np.unique(bounds) + 1):
+        if len(src) == 0:
+            continue
+        blk = (cols[:, src] if cols is not None else sp.csc_matrix(np.asarray(M)[:, src])).tocoo()
+        j, k, f = blk.row, src[blk.col], blk.data
+        keep = glossy[material[j]] & (f > 0)
+        j, k, f = j[keep], k[keep], f[keep]
+        d = center[k] - center[j]
+        d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        mu = np.clip(np.einsum("ij,ij->i", d, normal[j]), 0.0, 1.0)
+        vals = np.empty((len(j), 3), dtype=np.float32)
+        for m in np.unique(material[j]):
+            s_ = material[j] == m
+            vals[s_] = np.stack([np.interp(mu[s_], INCIDENCE_MU, excess[m][:, c]) for c in range(3)], axis=1)
+        vals *= f[:, None]
+        order = np.lexsort((j, k))  # column-major (CSC)
+        rows.append(j[order].astype(np.int32))
+        data.append(vals[order])
+        np.add.at(counts, k, 1)
+    rows = np.concatenate(rows) if rows else np.zeros(0, np.int32)
+    data = np.concatenate(data) if data else np.zeros((0, 3), np.float32)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32 if len(rows) < 2 ** 31 else np.int64)
+    return [sp.csc_matrix((np.ascontiguousarray(data[:, c]), rows, indptr), shape=(P, P)) for c in range(3)]
