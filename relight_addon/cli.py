@@ -57,24 +57,23 @@ def _seed(text):
     return v
 
 
-def _positive_length(text):
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive length in metres, got {text}")
-    return v
+def _positive_number(message):
+    """An argparse type: a finite number > 0; ``message`` says what else was given ({} = the text)."""
+
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise argparse.ArgumentTypeError(message.format(text))
+        return v
+
+    return parse
 
 
-def _target_scale(text):
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (v > 0 and math.isfinite(v)):
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text} (0 asks every target for no light)")
-    return v
+_positive_length = _positive_number("must be a positive length in metres, got {}")
+_target_scale = _positive_number("must be a positive number, got {} (0 asks every target for no light)")
 
 
 def _non_negative_int(text):

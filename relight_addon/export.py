@@ -289,26 +289,27 @@ def target_layer(mesh, owner=None):
     """The mesh's usable ``relight_target`` (a Face Corner FLOAT_COLOR or BYTE_COLOR attribute),
     None when there is none; a ``relight_target`` of another domain or type raises SceneError
     naming it (``owner``: the object name for the message)."""
-    attr = mesh.attributes.get(TARGET_ATTRIBUTE)
-    if attr is None:
-        return None
-    if attr.domain != TARGET_DOMAIN or attr.data_type not in TARGET_TYPES:
-        raise SceneError(f"{owner or mesh.name}: its {TARGET_ATTRIBUTE} is {describe_attribute(attr)}; Relight "
-                         "reads targets from a Face Corner colour attribute (Color or Byte Color), so this one is "
-                         "not used: convert it (Object Data > Color Attributes > Convert, Face Corner) or remove it")
-    return attr
+    return _checked_layer(mesh, TARGET_ATTRIBUTE, TARGET_DOMAIN, TARGET_TYPES, owner,
+                          "reads targets from a Face Corner colour attribute (Color or Byte Color), so this one is "
+                          "not used: convert it (Object Data > Color Attributes > Convert, Face Corner) or remove it")
 
 
 def forbidden_layer(mesh, owner=None):
     """The mesh's ``relight_forbidden`` (a Face attribute of a numeric type: BOOLEAN, INT, INT8,
     FLOAT), None when there is none; one of another domain or type raises SceneError naming it."""
-    attr = mesh.attributes.get(FORBIDDEN_ATTRIBUTE)
+    return _checked_layer(mesh, FORBIDDEN_ATTRIBUTE, FORBIDDEN_DOMAIN, FORBIDDEN_TYPES, owner,
+                          "reads a Face attribute of a numeric type (Boolean, Integer or Float; non-zero = forbidden): "
+                          "convert it (Object Data > Attributes > Convert, Face) or remove it")
+
+
+def _checked_layer(mesh, name, domain, types, owner, reads):
+    """The mesh's attribute ``name``, None when absent; of another domain or type: SceneError
+    naming it, the object (``owner``) and what Relight ``reads``."""
+    attr = mesh.attributes.get(name)
     if attr is None:
         return None
-    if attr.domain != FORBIDDEN_DOMAIN or attr.data_type not in FORBIDDEN_TYPES:
-        raise SceneError(f"{owner or mesh.name}: its {FORBIDDEN_ATTRIBUTE} is {describe_attribute(attr)}; Relight "
-                         "reads a Face attribute of a numeric type (Boolean, Integer or Float; non-zero = forbidden): "
-                         "convert it (Object Data > Attributes > Convert, Face) or remove it")
+    if attr.domain != domain or attr.data_type not in types:
+        raise SceneError(f"{owner or mesh.name}: its {name} is {describe_attribute(attr)}; Relight {reads}")
     return attr
 
 

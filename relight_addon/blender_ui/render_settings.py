@@ -27,12 +27,4 @@ class RELIGHT_OT_match_light_paths(bpy.types.Operator):
 
 CLASSES = (RELIGHT_OT_match_light_paths,)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -112,6 +112,21 @@ def viewport_center():
     return to_screen(r, (ui.x - r.x) // 2, r.height // 2)
 
 
+def edit_faces(ob, faces):
+    """Tab (in the viewport) into Edit Mode on the active ``ob`` (mode_set when the key did not
+    take), face select mode, exactly ``faces`` selected. Returns whether Tab entered Edit Mode."""
+    yield from key_in_viewport("Tab")
+    tabbed = bpy.context.mode == "EDIT_MESH"
+    if not tabbed:
+        with override():
+            bpy.ops.object.mode_set(mode="EDIT")
+        yield 1.0
+    with override():
+        bpy.ops.mesh.select_mode(type="FACE")
+    edit_select(ob, faces)
+    return tabbed
+
+
 def key_in_viewport(key):
     move(*viewport_center())
     yield 0.4
@@ -453,15 +468,8 @@ def scenario():
     t0, c0, f0, _ = counts()
     targets0 = m["export"].face_flags(floor, "target")
     fill = [int(k) for k in np.flatnonzero(~targets0)[:4]]
-    yield from key_in_viewport("Tab")
-    check("Tab enters Edit Mode", bpy.context.mode == "EDIT_MESH", bpy.context.mode)
-    if bpy.context.mode != "EDIT_MESH":
-        with override():
-            bpy.ops.object.mode_set(mode="EDIT")
-        yield 1.0
-    with override():
-        bpy.ops.mesh.select_mode(type="FACE")
-    edit_select(floor, fill)
+    tabbed = yield from edit_faces(floor, fill)
+    check("Tab enters Edit Mode", tabbed, bpy.context.mode)
     yield 1.5
     t1, c1, f1, notes = counts()
     check("counts in Edit Mode (from the edit mesh)", (t1, f1) == (t0, f0), f"{(t1, c1, f1)} vs {(t0, c0, f0)} {notes}")
@@ -485,14 +493,7 @@ def scenario():
     set_active(wall)
     cand = np.flatnonzero(m["export"].face_flags(wall, "candidate"))[:6]
     c_before = counts()[1]
-    yield from key_in_viewport("Tab")
-    if bpy.context.mode != "EDIT_MESH":
-        with override():
-            bpy.ops.object.mode_set(mode="EDIT")
-        yield 1.0
-    with override():
-        bpy.ops.mesh.select_mode(type="FACE")
-    edit_select(wall, [int(k) for k in cand])
+    yield from edit_faces(wall, [int(k) for k in cand])
     yield 1.0
     yield from press(found, "bpy.ops.relight.forbid_faces(allow=False)", settle=1.5)
     shot("06_forbid_selected")
