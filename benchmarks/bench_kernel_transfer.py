@@ -4,7 +4,7 @@ estimator (engine/kernel_transfer.py) vs hemisphere ray casting (engine/formfact
     .venv/bin/python benchmarks/bench_kernel_transfer.py [--quick] [--ref-rays 22]
 
 Scenes
-(a) the staircase sample (sample_blends/staircase_targets.blend, loaded through the bridge as
+(a) the staircase sample (sample_blends/staircase_targets.blend, loaded through export.py as
     bench_staircase.py does): its target patches x its candidate patches;
 (b) a furnished room built here: 4 x 3 x 2.5 m, every surface meshed into 0.25 m cells, a table
     (top and four legs) and a sofa (seat, back, arms) of boxes; targets: the floor cells around and
@@ -58,7 +58,8 @@ KERNEL_LEVELS = [
     ("k1", dict(points_per_patch=4, shadow_rays=1, penumbra_points=16, penumbra_rays=1)),
     ("k2", dict(points_per_patch=8, shadow_rays=2, penumbra_points=64, penumbra_rays=2)),
     ("k3", dict(points_per_patch=16, shadow_rays=4, penumbra_points=144, penumbra_rays=2)),
-    ("k4 (default)", dict()),
+    ("k4 (default)", dict()),  # 64 penumbra points
+    ("k4-256 (before)", dict(penumbra_points=256)),  # the default until the weighted reciprocity
     ("k5", dict(points_per_patch=16, shadow_rays=8, penumbra_points=1024, penumbra_rays=8)),
     ("k6", dict(points_per_patch=32, shadow_rays=8, penumbra_points=2048, penumbra_rays=8)),
 ]
@@ -121,7 +122,7 @@ def furnished_room(cell=0.25):
 
 
 def staircase():
-    from relight_addon import bridge
+    from relight_addon import export as bridge
 
     bridge.open_blend(str(SCENE))
     exp = bridge.export_scene()

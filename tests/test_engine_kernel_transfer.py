@@ -271,6 +271,43 @@ def test_non_coplanar_multi_triangle_patch_as_source_and_receiver():
     assert F[1, 0] == pytest.approx(ref_back, rel=0.005)
 
 
+def clustered_receiver_scene(h):
+    """Patch 0: the unit square at z = 0 facing up, as one patch of 8 x 8 cells (128 small
+    triangles, as the adaptive model clusters a dense prop); patch 1: the unit square at z = h
+    facing down (a quad of two triangles)."""
+    tris = []
+    for i in range(8):
+        for j in range(8):
+            c = square([i / 8, j / 8, 0], [1 / 8, 0, 0], [0, 1 / 8, 0])
+            tris += [c[[0, 1, 2]], c[[0, 2, 3]]]
+    top = square([0, 0, h], [0, 1, 0], [1, 0, 0])
+    tv = np.array(tris + [top[[0, 1, 2]], top[[0, 2, 3]]])
+    tri_patch = np.array([0] * 128 + [1, 1])
+    cr = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
+    ta = 0.5 * np.linalg.norm(cr, axis=1)
+    area = np.bincount(tri_patch, weights=ta)
+    normal = np.array([[0, 0, 1.0], [0, 0, -1.0]])
+    center = np.array([[0.5, 0.5, 0], [0.5, 0.5, h]])
+    z = np.zeros((2, 3))
+    return PatchSet(tri_vertices=tv, tri_patch=tri_patch, tri_face=tri_patch, area=area, normal=normal,
+                    center=center, face=np.arange(2), object=np.zeros(2, np.int64), reflectance=z + 0.5,
+                    exitance=z, target=np.zeros(2, bool), target_radiosity=z, forbidden=np.zeros(2, bool),
+                    n_faces=2, max_patch_size=10.0)
+
+
+@pytest.mark.parametrize("h,coarse", [(1.0, 0), (5.0, 1)])
+def test_clustered_receiver_coarse_rule_against_closed_form(h, coarse):
+    # 1 x 1 parallel squares, the receiver clustered from 128 triangles: at h = 5 the gap (3.6) exceeds
+    # COARSE_GAP (2) x the receiver's diameter (1.41) and its triangles get one node each (128
+    # instead of 512); at h = 1 they keep 2 x 2. Both against Howell's closed form.
+    ps = clustered_receiver_scene(h)
+    st = {}
+    F = kernel_form_factors(ps, [0], [1], stats=st)
+    assert st["coarse"] == coarse
+    assert st["evaluations"] == (128 if coarse else 512) * 2
+    assert F[0, 0] == pytest.approx(cf.parallel_rectangles(1, 1, h), rel=0.001)  # measured 0.013 % / 1e-6
+
+
 # ------------------------------------------------------------------- reciprocity and storage
 
 def test_apply_kernel_pairs_writes_both_directions_dense_and_sparse():

@@ -42,6 +42,13 @@ patches), F is integrated instead:
   width (area / diameter) or with the gap between the two, the receiver's rule is made
   finer (level L: node spacing / 2^L, L <= MAX_LEVEL), and each point then casts
   ``shadow_rays / 4^L`` rays (at least 1), so the rays per pair stay about the same.
+- Distant pairs get a coarse rule: when the gap between the patches exceeds COARSE_GAP x the
+  receiver's diameter, a receiver triangle no larger than the node spacing gets one node,
+  its centroid, instead of at least 2 x 2 (a patch clustered from many small triangles
+  would otherwise get 4 nodes per triangle; on the staircase 37 % fewer kernel evaluations
+  for a largest change of 0.3 % on the pairs above 1 % of their row's largest).
+- A parallelogram source (a quad cell) wholly in front of the point is one contour of four
+  edges: the diagonal's two terms of the two triangles cancel.
 - Far pairs (centre distance > ``far_ratio`` x the larger patch diameter) use the
   point-to-point kernel ``a_t cos cos / (pi r^2)`` to each source triangle's centroid
   instead of the contour integral (relative error about (diameter / distance)^2 / 4).
@@ -107,6 +114,8 @@ MAX_LEVEL = 3
 #: a near pair is refined when the receiver's diameter exceeds LEVEL_SPAN x the source's
 #: width (area / diameter) or the gap between the patches: level = ceil(log2(ratio / span)).
 LEVEL_SPAN = 4.0
+#: a pair farther apart than this many receiver diameters (gap between the patches) uses the coarse rule.
+COARSE_GAP = 2.0
 #: at most this many Gauss nodes along either direction of one receiver triangle.
 MAX_NODES = 24
 #: kernel evaluations (receiver point x source triangle) per work chunk.
@@ -145,10 +154,28 @@ def _lambert(x, n, v, ns):
     The triangle is clipped to the half-space n . (y - x) > 0 (Sutherland-Hodgman, edge by
     edge: the clipped polygon's edges are the kept parts of the triangle's edges plus one
     edge in the plane, from the exit point to the entry point), then Lambert's formula.
-    A point behind (or in) the triangle's plane gets 0.
+    A point behind (or in) the triangle's plane gets 0. Triangles wholly in front of the
+    point (the common case) skip the clipping.
     """
-    E = len(x)
+    out = np.zeros(len(x))
+    front = _dot(x - v[:, 0], ns) > 0
     r = [v[:, k] - x for k in range(3)]
+    ahead = [_dot(rk, n) > 0 for rk in r]
+    whole = front & ahead[0] & ahead[1] & ahead[2]
+    w = np.flatnonzero(whole)
+    if len(w):
+        rw, nw = [rk[w] for rk in r], n[w]
+        out[w] = _edge_term(rw[0], rw[1], nw) + _edge_term(rw[1], rw[2], nw) + _edge_term(rw[2], rw[0], nw)
+    c = np.flatnonzero(front & (ahead[0] | ahead[1] | ahead[2]) & ~whole)
+    if len(c):
+        out[c] = _clipped_contour([rk[c] for rk in r], n[c])
+    return np.maximum(-out, 0.0) * (0.5 / np.pi)
+
+
+def _clipped_contour(r, n):
+    """Lambert's contour sum over the part of the triangle (vertices r[k] relative to the
+    points, (E, 3) each) in front of the points' planes (normals n)."""
+    E = len(n)
     d = [_dot(rk, n) for rk in r]
     total = np.zeros(E)
     exit_p = np.zeros((E, 3))
@@ -171,8 +198,7 @@ def _lambert(x, n, v, ns):
         clipped |= leaves
     if clipped.any():
         total[clipped] += _edge_term(exit_p[clipped], entry_p[clipped], n[clipped])
-    front = _dot(x - v[:, 0], ns) > 0
-    return np.where(front, np.maximum(-total, 0.0) * (0.5 / np.pi), 0.0)
+    return total
 
 
 def point_polygon_form_factor(x, n, polygon) -> float:
@@ -214,7 +240,7 @@ def _gauss(n):
     return _RULES[n]
 
 
-def _triangle_rule(v, h):
+def _triangle_rule(v, h, coarse=False):
     """Collapsed Gauss rule on triangle v (3, 3) with node spacing about h: points (q, 3)
     and weights (q,) summing to the triangle's area. The collapsed vertex is the one
     opposite the shortest edge; n_xi nodes along the triangle's height from it (at least
@@ -224,9 +250,12 @@ def _triangle_rule(v, h):
     a, b, d = v[c], v[(c + 1) % 3], v[(c + 2) % 3]
     area = 0.5 * np.linalg.norm(np.cross(b - a, d - a))
     length = 2 * area / max(e[c], 1e-300)
-    n_xi = int(min(MAX_NODES, max(2, math.ceil(length / h - 1e-9))))
-    # across: at least 2 nodes, but 1 for a sliver (short edge < h / 4, e.g. a fan-triangulated disk)
-    n_eta = 1 if e[c] < 0.25 * h else int(min(MAX_NODES, max(2, math.ceil(e[c] / h - 1e-9))))
+    if coarse and length <= h and e[c] <= h:  # no larger than the node spacing: the centroid
+        n_xi = n_eta = 1
+    else:
+        n_xi = int(min(MAX_NODES, max(2, math.ceil(length / h - 1e-9))))
+        # across: at least 2 nodes, but 1 for a sliver (short edge < h / 4, e.g. a fan-triangulated disk)
+        n_eta = 1 if e[c] < 0.25 * h else int(min(MAX_NODES, max(2, math.ceil(e[c] / h - 1e-9))))
     xi, wxi, _, _ = _gauss(n_xi)
     _, _, eta, weta = _gauss(n_eta)
     XI, ETA = np.meshgrid(xi, eta, indexing="ij")
@@ -321,10 +350,11 @@ class _Geometry:
     def _parallelograms(self):
         """Patches of two triangles that share an edge and make a planar parallelogram (grid
         cells, quads): ``para`` flags them, ``pgeo`` (P, 12) float32 holds origin, edge u,
-        edge v (set in from the edges by 2 * offset) and the normal."""
+        edge v (set in from the edges by 2 * offset) and the normal, ``quad`` (P, 4, 3) the outline."""
         P = self.P
         self.para = np.zeros(P, dtype=bool)
         self.pgeo = np.zeros((P, 12), dtype=np.float32)
+        self.quad = np.zeros((P, 4, 3))  # a parallelogram patch's outline, in winding order
         two = np.flatnonzero((self.tcount == 2) & self.planar)
         if len(two) == 0:
             return
@@ -352,6 +382,8 @@ class _Geometry:
                               self.normal[two]], axis=1)
         self.para[two[ok]] = True
         self.pgeo[two[ok]] = geo[ok]
+        # the outline o1, shared vertex 0, o2, shared vertex 1 runs the way t0 winds
+        self.quad[two[ok]] = np.stack([o1, sv[0], o2, sv[1]], axis=1)[ok]
 
     def receiver_points(self, r: int, level: int):
         """(points (q, 3), normals (q, 3), weights (q,) summing to 1) of receiver r at a level."""
@@ -362,12 +394,12 @@ class _Geometry:
         t0, t1 = self.tstart[r], self.tstart[r] + self.tcount[r]
         # node spacing: a patch of area A gets about M points (a triangle of area a gets
         # about 2 a / h^2 nodes, so h^2 = 2 A / M), then / 2^level
-        h = math.sqrt(2 * self.area[r] / max(self.M, 1)) / 2 ** level
+        h = math.sqrt(2 * self.area[r] / max(self.M, 1)) / 2 ** max(level, 0)
         pts, nrm, wts = [], [], []
         for t in range(t0, t1):
             if self.ta[t] <= 0:
                 continue
-            p, w = _triangle_rule(self.tv[t], h)
+            p, w = _triangle_rule(self.tv[t], h, coarse=level < 0)
             pts.append(p)
             wts.append(w)
             nrm.append(np.repeat(self.tn[t][None], len(p), axis=0))
@@ -380,13 +412,13 @@ class _Geometry:
 def _clipped_receiver_points(g, r, level, s):
     """Receiver r's rule restricted to the part in front of planar source s's plane (the
     kernel is 0 behind it, a jump the Gauss rule would straddle); weights / A_r."""
-    h = math.sqrt(2 * g.area[r] / max(g.M, 1)) / 2 ** level
+    h = math.sqrt(2 * g.area[r] / max(g.M, 1)) / 2 ** max(level, 0)
     pts, nrm, wts = [], [], []
     for t in range(g.tstart[r], g.tstart[r] + g.tcount[r]):
         for part in _clip_triangle(g.tv[t], g.normal[s], g.center[s]):
             if np.linalg.norm(np.cross(part[1] - part[0], part[2] - part[0])) <= 0:
                 continue
-            p, w = _triangle_rule(part, h)
+            p, w = _triangle_rule(part, h, coarse=level < 0)
             pts.append(p)
             wts.append(w)
             nrm.append(np.repeat(g.tn[t][None], len(p), axis=0))
@@ -547,32 +579,36 @@ def kernel_form_factors(
     info["pairs"] = int(len(pr))
     info["far"] = int(far.sum())
     info["levels"] = np.bincount(lev, minlength=MAX_LEVEL + 1).tolist()
+    # the rule of a pair: its level, or -1 (coarse: one node per triangle no larger than the node
+    # spacing) for a pair whose gap exceeds COARSE_GAP x the receiver's diameter
+    rule_level = np.where((lev == 0) & (gap > COARSE_GAP * g.diam[pr]), -1, lev)
+    info["coarse"] = int(np.count_nonzero(rule_level < 0))
     if len(pr) == 0:
         if stats is not None:
             stats.update(info, seconds=time.perf_counter() - t_start)
         return out
 
     # receiver point sets: one array of all (receiver, level) rules
-    need = np.unique(pr * (MAX_LEVEL + 1) + lev)
+    need = np.unique(pr * (MAX_LEVEL + 2) + rule_level + 1)
     sets = {}
     xs, ns, ws = [], [], []
     base = 0
     for k in need:
-        r, L = divmod(int(k), MAX_LEVEL + 1)
-        x, n, w = g.receiver_points(r, L)
+        r, L = divmod(int(k), MAX_LEVEL + 2)
+        x, n, w = g.receiver_points(r, L - 1)
         sets[int(k)] = (base, len(x))
         xs.append(x)
         ns.append(n)
         ws.append(w)
         base += len(x)
-    rule_key = pr * (MAX_LEVEL + 1) + lev
+    rule_key = pr * (MAX_LEVEL + 2) + rule_level + 1
     lookup = np.array([sets[int(k)] for k in need], dtype=np.int64)
     pos = np.searchsorted(need, rule_key)
     pstart, pcount = lookup[pos, 0], lookup[pos, 1]
     # pairs whose receiver crosses the source's plane: a rule of their own
     info["clipped_receivers"] = int(straddle.sum())
     for k in np.flatnonzero(straddle):
-        x, n, w = _clipped_receiver_points(g, pr[k], lev[k], ps[k])
+        x, n, w = _clipped_receiver_points(g, pr[k], rule_level[k], ps[k])
         pstart[k], pcount[k] = base, len(x)
         xs.append(x)
         ns.append(n)
@@ -656,13 +692,33 @@ def kernel_form_factors(
 
 def _source_kernel(g: _Geometry, x, n, s, far):
     """F_pt from points x (normals n) to source patches s, one source per point, (m,):
-    the clipped contour integral per source triangle, or the point kernel where ``far``."""
-    m = len(x)
+    the clipped contour integral per source triangle, or the point kernel where ``far``. A
+    parallelogram source wholly in front of the point is one contour of four edges (the
+    diagonal's two terms cancel)."""
+    out = np.zeros(len(x))
+    rest = np.ones(len(x), dtype=bool)
+    q = np.flatnonzero(g.para[s] & ~far)
+    if len(q):
+        V, xq, nq = g.quad[s[q]], x[q], n[q]
+        r = [V[:, k] - xq for k in range(4)]
+        whole = _dot(xq - V[:, 0], g.normal[s[q]]) > 0
+        for rk in r:
+            whole &= _dot(rk, nq) > 0
+        w = np.flatnonzero(whole)
+        if len(w):
+            rw, nw = [rk[w] for rk in r], nq[w]
+            total = sum(_edge_term(rw[k], rw[(k + 1) % 4], nw) for k in range(4))
+            out[q[w]] = np.maximum(-total, 0.0) * (0.5 / np.pi)
+            rest[q[w]] = False
+    idx = np.flatnonzero(rest)
+    if len(idx) == 0:
+        return out
+    s, far = s[idx], far[idx]
     ntri = g.tcount[s]
-    ev = np.repeat(np.arange(m), ntri)
+    ev = np.repeat(idx, ntri)
     tri = _ragged(g.tstart[s], ntri)
     kval = np.zeros(len(ev))
-    fe = far[ev]
+    fe = np.repeat(far, ntri)
     near = np.flatnonzero(~fe)
     if len(near):
         e, t = ev[near], tri[near]
@@ -671,7 +727,8 @@ def _source_kernel(g: _Geometry, x, n, s, far):
     if len(fars):
         e, t = ev[fars], tri[fars]
         kval[fars] = _point_kernel(x[e], n[e], g.tc[t], g.tn[t], g.ta[t])
-    return np.bincount(ev, weights=kval, minlength=m)
+    out += np.bincount(ev, weights=kval, minlength=len(x))
+    return out
 
 
 def _sample_patches(g: _Geometry, s, k, rng):
