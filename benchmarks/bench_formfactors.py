@@ -1,11 +1,12 @@
 """Form-factor benchmark: accuracy per ray, speed vs raw embreex, threads, memory.
 
-Run:  .venv/bin/python benchmarks/bench_formfactors.py   (about 2 minutes on 2 cores)
+Run:  .venv/bin/python benchmarks/bench_formfactors.py [--only accuracy]   (about 2 minutes on 2 cores)
 
-1. Accuracy per ray: relative error of F_12 against Howell's closed forms on the
+1. Accuracy per ray: relative error of F_12 and F_21 against Howell's closed forms on the
    9 configurations of tests/test_engine_formfactors.py x 6 seeds: Sobol at
-   1024 ... 16384 and 262144 rays per patch (with and without reciprocity
-   symmetrisation), random and stratified sampling at the default.
+   1024 ... 16384 and 262144 rays per patch, each row from its own rays ("rays") and
+   with the reciprocity weighting (``weigh_reciprocity``, the default, from the same
+   rays), random and stratified sampling at the default.
 2. Speed: rays/s of compute_form_factors (all cores) divided by rays/s of raw
    embreex ``scene.run`` on the very same rays (pre-generated) with a thread pool
    of the same size, alternated 3 times in the same run (best and median).
@@ -27,7 +28,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from relight_addon.engine import closed_forms as cf  # noqa: E402
-from relight_addon.engine.formfactors import QUALITY, _Tracer, compute_form_factors, symmetrise  # noqa: E402
+from relight_addon.engine.formfactors import QUALITY, _Tracer, compute_form_factors, weigh_reciprocity  # noqa: E402
 from relight_addon.engine.scene import mesh_patches, polygon_faceset  # noqa: E402
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tests"))
@@ -43,14 +44,17 @@ def accuracy_table(seeds=6):
     for sampling, n in runs:
         err = {False: [], True: []}
         for name, ps, ref in scenes:
-            e = []
+            e, w = [], []
+            ref21 = ref * ps.area[0] / ps.area[1]
             for seed in range(seeds):
-                M = compute_form_factors(ps, n, seed=seed, sampling=sampling).matrix
-                e.append(M[0, 1] / ref - 1)
-                err[True].append(symmetrise(M, ps.area)[0, 1] / ref - 1)
+                M = compute_form_factors(ps, n, seed=seed, sampling=sampling, reciprocity="rays").matrix
+                e += [M[0, 1] / ref - 1, M[1, 0] / ref21 - 1]
+                W = weigh_reciprocity(M, ps.area, n)
+                w += [W[0, 1] / ref - 1, W[1, 0] / ref21 - 1]
             err[False] += e
+            err[True] += w
             if sampling == "sobol":
-                per_config[(name, n)] = float(np.sqrt(np.mean(np.square(e)))), float(np.abs(e).max())
+                per_config[(name, n)] = float(np.sqrt(np.mean(np.square(e)))), float(np.sqrt(np.mean(np.square(w))))
         for sym in (False, True):
             e = np.abs(err[sym])
             rows.append((sampling, sym, n, float(np.sqrt(np.mean(e**2))), float(e.max())))
@@ -131,21 +135,28 @@ def memory(rays_per_patch=QUALITY["draft"]):
 
 
 def main():
+    import argparse
+
+    ap = argparse.ArgumentParser(description="form-factor benchmark")
+    ap.add_argument("--only", choices=("accuracy",), help="run only this part")
+    args = ap.parse_args()
     t0 = time.perf_counter()
     print(os.popen("uptime").read().strip())
     rows, per_config = accuracy_table()
-    print("## Accuracy per ray (relative error of F_12 vs closed forms, 9 configs x 6 seeds)")
-    print("| sampling | symmetrised | rays/patch | RMS rel. error | max rel. error |")
+    print("## Accuracy per ray (relative error of F_12 and F_21 vs closed forms, 9 configs x 6 seeds)")
+    print("| sampling | reciprocity | rays/patch | RMS rel. error | max rel. error |")
     print("|---|---|---|---|---|")
     for s, sym, n, rms, mx in rows:
-        print(f"| {s} | {'yes' if sym else 'no'} | {n} | {rms * 100:.2f} % | {mx * 100:.2f} % |")
-    print("\n## Sobol, per configuration: RMS / max relative error over 6 seeds")
+        print(f"| {s} | {'weighted' if sym else 'rays'} | {n} | {rms * 100:.2f} % | {mx * 100:.2f} % |")
+    print("\n## Sobol, per configuration: RMS relative error of F_12 and F_21 over 6 seeds, rays / weighted")
     print("| configuration | F_12 | " + " | ".join(str(n) for n in SOBOL_RAYS) + " |")
     print("|---|---|" + "---|" * len(SOBOL_RAYS))
     for name, _, ref in CONFIGS:
         cells = [f"{per_config[(name, n)][0] * 100:.2f} / {per_config[(name, n)][1] * 100:.2f} %" for n in SOBOL_RAYS]
         print(f"| {name} | {ref:.4f} | " + " | ".join(cells) + " |")
     print(os.popen("uptime").read().strip())
+    if args.only == "accuracy":
+        return
     sp_ = speed()
     b, m = sp_["best"], sp_["median"]
     print("\n## Speed (closed box, dense), best / median of 3 alternated runs")

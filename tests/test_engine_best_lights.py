@@ -112,7 +112,7 @@ def test_lower_bounds_exact_matches_brute_force(kind, seed):
         opt, _ = brute(kind, seed, k)
         # the bound is the optimum minus the rounding margin, and that optimum is reached by its set
         assert lb.bound[k - 1] <= opt
-        assert lb.bound[k - 1] == pytest.approx(opt, rel=1e-7, abs=1e-12)
+        assert lb.bound[k - 1] == pytest.approx(opt, rel=1e-7, abs=1.01 * bl.BOUND_ROUNDING * np.linalg.norm(b))
         S = lb.optimum_lights[k - 1]
         assert len(S) <= k
         e = np.stack([sopt.nnls(T[c][:, S], b[:, c])[0] for c in range(3)], axis=1)
@@ -285,7 +285,7 @@ def test_curve_properties_and_bounds_on_random_problems():
             check_curve(curve, T, b, area, 12)
             for p in curve:
                 assert lb.at(p.k) <= p.error
-            assert curve[0].error == pytest.approx(lb.bound[0] / (1 - bl.BOUND_MARGIN), rel=1e-9)
+            assert curve[0].error == pytest.approx((lb.bound[0] + bl.BOUND_ROUNDING * np.linalg.norm(b)) / (1 - bl.BOUND_MARGIN), rel=1e-9)
         greedy = bl.best_k_curve(T, b, 12, area, swap=False)
         check_curve(greedy, T, b, area, 12)
         swapped = bl.best_k_curve(T, b, 12, area)
@@ -472,12 +472,13 @@ def test_staircase_quality(staircase):
     assert lb.exact[0] and lb.exact[1] and not lb.exact[2]  # C(693, 2) subsets: exact up to 2 lights
     for p in curve:
         assert lb.at(p.k) <= p.error
-    assert curve[0].error == pytest.approx(lb.bound[0] / (1 - bl.BOUND_MARGIN), rel=1e-9)  # k = 1 optimal
+    assert curve[0].error == pytest.approx((lb.bound[0] + bl.BOUND_ROUNDING * np.linalg.norm(b)) / (1 - bl.BOUND_MARGIN), rel=1e-9)  # k = 1 optimal
     # optimal at 2 lights (seeded with the certificate's optimum), near the NNLS floor at 32
-    assert curve[1].error == pytest.approx(lb.bound[1] / (1 - bl.BOUND_MARGIN), rel=1e-9)
+    assert curve[1].error == pytest.approx((lb.bound[1] + bl.BOUND_ROUNDING * np.linalg.norm(b)) / (1 - bl.BOUND_MARGIN), rel=1e-9)
     assert curve[31].error <= 1.05 * lb.nnls
-    # the plain greedy path (error-scored) already meets the target at 3 lights; correlation-scored does not
+    # the plain greedy path (error-scored) comes close at 3 lights (0.126 with the reciprocity-weighted
+    # form factors, 0.12 before), the swaps bring it under the target; correlation-scored is worse
     g = bl.best_k_curve(T, b, 3, area, swap=False)
-    assert g[2].relative_error <= 0.125
+    assert curve[2].relative_error <= g[2].relative_error <= 0.13
     gc = bl.best_k_curve(T, b, 3, area, swap=False, score="correlation")
     assert gc[2].relative_error >= g[2].relative_error

@@ -78,7 +78,7 @@ def test_reflectance_near_one_warns_and_stays_finite():
         inv = solve_inverse(prob, solver)
         assert np.all(np.isfinite(inv.exitance))
         assert any("ill-conditioned" in w for w in inv.warnings)
-    assert prob.condition > 1e8
+    assert prob.condition > 1e6  # float32 rows of the weighted F: about 1e7 (1e9 with exact ones)
     combos = [c for c in COMBOS if c[1] in ("exitance-elimination", "nnls-greedy") and c[2] == "distance"]
     rows = check_rows(prob, [c for c in combos if c[0] != "svd"], error_rtol=1e-4)
     assert all(r["positive"] for r in rows)

@@ -109,7 +109,7 @@ def test_ill_conditioned_room(problems):
     error agrees with a dense forward solve (to the conditioning)."""
     prob = problems("reflectance 1-1e-9")
     T = prob.transfer
-    assert prob.condition > 1e8 and any("ill-conditioned" in w for w in prob.warnings)
+    assert prob.condition > 1e6 and any("ill-conditioned" in w for w in prob.warnings)
     curves, lb = check(T, prob.b_target, prob.light_area)
     for curve in curves.values():
         for p in curve[:3]:

@@ -8,7 +8,10 @@ directions cosine-weighted about the triangle's normal, and counting the
 fraction whose first hit is the front side of j. Patches are one-sided: a hit
 on a back side is absorbed and counts for no patch; a ray that leaves the
 scene counts for none either, so row sums are < 1 in open scenes and ~1 in
-closed ones.
+closed ones. Every pair is then estimated from the rays of both its patches
+(``reciprocity="weighted"``, the default; ``weigh_reciprocity``): the exchange
+A_i F_ij = A_j F_ji weighted by the inverse variance of each side's count,
+which favours the smaller patch (a small light cell seen by a large wall).
 
 Sampling (``sampling=``):
 - ``"sobol"`` (default): randomised quasi-Monte Carlo. The first N points of
@@ -27,7 +30,7 @@ Sampling (``sampling=``):
 Directions map the unit square to the disk with Shirley's concentric map and
 lift it to the hemisphere (Malley), which gives a cosine-weighted density.
 See docs/benchmarks.md ("Form factors") for the measured error per ray of the
-three samplers, with and without reciprocity symmetrisation.
+three samplers, with and without the reciprocity weighting.
 
 Storage: ``FormFactors.matrix`` is a dense float32 ndarray (P, P) when
 P <= ``DENSE_LIMIT`` (6000, 144 MB), else a float32 scipy.sparse CSR matrix.
@@ -72,7 +75,7 @@ __all__ = [
     "compute_form_factors",
     "auto_rays_per_patch",
     "RAY_BUDGET",
-    "symmetrise",
+    "weigh_reciprocity",
 ]
 
 #: rays per patch for each quality level; accuracy measured in docs/benchmarks.md
@@ -87,6 +90,7 @@ RAY_BUDGET = 1 << 22
 #: dense float32 matrix up to this many patches, scipy.sparse CSR above.
 DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
+RECIPROCITY = ("weighted", "rays")
 #: target number of rays per chunk (one chunk = a contiguous range of source patches).
 CHUNK_RAYS = 1 << 17
 #: the Sobol point sets are pre-mapped for about this many rays (see _Tracer._sobol_pool).
@@ -113,7 +117,7 @@ class FormFactors:
     n_rays: int
     seconds: float
     sampling: str = "sobol"
-    symmetrised: bool = False
+    reciprocity: str = "weighted"  # "weighted": weigh_reciprocity; "rays": each row from its own rays
     #: receiver x source pairs replaced by the kernel estimator (kernel_transfer.py), 0 if none
     kernel_pairs: int = 0
 
@@ -174,15 +178,74 @@ class FormFactors:
         return float(np.max(np.abs(a - b) / (0.5 * (a + b))))
 
 
-def symmetrise(matrix, area):
-    """Enforce reciprocity: F_ij <- (A_i F_ij + A_j F_ji) / (2 A_i)."""
-    area = np.asarray(area, dtype=np.float64)
+def weigh_reciprocity(matrix, area, rays_per_patch: int):
+    """Every pair's form factors from the rays of both of its patches.
+
+    The power the pair exchanges, G_ij = A_i F_ij = A_j F_ji, is counted twice: by the rays of
+    i (hits on j) and by the rays of j (hits on i). With N rays per patch, a count of F N hits
+    has variance about F N, so the estimate from patch i has variance about A_i G / N: the
+    smaller patch measures the exchange better. The two are combined by inverse variance,
+    G = (F_ij + F_ji) / (1 / A_i + 1 / A_j), i.e. ``F_ij <- (F_ij + F_ji) A_j / (A_i + A_j)``
+    (variance G / N * A_i A_j / (A_i + A_j): below either one; for equal areas the plain mean).
+
+    Row sums: the rays' own row sum (the share of i's rays that reach a front face; exact, 1,
+    in a closed scene) and the combined one are blended by their variances (R (1 - R) / N and
+    sum_j F_ij A_j / (A_i + A_j) / N), capped at 1, and each row is scaled to that: no energy
+    is created, and a closed scene keeps its row sums of 1 (to float32 rounding, never above:
+    within 1.2e-7 below). Reciprocity then holds up to that scale (about 1 +- the row sum's
+    noise).
+    Dense (float32, by blocks of rows) or scipy.sparse CSR in, the same kind out.
+    """
+    a = np.asarray(area, dtype=np.float64)
+    N = float(rays_per_patch)
     if sp.issparse(matrix):
-        G = sp.diags(area) @ matrix.astype(np.float64)
-        S = sp.diags(0.5 / area) @ (G + G.T)
-        return S.astype(np.float32).tocsr()
-    G = area[:, None] * np.asarray(matrix, dtype=np.float64)
-    return ((G + G.T) * (0.5 / area)[:, None]).astype(np.float32)
+        M = matrix.tocsr().astype(np.float32)
+        raw = np.asarray(M.sum(axis=1), dtype=np.float64).ravel()
+        S = (M + M.T).tocsr()
+        rows = np.repeat(np.arange(S.shape[0]), np.diff(S.indptr))
+        w = a[S.indices] / (a[rows] + a[S.indices])
+        S.data = (S.data * w).astype(np.float32)
+        comb = np.bincount(rows, weights=S.data, minlength=S.shape[0])
+        var_comb = np.bincount(rows, weights=S.data * w, minlength=S.shape[0]) / N
+        scale, target = _row_scale(raw, comb, var_comb, N)
+        S.data = (S.data * scale[rows]).astype(np.float32)
+        over = _over(np.bincount(rows, weights=S.data, minlength=S.shape[0]), target)
+        S.data *= over[rows]
+        return S
+    M = np.asarray(matrix, dtype=np.float32)
+    P = M.shape[0]
+    raw = M.sum(axis=1, dtype=np.float64)
+    out = np.empty_like(M)
+    var_comb = np.empty(P)
+    for r0 in range(0, P, 512):
+        r1 = min(P, r0 + 512)
+        w = (a[None, :] / (a[r0:r1, None] + a[None, :])).astype(np.float32)
+        blk = np.add(M[r0:r1], M[:, r0:r1].T, out=out[r0:r1])
+        blk *= w
+        var_comb[r0:r1] = (blk * w).sum(axis=1, dtype=np.float64) / N
+    comb = out.sum(axis=1, dtype=np.float64)
+    scale, target = _row_scale(raw, comb, var_comb, N)
+    out *= scale.astype(np.float32)[:, None]
+    out *= _over(out.sum(axis=1, dtype=np.float64), target)[:, None]
+    return out
+
+
+def _row_scale(raw, comb, var_comb, N):
+    """Per row: the blended row sum (see weigh_reciprocity) over the combined one, and that sum."""
+    var_raw = np.clip(raw * (1 - raw), 0.0, None) / N
+    total = var_raw + var_comb
+    target = np.where(total > 0, (raw * var_comb + comb * var_raw) / np.where(total > 0, total, 1.0), raw)
+    target = np.minimum(target, 1.0)
+    return np.where(comb > 0, target / np.where(comb > 0, comb, 1.0), 0.0), target
+
+
+def _over(sums, target):
+    """float32 factors that bring rows whose float32 entries sum above their target just below it
+    (a row sum above 1 would create energy where the reflectance is 1); 1 elsewhere."""
+    over = sums > target
+    f = np.ones(len(sums))
+    f[over] = target[over] / sums[over] * (1 - 2.0**-23)
+    return f.astype(np.float32)
 
 
 def _cosine_directions(u2, u3) -> np.ndarray:
@@ -501,7 +564,7 @@ def compute_form_factors(
     progress=None,
     cancel=None,
     sampling: str = "sobol",
-    symmetrise_reciprocity: bool = False,
+    reciprocity: str = "weighted",
     dense_limit: int = DENSE_LIMIT,
     kernel_pairs=None,
     kernel_options: dict | None = None,
@@ -514,7 +577,8 @@ def compute_form_factors(
     ``threads``: worker threads (default ``os.cpu_count()``).
     ``progress(fraction)``: optional callback, called from the calling thread.
     ``cancel()``: optional; returning True aborts with :class:`Cancelled`.
-    ``symmetrise_reciprocity``: replace F by (A_i F_ij + A_j F_ji) / (2 A_i)
+    ``reciprocity``: "weighted" (default) combines the rays of both patches of every pair
+    (``weigh_reciprocity``); "rays": every row from its own patch's rays only
     (off by default: it no longer guarantees row sums <= 1).
     ``kernel_pairs=(receivers, sources)``: patch indices or masks; F[receivers, sources]
     and, by reciprocity, F[sources, receivers] are then replaced by the low-variance
@@ -533,6 +597,8 @@ def compute_form_factors(
         raise ValueError(f"rays per patch must be a positive integer, got {rays_per_patch!r}")
     if sampling not in SAMPLINGS:
         raise ValueError(f"unknown sampling {sampling!r}; use one of {SAMPLINGS}")
+    if reciprocity not in RECIPROCITY:
+        raise ValueError(f"unknown reciprocity {reciprocity!r}; use one of {RECIPROCITY}")
     if threads is None:
         threads = os.cpu_count() or 1
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
@@ -568,8 +634,8 @@ def compute_form_factors(
 
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
-    if symmetrise_reciprocity:
-        matrix = symmetrise(matrix, patches.area)
+    if reciprocity == "weighted":
+        matrix = weigh_reciprocity(matrix, patches.area, N)
     n_kernel = 0
     if kernel_pairs is not None:
         from .kernel_transfer import apply_kernel_pairs, kernel_form_factors
@@ -589,6 +655,6 @@ def compute_form_factors(
         n_rays=N * P,
         seconds=time.perf_counter() - t0,
         sampling=sampling,
-        symmetrised=bool(symmetrise_reciprocity),
+        reciprocity=reciprocity,
         kernel_pairs=int(n_kernel),
     )

@@ -42,7 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
-from .radiosity import radiosity_matrix
+from .radiosity import lossless_patches, radiosity_matrix
 from .registry import SOLVERS
 from .scene import SceneError
 
@@ -63,8 +63,9 @@ GRAM_MAX_COND = 1e5
 DIRECT_SOLVE_LIMIT = 6000
 #: relative residual of the iterative solves
 ITERATIVE_TOL = 1e-10
-#: condition-number estimate of A above which the problem warns
-ILL_CONDITIONED = 1e8
+#: condition-number estimate of A above which the problem warns (a closed scene of reflectance
+#: 1 - 1e-6 is about 1e6; closer to 1 the float32 rows of F, within 1.2e-7 of their sums, set the limit)
+ILL_CONDITIONED = 1e6
 #: condition-number estimate treated as singular (about 1 / machine epsilon / 100)
 SINGULAR = 1e14
 
@@ -324,6 +325,11 @@ class InverseProblem:
             factors = [None] * 3
             for g in _channel_groups(self.reflectance):
                 rho = self.reflectance[:, g[0]]
+                closed = lossless_patches(self.F, rho)
+                if closed.any():
+                    raise InverseError(
+                        f"the radiosity system I - rho F is singular: {int(closed.sum())} patch(es) with reflectance "
+                        "1 form a closed scene that never loses light (lower the reflectance below 1)")
                 fac = (_Iterative(self.F, rho) if self.n_patches > DIRECT_SOLVE_LIMIT
                        else _Factor(radiosity_matrix(self.F, rho)))  # may raise
                 for c in g:

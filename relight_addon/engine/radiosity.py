@@ -30,6 +30,7 @@ import scipy.sparse.linalg as spla
 __all__ = [
     "DIRECT_LIMIT",
     "MAX_REFLECTANCE",
+    "lossless_patches",
     "RadiosityError",
     "radiosity_matrix",
     "solve_radiosity",
@@ -70,6 +71,30 @@ def radiosity_matrix(F, rho_channel) -> np.ndarray | sp.csr_matrix:
     A = -(rho[:, None] * M.astype(np.float64))
     A[np.diag_indices(P)] += 1.0
     return A
+
+
+#: a row of F within this of 1 keeps all its patch's rays (float32 rounding of the weighted
+#: reciprocity is about 1e-7; one escaped ray of 262,144 is 3.8e-6)
+CLOSED_TOL = 1e-6
+
+
+def lossless_patches(F, rho_channel, tol: float = CLOSED_TOL) -> np.ndarray:
+    """(P,) bool: the patches that never lose light -- reflectance exactly 1, every ray caught by
+    the scene (row sum of F within ``tol`` of 1) -- and that send light only to patches that
+    never lose it either. rho F is substochastic, so I - rho F is singular exactly when such a
+    closed class exists (Perron-Frobenius); this finds it from the structure of F, not from LU
+    pivots that rounding makes nonzero."""
+    M = _matrix(F)
+    rho = np.asarray(rho_channel, dtype=np.float64).reshape(-1)
+    rows = np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1)
+    keep = (rho >= 1.0) & (rows >= 1.0 - tol)
+    while keep.any():
+        leak = (M @ (~keep).astype(np.float32)).reshape(-1) > 0  # sends light to a patch that loses it
+        drains = keep & np.asarray(leak)
+        if not drains.any():
+            break
+        keep &= ~drains
+    return keep
 
 
 def _check_inputs(M, reflectance, exitance, max_reflectance):
