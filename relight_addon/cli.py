@@ -480,7 +480,7 @@ def run_solve_command(args, progress=None, cancel=None):
 
     def mesh(progress, cancel):
         patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"], mode=mode)
-        return patches, jobs.solve_cost(patches, options)
+        return patches, jobs.solve_cost(patches, options, mode=mode)
 
     patches, cost = _job(args, mesh)
     _print_estimate(args, patches, cost)

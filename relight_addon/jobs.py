@@ -267,17 +267,27 @@ def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=Non
     return patch_model(options, default_max_patch_size).mesh(faces)
 
 
-def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0) -> dict:
+def uses_kernel_pairs(options: JobOptions, mode: str = "inverse") -> bool:
+    """Whether the job's estimator computes the light-to-target pairs by the kernel (inverse mode)."""
+    return mode == "inverse" and bool(ESTIMATORS[options.estimator].get("kernel_pairs", False))
+
+
+def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -> int:
+    """The option, or the automatic quality for this many patches (formfactors.auto_rays_per_patch)."""
+    return int(options.rays_per_patch or auto_rays_per_patch(n_patches, kernel=uses_kernel_pairs(options, mode)))
+
+
+def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mode: str = "inverse") -> dict:
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
     passes = options.refine_passes if PATCH_MODELS[options.patch_model].get("refines") else 0
-    return estimate_patches_cost(patches, options.rays_per_patch, options.solver, n_triangles=n_triangles,
-                                 refine_passes=passes, kernel=options.estimator == "kernel",
-                                 threads=options.threads)
+    return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
+                                 n_triangles=n_triangles, refine_passes=passes,
+                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
     """Memory and time estimate of a forward radiosity job (no inverse problem)."""
-    rays = options.rays_per_patch or auto_rays_per_patch(patches.n_patches)
+    rays = rays_per_patch(options, patches.n_patches, "radiosity")
     return estimate_cost(patches.n_patches, rays, 0, 0, threads=options.threads)  # no inverse terms
 
 
@@ -332,7 +342,7 @@ def check_before_meshing(faces: FaceSet, options: JobOptions, default_max_patch_
     the inverse problem's terms left out: a lower bound of the estimate checked after meshing)."""
     P = estimate_patch_count(faces, options, default_max_patch_size, certain=True)
     Pi = int(P)
-    rays = options.rays_per_patch or auto_rays_per_patch(Pi)
+    rays = rays_per_patch(options, Pi, mode)
     passes = options.refine_passes if (mode == "inverse" and PATCH_MODELS[options.patch_model].get("refines")) else 0
     cost = estimate_cost(Pi, int(rays), 0, 0, n_triangles=len(faces.triangles), refine_passes=passes,
                          threads=options.threads)
@@ -442,7 +452,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         patches = pm.mesh(faces)
     t_mesh = time.perf_counter() - t0
     warnings = list(faces.warnings)
-    cost = check_memory(solve_cost(patches, options, len(faces.triangles)),
+    cost = check_memory(solve_cost(patches, options, len(faces.triangles), mode),
                         f"this solve ({patches.n_patches} patches)")  # refuse before any more work
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
@@ -459,7 +469,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
         lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
         # a model that will be refined only ranks patches by importance: a quarter of the rays
-        rays = options.rays_per_patch or auto_rays_per_patch(patches.n_patches)
+        rays = rays_per_patch(options, patches.n_patches, mode)
         opts = options if p == passes else replace(options, rays_per_patch=max(64, rays // REFINE_RAY_FRACTION))
         F = ESTIMATORS[options.estimator](patches, opts, progress=_stage(progress, "form factors", lo, hi),
                                           cancel=cancel, pairs=pairs)
@@ -495,7 +505,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if not pm.refine(faces, patches, importance):
             break
         patches = pm.mesh(faces)
-        check_memory(solve_cost(patches, options, len(faces.triangles)),
+        check_memory(solve_cost(patches, options, len(faces.triangles), mode),
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
     if mode == "inverse" and np.any(background > 0):

@@ -227,3 +227,5 @@ def test_job_options_default_rays_is_the_form_factor_default():
     assert formfactors.auto_rays_per_patch(2) == formfactors.DEFAULT_RAYS_PER_PATCH == QUALITY["default"]
     assert formfactors.auto_rays_per_patch(10 ** 6) == QUALITY["draft"]
     assert formfactors.auto_rays_per_patch(1451) == 2048
+    # with kernel pairs (the default solve) half the budget: the staircase's 943 adaptive patches
+    assert formfactors.auto_rays_per_patch(943) == 4096 and formfactors.auto_rays_per_patch(943, kernel=True) == 2048

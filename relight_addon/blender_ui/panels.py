@@ -227,7 +227,7 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         col = layout.column(align=True)
         if s.rays_per_patch == 0:
             f = _counts(context)[2]
-            col.prop(s, "rays_per_patch", text=f"Rays: Auto (~{auto_rays_per_patch(max(f, 1))})")
+            col.prop(s, "rays_per_patch", text=f"Rays: Auto (~{auto_rays_per_patch(max(f, 1), kernel=True)})")  # solves: kernel pairs
         else:
             col.prop(s, "rays_per_patch")
         if s.max_patch_size == 0:

@@ -149,7 +149,7 @@ def estimate_patches_cost(patches, rays_per_patch=None, solver: str = "reduced",
 
     P = patches.n_patches
     if rays_per_patch is None:
-        rays_per_patch = auto_rays_per_patch(P)
+        rays_per_patch = auto_rays_per_patch(P, kernel=kernel)
     elif isinstance(rays_per_patch, str):
         if rays_per_patch not in QUALITY:
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")

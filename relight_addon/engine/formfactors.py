@@ -75,6 +75,7 @@ __all__ = [
     "compute_form_factors",
     "auto_rays_per_patch",
     "RAY_BUDGET",
+    "KERNEL_RAY_BUDGET",
     "weigh_reciprocity",
 ]
 
@@ -87,6 +88,11 @@ DEFAULT_RAYS_PER_PATCH = QUALITY["default"]
 #: faces, e.g. the closed-form configurations) get the default 16384; the ~1500-patch
 #: staircase gets 2048 (accuracy against rays per patch: docs/benchmarks.md).
 RAY_BUDGET = 1 << 22
+#: ... and with kernel pairs (compute_form_factors(kernel_pairs=...)), where the kernel estimate
+#: replaces the light-to-target pairs that need the most rays and the hemisphere estimate serves
+#: the rest of F (mostly the indirect light): half. The staircase's 943 adaptive patches then get
+#: 2048 (measured against 4096: docs/benchmarks.md, "The staircase's mathematical phase").
+KERNEL_RAY_BUDGET = RAY_BUDGET // 2
 #: dense float32 matrix up to this many patches, scipy.sparse CSR above.
 DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
@@ -549,9 +555,9 @@ def run_chunks(work, total, threads, stop, cancel=None, progress=None):
             raise
 
 
-def auto_rays_per_patch(n_patches: int) -> int:
-    """Rays per patch of the automatic quality (see RAY_BUDGET)."""
-    want = RAY_BUDGET / max(int(n_patches), 1)
+def auto_rays_per_patch(n_patches: int, kernel: bool = False) -> int:
+    """Rays per patch of the automatic quality (see RAY_BUDGET; KERNEL_RAY_BUDGET with kernel pairs)."""
+    want = (KERNEL_RAY_BUDGET if kernel else RAY_BUDGET) / max(int(n_patches), 1)
     k = int(np.rint(np.log2(want)))
     return int(np.clip(2 ** k, QUALITY["draft"], QUALITY["default"]))
 
@@ -572,7 +578,8 @@ def compute_form_factors(
     """Ray-cast form factors of ``patches`` (see the module docstring).
 
     ``rays_per_patch``: rays shot from every patch, a ``QUALITY`` name, or None for the
-    automatic quality (``auto_rays_per_patch``: a budget of RAY_BUDGET rays in all).
+    automatic quality (``auto_rays_per_patch``: a budget of RAY_BUDGET rays in all, or
+    KERNEL_RAY_BUDGET with ``kernel_pairs``).
     ``seed``: results are reproducible for a seed, whatever ``threads``.
     ``threads``: worker threads (default ``os.cpu_count()``).
     ``progress(fraction)``: optional callback, called from the calling thread.
@@ -588,7 +595,7 @@ def compute_form_factors(
     """
     t0 = time.perf_counter()
     if rays_per_patch is None:
-        rays_per_patch = auto_rays_per_patch(patches.n_patches)
+        rays_per_patch = auto_rays_per_patch(patches.n_patches, kernel=kernel_pairs is not None)
     if isinstance(rays_per_patch, str):
         if rays_per_patch not in QUALITY:
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")

@@ -105,7 +105,7 @@ DEFAULT_POINTS_PER_PATCH = 16
 #: shadow rays per receiver point and source patch (phase 1: they find the pairs in penumbra).
 DEFAULT_SHADOW_RAYS = 4
 #: jittered receiver points of a pair in penumbra (phase 2), and rays from each.
-DEFAULT_PENUMBRA_POINTS = 256
+DEFAULT_PENUMBRA_POINTS = 64
 DEFAULT_PENUMBRA_RAYS = 4
 #: pairs farther apart than this many times the larger patch diameter use the point kernel.
 DEFAULT_FAR_RATIO = 10.0

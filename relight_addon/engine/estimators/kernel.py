@@ -10,7 +10,7 @@ from ..registry import ESTIMATORS
 
 @ESTIMATORS.register("kernel", "Kernel for Lights to Targets",
                      "Hemisphere ray casting, and the analytic point-to-polygon kernel with shadow rays for the "
-                     "transport from candidate lights to targets (low noise for small lights)")
+                     "transport from candidate lights to targets (low noise for small lights)", kernel_pairs=True)
 def estimate(patches, options, progress=None, cancel=None, pairs=None):
     kw = {} if options.rays_per_patch is None else {"rays_per_patch": int(options.rays_per_patch)}
     return compute_form_factors(patches, seed=options.seed, threads=options.threads, progress=progress,
