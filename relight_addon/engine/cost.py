@@ -36,7 +36,9 @@ __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_
            "MEMORY_WARNING_BYTES", "SECONDS_WARNING", "RAYS_PER_SECOND", "FLOPS"]
 
 RAYS_PER_SECOND = 3.0e6
-FLOPS = 5.0e9
+#: dense LAPACK/BLAS on 2 threads (re-calibrated quiet, issue 7's staircase work: 5e9 had been
+#: set under load; three 943-patch LUs run at about 4e10)
+FLOPS = 1.0e10
 #: meshing + Embree BVH + the scene arrays, per triangle (bytes) and its time (s)
 BYTES_PER_TRIANGLE = 700.0
 SECONDS_PER_TRIANGLE = 4e-6
@@ -47,7 +49,8 @@ NNZ_PER_RAY = 0.25
 #: the job's fixed memory (the engine's modules, Embree's device) over the scene
 BASE_BYTES = 60 * 2 ** 20
 REFINE_RAY_FRACTION = 4  # jobs.REFINE_RAY_FRACTION
-KERNEL_SECONDS_PER_PAIR = 4e-5
+#: the kernel estimator per target x candidate pair at its defaults (64 penumbra points; 4e-5 at 256)
+KERNEL_SECONDS_PER_PAIR = 2e-5
 STORED_POINTS = 72
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
