@@ -58,8 +58,9 @@ KERNEL_LEVELS = [
     ("k1", dict(points_per_patch=4, shadow_rays=1, penumbra_points=16, penumbra_rays=1)),
     ("k2", dict(points_per_patch=8, shadow_rays=2, penumbra_points=64, penumbra_rays=2)),
     ("k3", dict(points_per_patch=16, shadow_rays=4, penumbra_points=144, penumbra_rays=2)),
-    ("k4 (default)", dict()),  # 64 penumbra points
-    ("k4-256 (before)", dict(penumbra_points=256)),  # the default until the weighted reciprocity
+    ("k4 (default)", dict()),  # 100 penumbra points x 2 rays
+    ("k4-64x4", dict(penumbra_points=64, penumbra_rays=4)),
+    ("k4-256x4 (before)", dict(penumbra_points=256, penumbra_rays=4)),  # the default until issue 7's staircase work
     ("k5", dict(points_per_patch=16, shadow_rays=8, penumbra_points=1024, penumbra_rays=8)),
     ("k6", dict(points_per_patch=32, shadow_rays=8, penumbra_points=2048, penumbra_rays=8)),
 ]

@@ -8,7 +8,7 @@ Scene: sample_blends/staircase_targets.blend through export.py and jobs.run_solv
 defaults (adaptive patches, Best k Lights), as `relight solve` runs it.
 
 Reference: the same patches and lights with 65,536 hemisphere rays per patch and the kernel
-estimator at 4,096 penumbra points (seed 11, independent of the runs): its light-to-target
+estimator at 4,096 penumbra points x 4 rays (seed 11, independent of the runs): its light-to-target
 transfer T_ref (targets x lights, per channel).
 
 Per variant and seed (1 .. seeds; variants interleaved seed by seed so that load changes hit all):
@@ -50,13 +50,14 @@ SCENE = ROOT / "sample_blends" / "staircase_targets.blend"
 OUT_JSON = ROOT / "benchmarks" / "results" / "bench_staircase_math.json"
 OUT_PNG = ROOT / "docs" / "img" / "bench_staircase_math.png"
 
-#: (label, estimator, rays per patch (None: auto), penumbra points, reciprocity)
+#: (label, estimator, rays per patch (None: auto), (penumbra points, rays each), reciprocity)
 VARIANTS = [
-    ("kernel, 4096 rays, 256 penumbra pts, rays (the defaults before)", "kernel", 4096, 256, "rays"),
-    ("kernel, 4096 rays, 256 penumbra pts, weighted", "kernel", 4096, 256, "weighted"),
-    ("kernel, 2048 rays, 256 penumbra pts, weighted", "kernel", 2048, 256, "weighted"),
-    ("kernel, 4096 rays, 64 penumbra pts, weighted", "kernel", 4096, 64, "weighted"),
-    ("kernel, auto (2048), 64 penumbra pts, weighted (default)", "kernel", None, 64, "weighted"),
+    ("kernel, 4096 rays, 256 penumbra pts x 4 rays, rays (the defaults before)", "kernel", 4096, (256, 4), "rays"),
+    ("kernel, 4096 rays, 256 penumbra pts x 4 rays, weighted", "kernel", 4096, (256, 4), "weighted"),
+    ("kernel, 2048 rays, 256 penumbra pts x 4 rays, weighted", "kernel", 2048, (256, 4), "weighted"),
+    ("kernel, auto (2048), 64 penumbra pts x 4 rays, weighted", "kernel", None, (64, 4), "weighted"),
+    ("kernel, 4096 rays, 100 penumbra pts x 2 rays, weighted", "kernel", 4096, (100, 2), "weighted"),
+    ("kernel, auto (2048), 100 penumbra pts x 2 rays, weighted (default)", "kernel", None, (100, 2), "weighted"),
     ("raycast, 4096 rays, rays (before)", "raycast", 4096, None, "rays"),
     ("raycast, auto (4096), weighted (default)", "raycast", None, None, "weighted"),
 ]
@@ -68,14 +69,15 @@ def uptime():
 
 
 @contextlib.contextmanager
-def settings(reciprocity, penumbra_points):
-    """The estimators' compute_form_factors with this reciprocity, the kernel with these penumbra points."""
+def settings(reciprocity, penumbra):
+    """The estimators' compute_form_factors with this reciprocity, the kernel with these penumbra (points, rays)."""
     saved = (kernel_estimator.compute_form_factors, raycast_estimator.compute_form_factors,
              kernel_transfer.kernel_form_factors)
     cff = functools.partial(formfactors.compute_form_factors, reciprocity=reciprocity)
     kernel_estimator.compute_form_factors = raycast_estimator.compute_form_factors = cff
-    if penumbra_points is not None:
-        kernel_transfer.kernel_form_factors = functools.partial(saved[2], penumbra_points=penumbra_points)
+    if penumbra is not None:
+        kernel_transfer.kernel_form_factors = functools.partial(saved[2], penumbra_points=penumbra[0],
+                                                                penumbra_rays=penumbra[1])
     try:
         yield
     finally:
@@ -107,7 +109,7 @@ def main():
 
     load = [uptime()]
     t0 = time.perf_counter()
-    ref = solve("kernel", 65536, 4096, "weighted", 11)
+    ref = solve("kernel", 65536, (4096, 4), "weighted", 11)
     t_ref = time.perf_counter() - t0
     T_ref = transfer(ref.problem)
     n = T_ref.shape[2]
@@ -164,7 +166,7 @@ def plot(summary):
     for s in summary:
         marker = "s" if s["variant"].startswith("raycast") else "o"
         ax.scatter(s["math_s_median"], s["prediction"] * 100, marker=marker, s=40)
-        ax.annotate(s["variant"].replace(", weighted", ", w").replace(" penumbra pts", " pp"),
+        ax.annotate(s["variant"].replace(", weighted", ", w").replace(" penumbra pts x ", " pp x "),
                     (s["math_s_median"], s["prediction"] * 100), fontsize=6, xytext=(4, 3),
                     textcoords="offset points")
     ax.axvline(0.5, color="grey", ls=":", lw=1)

@@ -219,9 +219,12 @@ def test_blocker_halfway_hides_exactly_half():
     # blocked and free sets and keeps the kernel, so exactly half of F_12 gets through.
     ref = cf.parallel_rectangles(1, 1, 1) / 2
     ps = blocker_scene(0.5)
-    # default settings: every receiver point is in penumbra, the noisiest case for this method
-    e = np.array([kernel_form_factors(ps, [0], [1], seed=s)[0, 0] / ref - 1 for s in range(6)])
-    assert abs(e.mean()) < 0.02 and np.sqrt(np.mean(e ** 2)) < 0.05, e
+    # default settings: every receiver point is in penumbra, the noisiest case for this method.
+    # 48 seeds (the standard error of their mean about 0.6 %): no bias beyond 2 %, RMS under 6 %
+    # (measured -1.4 % / 4.6 % on seeds 0-47, -0.35 % / 4.1 % on seeds 100-195; 256 x 4 penumbra
+    # samples, the default before issue 7's staircase work: -0.1 % / 1.5 %)
+    e = np.array([kernel_form_factors(ps, [0], [1], seed=s)[0, 0] / ref - 1 for s in range(48)])
+    assert abs(e.mean()) < 0.02 and np.sqrt(np.mean(e ** 2)) < 0.06, e
     # more penumbra samples: converges to the exact half
     hi = kernel_form_factors(ps, [0], [1], penumbra_points=4096, penumbra_rays=16)[0, 0]
     assert hi == pytest.approx(ref, rel=0.0075)
