@@ -49,7 +49,8 @@ NNZ_PER_RAY = 0.25
 #: the job's fixed memory (the engine's modules, Embree's device) over the scene
 BASE_BYTES = 60 * 2 ** 20
 REFINE_RAY_FRACTION = 4  # jobs.REFINE_RAY_FRACTION
-#: the kernel estimator per target x candidate pair at its defaults (64 penumbra points; 4e-5 at 256)
+#: the kernel estimator per target x candidate pair at its defaults (100 penumbra points x 2 rays;
+#: 4e-5 at 256 x 4)
 KERNEL_SECONDS_PER_PAIR = 2e-5
 STORED_POINTS = 72
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes

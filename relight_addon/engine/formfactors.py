@@ -585,8 +585,7 @@ def compute_form_factors(
     ``progress(fraction)``: optional callback, called from the calling thread.
     ``cancel()``: optional; returning True aborts with :class:`Cancelled`.
     ``reciprocity``: "weighted" (default) combines the rays of both patches of every pair
-    (``weigh_reciprocity``); "rays": every row from its own patch's rays only
-    (off by default: it no longer guarantees row sums <= 1).
+    (``weigh_reciprocity``); "rays": every row from its own patch's rays only.
     ``kernel_pairs=(receivers, sources)``: patch indices or masks; F[receivers, sources]
     and, by reciprocity, F[sources, receivers] are then replaced by the low-variance
     kernel estimate of kernel_transfer.kernel_form_factors (``kernel_options``: its

@@ -166,12 +166,17 @@ def _lambert(x, n, v, ns):
     whole = front & ahead[0] & ahead[1] & ahead[2]
     w = np.flatnonzero(whole)
     if len(w):
-        rw, nw = [rk[w] for rk in r], n[w]
-        out[w] = _edge_term(rw[0], rw[1], nw) + _edge_term(rw[1], rw[2], nw) + _edge_term(rw[2], rw[0], nw)
+        out[w] = _contour([rk[w] for rk in r], n[w])
     c = np.flatnonzero(front & (ahead[0] | ahead[1] | ahead[2]) & ~whole)
     if len(c):
         out[c] = _clipped_contour([rk[c] for rk in r], n[c])
     return np.maximum(-out, 0.0) * (0.5 / np.pi)
+
+
+def _contour(r, n):
+    """Lambert's contour sum over a polygon wholly in front of the points: its vertices r[k]
+    relative to the points ((E, 3) each, in winding order), the points' normals n."""
+    return sum(_edge_term(r[k], r[(k + 1) % len(r)], n) for k in range(len(r)))
 
 
 def _clipped_contour(r, n):
@@ -708,9 +713,7 @@ def _source_kernel(g: _Geometry, x, n, s, far):
             whole &= _dot(rk, nq) > 0
         w = np.flatnonzero(whole)
         if len(w):
-            rw, nw = [rk[w] for rk in r], nq[w]
-            total = sum(_edge_term(rw[k], rw[(k + 1) % 4], nw) for k in range(4))
-            out[q[w]] = np.maximum(-total, 0.0) * (0.5 / np.pi)
+            out[q[w]] = np.maximum(-_contour([rk[w] for rk in r], nq[w]), 0.0) * (0.5 / np.pi)
             rest[q[w]] = False
     idx = np.flatnonzero(rest)
     if len(idx) == 0:

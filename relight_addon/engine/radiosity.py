@@ -85,9 +85,10 @@ def lossless_patches(F, rho_channel, tol: float = CLOSED_TOL) -> np.ndarray:
     closed class exists (Perron-Frobenius); this finds it from the structure of F, not from LU
     pivots that rounding makes nonzero."""
     M = _matrix(F)
-    rho = np.asarray(rho_channel, dtype=np.float64).reshape(-1)
-    rows = np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1)
-    keep = (rho >= 1.0) & (rows >= 1.0 - tol)
+    keep = np.asarray(rho_channel, dtype=np.float64).reshape(-1) >= 1.0
+    if not keep.any():  # the usual scene: no row sums needed
+        return keep
+    keep &= np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1) >= 1.0 - tol
     while keep.any():
         leak = (M @ (~keep).astype(np.float32)).reshape(-1) > 0  # sends light to a patch that loses it
         drains = keep & np.asarray(leak)
