@@ -67,9 +67,9 @@ import bpy
 import numpy as np
 
 from .engine.scene import FaceSet, SceneError
+from .engine.units import MAX_REFLECTANCE, exitance_from_radiance
 
 DEFAULT_REFLECTANCE = 0.8
-MAX_REFLECTANCE = 0.99
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
 TARGET_ATTRIBUTE = "relight_target"
 FORBIDDEN_ATTRIBUTE = "relight_forbidden"
@@ -351,7 +351,7 @@ def _base_attributes(ob, target_scale, notes=None):
                 notes.append(f"{ob.name}: {int(np.sum(np.any(rgb < 0, axis=1)))} target(s) with a negative colour "
                              "set to 0 (light cannot be negative)")
             rgb = np.maximum(rgb, 0.0)
-        target_b[target] = math.pi * rgb * target_scale
+        target_b[target] = exitance_from_radiance(rgb * target_scale)
     attr = forbidden_layer(me, ob.name)  # another domain or type: refused (never ignored)
     if attr is not None:
         forbidden = read_forbidden(attr, n)
@@ -455,7 +455,7 @@ class _Builder:
             ids.append(self.mat_ids[key])
         mi = np.clip(mat_index, 0, len(props) - 1)
         self.f_mat.append(np.asarray(ids, dtype=np.int64)[mi])
-        return np.array([p[0] for p in props])[mi], math.pi * np.array([p[1] for p in props])[mi]
+        return np.array([p[0] for p in props])[mi], exitance_from_radiance(np.array([p[1] for p in props]))[mi]
 
     def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
         M = np.asarray(matrix, dtype=np.float64)

@@ -25,7 +25,8 @@ from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.incidence import first_bounce_matrices, incidence_tables
 from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
-from .engine.options import JobOptions
+from .engine.options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS, JobOptions
+from .engine.patch_models.adaptive import CLUSTER_BELOW
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
 from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
@@ -98,9 +99,6 @@ class PolygonMap:
         for k in self.reported:  # real objects come first: a later group of the same name is left out
             out.setdefault(self.names[k], rows[self.offset[k]:self.offset[k + 1]])
         return out
-
-    def object_of(self, pid) -> np.ndarray:
-        return np.searchsorted(self.offset, np.asarray(pid), side="right") - 1
 
 
 def _json_safe(x):
@@ -194,15 +192,6 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 
 # ---------------------------------------------------------------------------- inverse lighting
 
-#: configurations kept re-appliable in the .blend: every one up to this many lights, and
-#: about STORE_LOG_POINTS log-spaced ones above (plus e_x and the final one); the chart and
-#: the report keep the whole curve
-STORE_ALL_UP_TO = 32
-STORE_LOG_POINTS = 40
-
-#: intermediate (to-be-refined) models get this fraction of the rays
-REFINE_RAY_FRACTION = 4
-
 BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed background light; "
                    "the solve lights what they leave to the targets")
 
@@ -295,8 +284,6 @@ def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
 
 #: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
 _MAX_COUNT = 1e30
-#: the adaptive model clusters faces below this fraction of their size (its CLUSTER_BELOW)
-_CLUSTER_BELOW = 0.5
 
 
 def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_size=None,
@@ -325,7 +312,7 @@ def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_
         np.maximum.at(face_edge, tf, edge)
         count = np.where(face_edge <= s, 1.0, per_tri)
         if certain and options.patch_model == "adaptive":
-            count[face_edge <= _CLUSTER_BELOW * s] = 0.0
+            count[face_edge <= CLUSTER_BELOW * s] = 0.0
         quad = np.flatnonzero((faces.loop_total == 4) & (face_edge > s))
         if len(quad):
             p = V[faces.loop_vertices[faces.loop_start[quad][:, None] + np.arange(4)]]

@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .engine.bounces import TAIL, bounce_deficit, kept_terms, required_bounces
+from .engine.units import MAX_REFLECTANCE, radiance_from_exitance
 
 __all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_materials",
            "scene_max_reflectance",
@@ -92,7 +93,7 @@ def scene_materials(context=None) -> dict:
     Relight exports (no material: the default grey)."""
     import bpy
 
-    from .export import DEFAULT_REFLECTANCE, MAX_REFLECTANCE, exported_objects
+    from .export import DEFAULT_REFLECTANCE, exported_objects
     from .materials import surface_closure
 
     context = context or bpy.context
@@ -165,7 +166,7 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "(measured ~4 % on targets of default Principled materials; not estimated here); use Match "
                         "Cycles Light Paths (--out turns it off)")
     e = B - rho * _matvec(F, B)  # the exitance that gives B
-    radiance_max = float(max(e.max(), 0.0) / np.pi)
+    radiance_max = float(radiance_from_exitance(max(e.max(), 0.0)))
     clamps = {k: cur[k] for k in ("sample_clamp_direct", "sample_clamp_indirect") if cur[k] > 0}
     if clamps:
         block["clamping"] = {"settings": clamps, "light_radiance_max": radiance_max, "estimated": False}

@@ -27,7 +27,6 @@ written and the message names the object.
 """
 from __future__ import annotations
 
-import math
 import os
 import uuid
 import warnings as _warnings
@@ -37,6 +36,7 @@ import numpy as np
 
 from .engine.geometry import group_mean
 from .engine.scene import SceneError
+from .engine.units import radiance_from_exitance
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -226,7 +226,7 @@ def _emitter_mesh_data(data, exitance, scale):
     cell = tc[sel]
     offset = max(1e-3, OVERLAY_OFFSET * scale)
     tri = tri + offset * data["cell_normal"][cell][:, None, :]
-    return tri, cell_e[cell] / math.pi, data["cell_reflectance"][cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
+    return tri, radiance_from_exitance(cell_e[cell]), data["cell_reflectance"][cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
 
 
 def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
@@ -254,7 +254,7 @@ def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
     me.attributes.new("relight_cell", "INT", "FACE").data.foreach_set("value", np.asarray(cell, dtype=np.int32))
     rad = me.color_attributes.new(RADIOSITY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
     rgba = np.ones((3 * n, 4), dtype=np.float32)
-    rgba[:, :3] = np.repeat(radiosity / math.pi, 3, axis=0)
+    rgba[:, :3] = np.repeat(radiance_from_exitance(radiosity), 3, axis=0)
     rad.data.foreach_set("color", rgba.ravel())
     me.color_attributes.active_color = rad
     me.materials.append(_emitter_material(rid))
@@ -653,7 +653,7 @@ def write_radiosity_layer(ob, poly_radiosity, poly_area=None):
     active/render colours are remembered on the mesh for ``remove_radiosity_layer``.
     ``poly_area``: the weights (default: the mesh's own polygon areas)."""
     me = ob.data
-    vals = np.asarray(poly_radiosity, dtype=np.float64).reshape(-1, 3) / math.pi
+    vals = radiance_from_exitance(np.asarray(poly_radiosity, dtype=np.float64).reshape(-1, 3))
     if not np.all(np.isfinite(vals)):
         raise SceneError(f"{ob.name}: refusing to write non-finite radiosity")
     if poly_area is None:

@@ -7,6 +7,7 @@ from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors
 from relight_addon.engine.radiosity import RadiosityError, lossless_patches, radiosity_matrix, solve_radiosity
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
+from relight_addon.engine.units import MAX_REFLECTANCE
 
 
 @pytest.fixture(scope="module")
@@ -103,8 +104,8 @@ def test_reflectance_one_is_clamped_with_warning(closed_box):
     B, info = solve_radiosity(ff, rho, e, method="direct")
     assert info["warnings"] and "clamped" in info["warnings"][0]
     assert np.all(np.isfinite(B))
-    assert np.allclose(B, 1 / (1 - 0.999), rtol=1e-3)
-    # Gauss-Seidel converges slowly at rho = 0.999; it stays finite and says so
+    assert np.allclose(B, 1 / (1 - MAX_REFLECTANCE), rtol=1e-3)
+    # Gauss-Seidel converges slowly at the clamped reflectance; it stays finite and says so
     B, info = solve_radiosity(ff, rho, e, method="gauss-seidel", max_iter=30)
     assert info["warnings"] and np.all(np.isfinite(B)) and not info["converged"]
 

@@ -1,9 +1,29 @@
-"""Relight's radiosity engine: pure numpy/scipy/embreex, no bpy.
+"""Relight's radiosity engine: pure numpy/scipy/embreex, no bpy (docs/architecture.md).
 
-Modules
-- scene: FaceSet / PatchSet data model, meshing into patches, per-face means.
-- formfactors: form factors by ray casting with embreex.
+Data and units
+- units: the unit conversions and constants (pi, MAX_REFLECTANCE, 683 lm/W).
+- scene: FaceSet / PatchSet data model, meshing building blocks, per-face means.
+- geometry: triangle areas, group sums and means.
+- lights: candidate_mask, LightSet (the lights over the candidate patches).
+- options: JobOptions and the defaults shared by the CLI and the add-on.
+- registry: the registries of interchangeable methods (below).
+
+Transport
+- formfactors: form factors by hemisphere ray casting (embreex).
+- kernel_transfer: the analytic point-to-polygon kernel with shadow rays.
 - radiosity: forward solvers (Gauss-Seidel, direct).
-- inverse: the inverse radiosity system (paper SVD formulation, reduced T formulation, NNLS).
-- reduction: light-source reduction (selection procedures and energy-conservation distributions).
+- incidence: the lights' first reflection at the albedo of its incidence.
+- principled: Cycles' Principled BSDF (white-furnace albedo, evaluation).
+- view_radiance: radiance along a view through the materials' BSDFs.
+- bounces: the bounce limits Cycles needs.
+- closed_forms: Howell's closed-form form factors (references).
+
+Inverse lighting
+- inverse: the inverse radiosity system (InverseProblem, solve_inverse).
+- reduction: light-source reduction (the curve, stop criteria, Distributor).
+- best_lights: Best k Lights (greedy pursuit with swaps) and its certificate.
+- cost: memory and time estimate of a job; refusal before the work.
+
+Registered methods (one file each): patch_models/, estimators/, solvers/, selections/,
+distributions/.
 """

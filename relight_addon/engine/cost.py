@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 
 from .formfactors import DENSE_LIMIT
+from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
 from .registry import SOLVERS
 
 __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_memory", "check_memory",
@@ -48,11 +49,10 @@ ITERATIVE_SWEEPS = 25  # measured: the sweeps stop well before the worst case (r
 NNZ_PER_RAY = 0.25
 #: the job's fixed memory (the engine's modules, Embree's device) over the scene
 BASE_BYTES = 60 * 2 ** 20
-REFINE_RAY_FRACTION = 4  # jobs.REFINE_RAY_FRACTION
 #: the kernel estimator per target x candidate pair at its defaults (100 penumbra points x 2 rays;
 #: 4e-5 at 256 x 4)
 KERNEL_SECONDS_PER_PAIR = 2e-5
-STORED_POINTS = 72
+STORED_POINTS = STORE_ALL_UP_TO + STORE_LOG_POINTS  # at most, up to the ~40 log-spaced ones
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
 MEMORY_WARNING_BYTES = 4 * 1024 ** 3

@@ -13,6 +13,14 @@ DEFAULT_MAX_LIGHTS = 3
 DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
 DEFAULT_ESTIMATOR = "kernel"
 
+#: configurations kept re-appliable in the .blend: every one up to this many lights, and
+#: about STORE_LOG_POINTS log-spaced ones above (plus e_x and the final one); the chart and
+#: the report keep the whole curve (the cost model counts their forward solves)
+STORE_ALL_UP_TO = 32
+STORE_LOG_POINTS = 40
+#: intermediate (to-be-refined) models get this fraction of the rays
+REFINE_RAY_FRACTION = 4
+
 
 @dataclass
 class JobOptions:

@@ -17,7 +17,7 @@ Failure modes (documented contract):
   message in ``info["message"]`` (the best iterate is returned).
 - Divergence (residual growing past 1e3 x its start, or non-finite values) and
   any NaN/inf in the result raise :class:`RadiosityError` (a ValueError).
-- Reflectance above ``max_reflectance`` (0.999) is clamped -- rho >= 1 makes a
+- Reflectance above ``max_reflectance`` (units.MAX_REFLECTANCE, 0.99) is clamped -- rho >= 1 makes a
   closed scene's system singular -- and a warning goes to ``info["warnings"]``.
 """
 from __future__ import annotations
@@ -27,9 +27,10 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .units import MAX_REFLECTANCE
+
 __all__ = [
     "DIRECT_LIMIT",
-    "MAX_REFLECTANCE",
     "lossless_patches",
     "RadiosityError",
     "radiosity_matrix",
@@ -38,7 +39,6 @@ __all__ = [
 
 #: "auto" uses the direct LU solve for dense systems up to this many patches.
 DIRECT_LIMIT = 1500
-MAX_REFLECTANCE = 0.999
 
 
 class RadiosityError(ValueError):

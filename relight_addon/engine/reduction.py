@@ -19,6 +19,11 @@ Selections (``selection=``)
   gives the smallest error; cumulative. All trials of a step are evaluated at
   once with matrix products on T.
 - ``error-construction``: add the light whose addition gives the smallest error.
+- ``greedy-swap`` (beyond the paper; the default, "Best k Lights", engine/best_lights.py): for
+  every number of lights k, greedy pursuit on the true error with NNLS refits, then swaps; with a
+  certificate (a lower bound on any k non-negative lights).
+- ``least-power`` (beyond the paper): the non-negative lights of least total power that keep
+  every target within a tolerance (a linear programme, HiGHS).
 - ``nnls-greedy`` (beyond the paper): non-negative orthogonal matching pursuit
   on T -- add the candidate most correlated with the residual, refit all
   selected lights with NNLS. Every configuration is non-negative; ignores e_x

@@ -1,0 +1,45 @@
+"""Units and the constants that convert them: the one place (no bpy).
+
+Relight works in SI radiometric units: lengths in m, areas in m^2, radiosity B and exitance e
+in W/m^2, power in W, radiance L in W/(m^2 sr). Blender's emission strength x colour, the
+painted ``relight_target`` colours and the baked ``relight_radiosity`` layer are radiance; a
+Lambertian (diffuse) surface of radiance L has exitance pi L. Photometric quantities use the
+luminous efficacy of 683 lm/W and the luminance weights of linear Rec.709 (Blender's scene
+linear colour space), so illuminance E_v (lx) = 683 x (0.2126 E_r + 0.7152 E_g + 0.0722 E_b)
+with E in W/m^2 per channel.
+
+Import these; never copy them.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["MAX_REFLECTANCE", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
+           "radiance_from_exitance", "illuminance_lux"]
+
+#: reflectance of an exported material is clamped to [0, MAX_REFLECTANCE] (with a warning):
+#: a reflectance of 1 or more creates energy; the engine's forward solver clamps to the same value
+MAX_REFLECTANCE = 0.99
+
+#: luminous efficacy of the photometric standard: 683 lm per W at 555 nm
+LUMENS_PER_WATT = 683.0
+
+#: luminance weights of linear Rec.709 RGB (Blender's scene linear), summing to 1
+REC709_LUMINANCE = (0.2126, 0.7152, 0.0722)
+
+
+def exitance_from_radiance(radiance):
+    """Exitance (W/m^2) of a Lambertian surface of radiance ``radiance`` (W/(m^2 sr)): pi L."""
+    return math.pi * radiance
+
+
+def radiance_from_exitance(exitance):
+    """Radiance (W/(m^2 sr)) of a Lambertian surface of exitance or radiosity ``exitance`` (W/m^2): e / pi."""
+    return exitance / math.pi
+
+
+def illuminance_lux(irradiance_rgb) -> np.ndarray:
+    """Illuminance (lx) of an RGB irradiance (..., 3) in W/m^2 per channel."""
+    return LUMENS_PER_WATT * (np.asarray(irradiance_rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE))
