@@ -24,7 +24,7 @@ from .engine.cost import check_memory, estimate_cost, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.incidence import first_bounce_matrices, incidence_tables
 from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
-from .engine.lights import KINDS, LightSet, candidate_mask
+from .engine.lights import LightSet, candidate_mask
 from .engine.options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS, JobOptions
 from .engine.patch_models.adaptive import CLUSTER_BELOW
 from .engine.radiosity import solve_radiosity
@@ -469,7 +469,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         e_start = None
         if mode == "inverse":
             problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                     mask, patches.center, patches.normal, light_basis=lights.basis)
+                                     mask, patches.center, patches.normal, lights=lights)
             problem.first_bounce = first_bounce(faces, patches, F, mask | np.any(patches.exitance > 0, axis=1))
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
@@ -478,7 +478,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                 problem.b_target = problem.b_target - B_background[problem.targets]
         else:
             problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                                       patches.center, patches.normal, light_basis=lights.basis,
+                                                       patches.center, patches.normal, lights=lights,
                                                        first_bounce=first_bounce(faces, patches, F, mask))
         t_problem += time.perf_counter() - t1
         if p == passes:
@@ -582,12 +582,15 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
     E_patch = np.zeros((P, n_pts, 3))
     for k in range(n_pts):  # the lights' exitance on their patches
         E_patch[C, k] = problem.light_basis @ E[k]
+    H = problem.lights.irradiance
     facs = problem.factors()
     B = np.empty((n_pts, P, 3))
-    for c in range(3):
+    for c in range(3):  # every light's source (engine.lights), transported
         src = E_patch[:, :, c]
         if problem.first_bounce is not None:
             src = src + problem.first_bounce[c] @ src
+        if H is not None:
+            src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
         B[:, :, c] = (facs[c].solve(src) + model.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
@@ -605,15 +608,16 @@ def light_records(model: Model, curve: Curve, row: int) -> list:
     exitance [r, g, b] (W/m^2) and power (W)."""
     lights = model.lights
     e = curve.exitance[row]
+    watts, kinds = lights.watts, lights.kind_names
     out = []
     for j in np.flatnonzero(np.any(e != 0, axis=1)):
         pids = curve.light_polygons[j].indices
         obj = model.patches.object[lights.members(j)[0]]
         out.append({"object": model.faces.object_names[obj],
                     "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
-                    "kind": KINDS[lights.kind[j]],
+                    "kind": kinds[j],
                     "center": lights.center[j], "normal": lights.normal[j], "area": float(lights.area[j]),
-                    "exitance": e[j], "power": float(e[j].sum() * lights.area[j])})
+                    "exitance": e[j], "power": float(e[j].sum() * watts[j])})
     return out
 
 
@@ -644,7 +648,7 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
                     "max_patch_size": float(patches.max_patch_size),
                     "light_size": None if patches.light_size is None else float(patches.light_size)},
         "model": {"patch_model": options.patch_model, "estimator": options.estimator,
-                  "lights_by_kind": {k: int(np.sum(model.lights.kind == i)) for i, k in enumerate(KINDS)},
+                  "lights_by_kind": model.lights.count_by_kind(),
                   "refinement": model.refinement},
         "inverse": {
             "solver": inv.solver if inv else "direct-lighting",
@@ -681,7 +685,7 @@ def make_report(model: Model, options: JobOptions, inv: InverseResult | None, re
 
 def _power(problem, point) -> float:
     """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
-    return float(np.sum(point.exitance.sum(axis=1) * problem.light_area[point.lights]))
+    return float(np.sum(point.exitance.sum(axis=1) * problem.light_watts[point.lights]))
 
 
 def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:

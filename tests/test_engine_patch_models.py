@@ -11,7 +11,7 @@ import pytest
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors
 from relight_addon.engine.inverse import InverseProblem
-from relight_addon.engine.lights import KINDS, candidate_mask
+from relight_addon.engine.lights import candidate_mask, kind_code
 from relight_addon.engine.options import JobOptions
 from relight_addon.engine.patch_models.adaptive import AdaptiveModel
 from relight_addon.engine.registry import PATCH_MODELS
@@ -135,14 +135,14 @@ def test_light_cells_multi_scale_and_only_on_candidates(model):
     # the ceiling (4 x 3 m) alone is cut into 10 x 8 cells of 0.4 m: dozens of cells from one quad
     ceiling_cells = np.sum(patches.face[lights.patches] == 0)
     assert ceiling_cells == 10 * 8
-    assert kinds[KINDS.index("cell")] == cand.sum() and kinds[KINDS.index("group")] > 0
-    assert kinds[KINDS.index("polygon")] == 5  # the five big quads, whole
+    assert kinds[kind_code("cell")] == cand.sum() and kinds[kind_code("group")] > 0
+    assert kinds[kind_code("polygon")] == 5  # the five big quads, whole
     B = lights.basis.tocsc()
     sizes = np.diff(B.indptr)
-    assert np.all(sizes[lights.kind == KINDS.index("cell")] == 1)
-    assert np.all(sizes[lights.kind == KINDS.index("group")] >= 2)
+    assert np.all(sizes[lights.kind == kind_code("cell")] == 1)
+    assert np.all(sizes[lights.kind == kind_code("group")] >= 2)
     # a polygon light holds exactly that polygon's cells
-    for j in np.flatnonzero(lights.kind == KINDS.index("polygon")):
+    for j in np.flatnonzero(lights.kind == kind_code("polygon")):
         members = lights.patches[B.indices[B.indptr[j]:B.indptr[j + 1]]]
         f = np.unique(patches.face[members])
         assert len(f) == 1 and set(members) == set(np.flatnonzero(cand & (patches.face == f[0])))

@@ -119,19 +119,19 @@ def _as_targets(b, m):
     return b
 
 
-def total_power(exitance, light_area, lights=None):
+def total_power(exitance, light_watts, lights=None):
     """Total emitted power (W) of a configuration: ``sum_j A_j sum_c e_jc``.
 
-    exitance (k, 3) W/m^2 on the lights ``lights`` (k indices into light_area), or (n, 3) on
+    exitance (k, 3) W/m^2 on the lights ``lights`` (k indices into light_watts), or (n, 3) on
     every light when ``lights`` is None. Summed over the 3 channels (radiometric W per
     channel, as the exitances are).
     """
     e = np.asarray(exitance, dtype=np.float64).reshape(-1, 3)
-    a = np.asarray(light_area, dtype=np.float64)
+    a = np.asarray(light_watts, dtype=np.float64)
     if lights is not None:
         a = a[np.asarray(lights, dtype=np.int64)]
     if len(a) != len(e):
-        raise ValueError(f"{len(e)} exitances for {len(a)} light areas")
+        raise ValueError(f"{len(e)} exitances for {len(a)} lights")
     return float((a * e.sum(axis=1)).sum())
 
 
@@ -201,9 +201,9 @@ class _Model:
         self.b = _as_targets(b, m)
         self.area = np.ones(n) if area is None else np.asarray(area, dtype=np.float64).reshape(-1)
         if self.area.shape != (n,):
-            raise ValueError(f"light_area must have {n} entries, got {self.area.shape}")
+            raise ValueError(f"light_watts must have {n} entries, got {self.area.shape}")
         if not np.all(np.isfinite(self.area)) or np.any(self.area <= 0):
-            raise ValueError("light areas must be positive and finite")
+            raise ValueError("light areas (the power per unit strength) must be positive and finite")
         self.groups = {}  # id(T) -> channels sharing that matrix
         for c in range(3):
             self.groups.setdefault(id(self.T[c]), []).append(c)
@@ -562,20 +562,20 @@ def _swap_search(model, fit, max_rounds, max_exact):
     return fit, rounds
 
 
-def fit_lights(T, b, lights, light_area=None):
+def fit_lights(T, b, lights, light_watts=None):
     """NNLS per channel on a given set of lights: (lights on, exitance (k, 3), error, power)."""
-    model = _Model(T, b, light_area)
+    model = _Model(T, b, light_watts)
     f = model.fit(lights)
     return f[0], f[1], math.sqrt(f[2].sum()), f[3]
 
 
-def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0, max_swap_rounds=None,
+def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0, max_swap_rounds=None,
                  max_exact=24, restarts=0, initial=None, exhaustive_limit=20_000, swap_all=True, cancel=None,
                  progress=None, stats=None):
     """The best configuration found with at most k lights, for k = 1 .. k_max.
 
     T: list of 3 (m, n) transfer matrices (``problem.transfer``) or one (m, n) for all
-    channels; b (m, 3) targets W/m^2 (``problem.b_target``); light_area (n,) m^2 (for the
+    channels; b (m, 3) targets W/m^2 (``problem.b_target``); light_watts (n,) W per unit strength (the area for surface lights; for the
     power and the least-power tie-break; default 1).
 
     At every k the starts are the plain greedy path (one light added per step, each with an
@@ -605,7 +605,7 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
     """
     if score not in SCORES + ("both",):
         raise ValueError(f"unknown score {score!r}; choose one of {', '.join(SCORES + ('both',))}")
-    model = _Model(T, b, light_area)
+    model = _Model(T, b, light_watts)
     k_max = int(k_max)
     if k_max < 1:
         raise ValueError(f"k_max must be at least 1, got {k_max}")
@@ -711,18 +711,18 @@ def best_k_curve(T, b, k_max, light_area=None, swap=True, score="error", seed=0,
     return curve
 
 
-def best_k_with_certificate(T, b, k_max, light_area=None, exhaustive_limit=300_000, **kw):
+def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
     exact, and the swap search starts from there above. Returns (curve, bounds)."""
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit)
     initial = [s for s in bounds.optimum_lights if s is not None] + list(kw.pop("initial", None) or [])
-    return best_k_curve(T, b, k_max, light_area, initial=initial or None, **kw), bounds
+    return best_k_curve(T, b, k_max, light_watts, initial=initial or None, **kw), bounds
 
 
 def best_k_for_problem(problem, k_max, **kw):
     """best_k_curve on an InverseProblem: its transfer matrices, targets and light areas."""
-    return best_k_curve(problem.transfer, problem.b_target, k_max, problem.light_area, **kw)
+    return best_k_curve(problem.transfer, problem.b_target, k_max, problem.light_watts, **kw)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1014,7 +1014,7 @@ def min_max_deviation(T, b, zero_band=None, skip_unreachable=True):
     return max(xs), e
 
 
-def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
+def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
     """Least total power keeping every target within +-tolerance of its painted value (an LP).
 
     minimise  sum_j A_j sum_c e_jc   (W)
@@ -1031,7 +1031,7 @@ def least_power_within_tolerance(T, b, light_area, tolerance, zero_band=None):
     LP), and the least-power configuration at that tolerance. Returns a ToleranceResult.
     """
     t0 = time.perf_counter()
-    model = _Model(T, b, light_area)
+    model = _Model(T, b, light_watts)
     tol = float(tolerance)
     if not (np.isfinite(tol) and tol >= 0):
         raise ValueError(f"tolerance must be a non-negative number, got {tolerance}")

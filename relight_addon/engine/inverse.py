@@ -42,6 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
+from .lights import LightSet, candidate_mask, kind_code
 from .radiosity import lossless_patches, radiosity_matrix
 from .registry import SOLVERS
 from .scene import SceneError
@@ -201,16 +202,18 @@ class InverseProblem:
     ``exitance`` (P, 3) optionally holds the scene's own emitters (for the
     Gauss-Seidel error route and direct-lighting mode).
 
-    ``light_groups`` (P,) int, optional: candidate patches with the same value form ONE
-    light with one exitance (uniform over its patches), e.g. the patches of one Blender
-    face, since a material makes a whole face emit. The unknowns, T's columns, e_x and the
-    reduction are then per light; radiosity stays per patch. Default: every candidate
-    patch is a light. ``n_lights``, ``light_area``, ``light_center``, ``light_normal`` and
-    ``light_rows()`` describe the lights (area-weighted over their patches).
+    ``lights``: the LightSet (engine.lights) over the candidates, of any kinds; each light's
+    column of T is A^-1 applied to its source (``transfer``). Without it, ``light_basis``
+    (|C|, n_lights) 0/1 or ``light_groups`` (P,) int (candidate patches with the same value
+    form ONE light with one exitance, e.g. the patches of one Blender face) make surface
+    lights; default: every candidate patch is a light cell. The unknowns, T's columns, e_x
+    and the reduction are per light; radiosity stays per patch. ``n_lights``, ``light_area``,
+    ``light_center``, ``light_normal``, ``light_watts`` (W per unit strength) and
+    ``light_rows()`` describe the lights.
     """
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
-                 center=None, normal=None, light_groups=None, light_basis=None):
+                 center=None, normal=None, light_groups=None, light_basis=None, lights=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -259,7 +262,11 @@ class InverseProblem:
             raise InverseError("target radiosities must be non-negative")
         self.target_norm = float(np.linalg.norm(self.b_target))
         self.exitance = np.zeros((n, 3))
-        self._init_lights(light_groups, light_basis)
+        if lights is not None:
+            if not np.array_equal(np.asarray(lights.patches), self.candidates):
+                raise InverseError("the lights' candidate patches are not the problem's candidates")
+            light_basis = lights.basis
+        self._init_lights(light_groups, light_basis, lights)
         self._factors = None
         self._transfer = None
         self.transfer_seconds = None
@@ -268,7 +275,7 @@ class InverseProblem:
         #: the albedo of its incidence (engine.incidence): B = A^-1 (e + D e); None: B = A^-1 e
         self.first_bounce = None
 
-    def _init_lights(self, light_groups, light_basis):
+    def _init_lights(self, light_groups, light_basis, lights=None):
         C = self.candidates
         nC = len(C)
         if light_basis is not None:
@@ -276,8 +283,13 @@ class InverseProblem:
             if B.shape[0] != nC:
                 raise InverseError(f"the light basis has {B.shape[0]} rows for {nC} candidate patches")
             B.data[:] = 1.0
-            if B.shape[1] == 0 or np.any(np.diff(B.tocsc().indptr) == 0):
-                raise InverseError("every light must cover at least one candidate patch")
+            empty = np.diff(B.tocsc().indptr) == 0
+            H = None if lights is None else lights.irradiance
+            if H is not None:  # a light of an irradiance kind has its source there
+                empty &= np.diff(sp.csc_matrix(H).indptr) == 0
+            if B.shape[1] == 0 or np.any(empty):
+                raise InverseError("every light must have a source: cover at least one candidate patch, "
+                                   "or light at least one patch")
         else:
             if light_groups is None:
                 light_of = np.arange(nC)
@@ -294,6 +306,16 @@ class InverseProblem:
         self.light_area = np.asarray(B.T @ aC).reshape(-1)
         self.light_center = group_mean_basis(B, self.center[C], aC)
         self.light_normal = unit(group_mean_basis(B, self.normal[C], aC))
+        if lights is None:
+            code = kind_code("polygon" if light_groups is not None else "cell")
+            lights = LightSet(C, B, np.full(self.n_lights, code, dtype=np.int8), self.light_area,
+                              self.light_center, self.light_normal)
+        elif lights.irradiance is not None and lights.irradiance.shape != (self.n_patches, self.n_lights):
+            raise InverseError(f"the lights' irradiance has shape {lights.irradiance.shape}, "
+                               f"not ({self.n_patches}, {self.n_lights})")
+        self.lights = lights
+        #: (n_lights,) power (W) of one unit of strength in one channel (area for surface lights)
+        self.light_watts = lights.watts
 
     @property
     def light_of(self):
@@ -382,6 +404,9 @@ class InverseProblem:
                     T[c] = np.ascontiguousarray(X[P])
                 if self.grouped:  # one column per light: the sum of its patches' columns
                     T[c] = np.ascontiguousarray(np.asarray(self.light_basis.T @ T[c].T).T)
+                H = self.lights.irradiance
+                if H is not None:  # lights of irradiance kinds: rows P of A^-1 diag(rho) H
+                    T[c] = T[c] + self._irradiance_transfer(facs[c], c, H)
                 if not np.all(np.isfinite(T[c])):
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[key] = T[c]
@@ -389,6 +414,14 @@ class InverseProblem:
             self.transfer_seconds = time.perf_counter() - t0
             self._check_reachable()
         return self._transfer
+
+    def _irradiance_transfer(self, fac, c, H):
+        """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
+        lights whose source is a direct irradiance H (P, n_lights)."""
+        Y = np.zeros((self.n_patches, self.m))
+        Y[self.targets, np.arange(self.m)] = 1.0
+        Y = fac.solve(Y, trans=True)  # Y^T = rows P of A^-1
+        return np.asarray((H.T @ (self.reflectance[:, c:c + 1] * Y)).T)
 
     def _same_first_bounce(self, c):
         """The first channel whose D equals channel c's (grey materials: one transfer for all)."""
@@ -438,25 +471,32 @@ class InverseProblem:
         out[self.candidates] = self.light_basis @ np.asarray(e_C, dtype=np.float64).reshape(-1, 3)
         return out
 
-    def forward_radiosity(self, e_full):
-        """Exact forward solution B (P, 3) of A B = e (+ D e, ``first_bounce``) through the LU factors."""
+    def forward_radiosity(self, e_full, irradiance=None):
+        """Exact forward solution B (P, 3) of A B = e (+ D e, ``first_bounce``) + rho H, H a direct
+        irradiance (P, 3) W/m^2 (lamps), through the LU factors."""
         s = self.source(e_full)
+        if irradiance is not None:
+            s = s + self.reflectance * np.asarray(irradiance, dtype=np.float64).reshape(self.n_patches, 3)
         return np.stack([self.factors()[c].solve(s[:, c]) for c in range(3)], axis=1)
+
+    def configuration_radiosity(self, strength):
+        """B (P, 3) of the lights at ``strength`` (n_lights, 3): every kind's source, transported."""
+        return self.forward_radiosity(self.patch_exitance(strength),
+                                      self.lights.patch_irradiance(strength, self.n_patches)
+                                      if self.lights.irradiance is not None else None)
 
     @classmethod
     def from_patches(cls, patches, F, lights_per_face=True):
         """Problem from a PatchSet (targets, target radiosities, candidates as
         ``lights.candidate_mask``) and its form factors; with ``lights_per_face`` a light is a
         whole face (all its patches), as Blender shows it."""
-        from .lights import candidate_mask
-
         return cls(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                    candidate_mask(patches), patches.center, patches.normal,
                    light_groups=patches.face if lights_per_face else None)
 
 
 def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None,
-                            light_basis=None, first_bounce=None):
+                            light_basis=None, first_bounce=None, lights=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
@@ -471,13 +511,13 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
         raise InverseError("exitance must be a finite (P, 3) array")
     if np.any(exitance < 0):
         raise InverseError("direct-lighting mode needs non-negative exitances")
-    lights = exitance.max(axis=1) > 0
-    if not lights.any():
+    emitters = exitance.max(axis=1) > 0
+    if not emitters.any():
         raise InverseError("the scene has no light (no patch with a positive exitance)")
-    if lights.all():
+    if emitters.all():
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
-    prob = InverseProblem(F, area, reflectance, ~lights, np.zeros((n, 3)), lights, center, normal,
-                          light_groups=light_groups, light_basis=light_basis)
+    prob = InverseProblem(F, area, reflectance, ~emitters, np.zeros((n, 3)), emitters, center, normal,
+                          light_groups=light_groups, light_basis=light_basis, lights=lights)
     prob.first_bounce = first_bounce
     B = prob.forward_radiosity(exitance)
     prob.b_target = B[prob.targets].copy()

@@ -141,7 +141,7 @@ class Distributor:
     def __init__(self, problem: InverseProblem, kind="distance", coplanar_tol=1e-3):
         self.kind = kind
         self.rule = DISTRIBUTIONS[kind].impl(problem, coplanar_tol=coplanar_tol)
-        self.area = problem.light_area
+        self.area = problem.light_watts
 
     @property
     def pair(self):

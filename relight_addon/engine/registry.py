@@ -2,7 +2,7 @@
 
 A new method is one file that registers itself here, plus its import in its package's
 ``__init__`` (``solvers/``, ``selections/``, ``distributions/``, ``patch_models/``,
-``estimators/``). The CLI choices, the job options, the add-on's enum properties and the
+``estimators/``, ``lights/``). The CLI choices, the job options, the add-on's enum properties and the
 cost model all read these registries, so nothing else changes when a method is added.
 
     from ..registry import SOLVERS
@@ -19,7 +19,7 @@ import importlib
 from dataclasses import dataclass, field
 from typing import Callable
 
-__all__ = ["Method", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS", "DISTRIBUTIONS"]
+__all__ = ["Method", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS", "DISTRIBUTIONS", "LIGHT_KINDS"]
 
 
 @dataclass(frozen=True)
@@ -88,3 +88,4 @@ ESTIMATORS = Registry("form-factor estimator", ".estimators")
 SOLVERS = Registry("inverse solver", ".solvers")
 SELECTIONS = Registry("selection", ".selections")
 DISTRIBUTIONS = Registry("distribution", ".distributions")
+LIGHT_KINDS = Registry("light kind", ".lights")

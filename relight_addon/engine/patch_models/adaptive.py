@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..geometry import group_sum, triangle_cross, unit
-from ..lights import KINDS, LightSet
+from ..lights import LightSet, kind_code
 from ..registry import PATCH_MODELS
 from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
 
@@ -59,6 +59,8 @@ REFINE_SHARE = 0.5
 CLUSTER_BELOW = 0.5
 #: welding tolerance of vertices, relative to the scene's diagonal
 WELD = 1e-7
+#: the light kinds (engine/lights/) this model makes, finest first
+SURFACE_SCALES = ("cell", "group", "polygon")
 
 
 def normal_bucket(normals) -> np.ndarray:
@@ -87,7 +89,7 @@ def _ids(rows) -> np.ndarray:
                        "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
                        "whole polygons), reflectors refined where the targets need it", refines=True)
 class AdaptiveModel:
-    scales = ("cell", "group", "polygon")
+    scales = SURFACE_SCALES
 
     def __init__(self, options, default_max_patch_size=None):
         self.patch_size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
@@ -165,8 +167,8 @@ class AdaptiveModel:
     def lights(self, patches, mask, scales=None):
         scales = self.scales if scales is None else tuple(scales)
         for s in scales:
-            if s not in KINDS:
-                raise ValueError(f"unknown light scale {s!r}; use {', '.join(KINDS)}")
+            if s not in SURFACE_SCALES:
+                raise ValueError(f"unknown light scale {s!r}; use {', '.join(SURFACE_SCALES)}")
         C = np.flatnonzero(mask)
         nC = len(C)
         if not nC:
@@ -202,7 +204,7 @@ class AdaptiveModel:
             rows.append(members)
             cols.append(n + lid)
             k = int(lid.max()) + 1
-            kinds.append(np.full(k, KINDS.index(kind), dtype=np.int8))
+            kinds.append(np.full(k, kind_code(kind), dtype=np.int8))
             n += k
         basis = sp.csr_matrix((np.ones(sum(len(r) for r in rows)), (np.concatenate(rows), np.concatenate(cols))),
                               shape=(nC, n))

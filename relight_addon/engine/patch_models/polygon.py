@@ -3,7 +3,7 @@ quads into grids, other polygons' triangles into sub-triangles), and a light is 
 polygon (all its patches share one exitance, as one material would make them)."""
 from __future__ import annotations
 
-from ..lights import KINDS, lights_from_groups
+from ..lights import lights_from_groups
 from ..registry import PATCH_MODELS
 from ..scene import mesh_patches
 
@@ -18,4 +18,4 @@ class PolygonModel:
         return mesh_patches(faces, self.size)
 
     def lights(self, patches, mask):
-        return lights_from_groups(patches, mask, patches.face, kind=KINDS.index("polygon"))
+        return lights_from_groups(patches, mask, patches.face, kind="polygon")

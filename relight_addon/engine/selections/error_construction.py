@@ -12,7 +12,7 @@ from ..registry import SELECTIONS
 def error_construction(s):
     """ErrorConstruction: per step, try every remaining light (each trial vectorised over channels)."""
     problem, e_x, dist, record, step_hook = s.problem, s.e_x, s.dist, s.record, s.step
-    phi_x = e_x * problem.light_area[:, None]
+    phi_x = e_x * problem.light_watts[:, None]
     steps = problem.n_lights if s.max_steps is None else min(problem.n_lights, int(s.max_steps))
     T, b = problem.transfer, problem.b_target
     A = dist.area

@@ -18,7 +18,7 @@ def error_elimination(s):
     B_c = b_c 1^T - T_S diag(e_c) + ((T_S / A_S) W^T) diag(Phi_c)  (m x |S|).
     """
     problem, e_x, dist, record, step_hook = s.problem, s.e_x, s.dist, s.record, s.step
-    A = problem.light_area
+    A = problem.light_watts
     T, b = problem.transfer, problem.b_target
     k = len(e_x)
     S = np.arange(k)

@@ -10,7 +10,7 @@ from ..registry import SELECTIONS
 @SELECTIONS.register("exitance-construction", "Exitance Construction",
                      "Add lights in decreasing power until the error is acceptable", paper=True, gauss_seidel=True)
 def exitance_construction(s):
-    A = s.problem.light_area
+    A = s.problem.light_watts
     k = s.problem.n_lights
     phi_x = s.e_x * A[:, None]
     order = decreasing_order(s.e_x, A)

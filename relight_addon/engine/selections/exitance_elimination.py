@@ -12,7 +12,7 @@ from ..registry import SELECTIONS
 @SELECTIONS.register("exitance-elimination", "Exitance Elimination",
                      "Remove the lowest-power light at each step (the paper's choice)", paper=True, gauss_seidel=True)
 def exitance_elimination(s):
-    A = s.problem.light_area
+    A = s.problem.light_watts
     k = s.problem.n_lights
     S = np.arange(k)
     e = s.e_x.copy()

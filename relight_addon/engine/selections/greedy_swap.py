@@ -27,7 +27,7 @@ def greedy_swap(s):
     def progress(done, total):
         stop["cancel"] = s.step(done, total)
 
-    curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_area,
+    curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts,
                                             cancel=lambda: stop["cancel"], progress=progress)
     p.certificate = bounds  # jobs.certificate reuses it
     for pt in curve:

@@ -20,7 +20,7 @@ def least_power(s):
     if s.tolerance is None:
         raise ValueError("the least-power selection needs a tolerance (e.g. --tolerance 0.1 for +-10 %)")
     s.step(0, 1)
-    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_area, s.tolerance)
+    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, s.tolerance)
     on = np.flatnonzero(res.exitance.max(axis=1) > 0)
     s.record(on, res.exitance[on])
     s.step(1, 1)

@@ -1,0 +1,22 @@
+"""The light model: every light, whatever its kind, is a *source* (no bpy).
+
+A light is described by what it puts into the scene before the first reflection, per unit of
+its strength: an exitance on the patches it covers (a surface light: a light cell, a group of
+cells, a whole polygon; strength in W/m^2), or a direct irradiance on the patches it reaches (a
+lamp, the sun, the world; strength in W). Its column of the transfer matrix T is then A^-1
+applied to that source (engine.inverse): A^-1 (I + D) e for an exitance, A^-1 diag(rho) H for
+an irradiance. Everything after the transport (the inverse problem, the reduction, the
+distributions, the curve, the report, the stored result, the scene) works per light through
+:class:`LightSet` and the kinds' :class:`LightKind` entries only.
+
+A kind is one file here that registers a LightKind in ``LIGHT_KINDS`` (engine.registry), plus
+its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
+
+- ``kind.py``: LightKind, the interface; ``lightset.py``: LightSet, candidate_mask.
+- ``surface.py``: what the surface kinds share; ``cell.py``, ``group.py``, ``polygon.py``.
+"""
+from . import cell, group, polygon  # noqa: F401  (registration order = the stored kind codes)
+from .kind import LightKind
+from .lightset import LightSet, candidate_mask, kind_code, lights_from_groups
+
+__all__ = ["LightKind", "LightSet", "candidate_mask", "kind_code", "lights_from_groups"]
