@@ -39,6 +39,7 @@ import bpy  # noqa: E402
 import artist_scenes  # noqa: E402
 from relight_addon import export, jobs  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
+from relight_addon.polygons import PolygonMap  # noqa: E402
 
 W, D, H = artist_scenes.ROOM
 # (wall normal axis, wall coordinate, the two in-plane axes and their ranges, exitance W/m^2)
@@ -67,7 +68,7 @@ def patch_exitance(patches, room_object):
 
 
 def target_rows(exp, model, B):
-    pmap = jobs.PolygonMap(exp.faces, model.patches, exp.polygon_counts)
+    pmap = PolygonMap(exp.faces, model.patches, exp.polygon_counts)
     rows = pmap.split(pmap.mean(B))
     out = {}
     for oi, name in enumerate(exp.faces.object_names):

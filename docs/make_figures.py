@@ -99,8 +99,8 @@ for d, label, colour in ((paper_data, "the paper: ExitanceElimination + Distance
     ax.scatter(n[neg > 0], np.maximum(err[neg > 0], 1e-16), s=4, color="tab:orange")
     fi = int(d["final"])
     ax.scatter([n[fi]], [err[fi]], s=40, color="gold", edgecolor="k", zorder=5)
-b = data["curve_bound_relative_error"]
-n = data["curve_n_lights"]
+b = data.curve_bound_relative_error
+n = data.curve_n_lights
 o = np.argsort(n)
 ax.plot(n[o], np.maximum(b[o], 1e-16), color="k", lw=0.8, ls="--", label="certificate: no k non-negative lights below")
 ax.set_xscale("log")

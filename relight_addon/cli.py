@@ -23,7 +23,6 @@ import sys
 import threading
 import time
 
-import numpy as np
 
 PROG = "relight"
 
@@ -384,7 +383,7 @@ def _blender_message(exc):
 def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
-    from . import export, jobs, light_paths, results, viewing
+    from . import export, jobs, light_paths, report as reports, results, viewing
     from .engine.options import JobOptions
 
     t0 = time.perf_counter()
@@ -403,43 +402,19 @@ def run_radiosity_command(args, progress=None, cancel=None):
     _print_estimate(args, patches, cost)
     report, result = _job(args, lambda progress, cancel: jobs.run_radiosity(
         exp.faces, options, progress=progress, cancel=cancel, patches=patches, **inputs))
-    report["timings_s"]["export"] = exp.seconds
-    report["input"] = os.path.abspath(args.scene)
-    block, warns = light_paths.assess_radiosity(bpy.context.scene, result)
-    report["render_settings"] = light_paths._json(block)
-    report["warnings"].extend(w for w in warns if w not in report["warnings"])
+    rows = None
     if result.form_factors is not None and result.patches.n_patches <= viewing.MAX_PATCHES // 4:
-        rad = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
-                                      exp.face_material, exp.material_lobes, inputs["polygon_counts"],
-                                      exitance=result.patches.exitance)
-        for name, rows in rad.items():
-            if name in report["objects"]:  # the reported objects (instance groups are not)
-                report["objects"][name]["radiance_normal"] = rows
+        rows = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
+                                       exp.face_material, exp.material_lobes, inputs["polygon_counts"],
+                                       exitance=result.patches.exitance)
+    reports.finish(report, None, light_paths.assess_radiosity(bpy.context.scene, result), rows,
+                   export_seconds=exp.seconds, input_path=os.path.abspath(args.scene))
 
     def apply():
         results.write_radiosity(exp.objects, result.polygon_radiosity, result.polygon_area, report["warnings"])
         _match_light_paths(args, report)
 
     return _save_outputs(args, report, report["timings_s"], t0, apply)
-
-
-def _add_normal_radiance(outcome, exp):
-    """objects.<name>.radiance_normal: what a bake shows on the target faces (viewing.py)."""
-    from . import export, viewing
-
-    prob = outcome.problem
-    mask = getattr(prob, "target_mask", outcome.patches.target)
-    if not np.any(mask) or np.sum(mask) > viewing.MAX_PATCHES:
-        return
-    B = np.asarray(outcome.stored["radiosity"][outcome.final_index], dtype=np.float64)
-    e = prob.patch_exitance(outcome.stored["exitance"][outcome.final_index])
-    if outcome.report.get("command") == "solve":
-        e = e + outcome.patches.exitance  # the scene's own emitters (fixed background)
-    rad = viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, exp.face_material, exp.material_lobes,
-                                  export.job_inputs(exp)["polygon_counts"], mask, exitance=e)
-    for name, rows in rad.items():
-        if name in outcome.report["objects"]:  # the reported objects (instance groups are not)
-            outcome.report["objects"][name]["radiance_normal"] = rows
 
 
 def _match_light_paths(args, report):
@@ -458,15 +433,17 @@ def _match_light_paths(args, report):
 
 
 def run_solve_command(args, progress=None, cancel=None):
-    from . import export, jobs, results
+    import bpy
+
+    from . import export, results
     from .engine.options import JobOptions
+    from .preparation import SolveJob
 
     t0 = time.perf_counter()
     _check_paths(args)
     if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
         raise UsageError("--error-threshold must be a non-negative number")
     export.open_blend(args.scene)
-    exp = export.export_scene(target_scale=getattr(args, "target_scale", None))
     options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
                          threads=args.threads, solver=getattr(args, "solver", "reduced"),
                          selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
@@ -474,31 +451,16 @@ def run_solve_command(args, progress=None, cancel=None):
                          tolerance=args.tolerance,
                          patch_model=args.patch_model, light_size=args.light_size,
                          refine_passes=args.refine_passes, estimator=args.estimator).validate()
-    mode = "inverse" if args.command == "solve" else "direct"
-    inputs = export.job_inputs(exp)
-    jobs.check_solvable(exp.faces, mode, exp.notes)
-
-    def mesh(progress, cancel):
-        patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"], mode=mode)
-        return patches, jobs.solve_cost(patches, options, mode=mode)
-
-    patches, cost = _job(args, mesh)
+    job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
+                          target_scale=getattr(args, "target_scale", None))
+    patches, cost = _job(args, job.mesh)
     _print_estimate(args, patches, cost)
-    outcome = _job(args, lambda progress, cancel: jobs.run_solve(
-        exp.faces, options, progress=progress, cancel=cancel, mode=mode, patches=patches, **inputs))
+    outcome = _job(args, job.run)
+    job.finish(bpy.context.scene, outcome, input_path=os.path.abspath(args.scene))
     report = outcome.report
-    report["timings_s"]["export"] = exp.seconds
-    report["input"] = os.path.abspath(args.scene)
-
-    import bpy
-
-    from . import light_paths
-
-    light_paths.add_to_outcome(bpy.context.scene, outcome)
-    _add_normal_radiance(outcome, exp)
 
     def apply():
-        shown = results.show_outcome(bpy.context.scene, outcome, exp.fingerprints)
+        shown = results.show_outcome(bpy.context.scene, outcome, job.exp.fingerprints)
         report["warnings"].extend(w for w in shown["skipped"] if w not in report["warnings"])
         _match_light_paths(args, report)
 

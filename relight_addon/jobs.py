@@ -10,27 +10,27 @@ warning (the form factors are then not computed).
 """
 from __future__ import annotations
 
-import math
-import os
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-import scipy.optimize as sopt
 import scipy.sparse as sp
 
 from .engine.best_lights import lower_bounds
-from .engine.cost import check_memory, estimate_cost, estimate_patches_cost
+from .engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from .engine.formfactors import Cancelled, auto_rays_per_patch
 from .engine.incidence import first_bounce_matrices, incidence_tables
-from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
+from .engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
 from .engine.lights import LightSet, candidate_mask
-from .engine.options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS, JobOptions
-from .engine.patch_models.adaptive import CLUSTER_BELOW
+from .engine.options import REFINE_RAY_FRACTION, JobOptions
+from .engine.patch_models.adaptive import refinement_measure
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
 from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
-from .engine.scene import FaceSet, PatchSet, SceneError, default_max_patch_size as _default_patch_size, face_mean
+from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
+from .polygons import PolygonMap
+from .report import json_safe, radiosity_report, solve_report
+from .stored import StoredResult, stored_points
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]
 
@@ -45,77 +45,6 @@ class RadiosityResult:
     polygon_radiosity: dict  # object name -> (n_polygons, 3) W/m^2, base-mesh polygon order
     polygon_area: dict  # object name -> (n_polygons,) m^2 (world space; 0 for unreported polygons)
     form_factors: object = None
-
-
-class PolygonMap:
-    """Patches -> base-mesh polygons: the reports' and the scene's rows.
-
-    Every exported object's polygons are numbered globally (``offset[object] + polygon``);
-    ``weights`` (n_polygons, P) CSR holds, per polygon, the area fractions of the patches its
-    triangles lie on, so ``weights @ v`` is the area-weighted (power-conserving) mean of
-    per-patch values over each polygon. Faces without a base polygon (face_index -1: made by a
-    modifier, or instances) are left out; a polygon without area gets 0.
-    """
-
-    def __init__(self, faces: FaceSet, patches: PatchSet, polygon_counts=None):
-        counts = []
-        per_index = isinstance(polygon_counts, (list, tuple))
-        if per_index and len(polygon_counts) != len(faces.object_names):
-            raise ValueError(f"polygon_counts has {len(polygon_counts)} entries for {len(faces.object_names)} objects")
-        for oi, name in enumerate(faces.object_names):
-            if per_index:  # per object index: None = an unreported group (instances), no polygons
-                n = 0 if polygon_counts[oi] is None else polygon_counts[oi]
-            else:
-                n = polygon_counts.get(name) if polygon_counts else None
-            if n is None:
-                idx = faces.face_index[(faces.face_object == oi) & (faces.face_index >= 0)]
-                n = int(idx.max()) + 1 if len(idx) else 0
-            counts.append(int(n))
-        self.names = list(faces.object_names)
-        #: indices of the objects the reports list (keyed by name): every one, except the
-        #: unreported groups (None in a per-index ``polygon_counts``: instance groups)
-        self.reported = [oi for oi in range(len(self.names))
-                         if not (per_index and polygon_counts[oi] is None)]
-        self.offset = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        self.n = int(self.offset[-1])
-        face_pid = np.where(faces.face_index >= 0, self.offset[faces.face_object] + faces.face_index, -1)
-        pid = face_pid[patches.tri_face]
-        ok = pid >= 0
-        ta = patches.tri_area[ok]
-        A = sp.csr_matrix((ta, (pid[ok], patches.tri_patch[ok])), shape=(self.n, patches.n_patches))
-        A.sum_duplicates()
-        self.area = np.asarray(A.sum(axis=1)).reshape(-1)
-        self.weights = (sp.diags(1.0 / np.where(self.area > 0, self.area, 1.0)) @ A).tocsr()
-        self.pairs = A  # polygon x patch areas (m^2)
-
-    def mean(self, patch_values) -> np.ndarray:
-        """(n_polygons, k) area-weighted means of per-patch values (P, k)."""
-        return np.asarray(self.weights @ np.asarray(patch_values, dtype=np.float64))
-
-    def split(self, rows) -> dict:
-        """Global polygon rows -> {object name: its rows}, for the reported objects (keys are
-        unambiguous: real object names; groups without polygons are left out)."""
-        out = {}
-        for k in self.reported:  # real objects come first: a later group of the same name is left out
-            out.setdefault(self.names[k], rows[self.offset[k]:self.offset[k + 1]])
-        return out
-
-
-def _json_safe(x):
-    if isinstance(x, dict):
-        return {str(k): _json_safe(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_json_safe(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _json_safe(x.tolist())
-    if isinstance(x, (np.bool_, bool)):
-        return bool(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, (np.floating, float)):
-        x = float(x)
-        return x if math.isfinite(x) else None
-    return x
 
 
 def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
@@ -173,21 +102,11 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     B_face = face_mean(patches, B)
     pmap = PolygonMap(faces, patches, polygon_counts)
     poly, areas = pmap.split(pmap.mean(B)), pmap.split(pmap.area)
-    report = {
-        "command": "radiosity",
-        "units": {"radiosity": "W/m^2", "length": "m"},
-        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(P)},
-        "timings_s": {"export": 0.0, "meshing": t_mesh, "form_factors": t_ff, "solve": t_solve, "apply": 0.0,
-                      "total": time.perf_counter() - t0},
-        "estimate": {"memory_bytes": cost["memory_bytes"], "seconds": cost["seconds"]},
-        "options": {"rays_per_patch": None if F is None else int(F.rays_per_patch),
-                    "max_patch_size": float(patches.max_patch_size), "seed": int(options.seed)},
-        "solver": {k: v for k, v in info.items() if k != "warnings"},
-        "objects": {name: {"radiosity": rows} for name, rows in poly.items()},
-        "warnings": warnings,
-    }
+    timings = {"export": 0.0, "meshing": t_mesh, "form_factors": t_ff, "solve": t_solve, "apply": 0.0,
+               "total": time.perf_counter() - t0}
+    report = radiosity_report(faces, patches, options, F, info, poly, cost, warnings, timings)
     result = RadiosityResult(patches, B, B_face, poly, areas, F)
-    return _json_safe(report), result
+    return report, result
 
 
 # ---------------------------------------------------------------------------- inverse lighting
@@ -282,47 +201,6 @@ def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
 
 # ---------------------------------------------------------------------------- memory guard
 
-#: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
-_MAX_COUNT = 1e30
-
-
-def estimate_patch_count(faces: FaceSet, options: JobOptions, default_max_patch_size=None,
-                         certain: bool = False) -> float:
-    """How many patches the job's patch model makes of ``faces``, from the faces alone (no
-    meshing): a face no larger than its size is one patch, a larger quad an nu x nv grid, any
-    other face k x k pieces per triangle (engine.scene.split_faces); exact for the polygon model.
-    The adaptive model's candidate faces use the light size, and its faces below half their size
-    are clustered: ``certain`` counts those as none (a lower bound), else one each (an upper one)."""
-    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
-    if size is None:
-        size = _default_patch_size(faces.vertices)
-    F = faces.n_faces
-    s = np.full(F, float(size))
-    if options.patch_model == "adaptive":
-        cand = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
-        s[cand] = float(options.light_size or size)
-    V = faces.vertices
-    with np.errstate(over="ignore", invalid="ignore"):
-        T = V[faces.triangles]
-        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
-        tf = faces.triangle_face
-        k = np.maximum(np.ceil(np.minimum(edge / s[tf], _MAX_COUNT)), 1.0)
-        per_tri = np.bincount(tf, weights=np.minimum(k * k, _MAX_COUNT), minlength=F)
-        face_edge = np.zeros(F)
-        np.maximum.at(face_edge, tf, edge)
-        count = np.where(face_edge <= s, 1.0, per_tri)
-        if certain and options.patch_model == "adaptive":
-            count[face_edge <= CLUSTER_BELOW * s] = 0.0
-        quad = np.flatnonzero((faces.loop_total == 4) & (face_edge > s))
-        if len(quad):
-            p = V[faces.loop_vertices[faces.loop_start[quad][:, None] + np.arange(4)]]
-            d = lambda a, b: np.linalg.norm(p[:, a] - p[:, b], axis=1)  # noqa: E731
-            nu = np.maximum(np.ceil(np.minimum(np.maximum(d(1, 0), d(2, 3)) / s[quad], _MAX_COUNT)), 1.0)
-            nv = np.maximum(np.ceil(np.minimum(np.maximum(d(3, 0), d(2, 1)) / s[quad], _MAX_COUNT)), 1.0)
-            count[quad] = np.minimum(nu * nv, _MAX_COUNT)
-    return float(min(max(count.sum(), 1.0), _MAX_COUNT))
-
-
 def check_before_meshing(faces: FaceSet, options: JobOptions, default_max_patch_size=None, mode="inverse") -> dict:
     """Refuse (engine.cost.check_memory) before any allocation a job that cannot fit in memory:
     the estimate of the patches the faces certainly give (``estimate_patch_count(certain=True)``;
@@ -349,45 +227,11 @@ class Model:
     form_factors: object
     problem: InverseProblem
     background: np.ndarray  # (P, 3) W/m^2 the scene's own emitters (inverse mode), fixed
-    background_radiosity: np.ndarray  # (P, 3) W/m^2 the radiosity they give
     e_start: np.ndarray | None  # direct mode: the emitters' exitance per light
     warnings: list
     cost: dict
     seconds: dict
     refinement: dict = None  # adaptive model: passes made and the target change after each
-
-
-def refinement_measure(problem: InverseProblem, B_background, history: list):
-    """Importance of every patch for the targets and the change of the predicted target
-    radiosity since the previous model.
-
-    The reference configuration is the best non-negative one (NNLS on T) of the first model;
-    its lights keep their indices across refinements (the patch model's canonical light order),
-    so ``T e`` on each new model says how much the targets' prediction moved: the relative change
-    is returned (None on the first model). Importance psi solves A^T psi = w, w the targets'
-    area fractions, and weights the power each patch sends: psi_j A_j B_j (summed over the
-    channels), with B the radiosity of the reference configuration.
-    """
-    if not history:
-        e_ref = np.stack([sopt.nnls(problem.transfer[c], problem.b_target[:, c],
-                                    maxiter=50 * problem.n_lights)[0] for c in range(3)], axis=1)
-    else:
-        e_ref = history[0][0]
-    pred = problem.target_radiosity_of(e_ref)
-    change = None
-    if history:
-        prev = history[-1][1]
-        change = float(np.linalg.norm(pred - prev) / max(np.linalg.norm(prev), 1e-300))
-    history.append((e_ref, pred, change))
-    facs = problem.factors()
-    w = np.zeros(problem.n_patches)
-    w[problem.targets] = problem.area[problem.targets] / problem.area[problem.targets].sum()
-    B = problem.forward_radiosity(problem.patch_exitance(e_ref)) + B_background
-    importance = np.zeros(problem.n_patches)
-    for c in range(3):
-        psi = facs[c].solve(w, trans=True)
-        importance += psi * problem.area * B[:, c]
-    return change, importance
 
 
 @dataclass
@@ -416,7 +260,7 @@ class SolveOutcome:
     curve: list  # rows kept re-appliable: [{"n_lights", "error", "relative_error", "n_negative", "curve_index"}]
     final_index: int  # row of the final configuration in ``curve``
     warnings: list
-    stored: dict  # curve_store.pack_curve input: every configuration, re-appliable
+    stored: StoredResult  # every configuration, re-appliable (packed into the .blend by results.py)
     faces: FaceSet
     patches: PatchSet
     problem: object
@@ -465,17 +309,15 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             raise Cancelled("solve cancelled")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
-        B_background = np.zeros_like(patches.exitance)
         e_start = None
         if mode == "inverse":
-            problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                     mask, patches.center, patches.normal, lights=lights)
-            problem.first_bounce = first_bounce(faces, patches, F, mask | np.any(patches.exitance > 0, axis=1))
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
                 background = patches.exitance.copy()
-                B_background = problem.forward_radiosity(background)
-                problem.b_target = problem.b_target - B_background[problem.targets]
+            problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                                     mask, patches.center, patches.normal, lights=lights,
+                                     first_bounce=first_bounce(faces, patches, F, mask | emitting),
+                                     background=background)
         else:
             problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
                                                        patches.center, patches.normal, lights=lights,
@@ -484,7 +326,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if p == passes:
             break
         t2 = time.perf_counter()
-        change, importance = refinement_measure(problem, B_background, history)
+        change, importance = refinement_measure(problem, history)
         t_problem += time.perf_counter() - t2
         if change is not None and change < options.refine_tolerance:
             break
@@ -499,7 +341,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         emitting = np.any(patches.exitance > 0, axis=1)
         warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
-    return Model(mode, faces, patches, lights, F, problem, background, B_background, e_start, warnings, cost,
+    return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
                  {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement)
 
 
@@ -535,7 +377,7 @@ def certificate(problem: InverseProblem, red: ReductionResult):
     (engine.best_lights.lower_bounds: exact by exhaustive search where small enough, else the
     all-lights NNLS bound), and per curve point its bound (W/m^2)."""
     k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
-    bounds = getattr(problem, "certificate", None)  # the greedy-swap selection computed it already
+    bounds = red.certificate  # the greedy-swap selection computed it already
     if bounds is None or len(bounds.bound) < k_top:
         bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
     return bounds, np.array([bounds.at(p.n_lights) for p in red.curve])
@@ -591,7 +433,7 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
             src = src + problem.first_bounce[c] @ src
         if H is not None:
             src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
-        B[:, :, c] = (facs[c].solve(src) + model.background_radiosity[:, c:c + 1]).T
+        B[:, :, c] = (facs[c].solve(src) + problem.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
     pmap = PolygonMap(model.faces, patches, polygon_counts)
@@ -602,145 +444,11 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
                  time.perf_counter() - t0)
 
 
-def light_records(model: Model, curve: Curve, row: int) -> list:
-    """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
-    them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
-    exitance [r, g, b] (W/m^2) and power (W)."""
-    lights = model.lights
-    e = curve.exitance[row]
-    watts, kinds = lights.watts, lights.kind_names
-    out = []
-    for j in np.flatnonzero(np.any(e != 0, axis=1)):
-        pids = curve.light_polygons[j].indices
-        obj = model.patches.object[lights.members(j)[0]]
-        out.append({"object": model.faces.object_names[obj],
-                    "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
-                    "kind": kinds[j],
-                    "center": lights.center[j], "normal": lights.normal[j], "area": float(lights.area[j]),
-                    "exitance": e[j], "power": float(e[j].sum() * watts[j])})
-    return out
-
-
-def make_report(model: Model, options: JobOptions, inv: InverseResult | None, red: ReductionResult,
-                curve: Curve, warnings: list, timings: dict, bounds=None, point_bounds=None) -> dict:
-    """Stage 5: the JSON report (see README.md)."""
-    faces, patches, problem = model.faces, model.patches, model.problem
-    fi = curve.final_row
-    final = red.curve[red.final_index]
-    pmap = curve.polygons
-    E_patch = model.lights.patch_exitance(curve.exitance[fi], patches.n_patches) + model.background
-    radiosity = pmap.split(curve.final_polygon_radiosity())
-    exitance = pmap.split(pmap.mean(E_patch))
-    target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
-                                 pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
-    objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
-               for name in radiosity}
-    n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
-    norm = problem.target_norm if problem.target_norm > 0 else 1.0
-    return {
-        "command": "solve" if model.mode == "inverse" else "reduce",
-        "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
-        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces),
-                  "triangles": int(len(faces.triangles)), "patches": int(patches.n_patches)},
-        "timings_s": timings,
-        "estimate": {"memory_bytes": model.cost["memory_bytes"], "seconds": model.cost["seconds"]},
-        "options": {**options.to_dict(), "rays_per_patch": int(model.form_factors.rays_per_patch),
-                    "max_patch_size": float(patches.max_patch_size),
-                    "light_size": None if patches.light_size is None else float(patches.light_size)},
-        "model": {"patch_model": options.patch_model, "estimator": options.estimator,
-                  "lights_by_kind": model.lights.count_by_kind(),
-                  "refinement": model.refinement},
-        "inverse": {
-            "solver": inv.solver if inv else "direct-lighting",
-            "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
-            "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
-            "n_candidate_patches": int(len(problem.candidates)),
-            "rank": inv.rank if inv else None,
-            "rcond": inv.rcond if inv else None,
-            "error": inv.error if inv else 0.0,
-            "relative_error": inv.relative_error if inv else 0.0,
-            "n_negative": inv.n_negative if inv else 0,
-            "seconds": inv.seconds if inv else 0.0,
-            "condition_estimate": float(problem.condition),
-            "target_norm": problem.target_norm,
-        },
-        "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
-                      "final_index": red.final_index},
-        "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-                   "n_negative": p.n_negative, "power": _power(problem, p),
-                   "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
-                  for i, p in enumerate(red.curve)],
-        "certificate": None if bounds is None else {
-            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
-            "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
-                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
-        "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
-                  "n_negative": final.n_negative, "power": _power(problem, final),
-                  "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
-                  "lights": light_records(model, curve, fi)},
-        "objects": objects,
-        "warnings": warnings,
-    }
-
-
-def _power(problem, point) -> float:
-    """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
-    return float(np.sum(point.exitance.sum(axis=1) * problem.light_watts[point.lights]))
-
-
-def stored_result(model: Model, red: ReductionResult, curve: Curve, report: dict) -> dict:
-    """What the .blend keeps (curve_store.pack_curve): the whole curve, and per kept configuration
-    the lights' exitance and the patches' radiosity, with what is needed to show them without the
-    engine: the cells' triangles and reflectance, the light basis, the patches -> polygons map."""
-    keep, pts = curve.keep, red.curve
-    lights, patches, pmap = model.lights, model.patches, curve.polygons
-    C = lights.patches
-    in_c = np.full(patches.n_patches, -1)
-    in_c[C] = np.arange(len(C))
-    cell_of_tri = in_c[patches.tri_patch]
-    sel = np.flatnonzero(cell_of_tri >= 0)
-    sel = sel[np.argsort(cell_of_tri[sel], kind="stable")]
-    W = pmap.weights.tocsr()
-    lp = curve.light_polygons
-    return {
-        "objects": list(model.faces.object_names),
-        "polygon_offset": pmap.offset,
-        "light_object": model.patches.object[C[lights.basis.tocsc().indices[lights.basis.tocsc().indptr[:-1]]]],
-        "light_kind": lights.kind, "light_area": lights.area, "light_center": lights.center,
-        "light_normal": lights.normal, "light_polygons_indptr": lp.indptr, "light_polygons": lp.indices,
-        "basis_indptr": lights.basis.indptr, "basis_indices": lights.basis.indices,
-        "cell_triangles": patches.tri_vertices[sel].astype(np.float32),
-        "cell_triangle_cell": cell_of_tri[sel], "cell_normal": patches.normal[C], "cell_patch": C,
-        "cell_reflectance": patches.reflectance[C],
-        "polygon_weights_indptr": W.indptr, "polygon_weights_patch": W.indices, "polygon_weights": W.data,
-        "curve_n_lights": np.array([p.n_lights for p in pts]),
-        "curve_error": np.array([p.error for p in pts]),
-        "curve_relative_error": np.array([p.relative_error for p in pts]),
-        "curve_n_negative": np.array([p.n_negative for p in pts]),
-        "curve_power": np.array([c["power"] for c in report["curve"]]),
-        # -1: no certificate (direct-lighting mode)
-        "curve_bound_relative_error": np.array([-1.0 if c["bound_relative_error"] is None else
-                                                c["bound_relative_error"] for c in report["curve"]]),
-        "point_index": keep,
-        "n_lights": np.array([pts[i].n_lights for i in keep]),
-        "error": np.array([pts[i].error for i in keep]),
-        "relative_error": np.array([pts[i].relative_error for i in keep]),
-        "n_negative": np.array([pts[i].n_negative for i in keep]),
-        "exitance": curve.exitance,
-        "radiosity": curve.radiosity,
-        "final": np.array(red.final_index),
-        "target_patch": model.problem.targets,  # the painted patches and their painted radiosity (W/m^2)
-        "target_value": patches.target_radiosity[model.problem.targets],
-        "target_norm": np.array(model.problem.target_norm),
-        "meta": {"command": report["command"], "options": _json_safe(report["options"])},
-    }
-
-
 def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
               default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
               patches: PatchSet | None = None, notes: dict | None = None):
     """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``:
-    build_model -> solve_stage -> reduce_stage -> assemble_curve -> make_report.
+    build_model -> solve_stage -> reduce_stage -> certificate -> assemble_curve -> report.solve_report.
 
     inverse: targets are the painted faces; candidates as ``engine.lights.candidate_mask``;
     the scene's own emitters are fixed background light (subtracted from the targets). The
@@ -797,12 +505,12 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
-    report = make_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds)
+    report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]
-    stored = stored_result(model, red, curve, report)
-    return SolveOutcome(_json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
+    stored = StoredResult.from_solve(model, red, curve, report)
+    return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
                         model.problem, inv, red)
 
 
@@ -826,20 +534,3 @@ def _positivity_notes(problem, inv, final):
     return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
             f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "
             "greedy-swap selection (Best k Lights)"]
-
-
-def stored_points(n_lights, final_index):
-    """Indices of the curve points kept re-appliable (see STORE_ALL_UP_TO), ascending."""
-    n = np.asarray(n_lights)
-    keep = n <= STORE_ALL_UP_TO
-    if len(n) and n.max() > STORE_ALL_UP_TO:
-        wanted = np.unique(np.rint(np.geomspace(STORE_ALL_UP_TO + 1, n.max(), STORE_LOG_POINTS)))
-        for w in wanted:  # the point closest to each wanted count
-            keep[int(np.argmin(np.abs(n - w)))] = True
-    keep[0] = True  # e_x (or the first configuration)
-    keep[final_index] = True
-    return np.flatnonzero(keep)
-
-
-def _nan_to_none(rows):
-    return [None if np.isnan(r).any() else r for r in np.asarray(rows)]

@@ -183,8 +183,8 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
 def assess_solve(scene, outcome) -> tuple:
     """``assess`` for a solve's final configuration, on its target patches."""
     problem, patches = outcome.problem, outcome.patches
-    B = np.asarray(outcome.stored["radiosity"][outcome.final_index], dtype=np.float64)
-    mask = getattr(problem, "target_mask", patches.target)
+    B = np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64)
+    mask = problem.target_mask
     what = "targets" if outcome.report.get("command") == "solve" else "lit faces"
     return assess(scene, problem.F, patches.reflectance, B, mask, patches.area, what)
 
@@ -193,21 +193,3 @@ def assess_radiosity(scene, result) -> tuple:
     """``assess`` for a forward radiosity result, over every patch."""
     p = result.patches
     return assess(scene, result.form_factors, p.reflectance, result.patch_radiosity, None, p.area, "faces")
-
-
-def add_to_outcome(scene, outcome) -> dict:
-    """Put the render_settings block and its warnings into a solve's report and warnings."""
-    block, warns = assess_solve(scene, outcome)
-    outcome.report["render_settings"] = _json(block)
-    for w in warns:
-        if w not in outcome.warnings:
-            outcome.warnings.append(w)
-        if w not in outcome.report["warnings"]:
-            outcome.report["warnings"].append(w)
-    return block
-
-
-def _json(block):
-    import json
-
-    return json.loads(json.dumps(block, default=float))

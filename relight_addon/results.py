@@ -37,6 +37,7 @@ import numpy as np
 from .engine.geometry import group_mean
 from .engine.scene import SceneError
 from .engine.units import radiance_from_exitance
+from .stored import StoredResult
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -80,8 +81,7 @@ def result_id(scene):
     return scene.get(RESULT_ID_PROP)
 
 
-def load_result(scene) -> dict:
-    from .curve_store import unpack_curve
+def load_result(scene) -> StoredResult:
 
     text = scene.get(RESULT_PROP)
     if not text:
@@ -90,26 +90,22 @@ def load_result(scene) -> dict:
     if key not in _cache:
         _cache.clear()
         try:
-            _cache[key] = unpack_curve(text)
+            _cache[key] = StoredResult.unpack(text)
         except Exception as exc:  # zlib, base64, npz or format errors: one clear line
             raise SceneError(f"the stored Relight result of scene {scene.name!r} cannot be read "
                              f"({type(exc).__name__}); run Solve & Reduce again") from None
     return _cache[key]
 
 
-def _stored_data(outcome, fingerprints=None) -> dict:
-    data = dict(outcome.stored)
-    data["meta"] = dict(data.get("meta", {}), fingerprints=fingerprints or {})
-    return data
+def _stored_data(outcome, fingerprints=None) -> StoredResult:
+    return outcome.stored.with_fingerprints(fingerprints)
 
 
 def store_result(scene, outcome, fingerprints=None, text=None) -> str:
-    """Keep the whole curve in the scene (see curve_store) so any point can be re-applied;
+    """Keep the whole curve in the scene (stored.StoredResult) so any point can be re-applied;
     returns the result's new id. ``text``: the packed curve when the caller has it."""
-    from .curve_store import pack_curve
-
     if text is None:
-        text = pack_curve(_stored_data(outcome, fingerprints))
+        text = _stored_data(outcome, fingerprints).pack()
     rid = uuid.uuid4().hex
     scene[RESULT_PROP] = text
     scene[RESULT_ID_PROP] = rid
@@ -122,10 +118,8 @@ def show_outcome(scene, outcome, fingerprints=None) -> dict:
     All-or-nothing: the new result is packed (finite values) and checked against the scene (every
     object present and unchanged since the export) before the previous one is touched; should
     showing still fail, the new result is cleared and the error raised."""
-    from .curve_store import pack_curve
-
     data = _stored_data(outcome, fingerprints)
-    text = pack_curve(data)  # ValueError on non-finite values: nothing changed yet
+    text = data.pack()  # ValueError on non-finite values: nothing changed yet
     check_stored(scene, data)  # StaleResult when the scene changed during the solve: nothing changed yet
     clear_results(scene)
     store_result(scene, outcome, fingerprints, text)
@@ -142,8 +136,8 @@ def _objects_of(scene, data):
     """{object index: bpy object} of the stored objects present in the scene (real objects only:
     instance groups have no polygons)."""
     out = {}
-    off = data["polygon_offset"]
-    for oi, name in enumerate(data["objects"]):
+    off = data.polygon_offset
+    for oi, name in enumerate(data.objects):
         if off[oi + 1] == off[oi]:
             continue
         ob = scene.objects.get(name)
@@ -156,10 +150,10 @@ def _objects_of(scene, data):
 def check_stored(scene, data):
     """Validate the stored result against the scene: every object present and unchanged."""
     objs = _objects_of(scene, data)
-    fps = data["meta"].get("fingerprints", {})
+    fps = data.meta.get("fingerprints", {})
     for oi, ob in objs.items():
         fp = fps.get(ob.name)
-        n = int(data["polygon_offset"][oi + 1] - data["polygon_offset"][oi])
+        n = int(data.polygon_offset[oi + 1] - data.polygon_offset[oi])
         if len(ob.data.polygons) != n:
             raise StaleResult(f"{ob.name} has changed since the solve ({len(ob.data.polygons)} polygons, "
                               f"{n} when solved): nothing applied; solve again")
@@ -213,20 +207,15 @@ def _emitter_material(rid):
 def _emitter_mesh_data(data, exitance, scale):
     """Triangles (n, 3, 3), per-triangle radiance, reflectance and cell of the cells that emit
     in configuration ``exitance`` (n_lights, 3); cells with a negative net exitance are not shown."""
-    import scipy.sparse as sp
-
-    nC = len(data["cell_normal"])
-    basis = sp.csr_matrix((np.ones(len(data["basis_indices"])), data["basis_indices"], data["basis_indptr"]),
-                          shape=(nC, len(data["light_area"])))
-    cell_e = basis @ exitance
+    cell_e = data.light_basis() @ exitance
     lit = np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1)
-    tc = data["cell_triangle_cell"]
+    tc = data.cell_triangle_cell
     sel = lit[tc]
-    tri = data["cell_triangles"][sel].astype(np.float64)
+    tri = data.cell_triangles[sel].astype(np.float64)
     cell = tc[sel]
     offset = max(1e-3, OVERLAY_OFFSET * scale)
-    tri = tri + offset * data["cell_normal"][cell][:, None, :]
-    return tri, radiance_from_exitance(cell_e[cell]), data["cell_reflectance"][cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
+    tri = tri + offset * data.cell_normal[cell][:, None, :]
+    return tri, radiance_from_exitance(cell_e[cell]), data.cell_reflectance[cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
 
 
 def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
@@ -379,12 +368,7 @@ def clear_suppression(obj) -> bool:
 
 def polygon_rows(data, values):
     """Per-patch ``values`` (P, 3) -> per global polygon (n_polygons, 3), the stored area weights."""
-    import scipy.sparse as sp
-
-    off = data["polygon_offset"]
-    W = sp.csr_matrix((data["polygon_weights"], data["polygon_weights_patch"], data["polygon_weights_indptr"]),
-                      shape=(int(off[-1]), values.shape[0]))
-    return np.asarray(W @ values)
+    return np.asarray(data.polygon_weight_matrix() @ values)
 
 
 def apply_stored_point(scene, index) -> dict:
@@ -395,21 +379,21 @@ def apply_stored_point(scene, index) -> dict:
     "skipped": [messages about objects that could not take the radiosity layer]}."""
     data = load_result(scene)
     rid = result_id(scene) or uuid.uuid4().hex
-    n_points = len(data["n_lights"])
+    n_points = len(data.n_lights)
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     index = int(index)
     objs = check_stored(scene, data)
-    exitance = data["exitance"][index].astype(np.float64)
-    if not (np.all(np.isfinite(exitance)) and np.all(np.isfinite(data["radiosity"][index]))):
+    exitance = data.exitance[index].astype(np.float64)
+    if not (np.all(np.isfinite(exitance)) and np.all(np.isfinite(data.radiosity[index]))):
         raise SceneError("the stored result holds non-finite values: solve again")
     # everything computed before anything is written
-    scale = float(np.ptp(data["cell_triangles"].reshape(-1, 3), axis=0).max()) if len(data["cell_triangles"]) else 1.0
+    scale = float(np.ptp(data.cell_triangles.reshape(-1, 3), axis=0).max()) if len(data.cell_triangles) else 1.0
     tri, radiance, reflectance, cell, n_neg_cells = _emitter_mesh_data(data, exitance, scale)
-    patch_b = data["radiosity"][index].astype(np.float64)
-    cell_b = patch_b[data["cell_patch"]][cell]
+    patch_b = data.radiosity[index].astype(np.float64)
+    cell_b = patch_b[data.cell_patch][cell]
     poly_b = polygon_rows(data, patch_b)
-    off = data["polygon_offset"]
+    off = data.polygon_offset
     layers, skipped, seen_mesh = [], [], {}
     for oi, ob in objs.items():
         why = linked_message(ob)
@@ -423,10 +407,10 @@ def apply_stored_point(scene, index) -> dict:
         seen_mesh[ob.data.name] = ob.name
         layers.append((ob, poly_b[off[oi]:off[oi + 1]]))
     suppress = []
-    if data["meta"].get("command") == "reduce":
-        lp_ptr, lp = data["light_polygons_indptr"], data["light_polygons"]
+    if data.meta.get("command") == "reduce":
+        lp_ptr, lp = data.light_polygons_indptr, data.light_polygons
         for oi, ob in objs.items():
-            sel = np.flatnonzero(data["light_object"] == oi)
+            sel = np.flatnonzero(data.light_object == oi)
             polys = np.concatenate([lp[lp_ptr[j]:lp_ptr[j + 1]] for j in sel]) if len(sel) else np.zeros(0, int)
             if len(polys) and linked_message(ob):
                 skipped.append(f"{ob.name}: its mesh is linked (read-only), so its own emission cannot be switched "
@@ -490,13 +474,13 @@ def shown_light_polygons(scene, obj) -> np.ndarray:
     if RESULT_PROP not in scene.keys() or "relight_shown" not in scene.keys():
         return out
     data = load_result(scene)
-    if obj.name not in data["objects"]:
+    if obj.name not in data.objects:
         return out
-    oi = data["objects"].index(obj.name)
-    e = data["exitance"][int(scene["relight_shown"])]
-    lit = np.flatnonzero(np.any(e > 0, axis=1) & (data["light_object"] == oi))
-    ptr, lp = data["light_polygons_indptr"], data["light_polygons"]
-    off = data["polygon_offset"][oi]
+    oi = data.objects.index(obj.name)
+    e = data.exitance[int(scene["relight_shown"])]
+    lit = np.flatnonzero(np.any(e > 0, axis=1) & (data.light_object == oi))
+    ptr, lp = data.light_polygons_indptr, data.light_polygons
+    off = data.polygon_offset[oi]
     for j in lit:
         p = lp[ptr[j]:ptr[j + 1]] - off
         out[p[(p >= 0) & (p < n)]] = True
@@ -511,24 +495,20 @@ def make_area_lights(scene, index) -> int:
     All or nothing: every light is computed and checked (finite, positive area) before the
     previous lights of this result are replaced; cells without area are left out."""
     from mathutils import Matrix, Vector
-    import scipy.sparse as sp
 
     data = load_result(scene)
     rid = result_id(scene)
-    n_points = len(data["n_lights"])
+    n_points = len(data.n_lights)
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     check_stored(scene, data)
-    exitance = data["exitance"][int(index)].astype(np.float64)
+    exitance = data.exitance[int(index)].astype(np.float64)
     if not np.all(np.isfinite(exitance)):
         raise SceneError("the stored result holds non-finite values: solve again")
-    nC = len(data["cell_normal"])
-    basis = sp.csr_matrix((np.ones(len(data["basis_indices"])), data["basis_indices"], data["basis_indptr"]),
-                          shape=(nC, len(data["light_area"])))
-    cell_e = basis @ exitance
+    cell_e = data.light_basis() @ exitance
     cells = np.flatnonzero(np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1))
-    tc = data["cell_triangle_cell"]
-    tri_all = data["cell_triangles"].astype(np.float64)
+    tc = data.cell_triangle_cell
+    tri_all = data.cell_triangles.astype(np.float64)
     scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
     offset = max(1e-3, OVERLAY_OFFSET * scale)
     plan = []
@@ -539,7 +519,7 @@ def make_area_lights(scene, index) -> int:
         if not (area > 0 and np.isfinite(area)):
             continue
         center = (tri.mean(axis=1) * a[:, None]).sum(axis=0) / area
-        n = data["cell_normal"][c]
+        n = data.cell_normal[c]
         power = cell_e[c] * area
         # the cell's own frame: its longest edge and the side across it
         pts = tri.reshape(-1, 3)
@@ -613,15 +593,15 @@ def chart_data(scene) -> dict | None:
         return None
     data = load_result(scene)
     k = settings.curve_index
-    current = int(data["point_index"][k]) if 0 <= k < len(data["point_index"]) else None
-    bound = data.get("curve_bound_relative_error")
+    current = int(data.point_index[k]) if 0 <= k < len(data.point_index) else None
+    bound = data.curve_bound_relative_error
     if bound is not None:
         bound = np.asarray(bound, dtype=np.float64)
         bound = np.where(bound >= 0, bound, np.nan)  # -1: no certificate for that point
-        if len(bound) != len(data["curve_n_lights"]) or not np.isfinite(bound).any():
+        if len(bound) != len(data.curve_n_lights) or not np.isfinite(bound).any():
             bound = None
-    return {"n_lights": data["curve_n_lights"], "relative_error": data["curve_relative_error"],
-            "n_negative": data["curve_n_negative"], "current": current, "bound": bound}
+    return {"n_lights": data.curve_n_lights, "relative_error": data.curve_relative_error,
+            "n_negative": data.curve_n_negative, "current": current, "bound": bound}
 
 
 # --- the radiosity colour layer, saving and rendering ----------------------------------

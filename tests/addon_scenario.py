@@ -159,9 +159,9 @@ data = results.load_result(scene)
 R["curve_rows"] = len(settings.curve)
 R["curve_index"] = settings.curve_index
 R["rows"] = [[c.n_lights, c.relative_error, c.n_negative, c.curve_index] for c in settings.curve]
-R["stored_n_lights"] = data["n_lights"].tolist()
-R["e_x_relative_error"] = float(data["relative_error"][0])
-R["whole_curve_points"] = int(len(data["curve_n_lights"]))
+R["stored_n_lights"] = data.n_lights.tolist()
+R["e_x_relative_error"] = float(data.relative_error[0])
+R["whole_curve_points"] = int(len(data.curve_n_lights))
 
 
 def emitting_state():
@@ -182,9 +182,9 @@ def emitting_state():
 
 def expected_lights(k):
     """From the stored curve: the power per channel and the area of configuration k's positive lights."""
-    e = data["exitance"][k].astype(float)
+    e = data.exitance[k].astype(float)
     pos = np.any(e > 0, axis=1) & ~np.any(e < 0, axis=1)
-    a = data["light_area"].astype(float)
+    a = data.light_area.astype(float)
     return [(e[pos] * a[pos, None]).sum(axis=0).tolist(), float(a[pos].sum()), int(pos.sum())]
 
 
@@ -194,8 +194,8 @@ def target_check(k):
     rad = np.zeros(len(me.loops) * 4, dtype=np.float32)
     me.color_attributes["relight_radiosity"].data.foreach_get("color", rad)
     rad = rad.reshape(-1, 4)[:, :3]
-    rows = results.polygon_rows(data, data["radiosity"][k].astype(float))
-    off = data["polygon_offset"][data["objects"].index(floor.name)]
+    rows = results.polygon_rows(data, data.radiosity[k].astype(float))
+    off = data.polygon_offset[data.objects.index(floor.name)]
     return {"stored_target_radiance": (rows[off + paint] / math.pi).tolist(),
             "layer_corner_radiance_mean": float(rad.mean())}
 
@@ -203,10 +203,10 @@ def target_check(k):
 k_final = settings.curve_index
 R["final_state"] = emitting_state()
 R["final_lights"] = [[li_obj, li_polys] for li_obj, li_polys in (
-    (data["objects"][data["light_object"][j]],
-     (data["light_polygons"][data["light_polygons_indptr"][j]:data["light_polygons_indptr"][j + 1]]
-      - data["polygon_offset"][data["light_object"][j]]).tolist())
-    for j in np.flatnonzero(np.any(data["exitance"][settings.curve_index] > 0, axis=1)))]
+    (data.objects[data.light_object[j]],
+     (data.light_polygons[data.light_polygons_indptr[j]:data.light_polygons_indptr[j + 1]]
+      - data.polygon_offset[data.light_object[j]]).tolist())
+    for j in np.flatnonzero(np.any(data.exitance[settings.curve_index] > 0, axis=1)))]
 # Select Light Faces selects exactly the polygons under the lights shown, on the selected objects
 lit_obj = bpy.data.objects[R["final_lights"][0][0]] if R["final_lights"] else floor
 bpy.context.view_layer.objects.active = lit_obj
@@ -222,8 +222,8 @@ R["final_row"] = [settings.curve[k_final].n_lights, settings.curve[k_final].n_ne
 R["final_targets"] = target_check(k_final)["stored_target_radiance"]
 R["final_relative_error"] = float(settings.curve[k_final].relative_error)
 # Eq. 1 from what the file stores: the final configuration's radiosity on the painted patches
-b_k = data["radiosity"][k_final][data["target_patch"]].astype(float)
-want_b = data["target_value"].astype(float)
+b_k = data.radiosity[k_final][data.target_patch].astype(float)
+want_b = data.target_value.astype(float)
 R["stored_eq1_relative"] = float(np.linalg.norm(b_k - want_b) / np.linalg.norm(want_b))
 R["active_color"] = floor.data.color_attributes.active_color.name
 R["target_radiance"] = target_radiance.tolist()
@@ -243,7 +243,7 @@ panels = sys.modules[pkg + ".blender_ui.panels"]
 drawn = panels.chart_pixels(scene, 240, 204)
 R["chart"] = None if drawn is None else {
     "shape": list(drawn[0].shape), "marker": drawn[1]["marker"] is not None,
-    "current": results.chart_data(scene)["current"], "final_curve_index": int(data["point_index"][k_final])}
+    "current": results.chart_data(scene)["current"], "final_curve_index": int(data.point_index[k_final])}
 R["summary"] = [settings.last_summary, settings.last_warnings]
 
 # 6. area lights (one per emitting cell, the same power), then clear: the area lights stay (they
@@ -291,8 +291,8 @@ R["solve_after_edit"] = op(bpy.ops.relight.solve)
 data2 = results.load_result(scene)
 R["targets_before_edit"] = int(R["painted"])
 R["targets_after_edit"] = int(n_paint + len(extra))
-R["target_norm_before"] = float(data["target_norm"])
-R["target_norm_after"] = float(data2["target_norm"])
+R["target_norm_before"] = float(data.target_norm)
+R["target_norm_after"] = float(data2.target_norm)
 R["clear2"] = op(bpy.ops.relight.clear_results)
 R["clear2_restores"] = snapshot() == before
 

@@ -40,6 +40,6 @@ def stored_polygon_radiosity(data, k):
     stored polygon weights)."""
     from relight_addon import results
 
-    rows = results.polygon_rows(data, np.asarray(data["radiosity"][k], dtype=np.float64))
-    off = data["polygon_offset"]
-    return {name: rows[off[i]:off[i + 1]] for i, name in enumerate(data["objects"])}
+    rows = results.polygon_rows(data, np.asarray(data.radiosity[k], dtype=np.float64))
+    off = data.polygon_offset
+    return {name: rows[off[i]:off[i + 1]] for i, name in enumerate(data.objects)}

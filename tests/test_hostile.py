@@ -39,6 +39,7 @@ RAYS = ["--rays-per-patch", "256"]
 
 def _reset():
     bpy.ops.wm.read_factory_settings(use_empty=True)
+from relight_addon.engine.cost import estimate_patch_count  # noqa: E402
 
 
 def _grid(n, size=1.0, z=0.0, flip=False, x0=0.0, y0=0.0):
@@ -392,7 +393,7 @@ def assert_scene_finite():
             data = results.load_result(scene)
         except ValueError:
             return  # an unreadable stored result (a case of its own) holds no number at all
-        for k, v in data.items():
+        for k, v in vars(data).items():
             if isinstance(v, np.ndarray) and v.dtype.kind == "f":
                 assert np.all(np.isfinite(v)), f"non-finite stored {k}"
 
@@ -449,7 +450,7 @@ def _check_bright(report, out, tmp):
     from relight_addon import results
 
     data = results.load_result(bpy.context.scene)
-    assert data["radiosity"].max() > 65504.0  # beyond float16, stored exactly as float32 allows
+    assert data.radiosity.max() > 65504.0  # beyond float16, stored exactly as float32 allows
     b = np.array(report["objects"]["led"]["radiosity"])
     assert b.max() == pytest.approx(math.pi * 30000.0, rel=1e-3)  # its own exitance (+ a little reflected)
 
@@ -704,7 +705,7 @@ def test_patch_count_estimate_is_exact_for_the_polygon_model(bpy_clean):
     exp = export.export_scene()
     for size in (10.0, 0.3, 0.1, 0.07):
         opts = JobOptions(max_patch_size=size, patch_model="polygon").validate()
-        est = jobs.estimate_patch_count(exp.faces, opts)
+        est = estimate_patch_count(exp.faces, opts)
         assert est == jobs.mesh_for_job(exp.faces, opts).n_patches, size
 
 
@@ -923,7 +924,7 @@ def _check_bright_solve():
     from relight_addon import results
 
     data = results.load_result(bpy.context.scene)
-    assert data["radiosity"].max() > 65504.0
+    assert data.radiosity.max() > 65504.0
 
 
 def _check_int_forbidden_solve():

@@ -75,9 +75,9 @@ def test_staircase_paper_experiment(run_cli, bpy_clean, tmp_path):
     from relight_addon import results
 
     data = results.load_result(bpy.context.scene)
-    idx = list(data["point_index"])
-    assert idx[0] == 0 and int(data["final"]) == report["reduction"]["final_index"]
-    e_x = np.asarray(data["exitance"][0], dtype=float)  # (candidate faces, 3) W/m^2
+    idx = list(data.point_index)
+    assert idx[0] == 0 and int(data.final) == report["reduction"]["final_index"]
+    e_x = np.asarray(data.exitance[0], dtype=float)  # (candidate faces, 3) W/m^2
     nonzero = np.abs(e_x).max(axis=1) > 0
     assert nonzero.mean() > 0.9, nonzero.mean()
     assert (e_x < 0).any(axis=1).sum() > 0

@@ -10,7 +10,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import export, jobs, light_paths, results
+from .. import export, jobs, results
+from ..preparation import SolveJob
 from . import viewport
 from ..engine.options import JobOptions
 from ..engine.scene import SceneError
@@ -278,10 +279,10 @@ def sync_curve_list(scene):
     if results.RESULT_PROP not in scene.keys() or len(scene.relight.curve):
         return
     data = results.load_result(scene)
-    rows = [{"n_lights": data["n_lights"][k], "error": data["error"][k],
-             "relative_error": data["relative_error"][k], "n_negative": data["n_negative"][k],
-             "curve_index": data["point_index"][k]} for k in range(len(data["n_lights"]))]
-    final = int(np.searchsorted(data["point_index"], int(data["final"])))
+    rows = [{"n_lights": data.n_lights[k], "error": data.error[k],
+             "relative_error": data.relative_error[k], "n_negative": data.n_negative[k],
+             "curve_index": data.point_index[k]} for k in range(len(data.n_lights))]
+    final = int(np.searchsorted(data.point_index, int(data.final)))
     _fill_curve_list(scene.relight, rows, final)
     results.update_chart(scene)
 
@@ -347,28 +348,28 @@ class RELIGHT_OT_solve(bpy.types.Operator):
     _thread = None
     _timer = None
 
-    def _export(self, context):
+    def _prepare(self, context):
+        """The shared preparation step (preparation.SolveJob): export, check, mesh, estimate."""
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
-        settings = context.scene.relight
-        options = job_options(settings)
-        exp = export.export_scene(context)  # the target scale: the scene's relight_target_scale (= settings')
-        jobs.check_solvable(exp.faces, "inverse", exp.notes)
-        return exp, options
+        # the target scale: the scene's relight_target_scale (= the settings')
+        job = SolveJob.export(context, job_options(context.scene.relight))
+        job.mesh()
+        return job
 
     def execute(self, context):
         try:
-            exp, options = self._export(context)
-            outcome = jobs.run_solve(exp.faces, options, **export.job_inputs(exp))
+            job = self._prepare(context)
+            outcome = job.run()
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        return self._finish(context, outcome, exp.fingerprints)
+        return self._finish(context, job, outcome)
 
-    def _finish(self, context, outcome, fingerprints=None):
+    def _finish(self, context, job, outcome):
         try:
-            light_paths.add_to_outcome(context.scene, outcome)  # warns when Cycles would render darker
-            skipped = store_outcome(context, outcome, fingerprints)
+            job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
+            skipped = store_outcome(context, outcome, job.exp.fingerprints)
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -391,31 +392,26 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             self.report({"ERROR"}, "A Relight solve is already running (ESC cancels it)")
             return {"CANCELLED"}
         try:
-            exp, options = self._export(context)
-            inputs = export.job_inputs(exp)
-            patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
+            job = self._prepare(context)
         except (SceneError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        cost = jobs.solve_cost(patches, options)
-        if cost["warnings"] and not self.confirmed:
+        if job.cost["warnings"] and not self.confirmed:
             # a large solve: ask first. "Solve Anyway" invokes this operator again with
             # confirmed=True, so the solve still runs in the background with progress and ESC.
-            _ask_to_confirm(context, cost["warnings"])
+            _ask_to_confirm(context, job.cost["warnings"])
             return {"CANCELLED"}
-        return self._start(context, exp, options, inputs, patches)
+        return self._start(context, job)
 
-    def _start(self, context, exp, options, inputs, patches):
-        self._fingerprints = exp.fingerprints
+    def _start(self, context, job):
+        self._job = job
         self._cancel = threading.Event()
         self._progress = [0.0, "starting"]
         self._result = {}
 
         def work():
             try:
-                self._result["outcome"] = jobs.run_solve(
-                    exp.faces, options, progress=self._set_progress, cancel=self._cancel.is_set,
-                    patches=patches, **inputs)
+                self._result["outcome"] = job.run(progress=self._set_progress, cancel=self._cancel.is_set)
             except BaseException as exc:  # reported on the main thread
                 self._result["error"] = exc
 
@@ -484,7 +480,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             else:
                 self.report({"ERROR"}, f"Relight: {exc}")
             return {"CANCELLED"}
-        return self._finish(context, self._result["outcome"], self._fingerprints)
+        return self._finish(context, self._job, self._result["outcome"])
 
 
 def _ask_to_confirm(context, warnings):

@@ -29,9 +29,13 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
+
 from .formfactors import DENSE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
+from .patch_models.adaptive import CLUSTER_BELOW
 from .registry import SOLVERS
+from .scene import default_max_patch_size as scene_patch_size
 
 __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_memory", "check_memory",
            "MEMORY_WARNING_BYTES", "SECONDS_WARNING", "RAYS_PER_SECOND", "FLOPS"]
@@ -189,3 +193,44 @@ def check_memory(cost: dict, what: str = "this solve"):
                          f"(estimate), more than the {format_bytes(avail)} available: use a larger patch size "
                          "or light size, or fewer rays per patch")
     return cost
+
+
+#: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
+_MAX_COUNT = 1e30
+
+
+def estimate_patch_count(faces, options, default_max_patch_size=None,
+                         certain: bool = False) -> float:
+    """How many patches the job's patch model makes of ``faces``, from the faces alone (no
+    meshing): a face no larger than its size is one patch, a larger quad an nu x nv grid, any
+    other face k x k pieces per triangle (engine.scene.split_faces); exact for the polygon model.
+    The adaptive model's candidate faces use the light size, and its faces below half their size
+    are clustered: ``certain`` counts those as none (a lower bound), else one each (an upper one)."""
+    size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
+    if size is None:
+        size = scene_patch_size(faces.vertices)
+    F = faces.n_faces
+    s = np.full(F, float(size))
+    if options.patch_model == "adaptive":
+        cand = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
+        s[cand] = float(options.light_size or size)
+    V = faces.vertices
+    with np.errstate(over="ignore", invalid="ignore"):
+        T = V[faces.triangles]
+        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+        tf = faces.triangle_face
+        k = np.maximum(np.ceil(np.minimum(edge / s[tf], _MAX_COUNT)), 1.0)
+        per_tri = np.bincount(tf, weights=np.minimum(k * k, _MAX_COUNT), minlength=F)
+        face_edge = np.zeros(F)
+        np.maximum.at(face_edge, tf, edge)
+        count = np.where(face_edge <= s, 1.0, per_tri)
+        if certain and options.patch_model == "adaptive":
+            count[face_edge <= CLUSTER_BELOW * s] = 0.0
+        quad = np.flatnonzero((faces.loop_total == 4) & (face_edge > s))
+        if len(quad):
+            p = V[faces.loop_vertices[faces.loop_start[quad][:, None] + np.arange(4)]]
+            d = lambda a, b: np.linalg.norm(p[:, a] - p[:, b], axis=1)  # noqa: E731
+            nu = np.maximum(np.ceil(np.minimum(np.maximum(d(1, 0), d(2, 3)) / s[quad], _MAX_COUNT)), 1.0)
+            nv = np.maximum(np.ceil(np.minimum(np.maximum(d(3, 0), d(2, 1)) / s[quad], _MAX_COUNT)), 1.0)
+            count[quad] = np.minimum(nu * nv, _MAX_COUNT)
+    return float(min(max(count.sum(), 1.0), _MAX_COUNT))

@@ -213,7 +213,8 @@ class InverseProblem:
     """
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
-                 center=None, normal=None, light_groups=None, light_basis=None, lights=None):
+                 center=None, normal=None, light_groups=None, light_basis=None, lights=None,
+                 first_bounce=None, background=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -273,7 +274,14 @@ class InverseProblem:
         self.warnings = []
         #: optional per channel: D (P, P) sparse, the first reflection of the lights' light with
         #: the albedo of its incidence (engine.incidence): B = A^-1 (e + D e); None: B = A^-1 e
-        self.first_bounce = None
+        self.first_bounce = first_bounce
+        #: (P, 3) W/m^2: the radiosity of the fixed light (``background``: the scene's own emitters'
+        #: exitance), subtracted from the targets; the lights supply what it leaves. target_norm
+        #: stays the painted targets' norm (relative errors are of what was painted)
+        self.background_radiosity = np.zeros((n, 3))
+        if background is not None and np.any(np.asarray(background) > 0):
+            self.background_radiosity = self.forward_radiosity(arr(background, (n, 3), "background exitance"))
+            self.b_target = self.b_target - self.background_radiosity[self.targets]
 
     def _init_lights(self, light_groups, light_basis, lights=None):
         C = self.candidates
@@ -517,8 +525,8 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
     if emitters.all():
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
     prob = InverseProblem(F, area, reflectance, ~emitters, np.zeros((n, 3)), emitters, center, normal,
-                          light_groups=light_groups, light_basis=light_basis, lights=lights)
-    prob.first_bounce = first_bounce
+                          light_groups=light_groups, light_basis=light_basis, lights=lights,
+                          first_bounce=first_bounce)
     B = prob.forward_radiosity(exitance)
     prob.b_target = B[prob.targets].copy()
     prob.target_norm = float(np.linalg.norm(prob.b_target))

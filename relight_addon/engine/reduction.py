@@ -115,6 +115,8 @@ class ReductionResult:
     gs_iterations: list = None  # Gauss-Seidel sweeps per curve point (sum over channels), warm start
     gs_cold_iterations: list = None  # the same from a cold start (when compared)
     warnings: list = field(default_factory=list)
+    #: best_lights.LowerBounds, when the selection computed the certificate on the way (greedy-swap)
+    certificate: object = None
 
     @property
     def final(self) -> CurvePoint:
@@ -174,7 +176,8 @@ class Selection:
     """What a registered selection works with (engine/selections/): the problem, the starting
     configuration e_x (n_lights, 3), the distributor (None for selections that do not
     redistribute), ``record(lights, exitance, changed)`` to add a configuration to the curve,
-    ``step(done, total)`` returning True when cancelled, and ``max_steps`` for constructions."""
+    ``step(done, total)`` returning True when cancelled, and ``max_steps`` for constructions. A
+    selection that computes the certificate (lower bounds) on the way gives it in ``certificate``."""
 
     problem: InverseProblem
     e_x: np.ndarray
@@ -184,6 +187,7 @@ class Selection:
     max_steps: int | None = None
     max_lights: int | None = None  # the stop criterion (selections that build a curve per k use it)
     tolerance: float | None = None  # the least-power selection's band (relative)
+    certificate: object = None  # set by the selection: best_lights.LowerBounds, or left None
 
 
 class _ErrorEval:
@@ -330,7 +334,8 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         return cancelled
 
     dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
-    notes = method(Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance)) or []
+    sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance)
+    notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")
     idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
@@ -341,4 +346,5 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     return ReductionResult(curve=curve, final_index=idx, selection=selection,
                            distribution=distribution if dist is not None else "none",
                            seconds=time.perf_counter() - t0, cancelled=cancelled,
-                           gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns)
+                           gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns,
+                           certificate=sel.certificate)

@@ -622,7 +622,7 @@ def scenario():
     check("Show Radiosity shows it again", shading() == ("SOLID", "VERTEX"), shading())
     row = settings.curve[settings.curve_index]
     data = results.load_result(scene)
-    power = float(data["curve_power"][int(data["point_index"][settings.curve_index])]) \
+    power = float(data.curve_power[int(data.point_index[settings.curve_index])]) \
         if "curve_power" in data else None
     yield from press(found, "bpy.ops.relight.make_area_lights()", settle=2.0)
     lights = [o.name for o in scene.objects if o.type == "LIGHT"]

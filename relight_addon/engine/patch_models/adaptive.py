@@ -32,6 +32,7 @@ level finer) until they cover ``REFINE_SHARE`` of the total, and those of the lo
 from __future__ import annotations
 
 import numpy as np
+import scipy.optimize as sopt
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
@@ -240,3 +241,36 @@ class AdaptiveModel:
                 f = np.unique(patches.tri_face[np.isin(patches.tri_patch, sel)])
                 self.level[f] = np.clip(before[f] + step, 0, MAX_LEVEL)
         return bool(np.any(self.level != before))
+
+
+def refinement_measure(problem, history: list):
+    """Importance of every patch for the targets and the change of the predicted target
+    radiosity since the previous model.
+
+    The reference configuration is the best non-negative one (NNLS on T) of the first model;
+    its lights keep their indices across refinements (the patch model's canonical light order),
+    so ``T e`` on each new model says how much the targets' prediction moved: the relative change
+    is returned (None on the first model). Importance psi solves A^T psi = w, w the targets'
+    area fractions, and weights the power each patch sends: psi_j A_j B_j (summed over the
+    channels), with B the radiosity of the reference configuration.
+    """
+    if not history:
+        e_ref = np.stack([sopt.nnls(problem.transfer[c], problem.b_target[:, c],
+                                    maxiter=50 * problem.n_lights)[0] for c in range(3)], axis=1)
+    else:
+        e_ref = history[0][0]
+    pred = problem.target_radiosity_of(e_ref)
+    change = None
+    if history:
+        prev = history[-1][1]
+        change = float(np.linalg.norm(pred - prev) / max(np.linalg.norm(prev), 1e-300))
+    history.append((e_ref, pred, change))
+    facs = problem.factors()
+    w = np.zeros(problem.n_patches)
+    w[problem.targets] = problem.area[problem.targets] / problem.area[problem.targets].sum()
+    B = problem.forward_radiosity(problem.patch_exitance(e_ref)) + problem.background_radiosity
+    importance = np.zeros(problem.n_patches)
+    for c in range(3):
+        psi = facs[c].solve(w, trans=True)
+        importance += psi * problem.area * B[:, c]
+    return change, importance

@@ -29,7 +29,7 @@ def greedy_swap(s):
 
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts,
                                             cancel=lambda: stop["cancel"], progress=progress)
-    p.certificate = bounds  # jobs.certificate reuses it
+    s.certificate = bounds  # the reduction's result carries it to the certificate stage
     for pt in curve:
         on = pt.exitance.max(axis=1) > 0
         s.record(pt.lights[on], pt.exitance[on], pt.changed)

@@ -1,0 +1,71 @@
+"""One preparation step for every solve, shared by the CLI and the solve operator (bpy).
+
+    job = SolveJob.export(context, options, mode)   # main thread: the scene -> FaceSet, checked
+    job.mesh(progress, cancel)                      # any thread: patches and the cost estimate
+    outcome = job.run(progress, cancel)             # any thread, no bpy: jobs.run_solve
+    job.finish(scene, outcome, view_radiance=True)  # main thread: the report finished (report.finish)
+
+then ``results.show_outcome`` writes it into the scene. The operator asks before a costly job
+(``job.cost["warnings"]``); the CLI prints the estimate.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import export, jobs, light_paths, report, viewing
+
+__all__ = ["SolveJob"]
+
+
+@dataclass
+class SolveJob:
+    exp: object  # export.ExportedScene
+    options: object  # JobOptions, validated
+    mode: str  # "inverse" (solve) or "direct" (reduce)
+    inputs: dict  # export.job_inputs
+    patches: object = None
+    cost: dict = None
+
+    @classmethod
+    def export(cls, context, options, mode="inverse", target_scale=None) -> "SolveJob":
+        """Export the scene and check, from the faces alone, that the job can be solved."""
+        exp = export.export_scene(context, target_scale=target_scale)
+        jobs.check_solvable(exp.faces, mode, exp.notes)
+        return cls(exp, options, mode, export.job_inputs(exp))
+
+    def mesh(self, progress=None, cancel=None):
+        """Mesh the faces (refused first when they cannot fit in memory) and estimate the solve."""
+        self.patches = jobs.mesh_for_job(self.exp.faces, self.options, self.inputs["default_max_patch_size"],
+                                         mode=self.mode)
+        self.cost = jobs.solve_cost(self.patches, self.options, mode=self.mode)
+        return self.patches, self.cost
+
+    def run(self, progress=None, cancel=None):
+        """The solve (no bpy; any thread): a jobs.SolveOutcome."""
+        return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
+                              patches=self.patches, **self.inputs)
+
+    def finish(self, scene, outcome, view_radiance=True, input_path=None):
+        """The report finished with what only Blender can tell: the render settings of the scene's
+        Cycles light paths, and (``view_radiance``) the radiance along the target faces' normals."""
+        rows = self.normal_radiance(outcome) if view_radiance else None
+        report.finish(outcome.report, outcome.warnings, light_paths.assess_solve(scene, outcome), rows,
+                      export_seconds=self.exp.seconds, input_path=input_path)
+        return outcome
+
+    def normal_radiance(self, outcome):
+        """{object: rows}: what a bake shows on the target faces (viewing.py), or None when the
+        targets are too many to compute it."""
+        prob = outcome.problem
+        mask = prob.target_mask
+        if not np.any(mask) or np.sum(mask) > viewing.MAX_PATCHES:
+            return None
+        stored = outcome.stored
+        B = np.asarray(stored.radiosity[outcome.final_index], dtype=np.float64)
+        e = prob.patch_exitance(stored.exitance[outcome.final_index])
+        if self.mode == "inverse":
+            e = e + outcome.patches.exitance  # the scene's own emitters (fixed background)
+        return viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, self.exp.face_material,
+                                       self.exp.material_lobes, self.inputs["polygon_counts"], mask, exitance=e)

@@ -1,0 +1,166 @@
+"""The job's report: made here, and finished here, for the CLI and the add-on alike (no bpy).
+
+``solve_report`` (the solve / reduce commands) and ``radiosity_report`` (the forward command)
+make the JSON report from the stages' results (README.md, "Headless usage", lists its fields);
+``finish`` adds what only the Blender layer can measure -- the render settings the scene's
+Cycles light paths give (light_paths.py) and the radiance along the faces' normals
+(viewing.py) -- and merges their warnings, once, into the report and the outcome. ``json_safe``
+turns the result into plain JSON (no NaN or inf: they become null).
+"""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records"]
+
+
+def json_safe(x):
+    if isinstance(x, dict):
+        return {str(k): json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return json_safe(x.tolist())
+    if isinstance(x, (np.bool_, bool)):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, (np.floating, float)):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    return x
+
+
+def light_records(model, curve, row: int) -> list:
+    """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
+    them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
+    exitance [r, g, b] (W/m^2) and power (W)."""
+    lights = model.lights
+    e = curve.exitance[row]
+    watts, kinds = lights.watts, lights.kind_names
+    out = []
+    for j in np.flatnonzero(np.any(e != 0, axis=1)):
+        pids = curve.light_polygons[j].indices
+        obj = model.patches.object[lights.members(j)[0]]
+        out.append({"object": model.faces.object_names[obj],
+                    "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
+                    "kind": kinds[j],
+                    "center": lights.center[j], "normal": lights.normal[j], "area": float(lights.area[j]),
+                    "exitance": e[j], "power": float(e[j].sum() * watts[j])})
+    return out
+
+
+def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None) -> dict:
+    """Stage 5: the JSON report of a solve or a reduce (see README.md), from jobs.Model, the job's
+    JobOptions, the InverseResult (None in direct mode), the ReductionResult, jobs.Curve and the
+    certificate's bounds."""
+    faces, patches, problem = model.faces, model.patches, model.problem
+    fi = curve.final_row
+    final = red.curve[red.final_index]
+    pmap = curve.polygons
+    E_patch = model.lights.patch_exitance(curve.exitance[fi], patches.n_patches) + model.background
+    radiosity = pmap.split(curve.final_polygon_radiosity())
+    exitance = pmap.split(pmap.mean(E_patch))
+    target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
+                                 pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
+    objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
+               for name in radiosity}
+    n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    return {
+        "command": "solve" if model.mode == "inverse" else "reduce",
+        "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
+        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces),
+                  "triangles": int(len(faces.triangles)), "patches": int(patches.n_patches)},
+        "timings_s": timings,
+        "estimate": {"memory_bytes": model.cost["memory_bytes"], "seconds": model.cost["seconds"]},
+        "options": {**options.to_dict(), "rays_per_patch": int(model.form_factors.rays_per_patch),
+                    "max_patch_size": float(patches.max_patch_size),
+                    "light_size": None if patches.light_size is None else float(patches.light_size)},
+        "model": {"patch_model": options.patch_model, "estimator": options.estimator,
+                  "lights_by_kind": model.lights.count_by_kind(),
+                  "refinement": model.refinement},
+        "inverse": {
+            "solver": inv.solver if inv else "direct-lighting",
+            "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
+            "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
+            "n_candidate_patches": int(len(problem.candidates)),
+            "rank": inv.rank if inv else None,
+            "rcond": inv.rcond if inv else None,
+            "error": inv.error if inv else 0.0,
+            "relative_error": inv.relative_error if inv else 0.0,
+            "n_negative": inv.n_negative if inv else 0,
+            "seconds": inv.seconds if inv else 0.0,
+            "condition_estimate": float(problem.condition),
+            "target_norm": problem.target_norm,
+        },
+        "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
+                      "final_index": red.final_index},
+        "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
+                   "n_negative": p.n_negative, "power": _power(problem, p),
+                   "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
+                  for i, p in enumerate(red.curve)],
+        "certificate": None if bounds is None else {
+            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
+            "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
+                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
+        "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
+                  "n_negative": final.n_negative, "power": _power(problem, final),
+                  "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
+                  "lights": light_records(model, curve, fi)},
+        "objects": objects,
+        "warnings": warnings,
+    }
+
+
+def _power(problem, point) -> float:
+    """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
+    return float(np.sum(point.exitance.sum(axis=1) * problem.light_watts[point.lights]))
+
+
+def _nan_to_none(rows):
+    return [None if np.isnan(r).any() else r for r in np.asarray(rows)]
+
+
+def radiosity_report(faces, patches, options, form_factors, info: dict, polygon_radiosity: dict, cost: dict,
+                     warnings: list, timings: dict) -> dict:
+    """The JSON report of the forward command (README.md, "The radiosity command")."""
+    return json_safe({
+        "command": "radiosity",
+        "units": {"radiosity": "W/m^2", "length": "m"},
+        "scene": {"objects": len(faces.object_names), "faces": int(faces.n_faces), "patches": int(patches.n_patches)},
+        "timings_s": timings,
+        "estimate": {"memory_bytes": cost["memory_bytes"], "seconds": cost["seconds"]},
+        "options": {"rays_per_patch": None if form_factors is None else int(form_factors.rays_per_patch),
+                    "max_patch_size": float(patches.max_patch_size), "seed": int(options.seed)},
+        "solver": {k: v for k, v in info.items() if k != "warnings"},
+        "objects": {name: {"radiosity": rows} for name, rows in polygon_radiosity.items()},
+        "warnings": warnings,
+    })
+
+
+def finish(report: dict, warnings: list | None = None, render_settings=None, normal_radiance=None,
+           export_seconds=None, input_path=None) -> dict:
+    """Complete a report with what the Blender layer measured: ``render_settings`` (block, its
+    warnings) from light_paths.assess_*; ``normal_radiance`` {object: rows} from viewing.py (the
+    reported objects only: instance groups are not); the export time and the input file. Each
+    warning is added once to the report and to ``warnings`` (the outcome's, shown by the add-on)."""
+    if render_settings is not None:
+        block, warns = render_settings
+        report["render_settings"] = json.loads(json.dumps(block, default=float))
+        for w in warns:
+            if warnings is not None and w not in warnings:
+                warnings.append(w)
+            if w not in report["warnings"]:
+                report["warnings"].append(w)
+    for name, rows in (normal_radiance or {}).items():
+        if name in report["objects"]:
+            report["objects"][name]["radiance_normal"] = json_safe(rows)
+    if export_seconds is not None:
+        report["timings_s"]["export"] = export_seconds
+    if input_path is not None:
+        report["input"] = input_path
+    return report
