@@ -143,6 +143,9 @@ class _JobOptionsBase:
         flags on its command line). ValueError with one line naming the option."""
         if self.rays_per_patch == 0:
             self.rays_per_patch = None
+        for name in METHOD_PARAMS:  # a method's parameter set to None: not set, its declared default
+            if getattr(self, name) is None:
+                setattr(self, name, PARAMS[name].default)
         for name, p in PARAMS.items():
             try:
                 setattr(self, name, p.check(getattr(self, name)))
@@ -159,7 +162,8 @@ class _JobOptionsBase:
         return self
 
     def to_dict(self):
-        """Every option; the parameters of methods not chosen as None (the job does not use them)."""
+        """Every option; the parameters of methods not chosen as None (the job does not use them;
+        ``JobOptions(**d)`` gives the same options back)."""
         d = dataclasses.asdict(self)
         for name in METHOD_PARAMS:
             if not self.uses(name):
