@@ -46,46 +46,50 @@ def _positive_int(text):
     return v
 
 
-def _seed(text):
+def _target_scale(text):
     try:
-        v = int(text)
+        v = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 0 <= v < 2 ** 63:
-        raise argparse.ArgumentTypeError(f"must be a non-negative integer (0 to 2^63 - 1), got {v}")
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (v > 0 and math.isfinite(v)):
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text} (0 asks every target for no light)")
     return v
 
 
-def _positive_number(message):
-    """An argparse type: a finite number > 0; ``message`` says what else was given ({} = the text)."""
+def _param_type(param):
+    """An argparse ``type`` from an option's declaration (engine/options.py, engine/registry.py)."""
 
     def parse(text):
         try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if not (v > 0 and math.isfinite(v)):
-            raise argparse.ArgumentTypeError(message.format(text))
-        return v
+            return param.parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
 
+    parse.__name__ = param.type.__name__  # argparse's "invalid <name> value"
     return parse
 
 
-_positive_length = _positive_number("must be a positive length in metres, got {}")
-_target_scale = _positive_number("must be a positive number, got {} (0 asks every target for no light)")
+def _add_option(parser, param, users=()):
+    """The flag of one declared option (``users``: the methods whose parameter it is). Not
+    given: absent from the namespace (SUPPRESS), so that the job's default applies and
+    ``_options`` knows which flags were given."""
+    prefix = "".join(f"{m.name} {kind.replace('_', ' ')}: " for kind, m in users)
+    kw = dict(dest=param.name, default=argparse.SUPPRESS, help=param.help(prefix))
+    if param.type is bool:
+        parser.add_argument(param.cli_flag, action="store_false" if param.invert else "store_true", **kw)
+    elif param.registry is not None:
+        parser.add_argument(param.cli_flag, choices=param.choices(), **kw)
+    else:
+        parser.add_argument(param.cli_flag, type=_param_type(param), metavar=param.name.upper(), **kw)
 
 
-def _non_negative_int(text):
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be 0 or more, got {v}")
-    return v
+#: the options of the radiosity command (no inverse problem, no methods to choose)
+RADIOSITY_OPTIONS = ("rays_per_patch", "max_patch_size", "seed", "threads")
 
 
 def build_parser():
+    from .engine.options import PARAMS
+
     p = _Parser(prog=PROG, description="Relight: radiosity and inverse lighting on .blend scenes.")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     r = sub.add_parser("radiosity", help="forward radiosity from the scene's own emissive materials")
@@ -93,21 +97,14 @@ def build_parser():
     r.add_argument("--report", required=True, help="JSON report to write")
     r.add_argument("--out", help="write a copy of the scene with the relight_radiosity colour attribute and "
                                  "Cycles light paths that render the prediction (no clamping, enough bounces)")
-    r.add_argument("--rays-per-patch", type=_positive_int, default=None,
-                   help="rays shot per patch for the form factors (default: the engine's)")
-    r.add_argument("--max-patch-size", type=_positive_length, default=None,
-                   help="largest patch edge in metres (default: the scene's relight_max_patch_size, "
-                        "else the bounding-box diagonal / 20)")
-    r.add_argument("--seed", type=_seed, default=0, help="random seed >= 0 (results are reproducible)")
+    for name in RADIOSITY_OPTIONS:
+        _add_option(r, PARAMS[name])
     r.add_argument("-q", "--quiet", action="store_true", help="no estimate or progress on stderr")
-    r.add_argument("--threads", type=_positive_int, default=None, help="worker threads (default: all cores)")
     r.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
     r.add_argument("--render-samples", type=_positive_int, default=16, help="Cycles samples for --render")
     r.add_argument("--view-transform", choices=("AgX", "Standard", "Filmic"), default="AgX",
                    help="view transform of --render (default AgX, Blender's: it compresses the lights' "
                         "highlights; Standard shows a radiance of 1 as white)")
-    from .engine import options as o
-    from .engine.registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS
 
     for name, helptext in (("solve", "inverse lighting: lights for the painted targets, then reduction"),
                            ("reduce", "direct-lighting mode: reduce the scene's own emitters")):
@@ -117,38 +114,42 @@ def build_parser():
         s.add_argument("--out", help="write a copy with the final lights as emissive materials, the "
                                      "relight_radiosity layer, the whole curve and Cycles light paths "
                                      "that render the prediction (no clamping, enough bounces)")
-        s.add_argument("--rays-per-patch", type=_positive_int, default=None)
-        s.add_argument("--max-patch-size", type=_positive_length, default=None)
-        s.add_argument("--patch-model", choices=PATCH_MODELS.names(), default=o.DEFAULT_PATCH_MODEL,
-                       help="how the scene becomes patches and candidate lights (default %(default)s)")
-        s.add_argument("--light-size", type=_positive_length, default=None,
-                       help="adaptive model: size of the light cells in metres (default: the patch size)")
-        s.add_argument("--refine-passes", type=_non_negative_int, default=o.JobOptions.refine_passes,
-                       help="adaptive model: importance-driven refinement passes (default %(default)s, 0 = none)")
-        s.add_argument("--estimator", choices=ESTIMATORS.names(), default=o.DEFAULT_ESTIMATOR,
-                       help="form-factor estimator (default %(default)s)")
-        s.add_argument("--seed", type=_seed, default=0, help="random seed >= 0")
+        # every job option and every method's parameter, from their declarations
+        jobs_group = s.add_argument_group("job options")
+        methods_group = s.add_argument_group("method parameters (each used only by its method)")
+        from .engine.options import METHOD_PARAMS
+
+        for pname, param in PARAMS.items():
+            if pname in METHOD_PARAMS:
+                _add_option(methods_group, param, METHOD_PARAMS[pname][1])
+            else:
+                _add_option(jobs_group, param)
         s.add_argument("-q", "--quiet", action="store_true", help="no estimate or progress on stderr")
-        s.add_argument("--threads", type=_positive_int, default=None)
         if name == "solve":
-            s.add_argument("--solver", choices=SOLVERS.names(), default=o.DEFAULT_SOLVER)
             s.add_argument("--target-scale", type=_target_scale, default=None,
                            help="multiplies the painted target colours, > 0 (default: the scene's)")
-        s.add_argument("--selection", choices=SELECTIONS.names(), default=o.DEFAULT_SELECTION)
-        s.add_argument("--distribution", choices=DISTRIBUTIONS.names(), default=o.DEFAULT_DISTRIBUTION)
-        s.add_argument("--max-lights", type=_positive_int, default=o.DEFAULT_MAX_LIGHTS,
-                       help=f"stop criterion: at most this many lights (default {o.DEFAULT_MAX_LIGHTS})")
-        s.add_argument("--error-threshold", type=float, default=None,
-                       help="stop criterion: relative error (Eq. 1 / ||b_P||) at most this")
-        s.add_argument("--tolerance", type=float, default=None,
-                       help="least-power selection: every target within +-this fraction of its painted value")
-        s.add_argument("--allow-negative", action="store_true",
-                       help="do not require the final configuration to be free of negative exitances")
         s.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
         s.add_argument("--render-samples", type=_positive_int, default=16)
         s.add_argument("--view-transform", choices=("AgX", "Standard", "Filmic"), default="AgX",
                        help="view transform of --render (default AgX, Blender's)")
     return p
+
+
+def _options(args):
+    """The job's options from the flags given (the rest: the declared defaults). An option that
+    the chosen methods do not use is refused (UsageError naming it), as is an inverse-only
+    option given to ``reduce``."""
+    from .engine.options import PARAMS, JobOptions
+
+    given = {name: getattr(args, name) for name in PARAMS if hasattr(args, name)}
+    if args.command == "reduce":
+        for name in given:
+            if PARAMS[name].inverse_only:
+                raise UsageError(f"{PARAMS[name].cli_flag} is used only by solve (inverse lighting), not by reduce")
+    try:
+        return JobOptions(**given).validate(given=set(given))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def script_argv(argv):
@@ -384,14 +385,12 @@ def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
     from . import export, jobs, light_paths, report as reports, results, viewing
-    from .engine.options import JobOptions
 
     t0 = time.perf_counter()
     _check_paths(args)
     export.open_blend(args.scene)
     exp = export.export_scene()
-    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size,
-                         seed=args.seed, threads=args.threads).validate()
+    options = _options(args)
     inputs = export.job_inputs(exp)
 
     def mesh(progress, cancel):
@@ -436,21 +435,12 @@ def run_solve_command(args, progress=None, cancel=None):
     import bpy
 
     from . import export, results
-    from .engine.options import JobOptions
     from .preparation import SolveJob
 
     t0 = time.perf_counter()
     _check_paths(args)
-    if args.error_threshold is not None and not (args.error_threshold >= 0 and math.isfinite(args.error_threshold)):
-        raise UsageError("--error-threshold must be a non-negative number")
+    options = _options(args)  # before any work: an unusable option exits 2 at once
     export.open_blend(args.scene)
-    options = JobOptions(rays_per_patch=args.rays_per_patch, max_patch_size=args.max_patch_size, seed=args.seed,
-                         threads=args.threads, solver=getattr(args, "solver", "reduced"),
-                         selection=args.selection, distribution=args.distribution, max_lights=args.max_lights,
-                         error_threshold=args.error_threshold, require_positive=not args.allow_negative,
-                         tolerance=args.tolerance,
-                         patch_model=args.patch_model, light_size=args.light_size,
-                         refine_passes=args.refine_passes, estimator=args.estimator).validate()
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
                           target_scale=getattr(args, "target_scale", None))
     patches, cost = _job(args, job.mesh)

@@ -187,7 +187,7 @@ def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -
 
 def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mode: str = "inverse") -> dict:
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
-    passes = options.refine_passes if PATCH_MODELS[options.patch_model].get("refines") else 0
+    passes = options.param("refine_passes", 0)  # 0 unless the chosen patch model declares it
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
                                  n_triangles=n_triangles, refine_passes=passes,
                                  kernel=uses_kernel_pairs(options, mode), threads=options.threads)
@@ -208,7 +208,7 @@ def check_before_meshing(faces: FaceSet, options: JobOptions, default_max_patch_
     P = estimate_patch_count(faces, options, default_max_patch_size, certain=True)
     Pi = int(P)
     rays = rays_per_patch(options, Pi, mode)
-    passes = options.refine_passes if (mode == "inverse" and PATCH_MODELS[options.patch_model].get("refines")) else 0
+    passes = options.param("refine_passes", 0) if mode == "inverse" else 0
     cost = estimate_cost(Pi, int(rays), 0, 0, n_triangles=len(faces.triangles), refine_passes=passes,
                          threads=options.threads)
     size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
@@ -360,7 +360,8 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
                         max_lights=None if by_lp else options.max_lights,
                         relative_error_threshold=None if by_lp else options.error_threshold,
-                        require_positive=options.require_positive, tolerance=options.tolerance,
+                        require_positive=options.require_positive, tolerance=options.param("tolerance"),
+                        coplanar_tol=options.param("coplanar_tolerance", 1e-3),
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:

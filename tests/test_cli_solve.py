@@ -37,6 +37,42 @@ def test_bad_option_values_exit_2(run_cli, tmp_path):
         assert code == 2 and len(err.strip().splitlines()) == 1, (extra, err)
 
 
+@pytest.mark.parametrize("extra, words", [
+    (["--tolerance", "0.2"], ["--tolerance", "least-power selection"]),
+    (["--tolerance", "0.1"], ["--tolerance", "least-power selection"]),  # given, even at its default
+    (["--refine-passes", "1", "--patch-model", "polygon"], ["--refine-passes", "adaptive patch model"]),
+    (["--light-size", "0.5", "--patch-model", "polygon"], ["--light-size", "adaptive patch model"]),
+    (["--distribution", "uniform"], ["--distribution", "distributes no power"]),
+    (["--selection", "least-power", "--max-lights", "5"], ["--max-lights", "tolerance"]),
+])
+def test_an_option_the_chosen_methods_do_not_use_exits_2(run_cli, tmp_path, extra, words):
+    """Issue 15.2: refused with one line naming the option and its method, before any work."""
+    scene = os.path.join(SAMPLES, "staircase_targets.blend")
+    code, _, err = run_cli(["solve", scene, "--report", tmp_path / "r.json", *extra])
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 2 and len(lines) == 1, (extra, err)
+    assert lines[0].startswith("relight: error: ") and all(w in lines[0] for w in words), lines[0]
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_reduce_refuses_the_inverse_only_options(run_cli, tmp_path):
+    scene = os.path.join(SAMPLES, "cornell_box.blend")
+    for extra in (["--refine-passes", "1"], ["--solver", "svd"]):
+        code, _, err = run_cli(["reduce", scene, "--report", tmp_path / "r.json", *extra])
+        assert code == 2 and len(err.strip().splitlines()) == 1 and "used only by solve" in err, (extra, err)
+
+
+def test_least_power_from_the_cli_reports_its_tolerance(run_cli, tmp_path):
+    scene = os.path.join(SAMPLES, "staircase_targets.blend")
+    code, r, err = run_cli(["solve", scene, "--report", tmp_path / "r.json", "--selection", "least-power",
+                            "--tolerance", "0.3", "--rays-per-patch", "512", "-q"])
+    assert code == 0, err
+    assert r["options"]["selection"] == "least-power" and r["options"]["tolerance"] == 0.3
+    assert r["options"]["refine_passes"] == 0  # the adaptive model's, used
+    code, r, err = run_cli(["solve", scene, "--report", tmp_path / "r2.json", "--rays-per-patch", "512", "-q"])
+    assert code == 0 and r["options"]["tolerance"] is None  # greedy-swap: no tolerance listed
+
+
 def test_reduce_cornell_direct_lighting_mode(run_cli, tmp_path):
     """Direct-lighting mode on the Cornell box with its light split into 3 x 3 faces: e_x is the
     scene's own light (error 0, no negatives); every step conserves the light's power per

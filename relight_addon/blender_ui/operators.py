@@ -20,19 +20,24 @@ TARGET = export.TARGET_ATTRIBUTE
 FORBIDDEN = export.FORBIDDEN_ATTRIBUTE
 
 
-def job_options(settings) -> JobOptions:
-    return JobOptions(
-        rays_per_patch=settings.rays_per_patch,
-        max_patch_size=settings.max_patch_size or None,
-        seed=settings.seed,
-        threads=_preferences_threads(),
-        solver=settings.solver,
-        selection=settings.selection,
-        distribution=settings.distribution,
-        max_lights=settings.max_lights if settings.use_max_lights else None,
-        error_threshold=settings.error_threshold if settings.use_error_threshold else None,
-        require_positive=settings.require_positive,
-    ).validate()
+def job_options(settings, validate=True) -> JobOptions:
+    """The job's options from the scene's properties (properties.py, generated from the
+    declarations): the job-wide options the chosen methods use (the others keep their
+    defaults: e.g. a selection that distributes no power gets the default distribution), and
+    the parameters of the chosen methods only, so that nothing the sidebar shows is refused."""
+    from ..engine.options import JOB_PARAMS, METHOD_CHOICES, method_params
+    from .properties import ui_value
+
+    options = JobOptions(threads=_preferences_threads(),
+                         **{p.name: ui_value(settings, p) for p in JOB_PARAMS if p.ui != "hidden"})
+    for p in JOB_PARAMS:
+        if p.ui != "hidden" and not options.uses(p.name):
+            setattr(options, p.name, p.default)
+    for kind, _registry in METHOD_CHOICES:
+        for p in method_params(kind, getattr(options, kind)):
+            if options.uses(p.name):
+                setattr(options, p.name, ui_value(settings, p))
+    return options.validate() if validate else options
 
 
 def _preferences_threads():

@@ -215,6 +215,51 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         layout.operator("relight.select_faces", text="Select Forbidden").kind = "FORBIDDEN"
 
 
+def draw_option(layout, settings, p):
+    """The row of one declared option (engine/options.py): a checkbox beside the field for an
+    option that may be off, "Auto" in the label of one whose 0 means automatic."""
+    if p.ui == "toggle":
+        row = layout.row(align=True)
+        row.prop(settings, "use_" + p.name, text="")
+        sub = row.row()
+        sub.active = getattr(settings, "use_" + p.name)
+        sub.prop(settings, p.name)
+    elif p.ui == "zero" and getattr(settings, p.name) == 0:
+        layout.prop(settings, p.name, text=f"{p.title}: Auto")
+    else:
+        layout.prop(settings, p.name)
+
+
+def draw_method(layout, settings, kind, options, note=""):
+    """A method choice (its enum, label above: the sidebar is narrow) and, under it, the rows of
+    the chosen method's parameters; greyed out (with ``note``) when the chosen methods do not
+    use the choice."""
+    from ..engine.options import method_params
+
+    col = layout.column(align=True)
+    col.active = options.uses(kind)
+    col.label(text=settings.bl_rna.properties[kind].name if col.active or not note else note)
+    col.prop(settings, kind, text="")
+    for p in method_params(kind, getattr(settings, kind)):
+        draw_option(col, settings, p)
+    return col
+
+
+class RELIGHT_PT_model(RELIGHT_PT_base, bpy.types.Panel):
+    """How the scene becomes patches and lights, and how the form factors are estimated."""
+    bl_label = "Model"
+    bl_parent_id = "RELIGHT_PT_main"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        from . import operators
+
+        s = context.scene.relight
+        options = operators.job_options(s, validate=False)
+        for kind in ("patch_model", "estimator"):
+            draw_method(self.layout, s, kind, options)
+
+
 class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
     bl_label = "Solve"
     bl_parent_id = "RELIGHT_PT_main"
@@ -236,22 +281,19 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         else:
             col.prop(s, "max_patch_size")
         col.prop(s, "seed")
-        col = layout.column(align=True)
-        for name in ("solver", "selection", "distribution"):
-            col.label(text=s.bl_rna.properties[name].name)
-            col.prop(s, name, text="")
+        from ..engine.options import PARAMS
+
+        options = operators.job_options(s, validate=False)
+        draw_method(layout, s, "solver", options)
+        draw_method(layout, s, "selection", options)
+        draw_method(layout, s, "distribution", options, note="Distribution (not used)")
         box = layout.box()
-        box.label(text="Stop when")
-        row = box.row(align=True)
-        row.prop(s, "use_max_lights", text="")
-        sub = row.row()
-        sub.active = s.use_max_lights
-        sub.prop(s, "max_lights")
-        row = box.row(align=True)
-        row.prop(s, "use_error_threshold", text="")
-        sub = row.row()
-        sub.active = s.use_error_threshold
-        sub.prop(s, "error_threshold")
+        stops = options.uses("max_lights")
+        box.label(text="Stop when" if stops else "Stop when (the tolerance decides)")
+        col = box.column()
+        col.active = stops
+        draw_option(col, s, PARAMS["max_lights"])
+        draw_option(col, s, PARAMS["error_threshold"])
         box.prop(s, "require_positive")
         state = operators.solve_state(context.scene)
         if state is not None:
@@ -374,7 +416,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
                      icon="HIDE_ON" if shown else "SHADING_SOLID")
 
 
-CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_solve,
+CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_model, RELIGHT_PT_solve,
            RELIGHT_UL_curve, RELIGHT_PT_results)
 PANELS = [c for c in CLASSES if issubclass(c, bpy.types.Panel)]
 

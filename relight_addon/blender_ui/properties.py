@@ -1,10 +1,76 @@
-"""Scene and object properties of the Relight tab (thin: values only, no logic)."""
+"""Scene and object properties of the Relight tab (thin: values only, no logic).
+
+The job's options are generated from their declarations (``engine/options.py``: the job-wide
+``JOB_PARAMS`` and every registered method's ``params``): one scene property per option, of the
+option's name (an EnumProperty per method choice, listing its registry; Int/Float/Bool with the
+declared default, range and description), plus ``use_<name>`` for an option drawn with a
+checkbox (``ui="toggle"``: off = not set). ``ui_value`` reads a property back as the option's value.
+"""
 import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        IntProperty, PointerProperty, StringProperty)
 
 from ..engine import options as engine_options
-from ..engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS  # the enum items derive from them
+
+INT_MAX = 2 ** 31 - 1  # Blender's IntProperty is 32-bit
+
+
+def option_property(p):
+    """The scene property of one declared option (engine.registry.Param)."""
+    kw = dict(name=p.title, description=p.description)
+    if p.type is bool:
+        return BoolProperty(default=bool(p.default), **kw)
+    if p.registry is not None:  # the enum items derive from the registry
+        return EnumProperty(items=p.registry.enum_items(), default=p.default, **kw)
+    if p.ui == "zero":
+        default, lo = 0, 0
+        kw["description"] += f" (0 = {p.none or 'automatic'})"
+    else:
+        default = p.default if p.default is not None else (p.ui_default if p.ui_default is not None else 0)
+        lo = p.min
+    if p.type is int:
+        kw.update(default=int(default), min=int(lo) if lo is not None else -INT_MAX,
+                  max=min(int(p.max), INT_MAX) if p.max is not None else INT_MAX)
+        if p.soft_max is not None:
+            kw["soft_max"] = int(p.soft_max)
+        return IntProperty(**kw)
+    kw.update(default=float(default), precision=3 if not default or abs(default) >= 0.01 else 5)
+    if lo is not None:
+        kw["min"] = float(lo)
+    if p.max is not None:
+        kw["max"] = float(p.max)
+    if p.soft_max is not None:
+        kw["soft_max"] = float(p.soft_max)
+    if p.unit == "LENGTH":
+        kw.update(subtype="DISTANCE", unit="LENGTH")
+    elif p.unit == "FACTOR":
+        kw["subtype"] = "FACTOR"
+    return FloatProperty(**kw)
+
+
+def option_properties():
+    """{property name: property} of every declared option the scene shows (not ``ui="hidden"``)."""
+    out = {}
+    for p in engine_options.PARAMS.values():
+        if p.ui == "hidden":
+            continue
+        if p.ui == "toggle":
+            out["use_" + p.name] = BoolProperty(name=p.title, default=p.default is not None,
+                                                description=f"Use this option: {p.description}")
+        out[p.name] = option_property(p)
+    return out
+
+
+def ui_value(settings, p):
+    """The option's value from the scene's property (None where the property says "not set")."""
+    value = getattr(settings, p.name)
+    if p.ui == "zero" and not value:
+        return None
+    if p.ui == "toggle" and not getattr(settings, "use_" + p.name):
+        return None
+    if p.type is float:  # the property's float32, as the number shown (0.1, not 0.10000000149)
+        return float(f"{value:.7g}")
+    return value
 
 
 def _apply_curve_point(self, context):
@@ -41,45 +107,36 @@ def _set_target_scale(self, value):
     self.id_data[TARGET_SCALE_PROP] = float(value)
 
 
-class RELIGHT_SceneSettings(bpy.types.PropertyGroup):
-    target_scale: FloatProperty(
+_SETTINGS = {
+    "target_scale": FloatProperty(
         name="Target Scale", default=1.0, min=0.0, soft_max=100.0, get=_get_target_scale, set=_set_target_scale,
         description="Painted colours are radiance; the target radiosity is pi x colour x this scale (W/m^2). "
-                    "Stored as the scene custom property relight_target_scale (the CLI reads the same)")
-    paint_color: bpy.props.FloatVectorProperty(
+                    "Stored as the scene custom property relight_target_scale (the CLI reads the same)"),
+    "paint_color": bpy.props.FloatVectorProperty(
         name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
-        description="Colour used by Fill Targets")
-    rays_per_patch: IntProperty(
-        name="Rays per Patch", default=engine_options.DEFAULT_RAYS_PER_PATCH, min=0, soft_max=65536,
-        description="Form-factor quality: rays cast from every patch; 0 = automatic "
-                    "(about 4 million rays in all, 1024 to 16384 per patch)")
-    max_patch_size: FloatProperty(
-        name="Max Patch Size", default=0.0, min=0.0, subtype="DISTANCE", unit="LENGTH",
-        description="Faces larger than this are split into patches; 0 = automatic (scene diagonal / 20)")
-    seed: IntProperty(name="Seed", default=0, min=0, description="Random seed: results are reproducible")
-    solver: EnumProperty(name="Solver", items=SOLVERS.enum_items(), default=engine_options.DEFAULT_SOLVER)
-    selection: EnumProperty(name="Selection", items=SELECTIONS.enum_items(), default=engine_options.DEFAULT_SELECTION)
-    distribution: EnumProperty(name="Distribution", items=DISTRIBUTIONS.enum_items(),
-                               default=engine_options.DEFAULT_DISTRIBUTION)
-    use_max_lights: BoolProperty(name="Max Lights", default=True, description="Stop at this number of lights")
-    max_lights: IntProperty(name="Max Lights", default=engine_options.DEFAULT_MAX_LIGHTS, min=1)
-    use_error_threshold: BoolProperty(name="Error Threshold", default=False,
-                                      description="Stop when the relative error would exceed this")
-    error_threshold: FloatProperty(name="Relative Error", default=0.1, min=0.0, soft_max=1.0, subtype="FACTOR")
-    require_positive: BoolProperty(name="No Negatives", default=True,
-                                   description="The final configuration must have no negative exitance")
-    curve: CollectionProperty(type=RELIGHT_CurvePoint)
-    curve_index: IntProperty(name="Configuration", default=0, update=_apply_curve_point,
-                             description="The configuration shown in the scene")
-    status: StringProperty(name="Status", default="")
+        description="Colour used by Fill Targets"),
+    # the job's options: rays_per_patch, max_patch_size, seed, solver, selection, distribution,
+    # use_max_lights / max_lights, use_error_threshold / error_threshold, require_positive,
+    # patch_model, estimator, and every method's parameters (tolerance, light_size, ...)
+    **option_properties(),
+    "curve": CollectionProperty(type=RELIGHT_CurvePoint),
+    "curve_index": IntProperty(name="Configuration", default=0, update=_apply_curve_point,
+                               description="The configuration shown in the scene"),
+    "status": StringProperty(name="Status", default=""),
     # display: what the panel shows about the last solve, and the viewport shading to give back
-    last_summary: StringProperty(name="Last Solve", default="",
-                                 description="Summary of the last Solve & Reduce (shown in the Results panel)")
-    last_warnings: StringProperty(name="Warnings", default="",
-                                  description="Warnings of the last Solve & Reduce, one per line")
-    view_restore: StringProperty(name="Viewport Shading to Restore", default="",
-                                 description="The 3D Viewports' shading before Relight showed its radiosity "
-                                             "(JSON); restored by Hide Radiosity and Clear Results")
+    "last_summary": StringProperty(name="Last Solve", default="",
+                                   description="Summary of the last Solve & Reduce (shown in the Results panel)"),
+    "last_warnings": StringProperty(name="Warnings", default="",
+                                    description="Warnings of the last Solve & Reduce, one per line"),
+    "view_restore": StringProperty(name="Viewport Shading to Restore", default="",
+                                   description="The 3D Viewports' shading before Relight showed its radiosity "
+                                               "(JSON); restored by Hide Radiosity and Clear Results"),
+}
+
+# built with type(): the generated annotations are a plain dict on every Python Blender ships
+RELIGHT_SceneSettings = type("RELIGHT_SceneSettings", (bpy.types.PropertyGroup,),
+                             {"__annotations__": _SETTINGS, "__module__": __name__,
+                              "__doc__": "The Relight tab's scene settings (scene.relight)"})
 
 
 CLASSES = (RELIGHT_CurvePoint, RELIGHT_SceneSettings)

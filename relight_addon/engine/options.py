@@ -1,9 +1,22 @@
-"""Options of a Relight job, with the engine's defaults (shared by the CLI and the add-on)."""
+"""Options of a Relight job, with the engine's defaults (shared by the CLI and the add-on).
+
+One table: ``JOB_PARAMS`` declares the job-wide options (rays, patch size, seed, the method
+choices, the stop criteria), and every registered method declares its own parameters with it
+(``engine/registry.py``'s :class:`Param`; e.g. the least-power selection's ``tolerance``, the
+adaptive patch model's ``light_size``, ``refine_passes``, ``refine_tolerance``). From them:
+
+- :class:`JobOptions`, a dataclass with one field per declared option (generated: existing
+  callers keep ``JobOptions(selection="least-power", tolerance=0.1)``);
+- ``JobOptions.validate``: every value's type and range from its declaration, and a
+  ValueError for an option that the chosen methods do not use (refused, never ignored);
+- the CLI's flags (``cli.py``), the add-on's scene properties and panel rows
+  (``blender_ui/properties.py``, ``panels.py``, ``operators.job_options``).
+"""
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+import dataclasses
 
-from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS
+from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
 DEFAULT_SOLVER = "reduced"
@@ -21,49 +34,153 @@ STORE_LOG_POINTS = 40
 #: intermediate (to-be-refined) models get this fraction of the rays
 REFINE_RAY_FRACTION = 4
 
+#: the option holding each user-chosen method, and its registry (the order the panel shows them)
+METHOD_CHOICES = (("solver", SOLVERS), ("selection", SELECTIONS), ("distribution", DISTRIBUTIONS),
+                  ("patch_model", PATCH_MODELS), ("estimator", ESTIMATORS))
 
-@dataclass
-class JobOptions:
-    rays_per_patch: int | None = None  # None or 0: automatic (formfactors.auto_rays_per_patch)
-    max_patch_size: float | None = None  # None: scene diagonal / 20
-    seed: int = 0
-    threads: int | None = None  # None: every core
-    solver: str = DEFAULT_SOLVER
-    selection: str = DEFAULT_SELECTION
-    distribution: str = DEFAULT_DISTRIBUTION
-    max_lights: int | None = DEFAULT_MAX_LIGHTS  # stop criterion: number of lights
-    error_threshold: float | None = None  # stop criterion: relative error (Eq. 1 / ||b_P||)
-    tolerance: float | None = None  # least-power selection: every target within +-tolerance (relative)
-    require_positive: bool = True  # stop criterion: no negatives
-    patch_model: str = DEFAULT_PATCH_MODEL
-    light_size: float | None = None  # None: the patch size (adaptive model's light cells)
-    refine_passes: int = 0  # adaptive model: refinement passes after a first solve (measured: docs/benchmarks.md)
-    refine_tolerance: float = 0.02  # ... stop when the predicted target radiosity moves less than this (relative)
-    estimator: str = DEFAULT_ESTIMATOR
 
-    def validate(self):
-        for registry, name in ((SOLVERS, self.solver), (SELECTIONS, self.selection), (DISTRIBUTIONS, self.distribution),
-                               (PATCH_MODELS, self.patch_model), (ESTIMATORS, self.estimator)):
-            registry[name]  # ValueError naming the known methods
+def _unused_without_distribution(o):
+    if not SELECTIONS[o.selection].get("distributes", True):
+        users = ", ".join(m.name for m in SELECTIONS if m.get("distributes", True))
+        return f"the {o.selection} selection distributes no power (the selections that do: {users})"
+    return ""
+
+
+def _unused_by_least_power(o):
+    if SELECTIONS[o.selection].get("needs_tolerance"):
+        return f"the {o.selection} selection stops at its tolerance, not at the stop criteria"
+    return ""
+
+
+JOB_PARAMS = (
+    Param("rays_per_patch", int, None, min=1, label="Rays per Patch", ui="zero", soft_max=65536, none="automatic",
+          description="Form-factor quality: rays cast from every patch (automatic: about 4 million rays in "
+                      "all, 1024 to 16384 per patch)"),
+    Param("max_patch_size", float, None, min=0.0, min_exclusive=True, unit="LENGTH", label="Max Patch Size",
+          ui="zero", none="the scene's relight_max_patch_size, else the bounding-box diagonal / 20",
+          description="Largest patch edge in metres: larger faces are split into patches"),
+    Param("seed", int, 0, min=0, max=2 ** 63 - 1, label="Seed", error="must be a non-negative integer "
+          "(0 to 2^63 - 1), got {}", description="Random seed: results are reproducible"),
+    Param("threads", int, None, min=1, label="Threads", ui="hidden", none="every core",
+          description="Worker threads"),
+    Param("solver", str, DEFAULT_SOLVER, registry=SOLVERS, label="Solver", inverse_only=True,
+          description="Inverse solver"),
+    Param("selection", str, DEFAULT_SELECTION, registry=SELECTIONS, label="Selection",
+          description="How the lights are selected"),
+    Param("distribution", str, DEFAULT_DISTRIBUTION, registry=DISTRIBUTIONS, label="Distribution",
+          unused=_unused_without_distribution,
+          description="Where a removed light's power goes (selections that distribute power)"),
+    Param("max_lights", int, DEFAULT_MAX_LIGHTS, min=1, label="Max Lights", ui="toggle", soft_max=64,
+          unused=_unused_by_least_power, description="Stop criterion: at most this many lights"),
+    Param("error_threshold", float, None, min=0.0, label="Relative Error", ui="toggle", ui_default=0.1,
+          soft_max=1.0, unit="FACTOR", unused=_unused_by_least_power,
+          description="Stop criterion: relative error (Eq. 1 / ||b_P||) at most this"),
+    Param("require_positive", bool, True, label="No Negatives", flag="--allow-negative", invert=True,
+          description="The final configuration must have no negative exitance"),
+    Param("patch_model", str, DEFAULT_PATCH_MODEL, registry=PATCH_MODELS, label="Patch Model",
+          description="How the scene becomes patches and candidate lights"),
+    Param("estimator", str, DEFAULT_ESTIMATOR, registry=ESTIMATORS, label="Estimator",
+          description="Form-factor estimator"),
+)
+
+
+def _method_params():
+    """{name: (Param, [(choice option, Method), ...])}: every method's declared parameters; a
+    name two methods declare must be declared alike (then it is used when either is chosen)."""
+    table = {}
+    job = {p.name for p in JOB_PARAMS}
+    for kind, registry in METHOD_CHOICES:
+        for method in registry:
+            for p in method.params:
+                if p.name in job:
+                    raise ValueError(f"{registry.kind} {method.name!r}: parameter {p.name!r} is a job option")
+                if p.name in table and table[p.name][0] != p:
+                    raise ValueError(f"parameter {p.name!r} is declared differently by two methods")
+                table.setdefault(p.name, (p, []))[1].append((kind, method))
+    return table
+
+
+METHOD_PARAMS = _method_params()
+#: every declared option, job-wide first
+PARAMS = {**{p.name: p for p in JOB_PARAMS}, **{n: v[0] for n, v in METHOD_PARAMS.items()}}
+
+
+def method_params(kind, name) -> tuple:
+    """The Params of method ``name`` of the choice option ``kind`` ("selection", ...)."""
+    return dict(METHOD_CHOICES)[kind][name].params
+
+
+def _users(name):
+    return METHOD_PARAMS[name][1]
+
+
+class _JobOptionsBase:
+    def uses(self, name) -> bool:
+        """Does this job use option ``name``? (A method's parameter: its method is chosen; a
+        job option: no chosen method makes it moot.)"""
+        if name in METHOD_PARAMS:
+            return any(getattr(self, kind) == m.name and self.uses(kind) for kind, m in _users(name))
+        p = PARAMS[name]
+        return not (p.unused and p.unused(self))
+
+    def param(self, name, fallback=None):
+        """The value of option ``name`` when this job uses it, else ``fallback``."""
+        return getattr(self, name) if self.uses(name) else fallback
+
+    def unused_reason(self, name) -> str:
+        """Why option ``name`` is not used by this job's methods ("" when it is)."""
+        if name in METHOD_PARAMS:
+            if self.uses(name):
+                return ""
+            for kind, m in _users(name):
+                if getattr(self, kind) == m.name:  # its method is chosen, but the choice is moot
+                    why = PARAMS[kind].unused(self)
+                    return f"is used only by the {m.name} {dict(METHOD_CHOICES)[kind].kind}, and {why}"
+            users = " or ".join(f"the {m.name} {dict(METHOD_CHOICES)[kind].kind}" for kind, m in _users(name))
+            chosen = ", ".join(f"the {kind.replace('_', ' ')} is {getattr(self, kind)}" for kind in
+                               dict.fromkeys(k for k, _ in _users(name)))
+            return f"is used only by {users} ({chosen})"
+        p = PARAMS[name]
+        reason = p.unused(self) if p.unused else ""
+        return f"is not used: {reason}" if reason else ""
+
+    def validate(self, given=()):
+        """Check every option against its declaration (type, range; the method choices against
+        their registries), then refuse an option that the chosen methods do not use: one set to
+        a value other than its default (or None), or named in ``given`` (the CLI passes the
+        flags on its command line). ValueError with one line naming the option."""
         if self.rays_per_patch == 0:
             self.rays_per_patch = None
-        if self.rays_per_patch is not None and self.rays_per_patch < 1:
-            raise ValueError("rays per patch must be at least 1 (0 = automatic)")
-        if self.max_patch_size is not None and not self.max_patch_size > 0:
-            raise ValueError("max patch size must be a positive length")
-        if SELECTIONS[self.selection].get("needs_tolerance") and self.tolerance is None:
-            raise ValueError(f"the {self.selection} selection needs a tolerance (e.g. 0.1 for +-10 %)")
-        if self.tolerance is not None and not (self.tolerance >= 0 and self.tolerance < float("inf")):
-            raise ValueError("the tolerance must be a non-negative number")
-        if self.light_size is not None and not self.light_size > 0:
-            raise ValueError("light size must be a positive length")
-        if self.refine_passes < 0:
-            raise ValueError("refine passes must be >= 0")
-        if self.max_lights is not None and self.max_lights < 1:
-            raise ValueError("max lights must be at least 1")
-        if self.error_threshold is not None and not self.error_threshold >= 0:
-            raise ValueError("the error threshold must be >= 0")
+        for name in METHOD_PARAMS:  # a method's parameter set to None: not set, its declared default
+            if getattr(self, name) is None:
+                setattr(self, name, PARAMS[name].default)
+        for name, p in PARAMS.items():
+            try:
+                setattr(self, name, p.check(getattr(self, name)))
+            except ValueError as exc:
+                if p.registry is not None:
+                    raise
+                raise ValueError(f"{name.replace('_', ' ')} {exc}") from None
+        for name, p in PARAMS.items():
+            value = getattr(self, name)
+            if name in given or (value is not None and value != p.default):
+                reason = self.unused_reason(name)
+                if reason:
+                    raise ValueError(f"{p.cli_flag} {reason}")
         return self
 
     def to_dict(self):
-        return asdict(self)
+        """Every option; the parameters of methods not chosen as None (the job does not use them;
+        ``JobOptions(**d)`` gives the same options back)."""
+        d = dataclasses.asdict(self)
+        for name in METHOD_PARAMS:
+            if not self.uses(name):
+                d[name] = None
+        return d
+
+
+JobOptions = dataclasses.make_dataclass(
+    "JobOptions", [(p.name, object, dataclasses.field(default=p.default)) for p in PARAMS.values()],
+    bases=(_JobOptionsBase,), namespace={"__module__": __name__})
+JobOptions.__doc__ = ("The options of a job: one field per declared option (JOB_PARAMS, then the methods' "
+                      "parameters), defaults from the declarations; see the module's docstring.")

@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..registry import DISTRIBUTIONS
+from ..registry import DISTRIBUTIONS, Param
 
 
-@DISTRIBUTIONS.register("coplanar", "Coplanar", "Suppressed power is shared by the coplanar lights (uniform if none)")
+@DISTRIBUTIONS.register("coplanar", "Coplanar", "Suppressed power is shared by the coplanar lights (uniform if none)",
+                        params=(Param("coplanar_tolerance", float, 1e-3, min=0.0, max=1.0, label="Coplanar Tolerance",
+                                      soft_max=0.1, description="Two lights are coplanar when their normals' "
+                                      "dot product exceeds 1 - this and each lies within this fraction of the "
+                                      "lights' extent of the other's plane"),))
 class Coplanar:
     def __init__(self, problem, coplanar_tol=1e-3, **_):
         n = problem.light_normal

@@ -38,7 +38,7 @@ from scipy.sparse.csgraph import connected_components
 
 from ..geometry import group_sum, triangle_cross, unit
 from ..lights import LightSet, kind_code
-from ..registry import PATCH_MODELS
+from ..registry import PATCH_MODELS, Param
 from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
 
 __all__ = ["AdaptiveModel", "DIRECTIONS", "normal_bucket"]
@@ -88,7 +88,19 @@ def _ids(rows) -> np.ndarray:
 
 @PATCH_MODELS.register("adaptive", "Adaptive",
                        "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
-                       "whole polygons), reflectors refined where the targets need it", refines=True)
+                       "whole polygons), reflectors refined where the targets need it", refines=True,
+                       params=(
+                           Param("light_size", float, None, min=0.0, min_exclusive=True, unit="LENGTH",
+                                 label="Light Size", ui="zero", none="the patch size",
+                                 description="Size of the candidate lights' cells in metres"),
+                           Param("refine_passes", int, 0, min=0, soft_max=8, label="Refine Passes", inverse_only=True,
+                                 description="Importance-driven refinement passes after a first solve (0 = none; "
+                                             "measured: docs/benchmarks.md)"),
+                           Param("refine_tolerance", float, 0.02, min=0.0, soft_max=0.5, label="Refine Tolerance",
+                                 inverse_only=True,
+                                 description="Refinement stops when the predicted target radiosity moves less "
+                                             "than this (relative)"),
+                       ))
 class AdaptiveModel:
     scales = SURFACE_SCALES
 

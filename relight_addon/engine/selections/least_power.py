@@ -8,13 +8,17 @@ from __future__ import annotations
 import numpy as np
 
 from ..best_lights import least_power_within_tolerance
-from ..registry import SELECTIONS
+from ..registry import SELECTIONS, Param
 
 
 @SELECTIONS.register("least-power", "Least Power within Tolerance",
                      "The non-negative lights with the least total power that keep every target within "
                      "the tolerance of its painted value (a linear programme)",
-                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True)
+                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True,
+                     params=(Param("tolerance", float, 0.1, min=0.0, label="Tolerance", soft_max=1.0,
+                                   description="Every target within +-this fraction of its painted value "
+                                               "(0.1 = +-10 %); when no non-negative lights can, the reachable "
+                                               "tolerance is reported and used"),))
 def least_power(s):
     p = s.problem
     if s.tolerance is None:
