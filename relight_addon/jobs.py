@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from .engine.best_lights import lower_bounds
 from .engine.cost import check_memory, estimate_cost, estimate_patches_cost
-from .engine.formfactors import Cancelled, auto_rays_per_patch
+from .engine.formfactors import auto_rays_per_patch
 from .engine.incidence import first_bounce_matrices, incidence_tables
 from .engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from .engine.lights import KINDS, LightSet, candidate_mask
@@ -29,6 +29,7 @@ from .engine.options import JobOptions
 from .engine.radiosity import solve_radiosity
 from .engine.reduction import ReductionResult, reduce_lights
 from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
+from .engine.sampling import Cancelled
 from .engine.scene import FaceSet, PatchSet, SceneError, default_max_patch_size as _default_patch_size, face_mean
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]

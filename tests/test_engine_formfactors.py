@@ -9,11 +9,11 @@ import scipy.sparse as sp
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import (
     QUALITY,
-    Cancelled,
     FormFactors,
     compute_form_factors,
     weigh_reciprocity,
 )
+from relight_addon.engine.sampling import Cancelled
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
 
 # (name, polygons, closed form F_12); several aspect ratios per configuration.
