@@ -71,7 +71,6 @@ from .scene import PatchSet, SceneError
 
 __all__ = [
     "QUALITY",
-    "DEFAULT_RAYS_PER_PATCH",
     "DENSE_LIMIT",
     "SAMPLINGS",
     "FormFactors",
@@ -85,7 +84,6 @@ __all__ = [
 #: rays per patch for each quality level; accuracy measured in docs/benchmarks.md
 #: ("Form factors") and checked by tests/test_engine_formfactors.py.
 QUALITY = {"draft": 1024, "default": 16384, "high": 262144}
-DEFAULT_RAYS_PER_PATCH = QUALITY["default"]
 #: total rays of the automatic quality: rays per patch = the power of two nearest to
 #: RAY_BUDGET / patches, within [QUALITY["draft"], QUALITY["default"]]. Small scenes (a few
 #: faces, e.g. the closed-form configurations) get the default 16384; the ~1500-patch
@@ -100,7 +98,8 @@ KERNEL_RAY_BUDGET = RAY_BUDGET // 2
 DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
 RECIPROCITY = ("weighted", "rays")
-#: target number of rays per chunk (one chunk = a contiguous range of source patches).
+#: target number of rays per chunk (one chunk = a contiguous range of source patches, the unit
+#: of work of a thread and of the random streams).
 CHUNK_RAYS = 1 << 17
 #: the Sobol point sets are pre-mapped for about this many rays (see _Tracer._sobol_pool).
 POOL_RAYS = 1 << 17

@@ -123,8 +123,9 @@ COARSE_GAP = 2.0
 MAX_NODES = 24
 #: kernel evaluations (receiver point x source triangle) per work chunk.
 CHUNK_EVALS = 1 << 15
-#: at most about this many penumbra rays are generated at once.
-CHUNK_RAYS = 1 << 18
+#: at most about this many penumbra rays are generated at once (a batch within a work chunk:
+#: it bounds the memory only, unlike formfactors.CHUNK_RAYS, the hemisphere casting's unit of work).
+PENUMBRA_BATCH_RAYS = 1 << 18
 
 
 # --------------------------------------------------------------------------------------
@@ -641,7 +642,7 @@ def kernel_form_factors(
             np.maximum.at(vmax, pp_pair[live], vis[live])
             part = np.flatnonzero((vmin < 1) & (vmax > 0))
             partial[a + part] = True
-            per = max(1, CHUNK_RAYS // (Q * K2))
+            per = max(1, PENUMBRA_BATCH_RAYS // (Q * K2))
             for q0 in range(0, len(part), per):
                 sub = part[q0:q0 + per]
                 x, n = _sample_patches(g, pr[a + sub], Q, rng)
