@@ -479,7 +479,7 @@ def _interrupt(signum, frame):
 
 def main(argv=None) -> int:
     """Run the CLI on ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
-    from .engine.formfactors import Cancelled
+    from .engine.sampling import Cancelled
 
     argv = sys.argv[1:] if argv is None else list(argv)
     restore = None

@@ -12,12 +12,13 @@ import scipy.integrate
 import scipy.sparse as sp
 
 from relight_addon.engine import closed_forms as cf
-from relight_addon.engine.formfactors import Cancelled, _Tracer, compute_form_factors
+from relight_addon.engine.formfactors import _Tracer, compute_form_factors
 from relight_addon.engine.kernel_transfer import (
     apply_kernel_pairs,
     kernel_form_factors,
     point_polygon_form_factor,
 )
+from relight_addon.engine.sampling import Cancelled
 from relight_addon.engine.scene import PatchSet, mesh_patches, polygon_faceset
 
 
@@ -366,6 +367,33 @@ def test_compute_form_factors_kernel_pairs_option():
     sparse = compute_form_factors(ps, 1024, seed=2, kernel_pairs=(rows, cols), dense_limit=4)
     assert np.allclose(sparse.to_dense(), ff.matrix, atol=1e-7)
 
+
+
+def test_one_sampler_per_solve(monkeypatch):
+    """compute_form_factors with kernel pairs builds one SceneSampler (one Embree scene) for the
+    hemisphere rays and the kernel's shadow rays; a sampler passed in gives the same estimate."""
+    from relight_addon.engine import formfactors, kernel_transfer, sampling
+
+    ps = mesh_patches(polygon_faceset(cf.box_polygons((1.0, 1.0, 1.0))), max_patch_size=0.5)
+    rows, cols = ps.face == 0, ps.face == 1
+    built = []
+
+    class Counting(sampling.SceneSampler):
+        def __init__(self, patches):
+            built.append(patches)
+            super().__init__(patches)
+
+    monkeypatch.setattr(formfactors, "SceneSampler", Counting)
+    monkeypatch.setattr(kernel_transfer, "SceneSampler", Counting)
+    compute_form_factors(ps, 256, seed=2, kernel_pairs=(rows, cols))
+    assert len(built) == 1
+    own = kernel_form_factors(ps, rows, cols, seed=2)
+    assert len(built) == 2
+    shared = kernel_form_factors(ps, rows, cols, seed=2, sampler=sampling.SceneSampler(ps))
+    assert np.array_equal(own, shared)
+    other = mesh_patches(polygon_faceset(cf.box_polygons((1.0, 1.0, 1.0))), max_patch_size=0.25)
+    with pytest.raises(ValueError, match="sampler has"):
+        kernel_form_factors(other, [0], [1], sampler=sampling.SceneSampler(ps))
 
 # ------------------------------------------------------- a furnished room: noise per target
 

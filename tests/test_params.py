@@ -224,10 +224,10 @@ def test_least_power_through_the_operator(addon):
     s.selection, s.tolerance, s.rays_per_patch = "least-power", tol, 512
     assert bpy.ops.relight.solve() == {"FINISHED"}
     data = results.load_result(bpy.context.scene)
-    assert data["meta"]["options"]["selection"] == "least-power"
-    assert data["meta"]["options"]["tolerance"] == pytest.approx(tol)
+    assert data.meta["options"]["selection"] == "least-power"
+    assert data.meta["options"]["tolerance"] == pytest.approx(tol)
     k = s.curve_index
-    e_op = np.asarray(data["exitance"][k], dtype=np.float64)
+    e_op = np.asarray(data.exitance[k], dtype=np.float64)
 
     # the engine's own programme on the same problem (the operator's options, built independently)
     exp = export.export_scene()
@@ -244,7 +244,7 @@ def test_least_power_through_the_operator(addon):
     # every target within the band: |B - b| <= x * |b| per target channel (x = the tolerance, or
     # the reachable one); B from the stored final radiosity, b the painted target values
     x = tol if ref.status == "ok" else max(tol, ref.reachable_tolerance or tol)
-    B = np.asarray(data["radiosity"][k], dtype=np.float64)[data["target_patch"]]
-    b = np.asarray(data["target_value"], dtype=np.float64)
+    B = np.asarray(data.radiosity[k], dtype=np.float64)[data.target_patch]
+    b = np.asarray(data.target_value, dtype=np.float64)
     band = x * np.where(b != 0, np.abs(b), ref.zero_band)
     assert np.all(np.abs(B - b) <= band * (1 + 1e-3) + 1e-4 * np.abs(b).max())

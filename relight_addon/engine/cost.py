@@ -31,7 +31,8 @@ import os
 
 import numpy as np
 
-from .formfactors import DENSE_LIMIT
+from .formfactors import CHUNK_RAYS, DENSE_LIMIT
+from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
 from .patch_models.adaptive import CLUSTER_BELOW
 from .registry import SOLVERS
@@ -47,7 +48,6 @@ FLOPS = 1.0e10
 #: meshing + Embree BVH + the scene arrays, per triangle (bytes) and its time (s)
 BYTES_PER_TRIANGLE = 700.0
 SECONDS_PER_TRIANGLE = 4e-6
-DIRECT_SOLVE_LIMIT = 6000  # engine.inverse.DIRECT_SOLVE_LIMIT
 ITERATIVE_SWEEPS = 25  # measured: the sweeps stop well before the worst case (rate^n < tol)
 #: sparse F: distinct receivers per row, measured about N/6 + 1 (154 for N = 1024 in a room)
 NNZ_PER_RAY = 0.25
@@ -130,8 +130,6 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                             (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
     parts["reduction"] = (8.0 * L * L, float(L) * L * max(m, 1) * 8.0 / flops)
     parts["curve"] = (8.0 * 3 * STORED_POINTS * (P + L), g * STORED_POINTS * t_rhs / flops)
-    from .formfactors import CHUNK_RAYS
-
     parts["rays"] = (RAY_BYTES * float(max(N, CHUNK_RAYS)) * (threads or os.cpu_count() or 1), 0.0)
     memory = sum(b for b, _ in parts.values())
     seconds = sum(s for _, s in parts.values())

@@ -47,15 +47,17 @@ reciprocal ones) by the low-variance estimate of kernel_transfer.py (analytic
 point-to-polygon kernel times shadow-ray visibility), for the transport that decides an
 inverse solve: light cells to target patches. The rest of F stays ray cast.
 
+Triangles, area tables, ray offset and the Embree scene are a SceneSampler's (sampling.py),
+built once per call and shared with the kernel estimator.
+
 Cancellation: ``cancel()`` returning True makes ``compute_form_factors`` raise
-:class:`Cancelled` (defined here).
+``sampling.Cancelled``.
 """
 from __future__ import annotations
 
 import os
 import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,14 +65,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg.norm)
 from scipy.stats import qmc
 
-from .scene import PatchSet, SceneError, patch_triangles
+from .kernel_transfer import apply_kernel_pairs, kernel_form_factors
+from .sampling import SceneSampler, run_chunks
+from .scene import PatchSet, SceneError
 
 __all__ = [
     "QUALITY",
-    "DEFAULT_RAYS_PER_PATCH",
     "DENSE_LIMIT",
     "SAMPLINGS",
-    "Cancelled",
     "FormFactors",
     "compute_form_factors",
     "auto_rays_per_patch",
@@ -82,7 +84,6 @@ __all__ = [
 #: rays per patch for each quality level; accuracy measured in docs/benchmarks.md
 #: ("Form factors") and checked by tests/test_engine_formfactors.py.
 QUALITY = {"draft": 1024, "default": 16384, "high": 262144}
-DEFAULT_RAYS_PER_PATCH = QUALITY["default"]
 #: total rays of the automatic quality: rays per patch = the power of two nearest to
 #: RAY_BUDGET / patches, within [QUALITY["draft"], QUALITY["default"]]. Small scenes (a few
 #: faces, e.g. the closed-form configurations) get the default 16384; the ~1500-patch
@@ -97,16 +98,11 @@ KERNEL_RAY_BUDGET = RAY_BUDGET // 2
 DENSE_LIMIT = 6000
 SAMPLINGS = ("sobol", "stratified", "random")
 RECIPROCITY = ("weighted", "rays")
-#: target number of rays per chunk (one chunk = a contiguous range of source patches).
+#: target number of rays per chunk (one chunk = a contiguous range of source patches, the unit
+#: of work of a thread and of the random streams).
 CHUNK_RAYS = 1 << 17
 #: the Sobol point sets are pre-mapped for about this many rays (see _Tracer._sobol_pool).
 POOL_RAYS = 1 << 17
-#: origin offset along the normal, relative to the scene's bounding-box diagonal.
-RAY_OFFSET = 1e-5
-
-
-class Cancelled(Exception):
-    """The user cancelled the form-factor computation."""
 
 
 @dataclass
@@ -272,75 +268,40 @@ def _cosine_directions(u2, u3) -> np.ndarray:
 
 
 class _Tracer:
-    """Embree scene + per-patch sampling data for a PatchSet (internal; the
-    benchmark uses it to time raw embreex on the very same rays)."""
+    """Per-patch hemisphere sampling data for a PatchSet, on a SceneSampler's triangles and
+    Embree scene (``sampler``: built here when not given; internal: the benchmark uses it to
+    time raw embreex on the very same rays)."""
 
-    def __init__(self, patches: PatchSet, rays_per_patch: int, seed: int, sampling: str):
-        from embreex import rtcore as rtc
-        from embreex import rtcore_scene as rtcs
-        from embreex.mesh_construction import TriangleMesh
-
-        tv, tri_patch = patch_triangles(patches)
+    def __init__(self, patches: PatchSet, rays_per_patch: int, seed: int, sampling: str,
+                 sampler: SceneSampler | None = None):
+        self.sampler = sm = SceneSampler(patches) if sampler is None else sampler
+        if sm.n_patches != patches.n_patches:
+            raise ValueError(f"the sampler has {sm.n_patches} patches, the patch set {patches.n_patches}")
         P = patches.n_patches
         self.P = P
         self.N = N = int(rays_per_patch)
         self.seed = int(seed)
         self.sampling = sampling
 
-        # sort triangles by patch; per patch a cumulative-area table
-        order = np.argsort(tri_patch, kind="stable")
-        tv = tv[order]
-        self.tri_patch = tri_patch[order]
-        e1 = tv[:, 1] - tv[:, 0]
-        e2 = tv[:, 2] - tv[:, 0]
-        cr = np.cross(e1, e2)
-        ta = 0.5 * np.linalg.norm(cr, axis=1)
+        # the sampler's triangles (sorted by patch), area tables and offset
+        self.tri_patch = sm.tri_patch
+        ta, n, pa, start = sm.ta, sm.tn, sm.area, sm.tstart
+        # per triangle a tangent frame (t, b, n)
         ok = ta > 0
-        n = np.zeros_like(cr)
-        n[ok] = cr[ok] / (2 * ta[ok, None])
-        t = np.zeros_like(e1)
-        el = np.linalg.norm(e1, axis=1)
-        t[ok] = e1[ok] / el[ok, None]
+        t = np.zeros_like(sm.e1)
+        el = np.linalg.norm(sm.e1, axis=1)
+        t[ok] = sm.e1[ok] / el[ok, None]
         b = np.cross(n, t)
-        pa = np.bincount(self.tri_patch, weights=ta, minlength=P)
-        if np.any(pa <= 0):
-            raise SceneError("some patches have zero area")
-        cum = np.cumsum(ta)
-        start = np.searchsorted(self.tri_patch, np.arange(P), side="left")
-        before = np.concatenate([[0.0], cum])[start]  # area before each patch's first triangle
-        # within-patch CDF at each triangle's upper end, in (0, 1]
-        self.cdf_hi = (cum - before[self.tri_patch]) / pa[self.tri_patch]
-        self.cdf_hi[np.r_[start[1:] - 1, len(ta) - 1]] = 1.0
-        self.cdf_lo = np.concatenate([[0.0], self.cdf_hi[:-1]])
-        self.cdf_lo[start] = 0.0
-        self.key = self.tri_patch + self.cdf_hi  # global monotone search key
-        self.cdf_lo32 = self.cdf_lo.astype(np.float32)
-        self.cdf_w32 = np.maximum(self.cdf_hi - self.cdf_lo, 1e-30).astype(np.float32)
-
-        lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
-        diag = float(np.linalg.norm(hi - lo))
-        self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
-        # Sample each triangle shrunk about its incentre so that its edges move inward by
-        # 2 * offset: a point sampled within float32 rounding of an edge could otherwise
-        # start behind the adjacent wall at a concave edge and leak out (seen on a
-        # 20,000-patch box). The shift, <= 2 * offset, is of the order of the normal offset.
-        el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
-                        np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)  # side opposite each vertex
-        perim = np.maximum(el3.sum(axis=1), 1e-300)
-        incentre = np.einsum("tk,tkj->tj", el3, tv) / perim[:, None]
-        r_in = 2 * ta / perim
-        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, 1e-300))
-        v0 = incentre + shrink[:, None] * (tv[:, 0] - incentre)
-        e1 = e1 * shrink[:, None]
-        e2 = e2 * shrink[:, None]
-        base = v0 + self.offset * n
+        self.key = sm.key
+        self.cdf_lo32 = sm.cdf_lo.astype(np.float32)
+        self.cdf_w32 = np.maximum(sm.cdf_hi - sm.cdf_lo, 1e-30).astype(np.float32)
+        self.offset = sm.offset
+        # origins on the shrunk triangles (see SceneSampler), moved off the surface by the offset
+        e1, e2 = sm.s_e1, sm.s_e2
+        base = sm.s_v0 + self.offset * n
 
         # per triangle, component-major (18, T): origin base (v0 + offset n), e1, e2, t, b, n
         self.geo = np.ascontiguousarray(np.concatenate([base.T, e1.T, e2.T, t.T, b.T, n.T]), dtype=np.float32)
-        # front-side test of a hit: the hit triangle's normal; the extra last row
-        # (all zero, receiving patch P) is what a miss (primID -1) picks up
-        self.n_ext = np.concatenate([n, np.zeros((1, 3))]).astype(np.float32)
-        self.patch_ext = np.concatenate([self.tri_patch, [P]])
 
         # Fast path (two matrix products per patch) for patches of one triangle, or of two
         # triangles of equal area, when N is a power of two. The Sobol points are sorted
@@ -360,8 +321,6 @@ class _Tracer:
         self.pos2 = np.stack([base[tri2], e1[tri2], e2[tri2]], axis=2).astype(np.float32)  # (P, 2, 3, 3)
         self.frame2 = np.stack([t[tri2], b[tri2], n[tri2]], axis=2)  # (P, 2, 3, 3) rows t, b, n
 
-        self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-        self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         # chunks: contiguous patch ranges of ~CHUNK_RAYS rays
         per = max(1, CHUNK_RAYS // N)
         self.chunks = [(p0, min(P, p0 + per)) for p0 in range(0, P, per)]
@@ -496,7 +455,7 @@ class _Tracer:
         return org.reshape(-1, 3), d.reshape(-1, 3), None
 
     def trace(self, org, d) -> np.ndarray:
-        return self.scene.run(org, d)
+        return self.sampler.first_hit(org, d)
 
     def keys(self, ci: int) -> np.ndarray:
         """Trace chunk ci: per ray j * (P + 1) + receiving patch, for a ray of patch
@@ -504,55 +463,10 @@ class _Tracer:
         p0, p1 = self.chunks[ci]
         k, N, P = p1 - p0, self.N, self.P
         org, d, _ = self.rays(ci)
-        prim = np.asarray(self.trace(org, d))  # -1: miss -> the extra zero normal / column P
-        nh = np.take(self.n_ext, prim, axis=0)
-        nh *= d
-        back = nh[:, 0] + nh[:, 1]
-        back += nh[:, 2]
-        back = back >= 0  # a hit on a back side, or a miss
-        dst = np.take(self.patch_ext, prim)
-        dst[back] = P
+        dst = self.sampler.front_hit_patches(org, d)
         key = np.arange(0, k * (P + 1), P + 1).repeat(N)
         key += dst
         return key
-
-
-def run_chunks(work, total, threads, stop, cancel=None, progress=None):
-    """Run ``work(ci)`` for ci in range(total) on ``threads`` worker threads (in this thread when
-    1), calling ``progress(done / total)`` and checking ``cancel()`` here between chunks: on
-    cancel (Cancelled) or any error ``stop`` is set (work checks it) and the rest is dropped."""
-
-    def check_cancel():
-        if cancel is not None and cancel():
-            stop.set()
-            raise Cancelled("form-factor computation cancelled")
-
-    check_cancel()
-    done = 0
-    if threads == 1 or total == 1:
-        for ci in range(total):
-            work(ci)
-            done += 1
-            if progress is not None:
-                progress(done / total)
-            check_cancel()
-        return
-    with ThreadPoolExecutor(max_workers=int(threads)) as ex:
-        pending = {ex.submit(work, ci) for ci in range(total)}
-        try:
-            while pending:
-                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    f.result()
-                    done += 1
-                if finished and progress is not None:
-                    progress(done / total)
-                check_cancel()
-        except BaseException:
-            stop.set()
-            for f in pending:
-                f.cancel()
-            raise
 
 
 def auto_rays_per_patch(n_patches: int, kernel: bool = False) -> int:
@@ -583,7 +497,7 @@ def compute_form_factors(
     ``seed``: results are reproducible for a seed, whatever ``threads``.
     ``threads``: worker threads (default ``os.cpu_count()``).
     ``progress(fraction)``: optional callback, called from the calling thread.
-    ``cancel()``: optional; returning True aborts with :class:`Cancelled`.
+    ``cancel()``: optional; returning True aborts with ``sampling.Cancelled``.
     ``reciprocity``: "weighted" (default) combines the rays of both patches of every pair
     (``weigh_reciprocity``); "rays": every row from its own patch's rays only.
     ``kernel_pairs=(receivers, sources)``: patch indices or masks; F[receivers, sources]
@@ -614,7 +528,9 @@ def compute_form_factors(
     if kernel_pairs is not None and progress is not None:
         def progress(f):
             user_progress(0.5 * f)
-    tr = _Tracer(patches, int(rays_per_patch), seed, sampling)
+    # one sampler (triangles, area tables, Embree scene) for the rays and the kernel pairs
+    sampler = SceneSampler(patches)
+    tr = _Tracer(patches, int(rays_per_patch), seed, sampling, sampler=sampler)
     P, N = tr.P, tr.N
     dense = P <= dense_limit
     M = np.zeros((P, P), dtype=np.float32) if dense else None
@@ -644,10 +560,8 @@ def compute_form_factors(
         matrix = weigh_reciprocity(matrix, patches.area, N)
     n_kernel = 0
     if kernel_pairs is not None:
-        from .kernel_transfer import apply_kernel_pairs, kernel_form_factors
-
         rec, src = kernel_pairs
-        K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel,
+        K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel, sampler=sampler,
                                 progress=None if user_progress is None else (lambda f: user_progress(0.5 + 0.5 * f)),
                                 **(kernel_options or {}))
         matrix = apply_kernel_pairs(matrix, patches.area, rec, src, K)

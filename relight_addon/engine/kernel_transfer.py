@@ -22,7 +22,8 @@ patches), F is integrated instead:
   ``sum_j w_j v_j / sum_j w_j`` over shadow rays from x to stratified points y_j on s
   (a jittered g x g grid over the source's area, triangles picked by area),
   ``w_j = cos_x cos_y / r^4`` (zero behind either surface), ``v_j`` from an Embree
-  occlusion query (robust mode, the same triangles and ray offsets as formfactors.py).
+  occlusion query (sampling.SceneSampler: the same triangles, Embree scene and ray offset as
+  formfactors.py).
 - Phase 1, every pair: the integral over the receiver is a quadrature (not Monte Carlo):
   each receiver triangle gets a collapsed (Duffy) Gauss rule, Gauss-Jacobi along the
   triangle's length and Gauss-Legendre across it, with about ``points_per_patch`` points
@@ -85,8 +86,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.special
 
-from .formfactors import RAY_OFFSET, run_chunks
-from .scene import PatchSet, SceneError, patch_triangles
+from .sampling import SceneSampler, run_chunks
+from .scene import PatchSet, SceneError
 
 __all__ = [
     "DEFAULT_POINTS_PER_PATCH",
@@ -122,8 +123,9 @@ COARSE_GAP = 2.0
 MAX_NODES = 24
 #: kernel evaluations (receiver point x source triangle) per work chunk.
 CHUNK_EVALS = 1 << 15
-#: at most about this many penumbra rays are generated at once.
-CHUNK_RAYS = 1 << 18
+#: at most about this many penumbra rays are generated at once (a batch within a work chunk:
+#: it bounds the memory only, unlike formfactors.CHUNK_RAYS, the hemisphere casting's unit of work).
+PENUMBRA_BATCH_RAYS = 1 << 18
 
 
 # --------------------------------------------------------------------------------------
@@ -276,34 +278,28 @@ def _triangle_rule(v, h, coarse=False):
 # geometry
 
 class _Geometry:
-    """Per-patch triangle data, sampling tables and the Embree scene of a PatchSet."""
+    """Per-patch kernel data of a PatchSet (centres, sizes, planes, parallelograms, receiver
+    rules) on a SceneSampler's triangles, area tables and Embree scene (``sampler``: built
+    here when not given)."""
 
-    def __init__(self, patches: PatchSet, points_per_patch: int):
-        from embreex import rtcore as rtc
-        from embreex import rtcore_scene as rtcs
-        from embreex.mesh_construction import TriangleMesh
-
-        tv, tri_patch = patch_triangles(patches)
+    def __init__(self, patches: PatchSet, points_per_patch: int, sampler: SceneSampler | None = None):
+        self.sampler = sm = SceneSampler(patches) if sampler is None else sampler
         P = patches.n_patches
+        if sm.n_patches != P:
+            raise ValueError(f"the sampler has {sm.n_patches} patches, the patch set {P}")
         self.P = P
         self.M = int(points_per_patch)
-        order = np.argsort(tri_patch, kind="stable")
-        self.tv = tv = tv[order]
-        self.tri_patch = tri_patch[order]
-        self.tstart = np.searchsorted(self.tri_patch, np.arange(P), side="left")
-        self.tcount = np.bincount(self.tri_patch, minlength=P)
-        e1 = tv[:, 1] - tv[:, 0]
-        e2 = tv[:, 2] - tv[:, 0]
-        cr = np.cross(e1, e2)
-        ta = 0.5 * np.linalg.norm(cr, axis=1)
-        if np.any(np.bincount(self.tri_patch, weights=ta, minlength=P) <= 0):
-            raise SceneError("some patches have zero area")
-        ok = ta > 0
-        self.tn = np.zeros_like(cr)
-        self.tn[ok] = cr[ok] / (2 * ta[ok, None])
-        self.ta = ta
+        # the sampler's triangles (sorted by patch), normals, areas and area tables
+        self.tv = tv = sm.tv
+        self.tri_patch = sm.tri_patch
+        self.tstart, self.tcount = sm.tstart, sm.tcount
+        self.tn, self.ta, self.area = sm.tn, sm.ta, sm.area
+        self.cdf_lo, self.key = sm.cdf_lo, sm.key
+        self.cdf_w = np.maximum(sm.cdf_hi - sm.cdf_lo, 1e-300)
+        self.offset = sm.offset
+        cr = sm.cross
         self.tc = tv.mean(axis=1)
-        self.area = np.bincount(self.tri_patch, weights=ta, minlength=P)
+        ta = self.ta
         self.center = np.stack([np.bincount(self.tri_patch, weights=self.tc[:, k] * ta, minlength=P)
                                 for k in range(3)], axis=1) / self.area[:, None]
         dist = np.linalg.norm(tv - self.center[self.tri_patch][:, None, :], axis=2).max(axis=1)
@@ -321,36 +317,9 @@ class _Geometry:
         bad = (dn > 1e-9) | (off > tol[self.tri_patch])
         self.planar = np.bincount(self.tri_patch, weights=bad.astype(float), minlength=P) == 0
 
-        lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
-        diag = float(np.linalg.norm(hi - lo))
-        # the origin offset of formfactors.py (its _Tracer): along the normal, relative to the scene
-        self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
-        # source sample points: each triangle shrunk about its incentre so that its edges move
-        # inward by 2 * offset (as formfactors.py does for ray origins)
-        el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
-                        np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)
-        perim = np.maximum(el3.sum(axis=1), 1e-300)
-        incentre = np.einsum("tk,tkj->tj", el3, tv) / perim[:, None]
-        r_in = 2 * ta / perim
-        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, 1e-300))
-        self.s_v0 = incentre + shrink[:, None] * (tv[:, 0] - incentre)
-        self.s_e1 = e1 * shrink[:, None]
-        self.s_e2 = e2 * shrink[:, None]
-        # within-patch area CDF (the triangle pick of a source sample), as formfactors.py
-        cum = np.cumsum(ta)
-        before = np.concatenate([[0.0], cum])[self.tstart]
-        cdf_hi = (cum - before[self.tri_patch]) / self.area[self.tri_patch]
-        cdf_hi[np.r_[self.tstart[1:] - 1, len(ta) - 1]] = 1.0
-        self.cdf_lo = np.concatenate([[0.0], cdf_hi[:-1]])
-        self.cdf_lo[self.tstart] = 0.0
-        self.cdf_w = np.maximum(cdf_hi - self.cdf_lo, 1e-300)
-        self.key = self.tri_patch + cdf_hi
-
-        self.tgeo = np.concatenate([self.s_v0, self.s_e1, self.s_e2, self.tn], axis=1).astype(np.float32)
+        # source sample points on the shrunk triangles (see SceneSampler), with their normals
+        self.tgeo = np.concatenate([sm.s_v0, sm.s_e1, sm.s_e2, self.tn], axis=1).astype(np.float32)
         self._parallelograms()
-
-        self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-        self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         self._rules = {}
         self._lock = threading.Lock()
 
@@ -498,6 +467,7 @@ def kernel_form_factors(
     cancel=None,
     progress=None,
     stats: dict | None = None,
+    sampler: SceneSampler | None = None,
 ) -> np.ndarray:
     """F[receiver -> source] for every receiver x source pair, (len(receivers), len(sources)) float64.
 
@@ -513,10 +483,11 @@ def kernel_form_factors(
     penumbra_points is rounded to a square; 0: keep the phase-1 estimate).
     ``far_ratio``: pairs farther apart than far_ratio x the larger patch diameter use the
     point kernel (``inf``: never). ``seed``: reproducible for a seed, whatever ``threads``
-    (default ``os.cpu_count()``). ``cancel()`` returning True raises formfactors.Cancelled;
+    (default ``os.cpu_count()``). ``cancel()`` returning True raises sampling.Cancelled;
     ``progress(fraction)`` is called from the calling thread. ``stats``: an optional dict
     filled with counts (pairs, culled, far, pairs per level, clipped_receivers, kernel
-    evaluations, rays, penumbra_pairs, seconds).
+    evaluations, rays, penumbra_pairs, seconds). ``sampler``: the SceneSampler of ``patches``
+    to use (compute_form_factors passes the one its rays use; default: built here).
 
     Cost: about pairs x points x (source triangles) contour integrals and pairs x points x
     shadow_rays + penumbra pairs x penumbra_points x penumbra_rays rays; memory: a few
@@ -560,7 +531,7 @@ def kernel_form_factors(
             stats.update(info, seconds=time.perf_counter() - t_start)
         return out
 
-    g = _Geometry(patches, int(points_per_patch))
+    g = _Geometry(patches, int(points_per_patch), sampler)
     # all pairs, receiver-major; drop (r, r) and pairs with one patch behind the other
     ii = np.repeat(np.arange(len(rec)), len(src))
     jj = np.tile(np.arange(len(src)), len(rec))
@@ -671,7 +642,7 @@ def kernel_form_factors(
             np.maximum.at(vmax, pp_pair[live], vis[live])
             part = np.flatnonzero((vmin < 1) & (vmax > 0))
             partial[a + part] = True
-            per = max(1, CHUNK_RAYS // (Q * K2))
+            per = max(1, PENUMBRA_BATCH_RAYS // (Q * K2))
             for q0 in range(0, len(part), per):
                 sub = part[q0:q0 + per]
                 x, n = _sample_patches(g, pr[a + sub], Q, rng)
@@ -824,11 +795,11 @@ def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
         length = np.sqrt(np.einsum("ij,ij->i", dv, dv))
         dv /= np.maximum(length, np.float32(1e-30))[:, None]
         tfar = np.maximum(length - off, np.float32(0.5) * length)
-        hit = np.asarray(g.scene.run(org, dv, dists=tfar, query="OCCLUDED"))
+        free = g.sampler.visible(org, dv, tfar)
         if sel is None:
-            vis = (hit == -1).reshape(m, k).astype(np.float32)
+            vis = free.reshape(m, k).astype(np.float32)
         else:
-            vis[sel] = hit == -1
+            vis[sel] = free
     wsum = w.sum(axis=1, dtype=np.float64)
     wvis = (w * vis).sum(axis=1, dtype=np.float64)
     if sums:
