@@ -41,7 +41,8 @@ REGISTRY_CYCLE_MODULES = {ENGINE + "." + m for m in (
     "distributions", "distributions.coplanar", "distributions.distance", "distributions.local",
     "distributions.uniform",
     "estimators", "estimators.kernel", "estimators.raycast",
-    "patch_models", "patch_models.adaptive", "patch_models.polygon")}
+    "patch_models", "patch_models.adaptive", "patch_models.polygon",
+    "lights", "lights.cell", "lights.group", "lights.polygon", "lights.surface", "lights.lightset")}
 
 
 def package_modules() -> dict:

@@ -13,6 +13,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty
 from .. import export, jobs, results
 from ..preparation import SolveJob
 from . import viewport
+from .properties import set_curve_index, ui_value
 from ..engine.options import JobOptions
 from ..engine.scene import SceneError
 
@@ -26,7 +27,6 @@ def job_options(settings, validate=True) -> JobOptions:
     defaults: e.g. a selection that distributes no power gets the default distribution), and
     the parameters of the chosen methods only, so that nothing the sidebar shows is refused."""
     from ..engine.options import JOB_PARAMS, METHOD_CHOICES, method_params
-    from .properties import ui_value
 
     options = JobOptions(threads=_preferences_threads(),
                          **{p.name: ui_value(settings, p) for p in JOB_PARAMS if p.ui != "hidden"})
@@ -299,28 +299,6 @@ def store_outcome(context, outcome, fingerprints=None):
     _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
     results.update_chart(context.scene)
     return shown["skipped"]
-
-
-_QUIET = {"on": False}
-
-
-def set_curve_index(settings, index):
-    """Select a row of the curve without applying it through the update callback."""
-    _QUIET["on"] = True
-    try:
-        settings.curve_index = index
-    finally:
-        _QUIET["on"] = False
-
-
-def apply_curve_point(context, index):
-    if _QUIET["on"]:
-        return
-    try:
-        results.apply_stored_point(context.scene, index)
-        results.update_chart(context.scene)
-    except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale
-        print(f"Relight: cannot apply configuration {index}: {exc}")
 
 
 #: the interactive solve in progress (at most one): scene name, stage, fraction, cancelling.

@@ -10,6 +10,7 @@ import bpy
 from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty,
                        IntProperty, PointerProperty, StringProperty)
 
+from .. import results
 from ..engine import options as engine_options
 
 INT_MAX = 2 ** 31 - 1  # Blender's IntProperty is 32-bit
@@ -73,10 +74,30 @@ def ui_value(settings, p):
     return value
 
 
-def _apply_curve_point(self, context):
-    from . import operators  # late import: operators import this module
+_QUIET = {"on": False}
 
-    operators.apply_curve_point(context, self.curve_index)
+
+def set_curve_index(settings, index):
+    """Select a row of the curve without applying it through the update callback."""
+    _QUIET["on"] = True
+    try:
+        settings.curve_index = index
+    finally:
+        _QUIET["on"] = False
+
+
+def apply_curve_point(context, index):
+    if _QUIET["on"]:
+        return
+    try:
+        results.apply_stored_point(context.scene, index)
+        results.update_chart(context.scene)
+    except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale
+        print(f"Relight: cannot apply configuration {index}: {exc}")
+
+
+def _apply_curve_point(self, context):
+    apply_curve_point(context, self.curve_index)
 
 
 class RELIGHT_CurvePoint(bpy.types.PropertyGroup):
