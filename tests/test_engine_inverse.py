@@ -221,20 +221,20 @@ def test_gram_route_is_the_svd_pseudo_inverse_solution():
     the SVD pseudo-inverse's minimum-norm solution, and falls back to the SVD when M is
     rank-deficient (the cut-off then matters)."""
     import scipy.linalg as sla
-    from relight_addon.engine.inverse import _lstsq_min_norm
+    from relight_addon.engine.solvers.common import lstsq_min_norm
 
     rng = np.random.default_rng(3)
     M = rng.standard_normal((40, 90))
     R = rng.standard_normal((40, 2))
-    x_auto, rank_auto = _lstsq_min_norm(M, R, 1e-12, "auto")
-    x_svd, rank_svd = _lstsq_min_norm(M, R, 1e-12, "svd")
+    x_auto, rank_auto = lstsq_min_norm(M, R, 1e-12, "auto")
+    x_svd, rank_svd = lstsq_min_norm(M, R, 1e-12, "svd")
     np.testing.assert_allclose(x_auto, x_svd, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(x_auto, np.linalg.pinv(M) @ R, rtol=1e-9, atol=1e-12)
     assert rank_auto == rank_svd == 40
     # rank-deficient: two equal rows; the Gram route refuses, the SVD cut-off gives rank 39
     M2 = M.copy()
     M2[1] = M2[0]
-    x2, rank2 = _lstsq_min_norm(M2, R, 1e-10, "auto")
+    x2, rank2 = lstsq_min_norm(M2, R, 1e-10, "auto")
     assert rank2 == 39
     np.testing.assert_allclose(x2, sla.pinv(M2, rtol=1e-10) @ R, rtol=1e-8, atol=1e-10)
 

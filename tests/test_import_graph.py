@@ -2,8 +2,7 @@
 
 The graph is built from the modules' ASTs: every ``import`` / ``from ... import`` of the
 package's own modules, at module level or inside a function (a lazy import is still a
-dependency), plus the registries' lazy package imports (``engine/registry.py`` imports
-``.solvers``, ``.selections`` ... by name on first use; read here from the Registry objects).
+dependency); the registries import nothing (their methods' packages register themselves).
 Every module that imports without bpy is also imported for real, alone (the package's modules
 cleared from sys.modules before each), in a subprocess where bpy and Blender's other modules
 cannot be imported.
@@ -11,7 +10,6 @@ cannot be imported.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import json
 import os
 import pkgutil
@@ -19,31 +17,12 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "relight_addon"
 ENGINE = PACKAGE + ".engine"
 #: Blender's own modules: the engine must import none of them
 BLENDER_MODULES = ("bpy", "bmesh", "mathutils", "gpu", "gpu_extras", "bpy_extras", "bl_math", "blf", "aud", "idprop")
-
-#: Cycles that exist only through the registries' lazy loads, which this series leaves for a
-#: later step (issue 15): a method module imports the registry to register itself and the
-#: registry imports the method packages on first lookup (the registration pattern); and
-#: inverse.solve_inverse / reduction.reduce_lights look their methods up in the registries while
-#: those methods import inverse / reduction. No other module may join these cycles.
-REGISTRY_CYCLE_MODULES = {ENGINE + "." + m for m in (
-    "registry", "inverse", "reduction",
-    "solvers", "solvers.nnls", "solvers.reduced", "solvers.svd",
-    "selections", "selections.error_construction", "selections.error_elimination",
-    "selections.exitance_construction", "selections.exitance_elimination", "selections.greedy_swap",
-    "selections.least_power", "selections.nnls_greedy",
-    "distributions", "distributions.coplanar", "distributions.distance", "distributions.local",
-    "distributions.uniform",
-    "estimators", "estimators.kernel", "estimators.raycast",
-    "patch_models", "patch_models.adaptive", "patch_models.polygon",
-    "lights", "lights.cell", "lights.group", "lights.polygon", "lights.surface", "lights.lightset")}
-
 
 def package_modules() -> dict:
     """Dotted name -> (path, is_package) of every module of the package (pkgutil, directory by
@@ -97,22 +76,8 @@ def module_imports(name: str) -> tuple[set, set]:
     return {m for m in own if m in MODULES and m != name}, external
 
 
-def registry_edges() -> dict:
-    """engine.registry -> the packages its Registry objects import on first use."""
-    from relight_addon.engine import registry
-
-    pkgs = {importlib.util.resolve_name(r._package, registry.__package__)
-            for r in vars(registry).values() if isinstance(r, registry.Registry)}
-    assert pkgs, "no Registry objects found in engine.registry"
-    return {registry.__name__: pkgs}
-
-
-def import_graph(with_registries: bool = True) -> dict:
-    graph = {m: module_imports(m)[0] for m in MODULES}
-    if with_registries:
-        for m, targets in registry_edges().items():
-            graph[m] |= targets
-    return graph
+def import_graph() -> dict:
+    return {m: module_imports(m)[0] for m in MODULES}
 
 
 def cycles(graph: dict) -> list:
@@ -175,35 +140,25 @@ def _names(path):
 
 def test_no_import_cycle():
     """Every import the modules make (module level or inside functions): no cycle."""
-    found = cycles(import_graph(with_registries=False))
+    found = cycles(import_graph())
     assert not found, "import cycles: " + "; ".join(
         f"{_names(path)} (among {len(comp)} modules)" for comp, path in found)
 
 
-def test_registries_lazy_imports_add_no_other_cycle():
-    """With the registries' lazy package imports: only the known registry cycles (see
-    REGISTRY_CYCLE_MODULES); any other module caught in them fails."""
-    graph = import_graph(with_registries=True)
-    bad = []
-    for comp, path in cycles(graph):
-        extra = comp - REGISTRY_CYCLE_MODULES
-        if extra:
-            via = _names(_one_cycle(graph, comp, min(extra)))
-            bad.append(f"{sorted(x.removeprefix(PACKAGE + '.') for x in extra)} in a cycle, e.g. {via}")
-    assert not bad, "; ".join(bad)
+def test_registries_import_nothing_of_the_package():
+    """The registries never import their methods (no cycle through a lazy package import): each
+    kind's package registers itself when the module that dispatches to it imports it."""
+    assert module_imports(ENGINE + ".registry")[0] == set()
+    from relight_addon.engine import options, registry  # noqa: F401  (options imports every kind)
 
-
-@pytest.mark.xfail(strict=True, reason="issue 15: the registration pattern and inverse/reduction's "
-                                       "lookups still make cycles through the registries' lazy imports")
-def test_no_import_cycle_through_the_registries():
-    found = cycles(import_graph(with_registries=True))
-    assert not found, "; ".join(_names(path) for _, path in found)
+    for r in (v for v in vars(registry).values() if isinstance(v, registry.Registry)):
+        assert r.names(), f"the {r.kind} registry is empty after importing engine.options"
 
 
 def test_engine_imports_no_blender_module():
     """No engine module imports bpy (or bmesh, mathutils ...), directly or through any of the
     package's modules it imports, at module level or inside a function."""
-    graph = import_graph(with_registries=True)
+    graph = import_graph()
     direct = {m: module_imports(m)[1] & set(BLENDER_MODULES) for m in MODULES}
     bad = {}  # the module that imports Blender -> a shortest path to it from an engine module
     for m in sorted(x for x in MODULES if x == ENGINE or x.startswith(ENGINE + ".")):

@@ -44,7 +44,9 @@ import scipy.sparse.linalg as spla
 from .geometry import group_mean_basis, unit
 from .lights import LightSet, candidate_mask, kind_code
 from .radiosity import lossless_patches, radiosity_matrix
+from . import solvers  # noqa: F401  (registers the solvers that solve_inverse dispatches to)
 from .registry import SOLVERS
+from .solvers.common import channel_groups
 from .scene import SceneError
 
 __all__ = [
@@ -53,12 +55,9 @@ __all__ = [
     "InverseResult",
     "solve_inverse",
     "direct_lighting_problem",
-    "SolverOutput",
 ]
 
 
-#: the Gram-matrix route of the pseudo-inverse is used below this condition number of M
-GRAM_MAX_COND = 1e5
 #: above this many patches A is never factorised: its solves are iterative on the sparse F
 #: (engine.radiosity's dense/sparse limits for F itself are separate)
 DIRECT_SOLVE_LIMIT = 6000
@@ -73,19 +72,6 @@ SINGULAR = 1e14
 
 class InverseError(SceneError):
     """The inverse problem cannot be set up or solved; the message is for the user."""
-
-
-def _channel_groups(reflectance):
-    """Group the channels whose reflectance vectors are identical (grey scenes: one group)."""
-    groups = []
-    for c in range(3):
-        for g in groups:
-            if np.array_equal(reflectance[:, g[0]], reflectance[:, c]):
-                g.append(c)
-                break
-        else:
-            groups.append([c])
-    return groups
 
 
 class _Factor:
@@ -353,7 +339,7 @@ class InverseProblem:
         to DIRECT_SOLVE_LIMIT patches, iterative sweeps on the sparse F above."""
         if self._factors is None:
             factors = [None] * 3
-            for g in _channel_groups(self.reflectance):
+            for g in channel_groups(self.reflectance):
                 rho = self.reflectance[:, g[0]]
                 closed = lossless_patches(self.F, rho)
                 if closed.any():
@@ -536,60 +522,6 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
     return prob, e_x
 
 
-def _lstsq_min_norm(M, R, rcond, driver):
-    """Minimum-norm least squares through the SVD with relative cut-off rcond. Returns (X, rank).
-
-    driver "auto": when M (rows <= cols) has full row rank well above the cut-off, its
-    pseudo-inverse is exactly M^T (M M^T)^-1 -- no singular value is cut -- so the same
-    minimum-norm solution comes from a Cholesky factorisation of the Gram matrix M M^T
-    (rows x rows), tens of times cheaper than an SVD of M. Full row rank is accepted when
-    the factorisation succeeds and M's condition number (bounded from above by
-    ||M||_F^2 / lambda_min(M M^T), lambda_min by inverse iteration) is below
-    GRAM_MAX_COND = 1e5: then no singular value is near the
-    cut-off and squaring the condition number in the Gram matrix still leaves the solution
-    accurate to about 1e-6 relative or better. Otherwise the explicit SVD with the cut-off
-    ("gelsd") is used. The staircase's M has a condition number of about 10.
-    """
-    if driver == "auto":
-        X = _gram_min_norm(M, R, rcond)
-        if X is not None:
-            return X, int(M.shape[0])
-        driver = "gelsd"
-    if driver == "gelsd":
-        X, _, rank, _ = sla.lstsq(M, R, cond=rcond, lapack_driver="gelsd", check_finite=False)
-        return X, int(rank)
-    if driver == "svd":
-        U, s, Vt = sla.svd(M, full_matrices=False, check_finite=False, lapack_driver="gesdd")
-        keep = s > rcond * (s[0] if len(s) else 0.0)
-        X = Vt[keep].T @ ((U[:, keep].T @ R) / s[keep][:, None])
-        return X, int(keep.sum())
-    raise ValueError(f"unknown SVD driver {driver!r}; use 'gelsd' or 'svd'")
-
-
-def _gram_min_norm(M, R, rcond):
-    """M^T (M M^T)^-1 R when M has full row rank with margin over the cut-off, else None."""
-    rows, cols = M.shape
-    if rows > cols:
-        return None
-    G = sla.blas.dsyrk(1.0, np.asfortranarray(M), lower=1)  # lower triangle of M M^T
-    try:
-        L, lower = sla.cho_factor(G, lower=True, check_finite=False, overwrite_a=True)
-    except np.linalg.LinAlgError:
-        return None
-    rng = np.random.default_rng(0)
-    x = rng.standard_normal(rows)
-    for _ in range(8):  # inverse iteration: smallest eigenvalue of G (from above)
-        x = sla.cho_solve((L, lower), x / np.linalg.norm(x), check_finite=False)
-    lam_min = 1.0 / np.linalg.norm(x)
-    # largest eigenvalue of G from above: its trace, ||M||_F^2 (at most rows x too large, so the
-    # test below can only be stricter than cond(M) < GRAM_MAX_COND)
-    lam_max = float(np.einsum("ij,ij->", M, M))
-    if not (np.isfinite(lam_min) and lam_min > 0 and lam_max / lam_min < GRAM_MAX_COND ** 2):
-        return None
-    Y = sla.cho_solve((L, lower), R, check_finite=False)
-    return M.T @ Y
-
-
 def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver="auto", **kw):
     """Solve the inverse problem with a registered solver (``engine.solvers``: see the module
     docstring for the paper's, the reduced and the NNLS formulations).
@@ -620,19 +552,3 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
     return InverseResult(solver=solver, exitance=e, rank=int(out.rank), error=err, relative_error=rel,
                          n_negative=int((e < 0).any(axis=1).sum()), seconds=seconds,
                          rcond=out.rcond, warnings=warns)
-
-
-@dataclass
-class SolverOutput:
-    """What a registered solver returns: exitance (n_lights, 3) W/m^2, the rank used, the
-    cut-off used (None when not applicable) and its own warnings."""
-
-    exitance: np.ndarray
-    rank: int
-    rcond: float | None = None
-    warnings: list = field(default_factory=list)
-
-
-def default_rcond(rcond, shape):
-    """The pseudo-inverse cut-off: ``rcond`` when given, else max(rows, cols) * machine eps."""
-    return rcond if rcond is not None else max(shape) * np.finfo(float).eps

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from . import distributions, estimators, patch_models, selections, solvers  # noqa: F401  (register the methods)
 from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch

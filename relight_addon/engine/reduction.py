@@ -66,6 +66,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .inverse import InverseProblem
+from . import distributions, selections  # noqa: F401  (register the methods reduce_lights dispatches to)
 from .registry import DISTRIBUTIONS, SELECTIONS
 
 __all__ = [
@@ -76,7 +77,6 @@ __all__ = [
     "CurvePoint",
     "ReductionResult",
     "Distributor",
-    "decreasing_order",
     "reduce_lights",
     "select_final",
 ]
@@ -128,12 +128,6 @@ class ReductionResult:
         e = np.zeros((problem.n_lights, 3))
         e[pt.lights] = pt.exitance
         return problem.patch_exitance(e)
-
-
-def decreasing_order(e, area):
-    """DecreasingOrder: indices sorted by signed power sum_channels(e) * A, largest first (stable)."""
-    power = np.asarray(e, dtype=np.float64).sum(axis=1) * np.asarray(area, dtype=np.float64)
-    return np.argsort(-power, kind="stable")
 
 
 class Distributor:

@@ -20,8 +20,8 @@ list of known ones (the CLI and the operators show that line to the user).
 """
 from __future__ import annotations
 
-import importlib
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -187,13 +187,18 @@ class Method:
 
 
 class Registry:
-    """Named methods of one kind, in registration order (the order the UI lists them)."""
+    """Named methods of one kind, in registration order (the order the UI lists them).
+
+    The registry imports nothing: its methods' package registers them when imported (the package
+    of a kind of method is imported by the module that dispatches to it -- inverse.py for the
+    solvers, reduction.py for the selections and distributions, options.py for every user-chosen
+    kind -- so no import cycle runs through here). Reading a registry whose package was never
+    imported is a programming error, said as such."""
 
     def __init__(self, kind: str, package: str):
         self.kind = kind
-        self._package = package  # imported on first use: its modules register themselves
+        self.package = __name__.rsplit(".", 1)[0] + package  # e.g. relight_addon.engine.solvers
         self._methods: dict[str, Method] = {}
-        self._loaded = False
 
     def register(self, name: str, label: str, description: str, params=(), **extra):
         def deco(impl):
@@ -203,29 +208,26 @@ class Registry:
             return impl
         return deco
 
-    def _load(self):
-        if not self._loaded:
-            self._loaded = True
-            importlib.import_module(self._package, __package__)
+    def _loaded(self) -> dict:
+        if self.package not in sys.modules:
+            raise RuntimeError(f"the {self.kind} registry is read before {self.package} was imported "
+                               "(import the package that registers them, e.g. engine.options)")
+        return self._methods
 
     def __getitem__(self, name) -> Method:
-        self._load()
         try:
-            return self._methods[name]
+            return self._loaded()[name]
         except (KeyError, TypeError):
             raise ValueError(f"unknown {self.kind} {name!r}; choose one of {', '.join(self.names())}") from None
 
     def __contains__(self, name) -> bool:
-        self._load()
-        return name in self._methods
+        return name in self._loaded()
 
     def __iter__(self):
-        self._load()
-        return iter(self._methods.values())
+        return iter(self._loaded().values())
 
     def names(self) -> tuple:
-        self._load()
-        return tuple(self._methods)
+        return tuple(self._loaded())
 
     def enum_items(self) -> list:
         """(identifier, label, description) triples for a Blender EnumProperty."""

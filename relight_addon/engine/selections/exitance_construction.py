@@ -3,8 +3,15 @@ selected lights plus the original power of every not-yet-selected light distribu
 (not cumulative, as in the paper's Fig. 3)."""
 from __future__ import annotations
 
-from ..reduction import decreasing_order
+import numpy as np
+
 from ..registry import SELECTIONS
+
+
+def decreasing_order(e, area):
+    """DecreasingOrder: indices sorted by signed power sum_channels(e) * A, largest first (stable)."""
+    power = np.asarray(e, dtype=np.float64).sum(axis=1) * np.asarray(area, dtype=np.float64)
+    return np.argsort(-power, kind="stable")
 
 
 @SELECTIONS.register("exitance-construction", "Exitance Construction",

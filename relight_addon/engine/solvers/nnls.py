@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.optimize as sopt
 
-from ..inverse import SolverOutput
+from .common import SolverOutput
 from ..registry import SOLVERS
 
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..inverse import SolverOutput, _lstsq_min_norm, default_rcond
+from .common import SolverOutput, default_rcond, lstsq_min_norm
 from ..registry import SOLVERS
 
 
@@ -19,7 +19,7 @@ def solve_reduced(problem, rcond=None, svd_driver="auto"):
     ranks, used = [], None
     for c in range(3):
         used = default_rcond(rcond, T[c].shape)
-        X, rank = _lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used, svd_driver)
+        X, rank = lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used, svd_driver)
         e[:, c] = X[:, 0]
         ranks.append(rank)
     return SolverOutput(e, min(ranks), used)

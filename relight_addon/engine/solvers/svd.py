@@ -12,7 +12,7 @@ import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 
-from ..inverse import GRAM_MAX_COND, SolverOutput, _channel_groups, _lstsq_min_norm, default_rcond
+from .common import GRAM_MAX_COND, SolverOutput, channel_groups, default_rcond, lstsq_min_norm
 from ..radiosity import radiosity_matrix
 from ..registry import SOLVERS
 
@@ -87,7 +87,7 @@ def solve_paper(problem, rcond=None, svd_driver="auto"):
     structured = _PaperGram(problem, U) if svd_driver == "auto" and D is None else None
     e = np.zeros((problem.n_lights, 3))
     ranks, used = [], None
-    groups = _channel_groups(problem.reflectance) if D is None else [[0], [1], [2]]
+    groups = channel_groups(problem.reflectance) if D is None else [[0], [1], [2]]
     for g in groups:
         if structured is not None:
             used = default_rcond(rcond, (n, len(U) + problem.n_lights))
@@ -106,7 +106,7 @@ def solve_paper(problem, rcond=None, svd_driver="auto"):
             M[:, len(U):] -= (D[g[0]][:, C] @ problem.light_basis).toarray()
         R = -(A[:, P] @ problem.b_target[:, g])
         used = default_rcond(rcond, M.shape)
-        X, rank = _lstsq_min_norm(M, R, used, svd_driver)
+        X, rank = lstsq_min_norm(M, R, used, svd_driver)
         e[:, g] = X[len(U):]
         ranks.append(rank)
     return SolverOutput(e, min(ranks), used)
