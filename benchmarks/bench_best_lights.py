@@ -52,7 +52,8 @@ _CACHE = {}
 def staircase_problem():
     """The staircase's InverseProblem as jobs.run_solve builds it (cached per process)."""
     if "p" not in _CACHE:
-        from relight_addon import export, jobs
+        from relight_addon.blender import export
+        from relight_addon.pipeline import jobs
         from relight_addon.engine.options import JobOptions
 
         export.open_blend(str(SCENE))

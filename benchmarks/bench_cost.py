@@ -32,7 +32,8 @@ CHILD = r'''
 import json, os, sys, time
 sys.path.insert(0, ROOT); sys.path.insert(0, os.path.join(ROOT, "tests"))
 import bpy
-from relight_addon import export, jobs
+from relight_addon.blender import export
+from relight_addon.pipeline import jobs
 from relight_addon.engine.options import JobOptions
 
 def rss(field):

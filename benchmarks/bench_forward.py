@@ -25,7 +25,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from relight_addon import export  # noqa: E402
+from relight_addon.blender import export  # noqa: E402
 from relight_addon.engine.formfactors import auto_rays_per_patch, compute_form_factors  # noqa: E402
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
 from relight_addon.engine.scene import face_mean, mesh_patches  # noqa: E402

@@ -123,7 +123,7 @@ def furnished_room(cell=0.25):
 
 
 def staircase():
-    from relight_addon import export as bridge
+    from relight_addon.blender import export as bridge
 
     bridge.open_blend(str(SCENE))
     exp = bridge.export_scene()

@@ -37,9 +37,10 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 import bpy  # noqa: E402
 
 import artist_scenes  # noqa: E402
-from relight_addon import export, jobs  # noqa: E402
+from relight_addon.blender import export
+from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
-from relight_addon.polygons import PolygonMap  # noqa: E402
+from relight_addon.pipeline.polygons import PolygonMap  # noqa: E402
 
 W, D, H = artist_scenes.ROOM
 # (wall normal axis, wall coordinate, the two in-plane axes and their ranges, exitance W/m^2)

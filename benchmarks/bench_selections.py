@@ -33,7 +33,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import bpy  # noqa: E402
 
-from relight_addon import export, jobs  # noqa: E402
+from relight_addon.blender import export
+from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.engine.reduction import reduce_lights  # noqa: E402
 from relight_addon.engine.registry import SELECTIONS  # noqa: E402

@@ -47,7 +47,7 @@ def uptime():
 
 def load_staircase(rays=None, seed=0):
     """(patches, F as float64 ndarray, form-factor seconds, rays per patch) of the staircase."""
-    from relight_addon import export
+    from relight_addon.blender import export
 
     export.open_blend(str(SCENE))
     exp = export.export_scene()

@@ -40,7 +40,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from relight_addon import export, jobs  # noqa: E402
+from relight_addon.blender import export
+from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine import formfactors, kernel_transfer  # noqa: E402
 from relight_addon.engine.estimators import kernel as kernel_estimator  # noqa: E402
 from relight_addon.engine.estimators import raycast as raycast_estimator  # noqa: E402

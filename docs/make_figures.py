@@ -18,7 +18,8 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-from relight_addon import export, jobs, results  # noqa: E402
+from relight_addon.blender import export, results
+from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 
 IMG = os.path.join(ROOT, "docs", "img")

@@ -8,12 +8,12 @@ refers to its own package through ``__package__``, never by name.
 
 
 def register():
-    from . import blender_ui
+    from .blender import ui
 
-    blender_ui.register()
+    ui.register()
 
 
 def unregister():
-    from . import blender_ui
+    from .blender import ui
 
-    blender_ui.unregister()
+    ui.unregister()

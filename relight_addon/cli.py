@@ -346,7 +346,7 @@ def _save_outputs(args, report, timings, t0, apply):
     """Apply the result to the open scene (for --out/--render), write the report, then save the
     copy and render; the report is rewritten with the apply/render timings at the end. When the
     apply fails, the report is still written (then the error raised)."""
-    from . import results
+    from .blender import results
 
     t1 = time.perf_counter()
     try:
@@ -384,7 +384,8 @@ def _blender_message(exc):
 def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
-    from . import export, jobs, light_paths, report as reports, results, viewing
+    from .blender import export, light_paths, results
+    from .pipeline import jobs, report as reports, viewing
 
     t0 = time.perf_counter()
     _check_paths(args)
@@ -422,7 +423,7 @@ def _match_light_paths(args, report):
         return
     import bpy
 
-    from . import light_paths
+    from .blender import light_paths
 
     scene = bpy.context.scene
     block = report["render_settings"]
@@ -434,8 +435,8 @@ def _match_light_paths(args, report):
 def run_solve_command(args, progress=None, cancel=None):
     import bpy
 
-    from . import export, results
-    from .preparation import SolveJob
+    from .blender import export, results
+    from .blender.preparation import SolveJob
 
     t0 = time.perf_counter()
     _check_paths(args)

@@ -239,7 +239,7 @@ settings.curve_index = k_final  # clicking a row in the list applies it
 R["back_to_final_state"] = emitting_state()
 
 # the chart the Results panel draws, with the shown configuration marked
-panels = sys.modules[pkg + ".blender_ui.panels"]
+panels = sys.modules[pkg + ".blender.ui.panels"]
 drawn = panels.chart_pixels(scene, 240, 204)
 R["chart"] = None if drawn is None else {
     "shape": list(drawn[0].shape), "marker": drawn[1]["marker"] is not None,

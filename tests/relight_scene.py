@@ -38,7 +38,7 @@ def emitted_power(scene):
 def stored_polygon_radiosity(data, k):
     """{object: (n_polygons, 3) W/m^2} of stored configuration ``k`` (patch radiosity through the
     stored polygon weights)."""
-    from relight_addon import results
+    from relight_addon.blender import results
 
     rows = results.polygon_rows(data, np.asarray(data.radiosity[k], dtype=np.float64))
     off = data.polygon_offset

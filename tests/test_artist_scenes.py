@@ -71,7 +71,8 @@ def test_model_smaller_than_the_mesh_and_lights_smaller_than_polygons(solved):
 
 
 def test_out_file_shows_the_lights_and_resolves_without_counting_them(solved, tmp_path):
-    from relight_addon import cli, export
+    from relight_addon import cli
+    from relight_addon.blender import export
     from relight_scene import emitted, emitted_power
 
     r, out, _ = solved

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from relight_addon import chart
+from relight_addon.pipeline import chart
 
 C = {k: np.array(v[:3], dtype=np.float32) for k, v in chart.COLORS.items()}
 

@@ -155,7 +155,8 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
     anything is written back (the operator only touches the scene after a finished job)."""
     import pytest
 
-    from relight_addon import export, jobs
+    from relight_addon.blender import export
+    from relight_addon.pipeline import jobs
     from relight_addon.engine.options import JobOptions
 
     export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
@@ -184,7 +185,8 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
 def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_clean):
     """Targets painted at exactly the radiosity the Cornell box's own light gives them need no
     extra light: the solve keeps the scene's emitter as background, so e_x is ~0 and exact."""
-    from relight_addon import export, jobs
+    from relight_addon.blender import export
+    from relight_addon.pipeline import jobs
     from relight_addon.engine.options import JobOptions
 
     export.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))

@@ -23,7 +23,7 @@ bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender
 
 import cycles_reference as cr  # noqa: E402
 
-from relight_addon import materials  # noqa: E402
+from relight_addon.blender import materials  # noqa: E402
 
 TOL = 0.003
 BASE = (0.6, 0.4, 0.2)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon import export, results  # noqa: E402
+from relight_addon.blender import export, results  # noqa: E402
 from relight_addon.engine.principled import principled_albedo  # noqa: E402
 
 

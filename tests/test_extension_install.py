@@ -55,7 +55,7 @@ def test_zip_content_matches_manifest(linux_zip):
     with zipfile.ZipFile(linux_zip) as zf:
         names = zf.namelist()
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
-    assert "__init__.py" in names and "engine/scene.py" in names and "blender_ui/__init__.py" in names
+    assert "__init__.py" in names and "engine/scene.py" in names and "blender/ui/__init__.py" in names
     wheels = sorted(n for n in names if n.endswith(".whl"))
     # --split-platforms narrows platforms/wheels in a [build.generated] table, which Blender
     # applies over the top-level values when it reads the manifest.

@@ -387,7 +387,7 @@ def assert_scene_finite():
         assert np.all(np.isfinite(np.array(ob.matrix_world))), ob.name
     scene = bpy.context.scene
     if "relight_result" in scene.keys():
-        from relight_addon import results
+        from relight_addon.blender import results
 
         try:
             data = results.load_result(scene)
@@ -447,7 +447,7 @@ def _check_linked(report, out, tmp):
 
 def _check_bright(report, out, tmp):
     bpy.ops.wm.open_mainfile(filepath=out)
-    from relight_addon import results
+    from relight_addon.blender import results
 
     data = results.load_result(bpy.context.scene)
     assert data.radiosity.max() > 65504.0  # beyond float16, stored exactly as float32 allows
@@ -613,7 +613,7 @@ def test_cli(case, run_cli, scenes, tmp_path):
 
 def test_cli_report_survives_a_failing_save(run_cli, scenes, tmp_path, monkeypatch):
     """The report is written before --out: a save that fails (after the checks) still leaves it."""
-    from relight_addon import results
+    from relight_addon.blender import results
 
     def fail(path):
         raise RuntimeError("Error: Cannot open file x.blend@ for writing: No space left on device")
@@ -632,7 +632,7 @@ def test_cli_report_survives_a_failing_save(run_cli, scenes, tmp_path, monkeypat
 
 def test_cli_unexpected_error_is_one_line(run_cli, scenes, tmp_path, monkeypatch):
     """An unexpected exception anywhere (here a TypeError inside the job) is still one line, exit 2."""
-    from relight_addon import jobs
+    from relight_addon.pipeline import jobs
 
     def boom(*a, **k):
         raise TypeError("something nobody expected")
@@ -645,7 +645,7 @@ def test_cli_unexpected_error_is_one_line(run_cli, scenes, tmp_path, monkeypatch
 
 
 def test_cli_memory_error_is_one_line(run_cli, scenes, tmp_path, monkeypatch):
-    from relight_addon import jobs
+    from relight_addon.pipeline import jobs
 
     def oom(*a, **k):
         raise MemoryError("Unable to allocate 32.0 GiB for an array with shape (1073741824, 4)")
@@ -696,7 +696,8 @@ def test_progress_display_modes():
 def test_patch_count_estimate_is_exact_for_the_polygon_model(bpy_clean):
     """The memory guard's patch count before meshing, against the meshed count (quads split into
     grids, triangles into k x k pieces, small faces whole)."""
-    from relight_addon import export, jobs
+    from relight_addon.blender import export
+    from relight_addon.pipeline import jobs
     from relight_addon.engine.options import JobOptions
 
     _room()
@@ -882,7 +883,7 @@ def _check_byte_fill():
     assert [(a.name, a.data_type) for a in ob.data.color_attributes] == [("relight_target", "BYTE_COLOR")]
     c = _colors(ob)  # linear values, as export reads them: the paint colour (0.5, 0.25, 1) to 1/255 in sRGB
     assert np.allclose(c[:, :3], (0.5, 0.25, 1.0), atol=0.01) and (c[:, 3] == 1).all()
-    from relight_addon import export
+    from relight_addon.blender import export
 
     t = export.face_flags(ob, "target")
     assert t.all()
@@ -893,7 +894,7 @@ def _check_forbid_kept_type(dtype):
         bpy.ops.object.mode_set(mode="OBJECT")
         a = bpy.data.objects["ceiling"].data.attributes["relight_forbidden"]
         assert a.data_type == dtype and a.domain == "FACE"
-        from relight_addon import export
+        from relight_addon.blender import export
 
         assert export.face_flags(bpy.data.objects["ceiling"], "forbidden").all()
     return check
@@ -921,14 +922,14 @@ def _check_linked_solve():
 
 
 def _check_bright_solve():
-    from relight_addon import results
+    from relight_addon.blender import results
 
     data = results.load_result(bpy.context.scene)
     assert data.radiosity.max() > 65504.0
 
 
 def _check_int_forbidden_solve():
-    from relight_addon import results
+    from relight_addon.blender import results
 
     lit = results.shown_light_polygons(bpy.context.scene, bpy.data.objects["ceiling"])
     assert lit.any() and not lit[0] and not lit[3]

@@ -95,7 +95,7 @@ def test_solve_reports_and_out_writes_light_paths(run_cli, tmp_path):
 
 def test_match_light_paths_operator(bpy_clean):
     import relight_addon
-    from relight_addon import light_paths
+    from relight_addon.blender import light_paths
 
     bpy = bpy_clean
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))

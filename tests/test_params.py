@@ -152,7 +152,7 @@ def test_panel_rows_follow_the_chosen_methods(addon):
     """The Solve panel's rows: least-power shows its Tolerance; the Model panel the adaptive
     model's parameters (a recording layout: panels draw nothing in background mode)."""
     bpy = addon
-    from relight_addon.blender_ui import panels
+    from relight_addon.blender.ui import panels
 
     class Layout:
         def __init__(self, rows):
@@ -195,7 +195,7 @@ def test_panel_rows_follow_the_chosen_methods(addon):
 
 def test_operator_options_pass_only_the_chosen_methods_parameters(addon):
     bpy = addon
-    from relight_addon.blender_ui import operators
+    from relight_addon.blender.ui import operators
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     s = bpy.context.scene.relight
@@ -215,7 +215,8 @@ def test_least_power_through_the_operator(addon):
     problem, and every target is within the tolerance (or within the tolerance the programme
     reports as reachable, when no non-negative lights reach the one asked)."""
     bpy = addon
-    from relight_addon import export, jobs, results
+    from relight_addon.blender import export, results
+    from relight_addon.pipeline import jobs
     from relight_addon.engine.best_lights import least_power_within_tolerance
 
     tol = 0.3

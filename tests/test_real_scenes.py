@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon import export, jobs  # noqa: E402
+from relight_addon.blender import export
+from relight_addon.pipeline import jobs  # noqa: E402
 from test_export import emission_material  # noqa: E402
 from relight_addon.engine import closed_forms as cf  # noqa: E402
 from relight_addon.engine.cost import estimate_cost, estimate_patches_cost  # noqa: E402

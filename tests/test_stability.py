@@ -162,7 +162,7 @@ def test_infeasible_contrast_reports_the_positive_floor():
 def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     """The engine's reductions end positive with a large error and no message of their own; the
     job (what `relight solve` and the add-on run) adds one, with the NNLS bound."""
-    from relight_addon.jobs import _positivity_notes
+    from relight_addon.pipeline.jobs import _positivity_notes
     from relight_addon.engine.reduction import reduce_lights
 
     prob = CASES["infeasible contrast"][1]()

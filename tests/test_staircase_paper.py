@@ -72,7 +72,7 @@ def test_staircase_paper_experiment(run_cli, bpy_clean, tmp_path):
     # the .blend written by --out: e_x stored per candidate face, spread over nearly all of them
     bpy = bpy_clean
     bpy.ops.wm.open_mainfile(filepath=str(out))
-    from relight_addon import results
+    from relight_addon.blender import results
 
     data = results.load_result(bpy.context.scene)
     idx = list(data.point_index)

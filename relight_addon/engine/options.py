@@ -10,7 +10,7 @@ adaptive patch model's ``light_size``, ``refine_passes``, ``refine_tolerance``).
 - ``JobOptions.validate``: every value's type and range from its declaration, and a
   ValueError for an option that the chosen methods do not use (refused, never ignored);
 - the CLI's flags (``cli.py``), the add-on's scene properties and panel rows
-  (``blender_ui/properties.py``, ``panels.py``, ``operators.job_options``).
+  (``blender/ui/properties.py``, ``panels.py``, ``operators.job_options``).
 """
 from __future__ import annotations
 

@@ -31,7 +31,7 @@ result["module_loaded"] = module_name in sys.modules
 result["addon_enabled"] = module_name in bpy.context.preferences.addons
 mod = sys.modules.get(module_name)
 result["module_file"] = getattr(mod, "__file__", None)
-ui = sys.modules.get(module_name + ".blender_ui")
+ui = sys.modules.get(module_name + ".blender.ui")
 result["ui_package_seen"] = getattr(ui, "ADDON_PACKAGE", None)
 
 addon = bpy.context.preferences.addons.get(module_name)

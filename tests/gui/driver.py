@@ -82,8 +82,8 @@ def override():
 
 
 def mods():
-    return {k: sys.modules[f"{PKG}.{k}"] for k in ("results", "blender_ui.panels", "blender_ui.operators",
-                                                   "blender_ui.viewport", "export")}
+    return {k: sys.modules[f"{PKG}.{k}"] for k in ("blender.results", "blender.ui.panels", "blender.ui.operators",
+                                                   "blender.ui.viewport", "blender.export")}
 
 
 # --- input ----------------------------------------------------------------------------------
@@ -258,7 +258,7 @@ _STAGE = [None]
 def heartbeat():
     now = time.monotonic()
     try:
-        state = sys.modules[PKG + ".blender_ui.operators"].solve_state(bpy.context.scene)
+        state = sys.modules[PKG + ".blender.ui.operators"].solve_state(bpy.context.scene)
         stage = None if state is None else f"{state['stage']} {state['fraction']:.2f}"
     except Exception:  # noqa: BLE001  (not loaded yet, or an older add-on)
         stage = None
@@ -279,7 +279,7 @@ def max_gap(t0, t1):
 # --- scene state ---------------------------------------------------------------------------
 
 def counts():
-    return mods()["blender_ui.panels"]._counts(bpy.context)
+    return mods()["blender.ui.panels"]._counts(bpy.context)
 
 
 def mesh_objects():
@@ -377,7 +377,7 @@ def chart_on_screen(path):
 
 
 def check_marker(name, path):
-    panels = mods()["blender_ui.panels"]
+    panels = mods()["blender.ui.panels"]
     geo = panels.last_chart_geometry()
     seen = chart_on_screen(path)
     if seen is None or geo is None or geo.get("marker") is None:
@@ -386,7 +386,7 @@ def check_marker(name, path):
     w_img = geo["size"][0]
     scale = (box[2] - box[0] + 1) / w_img
     want = box[0] + geo["marker"][0] * scale
-    current = mods()["results"].chart_data(bpy.context.scene)["current"]
+    current = mods()["blender.results"].chart_data(bpy.context.scene)["current"]
     ok = mx is not None and abs(mx - want) <= 3 and geo["current"] == current
     return check(name, ok, f"marker at x={mx}, expected {want:.1f} (chart {box}, drawn at {scale:.3f} x), "
                            f"curve point {geo['current']} (shown {current})")
@@ -399,7 +399,7 @@ def scenario():
     prefs = bpy.context.preferences
     check("the extension is installed and enabled", PKG in prefs.addons, sorted(prefs.addons.keys()))
     m = mods()
-    panels, operators, results = m["blender_ui.panels"], m["blender_ui.operators"], m["results"]
+    panels, operators, results = m["blender.ui.panels"], m["blender.ui.operators"], m["blender.results"]
     scene = bpy.context.scene
     settings = scene.relight
     initial_shading = shading()
@@ -466,7 +466,7 @@ def scenario():
 
     # 5. Edit Mode: the panel keeps working (defect 1); Fill Selected then Unpaint
     t0, c0, f0, _ = counts()
-    targets0 = m["export"].face_flags(floor, "target")
+    targets0 = m["blender.export"].face_flags(floor, "target")
     fill = [int(k) for k in np.flatnonzero(~targets0)[:4]]
     tabbed = yield from edit_faces(floor, fill)
     check("Tab enters Edit Mode", tabbed, bpy.context.mode)
@@ -491,7 +491,7 @@ def scenario():
         if bpy.context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
     set_active(wall)
-    cand = np.flatnonzero(m["export"].face_flags(wall, "candidate"))[:6]
+    cand = np.flatnonzero(m["blender.export"].face_flags(wall, "candidate"))[:6]
     c_before = counts()[1]
     yield from edit_faces(wall, [int(k) for k in cand])
     yield 1.0

@@ -10,12 +10,13 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import export, jobs, results
+from .. import ADDON_PACKAGE, export, results
+from ...pipeline import jobs
 from ..preparation import SolveJob
 from . import viewport
 from .properties import set_curve_index, ui_value
-from ..engine.options import JobOptions
-from ..engine.scene import SceneError
+from ...engine.options import JobOptions
+from ...engine.scene import SceneError
 
 TARGET = export.TARGET_ATTRIBUTE
 FORBIDDEN = export.FORBIDDEN_ATTRIBUTE
@@ -26,7 +27,7 @@ def job_options(settings, validate=True) -> JobOptions:
     declarations): the job-wide options the chosen methods use (the others keep their
     defaults: e.g. a selection that distributes no power gets the default distribution), and
     the parameters of the chosen methods only, so that nothing the sidebar shows is refused."""
-    from ..engine.options import JOB_PARAMS, METHOD_CHOICES, method_params
+    from ...engine.options import JOB_PARAMS, METHOD_CHOICES, method_params
 
     options = JobOptions(threads=_preferences_threads(),
                          **{p.name: ui_value(settings, p) for p in JOB_PARAMS if p.ui != "hidden"})
@@ -41,7 +42,7 @@ def job_options(settings, validate=True) -> JobOptions:
 
 
 def _preferences_threads():
-    addon = bpy.context.preferences.addons.get(__package__.rpartition(".")[0])
+    addon = bpy.context.preferences.addons.get(ADDON_PACKAGE)
     threads = getattr(addon.preferences, "threads", 0) if addon else 0
     return threads or None
 

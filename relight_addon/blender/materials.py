@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from .engine.principled import PrincipledParams, oren_nayar_albedo, principled_albedo
+from ..engine.principled import PrincipledParams, oren_nayar_albedo, principled_albedo
 
 __all__ = ["material_properties", "surface_node", "Closure", "surface_closure"]
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .engine.options import STORE_ALL_UP_TO, STORE_LOG_POINTS
+from ..engine.options import STORE_ALL_UP_TO, STORE_LOG_POINTS
 
 FORMAT = 2
 

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import export, jobs, light_paths, report, viewing
+from . import export, light_paths
+from ..pipeline import jobs, report, viewing
 
 __all__ = ["SolveJob"]
 

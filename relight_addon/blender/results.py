@@ -34,10 +34,10 @@ import warnings as _warnings
 import bpy
 import numpy as np
 
-from .engine.geometry import group_mean
-from .engine.scene import SceneError
-from .engine.units import radiance_from_exitance
-from .stored import StoredResult
+from ..engine.geometry import group_mean
+from ..engine.scene import SceneError
+from ..engine.units import radiance_from_exitance
+from ..pipeline.stored import StoredResult
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -567,7 +567,7 @@ def make_area_lights(scene, index) -> int:
 # --- the chart ---------------------------------------------------------------------------------
 def update_chart(scene) -> None:
     """Ask the Results panel to redraw its chart. The chart is drawn on demand by the panel
-    (blender_ui.panels, from ``chart_data``) at the sidebar's width; nothing is written here."""
+    (blender/ui/panels.py, from ``chart_data``) at the sidebar's width; nothing is written here."""
     redraw_sidebars()
 
 

@@ -25,8 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .engine.bounces import TAIL, bounce_deficit, kept_terms, required_bounces
-from .engine.units import MAX_REFLECTANCE, radiance_from_exitance
+from ..engine.bounces import TAIL, bounce_deficit, kept_terms, required_bounces
+from ..engine.units import MAX_REFLECTANCE, radiance_from_exitance
 
 __all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_materials",
            "scene_max_reflectance",

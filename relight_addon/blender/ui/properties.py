@@ -11,7 +11,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        IntProperty, PointerProperty, StringProperty)
 
 from .. import results
-from ..engine import options as engine_options
+from ...engine import options as engine_options
 
 INT_MAX = 2 ** 31 - 1  # Blender's IntProperty is 32-bit
 

@@ -1,15 +1,14 @@
-"""Blender layer of Relight (bpy). Thin: operators and panels call relight_addon.jobs.
+"""Blender layer of Relight (bpy). Thin: operators and panels call relight_addon.pipeline.jobs.
 
 Registers the preferences, the scene/object properties, the operators and the sidebar
 panels (whose tab name comes from the preferences).
-The add-on's own package is the parent of this one (``bl_ext.<repo>.relight`` when
-installed as an extension, ``relight_addon`` when used from the repository); it is
-found through ``__package__``, never hard-coded.
+The add-on's own package is ``blender.ADDON_PACKAGE`` (found through ``__package__``,
+never hard-coded).
 """
 
 import bpy
 
-ADDON_PACKAGE = __package__.rpartition(".")[0]
+from .. import ADDON_PACKAGE
 
 
 class RelightPreferences(bpy.types.AddonPreferences):

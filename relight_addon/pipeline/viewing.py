@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .engine.view_radiance import view_radiance
+from ..engine.view_radiance import view_radiance
 
 #: above this many chosen patches it is not computed (work: chosen patches x all patches)
 MAX_PATCHES = 20000

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .engine.scene import FaceSet, PatchSet
+from ..engine.scene import FaceSet, PatchSet
 
 __all__ = ["PolygonMap"]
 

@@ -3,7 +3,7 @@
 Written for the sidebar's default width (about 290 px): no label shares a row with a field
 that would clip it, two buttons at most per row, hints say why a button is greyed out, and
 the rows stay in place when a mesh becomes active. Every count also works in Edit Mode (read
-from the edit BMesh). The error chart is rasterised by ``relight_addon.chart`` at the panel's
+from the edit BMesh). The error chart is rasterised by ``relight_addon.pipeline.chart`` at the panel's
 width into a preview icon (never a data-block) and drawn with ``template_icon``.
 """
 import math
@@ -15,8 +15,9 @@ import bpy.utils.previews
 import numpy as np
 from mathutils import Vector
 
-from .. import chart, export, results
-from ..engine.formfactors import auto_rays_per_patch
+from ...pipeline import chart
+from .. import export, results
+from ...engine.formfactors import auto_rays_per_patch
 from . import viewport
 
 #: beyond this many faces in Edit Mode, counts are not read from the BMesh on every redraw
@@ -234,7 +235,7 @@ def draw_method(layout, settings, kind, options, note=""):
     """A method choice (its enum, label above: the sidebar is narrow) and, under it, the rows of
     the chosen method's parameters; greyed out (with ``note``) when the chosen methods do not
     use the choice."""
-    from ..engine.options import method_params
+    from ...engine.options import method_params
 
     col = layout.column(align=True)
     col.active = options.uses(kind)
@@ -281,7 +282,7 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         else:
             col.prop(s, "max_patch_size")
         col.prop(s, "seed")
-        from ..engine.options import PARAMS
+        from ...engine.options import PARAMS
 
         options = operators.job_options(s, validate=False)
         draw_method(layout, s, "solver", options)

@@ -16,19 +16,19 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from .engine.best_lights import lower_bounds
-from .engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
-from .engine.formfactors import auto_rays_per_patch
-from .engine.incidence import first_bounce_matrices, incidence_tables
-from .engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
-from .engine.lights import LightSet, candidate_mask
-from .engine.options import REFINE_RAY_FRACTION, JobOptions
-from .engine.patch_models.adaptive import refinement_measure
-from .engine.radiosity import solve_radiosity
-from .engine.reduction import ReductionResult, reduce_lights
-from .engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
-from .engine.sampling import Cancelled
-from .engine.scene import FaceSet, PatchSet, SceneError, face_mean
+from ..engine.best_lights import lower_bounds
+from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
+from ..engine.formfactors import auto_rays_per_patch
+from ..engine.incidence import first_bounce_matrices, incidence_tables
+from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
+from ..engine.lights import LightSet, candidate_mask
+from ..engine.options import REFINE_RAY_FRACTION, JobOptions
+from ..engine.patch_models.adaptive import refinement_measure
+from ..engine.radiosity import solve_radiosity
+from ..engine.reduction import ReductionResult, reduce_lights
+from ..engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
+from ..engine.sampling import Cancelled
+from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from .polygons import PolygonMap
 from .report import json_safe, radiosity_report, solve_report
 from .stored import StoredResult, stored_points

@@ -66,8 +66,8 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from .engine.scene import FaceSet, SceneError
-from .engine.units import MAX_REFLECTANCE, exitance_from_radiance
+from ..engine.scene import FaceSet, SceneError
+from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
 
 DEFAULT_REFLECTANCE = 0.8
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
