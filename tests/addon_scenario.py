@@ -56,7 +56,7 @@ R["install"] = sorted(ret)
 pkg = "bl_ext.user_default.relight"
 R["enabled"] = pkg in bpy.context.preferences.addons
 mod = sys.modules[pkg]
-results = sys.modules[pkg + ".results"]
+results = sys.modules[pkg + ".blender.results"]
 
 # 1. a scene without targets: an error report, nothing changed
 bpy.ops.wm.open_mainfile(filepath=os.path.join(samples, "staircase.blend"))

@@ -357,7 +357,7 @@ def load_shot(path):
 def chart_on_screen(path):
     """(x0, y0, x1, y1) of the chart in the screenshot (its distinctive background colour
     inside the sidebar), and the x of its marker line, or None."""
-    chart = sys.modules[PKG + ".chart"]
+    chart = sys.modules[PKG + ".pipeline.chart"]
     a = load_shot(path)
     r = ui_region()
     x_lo, x_hi = r.x, r.x + r.width
