@@ -36,6 +36,8 @@ import numpy as np
 
 from ..engine.geometry import group_mean
 from ..engine.scene import SceneError
+from ..engine import lights  # noqa: F401  (registers the light kinds)
+from ..engine.registry import LIGHT_KINDS
 from ..engine.units import radiance_from_exitance
 from ..pipeline.stored import StoredResult
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
@@ -371,6 +373,23 @@ def polygon_rows(data, values):
     return np.asarray(data.polygon_weight_matrix() @ values)
 
 
+#: the light kinds' writers (engine.lights.LightKind.writer) this layer has: "surface" lights are
+#: shown as their emitting cells in the emitters object, and made into one area light per cell by
+#: make_area_lights. A new writer is a function here and its name in this tuple.
+WRITERS = ("surface",)
+
+
+def check_writers(data) -> None:
+    """SceneError, before anything is written, when the stored lights include a kind this version
+    cannot show (a code it does not know, or a kind whose writer it lacks)."""
+    names = LIGHT_KINDS.names()
+    for code in np.unique(np.asarray(data.light_kind, dtype=np.int64)):
+        kind = names[code] if 0 <= code < len(names) else None
+        if kind is None or LIGHT_KINDS[kind].impl.writer not in WRITERS:
+            raise SceneError(f"the stored Relight result holds lights of a kind this version cannot show "
+                             f"({kind if kind is not None else f'code {code}'}); run Solve & Reduce again")
+
+
 def apply_stored_point(scene, index) -> dict:
     """Show configuration ``index`` of the stored curve: the emitters object (cells with a positive
     exitance: a material cannot emit negative light), the radiosity layer, and in direct-lighting
@@ -384,6 +403,7 @@ def apply_stored_point(scene, index) -> dict:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     index = int(index)
     objs = check_stored(scene, data)
+    check_writers(data)
     exitance = data.exitance[index].astype(np.float64)
     if not (np.all(np.isfinite(exitance)) and np.all(np.isfinite(data.radiosity[index]))):
         raise SceneError("the stored result holds non-finite values: solve again")
@@ -502,6 +522,7 @@ def make_area_lights(scene, index) -> int:
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     check_stored(scene, data)
+    check_writers(data)
     exitance = data.exitance[int(index)].astype(np.float64)
     if not np.all(np.isfinite(exitance)):
         raise SceneError("the stored result holds non-finite values: solve again")

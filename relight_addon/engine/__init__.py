@@ -4,11 +4,13 @@ Data and units
 - units: the unit conversions and constants (pi, MAX_REFLECTANCE, 683 lm/W).
 - scene: FaceSet / PatchSet data model, meshing building blocks, per-face means.
 - geometry: triangle areas, group sums and means.
-- lights: candidate_mask, LightSet (the lights over the candidate patches).
+- lights/: the light model: a light is a source (LightKind, LightSet, candidate_mask; one
+  file per kind).
 - options: JobOptions and the defaults shared by the CLI and the add-on.
 - registry: the registries of interchangeable methods (below).
 
 Transport
+- sampling: the one Embree scene of a solve and its queries, the chunk runner.
 - formfactors: form factors by hemisphere ray casting (embreex).
 - kernel_transfer: the analytic point-to-polygon kernel with shadow rays.
 - radiosity: forward solvers (Gauss-Seidel, direct).
@@ -24,6 +26,6 @@ Inverse lighting
 - best_lights: Best k Lights (greedy pursuit with swaps) and its certificate.
 - cost: memory and time estimate of a job; refusal before the work.
 
-Registered methods (one file each): patch_models/, estimators/, solvers/, selections/,
-distributions/.
+Registered methods (one file each): patch_models/, estimators/, solvers/ (common.py: what they
+share), selections/, distributions/, lights/.
 """

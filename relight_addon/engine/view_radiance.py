@@ -67,7 +67,6 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     exitance e; default B - rho F B (right when B was solved without engine.incidence's
     first-reflection term, which B - rho F B would count as emission)."""
     M = getattr(F, "matrix", F)
-    P = M.shape[0]
     B = np.asarray(B, dtype=np.float64)
     rho = np.asarray(reflectance, dtype=np.float64)
     material = np.asarray(material, dtype=np.int64)

@@ -15,7 +15,6 @@ def error_construction(s):
     phi_x = e_x * problem.light_watts[:, None]
     steps = problem.n_lights if s.max_steps is None else min(problem.n_lights, int(s.max_steps))
     T, b = problem.transfer, problem.b_target
-    A = dist.area
     k = len(e_x)
     S = np.zeros(0, dtype=np.int64)
     Q = np.arange(k)
