@@ -5,7 +5,9 @@
 Each round runs `python -m relight_addon solve` on the shipped staircase and on the living room
 (tests/artist_scenes.living_room(2), 22k triangles, written once to a temporary .blend) with the
 old and the new code, alternately, in fresh processes. It prints the timings the reports give
-(form factors + inverse = the mathematical phase; the job's total), their new/old ratios (medians),
+(form factors + inverse = the mathematical phase; the job's total), in a fresh process and warm (2
+more solves in one process, as the add-on runs every solve after the first), their new/old
+ratios (medians),
 and how far the results differ: the curve's relative errors, the final lights' exitances and the
 targets' radiosity rows. Writes benchmarks/results/bench_refactor.json.
 """
@@ -25,7 +27,7 @@ ROOT = os.path.dirname(HERE)
 
 
 def living_room_blend(path):
-    code = ("import sys; sys.path[:0] = [%r, %r]; import bpy, artist_scenes; artist_scenes.living_room(2); "
+    code = ("import sys; sys.path[:0] = [%r, %r]; import bpy, artist_scenes; bpy.ops.wm.read_factory_settings(use_empty=True); artist_scenes.living_room(2); "
             "bpy.ops.wm.save_as_mainfile(filepath=%r)") % (ROOT, os.path.join(ROOT, "tests"), path)
     subprocess.run([sys.executable, "-c", code], check=True, capture_output=True)
 
@@ -36,6 +38,35 @@ def solve(tree, scene, report):
                    check=True, cwd=tree, env=env, capture_output=True)
     with open(report) as f:
         return json.load(f)
+
+
+WARM = r"""
+import json, sys, time
+try:
+    from relight_addon.blender import export
+    from relight_addon.pipeline import jobs
+except ImportError:  # the layout before the pipeline/ and blender/ split
+    from relight_addon import export, jobs
+from relight_addon.engine.options import JobOptions
+export.open_blend(sys.argv[1])
+exp = export.export_scene()
+inputs = export.job_inputs(exp)
+options = JobOptions().validate()
+patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
+out = []
+for _ in range(int(sys.argv[2])):
+    r = jobs.run_solve(exp.faces, options, patches=patches, **inputs).report["timings_s"]
+    out.append([r["form_factors"] + r["inverse"], r["total"]])
+print("RESULT " + json.dumps(out))
+"""
+
+
+def warm(tree, scene, repeats):
+    """(math phase, job total) per repeated solve in one process: the add-on's every solve after the first."""
+    env = dict(os.environ, PYTHONPATH=tree)
+    run = subprocess.run([sys.executable, "-c", WARM, scene, str(repeats)], check=True, cwd=tree, env=env,
+                         capture_output=True, text=True)
+    return json.loads(next(ln for ln in run.stdout.splitlines() if ln.startswith("RESULT "))[7:])
 
 
 def differences(a, b):
@@ -67,7 +98,7 @@ def main():
     living_room_blend(room)
     scenes = {"staircase": os.path.join(ROOT, "sample_blends", "staircase_targets.blend"), "living room": room}
     trees = {"old": os.path.abspath(args.base), "new": ROOT}
-    times = {s: {t: {"math": [], "total": []} for t in trees} for s in scenes}
+    times = {s: {t: {"math": [], "total": [], "warm_math": [], "warm_total": []} for t in trees} for s in scenes}
     last = {}
     for r in range(args.rounds):
         for s, path in scenes.items():
@@ -77,15 +108,20 @@ def main():
                 times[s][t]["math"].append(tm["form_factors"] + tm["inverse"])
                 times[s][t]["total"].append(tm["total"])
                 last[(s, t)] = rep
+                for m, total in warm(trees[t], path, 3)[1:]:  # the first of the process is cold
+                    times[s][t]["warm_math"].append(m)
+                    times[s][t]["warm_total"].append(total)
     out = {}
     for s in scenes:
         med = {t: {k: float(np.median(v)) for k, v in times[s][t].items()} for t in trees}
-        out[s] = {"median_s": med, "ratio_new_over_old": {k: med["new"][k] / med["old"][k] for k in ("math", "total")},
+        out[s] = {"median_s": med, "ratio_new_over_old": {k: med["new"][k] / med["old"][k] for k in med["new"]},
                   "runs": times[s], "patches": last[(s, "new")]["scene"]["patches"],
                   "differences": differences(last[(s, "old")], last[(s, "new")])}
         print(f"{s}: math phase old {med['old']['math']:.3f} s, new {med['new']['math']:.3f} s "
               f"(x{out[s]['ratio_new_over_old']['math']:.2f}); total old {med['old']['total']:.2f} s, "
-              f"new {med['new']['total']:.2f} s (x{out[s]['ratio_new_over_old']['total']:.2f}); "
+              f"new {med['new']['total']:.2f} s (x{out[s]['ratio_new_over_old']['total']:.2f}); warm math phase "
+              f"old {med['old']['warm_math']:.3f} s, new {med['new']['warm_math']:.3f} s "
+              f"(x{out[s]['ratio_new_over_old']['warm_math']:.2f}); "
               f"differences {out[s]['differences']}")
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
     with open(os.path.join(HERE, "results", "bench_refactor.json"), "w") as f:
