@@ -14,6 +14,7 @@ Checks are printed as ``GUI-CHECK <status> <name>: <detail>`` and written to OUT
 Blender exits with os._exit(0) when every check passed (xfail allowed), 1 otherwise.
 """
 import json
+import math
 import os
 import subprocess
 import sys
@@ -198,9 +199,14 @@ def probe_page(hits):
                 break
 
 
-def probe_sidebar(max_pages=4):
+#: a page of the probe overlaps the previous one: it scrolls at most this fraction of the region
+PAGE_OVERLAP = 0.8
+
+
+def probe_sidebar(max_pages=6):
     """Every copyable button of the sidebar: {python command or value: (view x, view y)} (the
-    middle of the places where it answered), scrolling down page by page."""
+    middle of the places where it answered), scrolling down page by page (each page scrolled by
+    at most PAGE_OVERLAP of the region, so that no row falls between two pages)."""
     t = time.monotonic()
     hits = {}
     yield from scroll_sidebar(-60)
@@ -208,8 +214,12 @@ def probe_sidebar(max_pages=4):
         yield from probe_page(hits)
         top = ui_region().view2d.region_to_view(0, 0)[1]
         yield from scroll_sidebar(30)
-        if abs(ui_region().view2d.region_to_view(0, 0)[1] - top) < 2:
+        moved = abs(ui_region().view2d.region_to_view(0, 0)[1] - top)
+        if moved < 2:
             break  # the bottom of the sidebar is visible
+        limit = PAGE_OVERLAP * ui_region().height
+        if moved > limit:  # 30 notches scrolled past rows never probed: scroll back over them
+            yield from scroll_sidebar(-int(math.ceil(30 * (moved - limit) / moved)))
     found = {}
     for k, pts in hits.items():
         x = min(p[0] for p in pts)  # the first column that answered
@@ -622,8 +632,7 @@ def scenario():
     check("Show Radiosity shows it again", shading() == ("SOLID", "VERTEX"), shading())
     row = settings.curve[settings.curve_index]
     data = results.load_result(scene)
-    power = float(data.curve_power[int(data.point_index[settings.curve_index])]) \
-        if "curve_power" in data else None
+    power = float(data.curve_power[int(data.point_index[settings.curve_index])])
     yield from press(found, "bpy.ops.relight.make_area_lights()", settle=2.0)
     lights = [o.name for o in scene.objects if o.type == "LIGHT"]
     energy = sum(scene.objects[n].data.energy for n in lights)
