@@ -58,7 +58,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -122,6 +122,8 @@ class FormFactors:
     reciprocity: str = "weighted"  # "weighted": weigh_reciprocity; "rays": each row from its own rays
     #: receiver x source pairs replaced by the kernel estimator (kernel_transfer.py), 0 if none
     kernel_pairs: int = 0
+    #: the solve's SceneSampler (its one Embree scene), for the lamps' shadow rays (engine.lamps)
+    sampler: object = field(default=None, repr=False, compare=False)
 
     @property
     def n_patches(self) -> int:
@@ -577,4 +579,5 @@ def compute_form_factors(
         sampling=sampling,
         reciprocity=reciprocity,
         kernel_pairs=int(n_kernel),
+        sampler=sampler,
     )

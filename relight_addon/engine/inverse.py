@@ -200,7 +200,7 @@ class InverseProblem:
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
-                 first_bounce=None, background=None):
+                 first_bounce=None, background=None, background_irradiance=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -262,11 +262,14 @@ class InverseProblem:
         #: the albedo of its incidence (engine.incidence): B = A^-1 (e + D e); None: B = A^-1 e
         self.first_bounce = first_bounce
         #: (P, 3) W/m^2: the radiosity of the fixed light (``background``: the scene's own emitters'
-        #: exitance), subtracted from the targets; the lights supply what it leaves. target_norm
+        #: exitance; ``background_irradiance``: the lamps' direct irradiance, engine.lamps),
+        #: subtracted from the targets; the lights supply what it leaves. target_norm
         #: stays the painted targets' norm (relative errors are of what was painted)
         self.background_radiosity = np.zeros((n, 3))
-        if background is not None and np.any(np.asarray(background) > 0):
-            self.background_radiosity = self.forward_radiosity(arr(background, (n, 3), "background exitance"))
+        e_bg = None if background is None else arr(background, (n, 3), "background exitance")
+        h_bg = None if background_irradiance is None else arr(background_irradiance, (n, 3), "background irradiance")
+        if (e_bg is not None and np.any(e_bg > 0)) or (h_bg is not None and np.any(h_bg > 0)):
+            self.background_radiosity = self.forward_radiosity(np.zeros((n, 3)) if e_bg is None else e_bg, h_bg)
             self.b_target = self.b_target - self.background_radiosity[self.targets]
 
     def _init_lights(self, light_groups, light_basis, lights=None):

@@ -63,6 +63,8 @@ class FaceSet:
     #: direction-dependent reflection of engine.incidence); None: every material is Lambertian
     face_material: np.ndarray = None
     material_lobes: list = None
+    #: the scene's lamps (engine.lamps.Lamp, world space): fixed light that lights the faces directly
+    lamps: list = field(default_factory=list)
 
     def __post_init__(self):
         self.loop_vertices = np.asarray(self.loop_vertices, dtype=np.int64).reshape(-1)

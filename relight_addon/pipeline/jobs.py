@@ -21,6 +21,7 @@ from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, est
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
 from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
+from ..engine.lamps import lamp_irradiance
 from ..engine.lights import LightSet, candidate_mask
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
@@ -35,7 +36,7 @@ from .stored import StoredResult, stored_points
 
 __all__ = ["Cancelled", "RadiosityResult", "run_radiosity", "run_solve", "PolygonMap", "JobOptions"]
 
-NO_EMITTER_WARNING = "the scene has no emitter (no material with emission): every radiosity is 0"
+NO_EMITTER_WARNING = "the scene has no emitter (no lamp, no material with emission): every radiosity is 0"
 
 
 @dataclass
@@ -77,7 +78,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     F = None
     t_ff = t_solve = 0.0
     info = {}
-    if not np.any(patches.exitance > 0):
+    if not np.any(patches.exitance > 0) and not faces.lamps:
         warnings.append(NO_EMITTER_WARNING)
         B = np.zeros((P, 3))
     else:
@@ -91,7 +92,8 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
             source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
-        B, info = solve_radiosity(F, patches.reflectance, source)
+        H = lamps_irradiance(faces, patches, F, options.seed).sum(axis=1)
+        B, info = solve_radiosity(F, patches.reflectance, source + patches.reflectance * H)
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
         if not info.get("converged", True):
@@ -112,7 +114,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 
 # ---------------------------------------------------------------------------- inverse lighting
 
-BACKGROUND_NOTE = ("the scene's own emitters ({n} face(s)) are kept as fixed background light; "
+BACKGROUND_NOTE = ("the scene's own light ({lamps} lamp(s), {n} emissive face(s)) is kept as fixed background light; "
                    "the solve lights what they leave to the targets")
 
 
@@ -233,6 +235,7 @@ class Model:
     cost: dict
     seconds: dict
     refinement: dict = None  # adaptive model: passes made and the target change after each
+    lamp_irradiance: np.ndarray = None  # (P, n_lamps, 3) W/m^2: each scene lamp's direct irradiance (fixed light)
 
 
 @dataclass
@@ -310,15 +313,17 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             raise Cancelled("solve cancelled")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
+        lamp_H = np.zeros((patches.n_patches, 0, 3))
         e_start = None
         if mode == "inverse":
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
                 background = patches.exitance.copy()
+            lamp_H = lamps_irradiance(faces, patches, F, options.seed)
             problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                                      mask, patches.center, patches.normal, lights=lights,
                                      first_bounce=first_bounce(faces, patches, F, mask | emitting),
-                                     background=background)
+                                     background=background, background_irradiance=lamp_H.sum(axis=1))
         else:
             problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
                                                        patches.center, patches.normal, lights=lights,
@@ -338,12 +343,16 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         check_memory(solve_cost(patches, options, len(faces.triangles), mode),
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
-    if mode == "inverse" and np.any(background > 0):
+    if mode == "inverse" and (np.any(background > 0) or faces.lamps):
         emitting = np.any(patches.exitance > 0, axis=1)
-        warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting])))))
+        warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps)))
+    if mode == "direct" and faces.lamps:
+        warnings.append(f"the scene's {len(faces.lamps)} lamp(s) are not reduced by this mode (only emissive "
+                        f"materials are): they are left out of the reduction and of its radiosity "
+                        f"({', '.join(l.name for l in faces.lamps[:5])}{' ...' if len(faces.lamps) > 5 else ''})")
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement)
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H)
 
 
 def solve_stage(model: Model, options: JobOptions) -> tuple:
@@ -398,6 +407,52 @@ def certificate_notes(problem, bounds, final) -> list:
                 f"relative error {final.relative_error:.3g}"]
     return [f"{k} light(s): relative error {final.relative_error:.3g}; no {k} non-negative lights can go below "
             f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
+
+
+#: a target object whose fixed light alone exceeds the painted radiosity by more than this is named
+ALREADY_BRIGHTER = 0.05
+
+
+def fixed_light(model: Model) -> tuple:
+    """The scene's own light that the solve keeps (inverse mode): per lamp and per emissive object
+    its share of the targets' painted radiosity (area-weighted, channels summed), and a warning
+    for each target object that this light alone already makes brighter than painted."""
+    problem, patches, faces = model.problem, model.patches, model.faces
+    tg = problem.targets
+    w = problem.area[tg]
+    painted = float(np.sum(w[:, None] * patches.target_radiosity[tg]))
+    zero = np.zeros((patches.n_patches, 3))
+
+    def share(B):
+        return float(np.sum(w[:, None] * B[tg]) / painted) if painted > 0 else None
+
+    rows = []
+    for i, lamp in enumerate(faces.lamps):
+        B = problem.forward_radiosity(zero, model.lamp_irradiance[:, i])
+        rows.append({"name": lamp.name, "kind": lamp.kind.lower(), "power": lamp.power, "share": share(B)})
+    emitting = np.any(model.background > 0, axis=1)
+    for oi in np.unique(patches.object[emitting]):
+        e = np.where((patches.object == oi)[:, None], model.background, 0.0)
+        rows.append({"name": faces.object_names[oi], "kind": "emission", "power": None,
+                     "share": share(problem.forward_radiosity(e))})
+    notes = []
+    B_bg = problem.background_radiosity
+    for oi in np.unique(patches.object[tg]):
+        sel = tg[patches.object[tg] == oi]
+        want = float(np.sum(problem.area[sel, None] * patches.target_radiosity[sel]))
+        got = float(np.sum(problem.area[sel, None] * B_bg[sel]))
+        if want > 0 and got > want * (1 + ALREADY_BRIGHTER):
+            notes.append(f"{faces.object_names[oi]}: its targets are already {100 * (got / want - 1):.0f} % brighter "
+                         "than painted without any new light (the scene's own lamps and emitters)")
+    return rows, notes
+
+
+def lamps_irradiance(faces: FaceSet, patches: PatchSet, F, seed=0) -> np.ndarray:
+    """(P, n_lamps, 3) W/m^2: the direct irradiance of the scene's lamps (engine.lamps), shadow rays
+    cast on the form factors' sampler (one Embree scene per solve)."""
+    if not faces.lamps:
+        return np.zeros((patches.n_patches, 0, 3))
+    return lamp_irradiance(patches, faces.lamps, sampler=getattr(F, "sampler", None), seed=seed)
 
 
 def first_bounce(faces: FaceSet, patches: PatchSet, F, sources):
@@ -501,13 +556,17 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
         t_reduce += time.perf_counter() - t3
         warnings.extend(_positivity_notes(model.problem, inv, red.final))
         warnings.extend(certificate_notes(model.problem, bounds, red.final))
+    fixed = None
+    if mode == "inverse":
+        fixed, notes = fixed_light(model)
+        warnings.extend(notes)
     warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
-    report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds)
+    report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]

@@ -53,7 +53,8 @@ def light_records(model, curve, row: int) -> list:
     return out
 
 
-def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None) -> dict:
+def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None,
+                 fixed_light=None) -> dict:
     """Stage 5: the JSON report of a solve or a reduce (see README.md), from jobs.Model, the job's
     JobOptions, the InverseResult (None in direct mode), the ReductionResult, jobs.Curve and the
     certificate's bounds."""
@@ -111,6 +112,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "n_negative": final.n_negative, "power": _power(problem, final),
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": light_records(model, curve, fi)},
+        "fixed_light": fixed_light,
         "objects": objects,
         "warnings": warnings,
     }

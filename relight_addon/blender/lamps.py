@@ -1,0 +1,137 @@
+"""The scene's lamps and World, read as Cycles renders them (bpy): Blender Light objects ->
+engine.lamps.Lamp, and a warning for every part of the scene's light that is not modelled.
+
+Read: Point (power, colour, radius = soft size), Spot (and its cone: size and blend), Area
+(square, rectangle, disk, ellipse; the object's scale scales the sizes, as in Cycles) and Sun
+(strength, angle) lamps that render (visible in the view layer, not disabled for rendering,
+diffuse visibility on), in world space; their shadows (Cast Shadow). Named in a warning, and
+not modelled: light node trees, area spread below 180 degrees, light and shadow linking, a
+point or spot lamp with soft falloff off (modelled as a point of the same intensity: exact
+where the whole sphere is seen), instanced lamps, and the World's light.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..engine.lamps import Lamp
+
+__all__ = ["export_lamps", "world_warning"]
+
+
+def _cycles(ld, name, default):
+    c = getattr(ld, "cycles", None)
+    return getattr(c, name, getattr(ld, name, default)) if c is not None else getattr(ld, name, default)
+
+
+def _default_light_nodes(ld) -> bool:
+    """True when the light has no node tree, or only the default Emission (strength 1, white)."""
+    if not getattr(ld, "use_nodes", False) or ld.node_tree is None:
+        return True
+    kinds = sorted(n.type for n in ld.node_tree.nodes)
+    if kinds != ["EMISSION", "OUTPUT_LIGHT"]:
+        return False
+    em = next(n for n in ld.node_tree.nodes if n.type == "EMISSION")
+    col, strength = em.inputs["Color"], em.inputs["Strength"]
+    return (not col.is_linked and not strength.is_linked and abs(strength.default_value - 1.0) < 1e-6
+            and all(abs(v - 1.0) < 1e-6 for v in tuple(col.default_value)[:3]))
+
+
+def _light_linking(ob) -> bool:
+    ll = getattr(ob, "light_linking", None)
+    return ll is not None and (getattr(ll, "receiver_collection", None) is not None
+                               or getattr(ll, "blocker_collection", None) is not None)
+
+
+def export_lamps(context, renderable, owner_prop) -> tuple:
+    """(lamps, warnings): the scene's lamps as engine.lamps.Lamp, and what is not modelled.
+    ``renderable``: the names of the objects that render (export.render_visible_objects);
+    ``owner_prop``: the custom property of what Relight made (its lamps are not scene light)."""
+    scene, view_layer = context.scene, context.view_layer
+    lamps, warnings = [], []
+    for ob in scene.objects:
+        if ob.type != "LIGHT" or ob.hide_render or ob.name not in renderable:
+            continue
+        if not ob.visible_get(view_layer=view_layer) or ob.get(owner_prop) is not None:
+            continue
+        ld = ob.data
+        name = ob.name
+        if not getattr(ob, "visible_diffuse", True):
+            warnings.append(f"lamp {name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
+                            "left out, as Cycles leaves it out of their light")
+            continue
+        color = np.array(ld.color, dtype=np.float64)[:3]
+        power = color * float(ld.energy)
+        if not np.any(power > 0):
+            continue
+        M = np.array(ob.matrix_world, dtype=np.float64)
+        X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
+        sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
+        if min(sx, sy, sz) <= 0:
+            warnings.append(f"lamp {name!r} is scaled to zero: left out")
+            continue
+        kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
+                  power=power, cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
+        notes = []
+        if ld.type in ("POINT", "SPOT"):
+            kw["radius"] = float(ld.shadow_soft_size)
+            if not getattr(ld, "use_soft_falloff", True) and kw["radius"] > 0:
+                notes.append("soft falloff off: modelled as a point lamp of the same intensity")
+                kw["radius"] = 0.0
+            if ld.type == "SPOT":
+                kw["spot_size"], kw["spot_blend"] = float(ld.spot_size), float(ld.spot_blend)
+                if max(sx, sy, sz) - min(sx, sy, sz) > 1e-6 * max(sx, sy, sz):
+                    notes.append("a non-uniform scale (an elliptic cone) is modelled as a round cone")
+        elif ld.type == "AREA":
+            su = float(ld.size)
+            sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
+            kw.update(size_u=su * sx, size_v=sv * sy, ellipse=ld.shape in ("DISK", "ELLIPSE"))
+            if float(getattr(ld, "spread", math.pi)) < math.pi - 1e-6:
+                notes.append(f"spread {math.degrees(ld.spread):.0f} degrees is modelled as 180 (the lamp's light is "
+                             "less focused than Cycles renders it)")
+        elif ld.type == "SUN":
+            kw["angle"] = float(ld.angle)
+        if not _default_light_nodes(ld):
+            notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
+        if _light_linking(ob):
+            notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")
+        lamps.append(Lamp(**kw))
+        warnings.extend(f"lamp {name!r}: {n}" for n in notes)
+    n_inst = 0
+    depsgraph = context.evaluated_depsgraph_get()
+    for inst in depsgraph.object_instances:
+        if inst.is_instance and inst.object.type == "LIGHT":
+            n_inst += 1
+    if n_inst:
+        warnings.append(f"{n_inst} instanced lamp(s) (in collection instances or particle systems) are not "
+                        "modelled: Cycles renders their light, the prediction leaves it out")
+    world = world_warning(scene)
+    if world:
+        warnings.append(world)
+    return lamps, warnings
+
+
+def world_warning(scene) -> str | None:
+    """A warning naming the World when it lights the scene: its light is not modelled yet."""
+    world = scene.world
+    if world is None:
+        return None
+    emits = False
+    if getattr(world, "use_nodes", True) and world.node_tree is not None:
+        out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
+        link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
+        node = link.from_node if link is not None else None
+        if node is not None:
+            if node.type == "BACKGROUND":
+                col, strength = node.inputs["Color"], node.inputs["Strength"]
+                emits = (col.is_linked or strength.is_linked
+                         or (strength.default_value > 0 and max(tuple(col.default_value)[:3]) > 0))
+            else:
+                emits = True
+    else:
+        emits = max(tuple(world.color)[:3]) > 0
+    if not emits:
+        return None
+    return (f"the World ({world.name!r}) lights the scene, and its light (a colour, a sky or an HDRI) is not "
+            "modelled yet: Cycles renders brighter than predicted; set its Strength to 0 to match the prediction")

@@ -1,0 +1,156 @@
+"""The scene's lamps against Cycles (issue 16): each lamp kind's direct irradiance, and the
+`radiosity` command in a room lit only by lamps, baked by Cycles (Lambertian materials, black
+World: tests/cycles_reference.py).
+
+Direct irradiance: a grey floor (albedo 0.5) of 8 x 8 faces, one lamp, a small blocker casting
+a shadow on the floor; Cycles bakes the floor's radiance L = albedo E / pi; the engine's
+``lamp_irradiance`` on the exported scene must give E on every lit face.
+"""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
+
+import cycles_reference as cr  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SAMPLES = 256
+ALBEDO = 0.5
+
+
+def _light(kind, location, rotation=(0.0, 0.0, 0.0), **props):
+    ld = bpy.data.lights.new(f"lamp_{kind.lower()}", kind)
+    for k, v in props.items():
+        setattr(ld, k, v)
+    ob = bpy.data.objects.new(ld.name, ld)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location, ob.rotation_euler = location, rotation
+    return ob
+
+
+def _floor_with_blocker():
+    cr.reset_blender()
+    bpy.context.scene.world = None  # no World light: only the lamp
+    grey = cr._material("grey", (ALBEDO,) * 3, lambertian=True)
+    v, f = cr.grid_quads((-2.0, -2.0, 0.0), (4.0, 0, 0), (0, 4.0, 0), 8, 8)
+    floor = cr.add_mesh_object("floor", v, f, grey)
+    black = cr._material("black", (0.0,) * 3, lambertian=True)
+    v, f = cr.grid_quads((-0.9, -0.3, 0.5), (0.6, 0, 0), (0, 0.6, 0), 1, 1)  # a tile floating at 0.5 m
+    cr.add_mesh_object("blocker", v, f, black)
+    return floor
+
+
+LAMPS = {
+    "point": ("POINT", (0.0, 0.0, 1.2), (0, 0, 0), dict(energy=120.0, shadow_soft_size=0.0)),
+    "point soft": ("POINT", (0.2, 0.1, 1.2), (0, 0, 0), dict(energy=120.0, shadow_soft_size=0.3)),
+    "spot": ("SPOT", (0.0, 0.0, 1.5), (0.3, 0.0, 0.0),
+             dict(energy=300.0, shadow_soft_size=0.0, spot_size=math.radians(80), spot_blend=0.3)),
+    "area rectangle": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
+                                                                      size_y=0.4)),
+    "area disk": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6)),
+    "sun": ("SUN", (0, 0, 3.0), (0.5, 0.2, 0.0), dict(energy=3.0, angle=math.radians(8))),
+}
+
+
+@pytest.mark.parametrize("name", list(LAMPS))
+def test_lamp_direct_irradiance_against_cycles(name):
+    from relight_addon.blender import export
+    from relight_addon.engine.lamps import lamp_irradiance
+    from relight_addon.engine.scene import mesh_patches
+
+    kind, loc, rot, props = LAMPS[name]
+    try:
+        floor = _floor_with_blocker()
+        _light(kind, loc, rot, **props)
+        exp = export.export_scene()
+        assert [lamp.kind for lamp in exp.faces.lamps] == [kind]
+        patches = mesh_patches(exp.faces, 10.0)
+        H = lamp_irradiance(patches, exp.faces.lamps, seed=0)[:, 0, 0]
+        oi = exp.faces.object_names.index("floor")
+        on_floor = patches.object == oi
+        ours = np.zeros(len(floor.data.polygons))
+        ours[exp.faces.face_index[patches.face[on_floor]]] = H[on_floor]
+        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, objects=[floor])["floor"]
+    finally:
+        cr.reset_blender()
+    E = math.pi * baked.radiance[:, 0] / ALBEDO
+    noise = math.pi * baked.std_error[:, 0] / ALBEDO
+    lit = E > 0.05 * E.max()
+    rel = np.abs(ours[lit] - E[lit]) / E[lit]
+    total = abs(ours[lit].sum() / E[lit].sum() - 1)
+    summary = (f"{name}: {lit.sum()} lit faces, mean {rel.mean():.4f} max {rel.max():.4f}, total {total:.4f}; "
+               f"Cycles noise {np.mean(noise[lit] / E[lit]):.4f}")
+    worst = np.argsort(-rel)[:3]
+    summary += "; worst faces (ours, Cycles, peak): " + ", ".join(
+        f"({ours[lit][i]:.3g}, {E[lit][i]:.3g})" for i in worst) + f", {E.max():.3g}"
+    print(summary)
+    assert lit.sum() >= 8, summary
+    assert total < 0.01, summary  # the lamp's power on the floor
+    assert rel.mean() < 0.02, summary
+    # per face: 8 %, or 2 % of the peak on faces the cone's or a shadow's edge crosses (sampled)
+    assert np.all(np.abs(ours[lit] - E[lit]) <= 0.08 * E[lit] + 0.02 * E.max() + 4 * noise[lit]), summary
+    # dark where Cycles is dark (outside a cone, behind the blocker)
+    dark = E < 0.005 * E.max()
+    assert np.all(ours[dark] <= 0.02 * E.max()), summary
+
+
+def _lamp_room(path):
+    cr.reset_blender()
+    bpy.context.scene.world = None
+    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
+    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=True)
+    W, D, H, n = 4.0, 3.0, 2.5, 4
+    quads = [  # inward-facing walls and ceiling, a floor
+        ("floor", (0, 0, 0), (W, 0, 0), (0, D, 0), floor_m),
+        ("ceiling", (0, D, H), (W, 0, 0), (0, -D, 0), walls),
+        ("wall_s", (0, 0, 0), (0, 0, H), (W, 0, 0), walls),
+        ("wall_n", (0, D, 0), (W, 0, 0), (0, 0, H), walls),
+        ("wall_w", (0, 0, 0), (0, D, 0), (0, 0, H), walls),
+        ("wall_e", (W, 0, 0), (0, 0, H), (0, D, 0), walls),
+    ]
+    for name, o, du, dv, m in quads:
+        v, f = cr.grid_quads(o, du, dv, n, n)
+        cr.add_mesh_object(name, v, f, m)
+    _light("POINT", (1.2, 1.5, 2.0), energy=150.0, shadow_soft_size=0.1)
+    _light("SPOT", (3.2, 1.0, 2.3), (0.4, 0.3, 0.0), energy=400.0, spot_size=math.radians(60), spot_blend=0.2)
+    bpy.context.scene["relight_max_patch_size"] = 0.5
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+
+def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
+    """`radiosity` on a closed room lit only by a point and a spot lamp: every face's radiosity
+    (direct and interreflected) against a Cycles bake of the same file."""
+    blend, report_path = tmp_path / "room.blend", tmp_path / "r.json"
+    try:
+        _lamp_room(blend)
+    finally:
+        cr.reset_blender()
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", "radiosity", str(blend), "--report",
+                           str(report_path), "--quiet"], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(report_path.read_text())
+    try:
+        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, blend_path=str(blend))
+    finally:
+        cr.reset_blender()
+    rel, signed, lines = [], [], []
+    for name, cyc in baked.items():
+        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
+        lum = cyc.radiance.sum(axis=1)
+        e = np.abs(ours.sum(axis=1) - lum) / lum
+        rel.append(e)
+        signed.append((ours.sum(axis=1) - lum) / lum)
+        lines.append(f"{name}: mean {e.mean():.4f} max {e.max():.4f} signed {signed[-1].mean():+.4f}")
+    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
+        "\n".join(lines)
+    print(summary)
+    assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
+    assert rel.max() < 0.08, summary
