@@ -60,12 +60,14 @@ class FaceRadiance:
         return np.where(m > 0, self.std_error / np.where(m > 0, m, 1.0), 0.0)
 
 
-def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_light_paths: bool = False):
+def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_light_paths: bool = False,
+                     keep_world: bool = False):
     """Cycles CPU settings for an unbiased, unclamped, Lambertian-comparable bake.
 
     ``keep_light_paths``: leave the scene's own clamping, bounce limits, caustics, glossy
     filter and light threshold as they are (what an artist renders with); only the device,
-    samples, seed, denoising/adaptive sampling, view transform and the black world are set."""
+    samples, seed, denoising/adaptive sampling, view transform and the black world are set.
+    ``keep_world``: the World lights the bake as the file has it (else it is made black)."""
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -83,6 +85,8 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_
     if threads:
         scene.render.threads_mode = "FIXED"
         scene.render.threads = int(threads)
+    if keep_world:
+        return
     # No world light.
     world = scene.world or bpy.data.worlds.new("relight_black_world")
     scene.world = world
@@ -94,6 +98,19 @@ def configure_cycles(scene, samples: int, seed: int = 0, threads: int = 0, keep_
         bg.inputs["Strength"].default_value = 0.0
         bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
     world.color = (0.0, 0.0, 0.0)
+
+
+def black_world(name="World"):
+    """A World that gives no light (black background): for scenes lit by their emitters alone.
+    Relight counts the World's light (engine.lamps.world_irradiance), as Cycles does."""
+    world = bpy.data.worlds.new(name)
+    world.color = (0.0, 0.0, 0.0)
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    bg = next((n for n in world.node_tree.nodes if n.type == "BACKGROUND"), None) if world.node_tree else None
+    if bg is not None:
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    return world
 
 
 def _unbiased_light_paths(c):
@@ -225,7 +242,7 @@ def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
 
 def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
                          blend_path: str | None = None, threads: int = 0, keep_materials: bool = False,
-                         keep_light_paths: bool = False) -> dict:
+                         keep_light_paths: bool = False, keep_world: bool = False) -> dict:
     """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
 
     Works on the current Blender data, or opens ``blend_path`` first. Modifies
@@ -240,7 +257,7 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     if blend_path is not None:
         bpy.ops.wm.open_mainfile(filepath=str(blend_path))
     scene = bpy.context.scene
-    configure_cycles(scene, samples, seed, threads, keep_light_paths=keep_light_paths)
+    configure_cycles(scene, samples, seed, threads, keep_light_paths=keep_light_paths, keep_world=keep_world)
     if not keep_materials:
         make_lambertian()
     one_sided_emission()  # Cycles' mesh emission is two-sided; the radiosity model's is not
@@ -316,7 +333,7 @@ def build_parallel_emitter_scene(side=1.0, height=0.5, n_recv=6, strength=2.0, a
     """
     reset_blender()
     if bpy.context.scene.world is None:
-        bpy.context.scene.world = bpy.data.worlds.new("World")
+        bpy.context.scene.world = black_world()
     h = side / 2
     v, f = grid_quads((-h, -h, 0.0), (side, 0, 0), (0, side, 0), n_recv, n_recv)
     recv = add_mesh_object("Receiver", v, f, _material("grey", (albedo,) * 3))
@@ -381,7 +398,7 @@ def build_cornell_box(n=5, radiance=10.0):
     if n % 2 != 1:
         raise ValueError("n must be odd so that the light is the central ceiling cell")
     reset_blender()
-    bpy.context.scene.world = bpy.data.worlds.new("World")
+    bpy.context.scene.world = black_world()
     L = CORNELL_SIZE
     white = _material("white", CORNELL_WHITE)
     objs = []

@@ -62,7 +62,7 @@ def build_room(path: Path) -> None:
     Level 0 -- Lambert, as the bake below makes every material -- plain base colours, no emission), a 0.5 m block on the floor, targets painted in the
     ``relight_target`` corner layer, floor and block forbidden as light positions."""
     cr.reset_blender()
-    bpy.context.scene.world = bpy.data.worlds.new("World")
+    bpy.context.scene.world = cr.black_world()
     walls = [  # name, origin, du, dv with du x dv pointing into the room
         ("Floor", (0, 0, 0), (W, 0, 0), (0, W, 0)),
         ("Ceiling", (0, 0, H), (0, W, 0), (W, 0, 0)),

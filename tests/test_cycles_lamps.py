@@ -154,3 +154,115 @@ def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
     print(summary)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.08, summary
+
+
+def _paint(ob, polygons, rgb):
+    me = ob.data
+    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+    col = np.zeros((len(me.loops), 4), dtype=np.float32)
+    for p in polygons:
+        poly = me.polygons[p]
+        col[poly.loop_start:poly.loop_start + poly.loop_total] = (*rgb, 1.0)
+    layer.data.foreach_set("color", col.ravel())
+
+
+def test_solve_counts_the_lamps_closed_loop(tmp_path):
+    """A room lit by a Point and a Spot lamp, targets on the floor asking for about twice what the
+    lamps give there, lights only on the ceiling: `solve --out`, then Cycles bakes the written
+    file (its emitters object and the lamps). The targets show what the report predicts, and the
+    lamps are listed as fixed light with a large share."""
+    blend, report_path, out = tmp_path / "room.blend", tmp_path / "r.json", tmp_path / "out.blend"
+    try:
+        _lamp_room(blend)
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        objs = bpy.data.objects
+        n = 4
+        _paint(objs["floor"], [j * n + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8))
+        for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
+            objs[name]["relight_no_lights"] = True
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        cr.reset_blender()
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", "solve", str(blend), "--report", str(report_path),
+                           "--out", str(out), "--seed", "1", "--quiet"], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(report_path.read_text())
+    lamps = {r["name"]: r for r in report["fixed_light"] if r["kind"] in ("point", "spot")}
+    assert set(lamps) == {"lamp_point", "lamp_spot"}, report["fixed_light"]
+    share = sum(r["share"] for r in lamps.values())
+    assert 0.3 < share < 0.9, share  # a large share of the painted light, not all of it
+    try:
+        baked = cr.cycles_face_radiance(samples=1024, seed=2, blend_path=str(out), objects=None)
+    finally:
+        cr.reset_blender()
+    ours = np.asarray(report["objects"]["floor"]["radiosity"], dtype=np.float64) / math.pi
+    target = np.array([t is not None for t in report["objects"]["floor"]["target"]])
+    got = baked["floor"].radiance
+    e = np.abs(ours[target].sum(axis=1) - got[target].sum(axis=1)) / got[target].sum(axis=1)
+    signed = (ours[target].sum(axis=1) - got[target].sum(axis=1)) / got[target].sum(axis=1)
+    summary = (f"lamps' share {share:.2f}; {report['final']['n_lights']} lights, relative error "
+               f"{report['final']['relative_error']:.3f}; targets: mean {e.mean():.4f} max {e.max():.4f} "
+               f"signed {signed.mean():+.4f}")
+    print(summary)
+    assert e.mean() < 0.02 and e.max() < 0.05, summary
+
+
+def _world(color, strength=1.0):
+    world = bpy.data.worlds.new("sky")
+    bpy.context.scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (*color, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    return world
+
+
+def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
+    """A room whose south wall has a window (two quads left out), lit only by a uniform World
+    and a Sun through the window: every face's radiosity against Cycles baking the same file
+    with its World."""
+    blend, report_path = tmp_path / "window.blend", tmp_path / "r.json"
+    try:
+        _lamp_room(blend)
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        for ob in [o for o in bpy.data.objects if o.type == "LIGHT"]:
+            bpy.data.objects.remove(ob)
+        import bmesh
+
+        me = bpy.data.objects["wall_s"].data
+        bm = bmesh.new()
+        bm.from_mesh(me)
+        bm.faces.ensure_lookup_table()
+        bmesh.ops.delete(bm, geom=[bm.faces[i] for i in (5, 6, 9, 10)], context="FACES_ONLY")  # a 2 x 1.25 m window
+        bm.to_mesh(me)
+        bm.free()
+        _world((0.4, 0.5, 0.7), 1.0)
+        _light("SUN", (0, 0, 5), (math.radians(-55), 0.0, 0.0), energy=2.0, angle=math.radians(2))
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        cr.reset_blender()
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", "radiosity", str(blend), "--report",
+                           str(report_path), "--quiet"], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    report = json.loads(report_path.read_text())
+    try:
+        baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
+    finally:
+        cr.reset_blender()
+    rel, signed, lines = [], [], []
+    for name, cyc in baked.items():
+        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
+        lum = cyc.radiance.sum(axis=1)
+        e = np.abs(ours.sum(axis=1) - lum) / lum
+        rel.append(e)
+        signed.append((ours.sum(axis=1) - lum) / lum)
+        lines.append(f"{name}: mean {e.mean():.4f} max {e.max():.4f} signed {signed[-1].mean():+.4f}")
+    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
+        "\n".join(lines)
+    print(summary)
+    assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
+    assert rel.max() < 0.10, summary

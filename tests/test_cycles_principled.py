@@ -92,7 +92,7 @@ def build_furnished_room(path: Path) -> None:
     table top and on the wall behind the sofa. Cycles is the render engine (defaults otherwise)."""
     cr.reset_blender()
     scene = bpy.context.scene
-    scene.world = bpy.data.worlds.new("World")
+    scene.world = cr.black_world()
     scene.render.engine = "CYCLES"
     W, D, H = ROOM
     nx, ny, nz = round(W / CELL), round(D / CELL), round(H / CELL)
@@ -246,7 +246,7 @@ def test_glossy_plane_under_a_lamp(tmp_path):
     which B/pi (the view average) misses by ~13 % under the lamp; radiance_normal gathers it
     through the GGX lobe: every face within 2 % of Cycles (measured 0.6 % at 65536 rays)."""
     cr.reset_blender()
-    bpy.context.scene.world = bpy.data.worlds.new("World")
+    bpy.context.scene.world = cr.black_world()
     bpy.context.scene.render.engine = "CYCLES"
     v, f = cr.grid_quads((-0.35, -0.35, 0), (0.7, 0, 0), (0, 0.7, 0), 7, 7)
     cr.add_mesh_object("Floor", v, f, _principled("floor", (0.73, 0.71, 0.68)))

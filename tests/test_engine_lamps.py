@@ -91,3 +91,24 @@ def test_inverse_problem_subtracts_the_lamps_radiosity():
         np.testing.assert_allclose(prob.background_radiosity[:, c], B_lamp, rtol=1e-10, atol=1e-12)
         np.testing.assert_allclose(prob.b_target[:, c], 5.0 - B_lamp[floor], rtol=1e-10)
     assert prob.target_norm == pytest.approx(np.linalg.norm(painted[floor]))  # relative errors: of what was painted
+
+
+def test_uniform_world_lights_what_sees_the_sky():
+    from relight_addon.engine.lamps import world_irradiance
+
+    L = np.array([1.0, 0.5, 0.25])
+    ps, _ = _grid()  # a floor alone: its whole hemisphere is sky
+    np.testing.assert_allclose(world_irradiance(ps, L), np.pi * np.broadcast_to(L, (ps.n_patches, 3)), rtol=1e-12)
+    # a closed box (faces inward): no ray escapes
+    from relight_addon.engine import closed_forms as cf
+
+    box = cf.box_polygons()
+    closed = mesh_patches(polygon_faceset(box), 10.0)
+    np.testing.assert_array_equal(world_irradiance(closed, L), 0.0)
+    # the box without its top: the floor sees the sky through a unit square 1 m up; the share of
+    # its cosine-weighted hemisphere is the form factor to that square (Howell C-11), mean over the floor
+    open_box = mesh_patches(polygon_faceset([p for i, p in enumerate(box) if i != 1]), 10.0)
+    E = world_irradiance(open_box, L, rays_per_patch=4096)
+    floor = np.flatnonzero(open_box.center[:, 2] < 1e-9)
+    F = cf.parallel_rectangles(1.0, 1.0, 1.0)
+    assert E[floor, 0].mean() == pytest.approx(np.pi * L[0] * F, rel=0.03)

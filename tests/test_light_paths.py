@@ -46,7 +46,7 @@ def test_cycles_bounce_limit_keeps_limit_plus_one_reflections(bpy_clean):
              ((0, 1, 0), (1, 0, 0), (0, 0, 1)), ((0, 0, 0), (0, 1, 0), (0, 0, 1)), ((1, 0, 0), (0, 0, 1), (0, 1, 0))]
     for D in (1, 2):
         cr.reset_blender()
-        bpy.context.scene.world = bpy.data.worlds.new("W")
+        bpy.context.scene.world = cr.black_world("W")
         mat = cr._material("box", (rho,) * 3, (1, 1, 1), 1.0)
         mat.node_tree.nodes["Principled BSDF"].inputs["Specular IOR Level"].default_value = 0.0
         verts, faces = [], []

@@ -68,7 +68,7 @@ import numpy as np
 
 from ..engine.scene import FaceSet, SceneError
 from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
-from .lamps import export_lamps
+from .lamps import export_lamps, world_light
 
 DEFAULT_REFLECTANCE = 0.8
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
@@ -610,7 +610,11 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
     lamps, lamp_warnings = export_lamps(context, renderable, RELIGHT_OWNER_PROP)
-    warnings.extend(w for w in lamp_warnings if w not in warnings)
+    try:
+        world_L, world_name, world_note = world_light(context.scene)
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    warnings.extend(w for w in lamp_warnings + ([world_note] if world_note else []) if w not in warnings)
     faces = FaceSet(
         vertices=np.concatenate(b.verts),
         triangles=np.concatenate(b.tris),
@@ -630,6 +634,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         face_material=np.concatenate(b.f_mat),
         material_lobes=b.lobes,
         lamps=lamps,
+        world_radiance=world_L,
+        world_name=world_name,
     )
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,

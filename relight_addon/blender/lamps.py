@@ -7,7 +7,8 @@ Read: Point (power, colour, radius = soft size), Spot (and its cone: size and bl
 diffuse visibility on), in world space; their shadows (Cast Shadow). Named in a warning, and
 not modelled: light node trees, area spread below 180 degrees, light and shadow linking, a
 point or spot lamp with soft falloff off (modelled as a point of the same intensity: exact
-where the whole sphere is seen), instanced lamps, and the World's light.
+where the whole sphere is seen) and instanced lamps. The World: a uniform colour is modelled
+(``world_light``); a texture or another shader is named and left out.
 """
 from __future__ import annotations
 
@@ -17,7 +18,7 @@ import numpy as np
 
 from ..engine.lamps import Lamp
 
-__all__ = ["export_lamps", "world_warning"]
+__all__ = ["export_lamps", "world_light"]
 
 
 def _cycles(ld, name, default):
@@ -106,32 +107,39 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
     if n_inst:
         warnings.append(f"{n_inst} instanced lamp(s) (in collection instances or particle systems) are not "
                         "modelled: Cycles renders their light, the prediction leaves it out")
-    world = world_warning(scene)
-    if world:
-        warnings.append(world)
     return lamps, warnings
 
 
-def world_warning(scene) -> str | None:
-    """A warning naming the World when it lights the scene: its light is not modelled yet."""
+def world_light(scene) -> tuple:
+    """(uniform radiance (3,) W/(m^2 sr) or None, the World's name, a warning or None): the World
+    as Cycles lights diffuse surfaces with it. A uniform colour (Background: Color x Strength, or
+    the World colour without nodes) is modelled; a texture (a sky, an HDRI) or another shader is
+    named in a warning and left out."""
     world = scene.world
     if world is None:
-        return None
-    emits = False
+        return None, "", None
+    vis = getattr(world, "cycles_visibility", None)
+    if vis is not None and not getattr(vis, "diffuse", True):
+        return None, world.name, None  # Cycles does not light diffuse surfaces with it either
     if getattr(world, "use_nodes", True) and world.node_tree is not None:
         out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
-        link = out.inputs["Surface"].links[0] if out is not None and out.inputs["Surface"].is_linked else None
-        node = link.from_node if link is not None else None
-        if node is not None:
-            if node.type == "BACKGROUND":
-                col, strength = node.inputs["Color"], node.inputs["Strength"]
-                emits = (col.is_linked or strength.is_linked
-                         or (strength.default_value > 0 and max(tuple(col.default_value)[:3]) > 0))
-            else:
-                emits = True
+        if out is None:
+            out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD"), None)
+        if out is None or not out.inputs["Surface"].is_linked:
+            return None, world.name, None
+        node = out.inputs["Surface"].links[0].from_node
+        if node.type == "BACKGROUND" and not node.inputs["Color"].is_linked and not node.inputs["Strength"].is_linked:
+            L = np.array(node.inputs["Color"].default_value, dtype=np.float64)[:3] * float(
+                node.inputs["Strength"].default_value)
+        else:
+            return None, world.name, (
+                f"the World ({world.name!r}) lights the scene through a texture or a shader node ({node.name}): "
+                "only a uniform colour is modelled yet, so its light (a sky, an HDRI) is left out and Cycles "
+                "renders brighter than predicted; set its Strength to 0 to match the prediction")
     else:
-        emits = max(tuple(world.color)[:3]) > 0
-    if not emits:
-        return None
-    return (f"the World ({world.name!r}) lights the scene, and its light (a colour, a sky or an HDRI) is not "
-            "modelled yet: Cycles renders brighter than predicted; set its Strength to 0 to match the prediction")
+        L = np.array(world.color, dtype=np.float64)[:3]
+    if not np.all(np.isfinite(L)):
+        raise ValueError(f"the World ({world.name!r}) has a NaN or infinite colour or strength")
+    if not np.any(L > 0):
+        return None, world.name, None
+    return np.maximum(L, 0.0), world.name, None

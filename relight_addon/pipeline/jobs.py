@@ -21,7 +21,7 @@ from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, est
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
 from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
-from ..engine.lamps import lamp_irradiance
+from ..engine.lamps import lamp_irradiance, world_irradiance
 from ..engine.lights import LightSet, candidate_mask
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
@@ -78,7 +78,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     F = None
     t_ff = t_solve = 0.0
     info = {}
-    if not np.any(patches.exitance > 0) and not faces.lamps:
+    if not np.any(patches.exitance > 0) and not has_scene_light(faces):
         warnings.append(NO_EMITTER_WARNING)
         B = np.zeros((P, 3))
     else:
@@ -92,7 +92,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
             source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
-        H = lamps_irradiance(faces, patches, F, options.seed).sum(axis=1)
+        H = scene_light(faces, patches, F, options.seed)[0].sum(axis=1)
         B, info = solve_radiosity(F, patches.reflectance, source + patches.reflectance * H)
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
@@ -114,7 +114,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
 
 # ---------------------------------------------------------------------------- inverse lighting
 
-BACKGROUND_NOTE = ("the scene's own light ({lamps} lamp(s), {n} emissive face(s)) is kept as fixed background light; "
+BACKGROUND_NOTE = ("the scene's own light ({lamps} lamp(s){world}, {n} emissive face(s)) is kept as fixed background light; "
                    "the solve lights what they leave to the targets")
 
 
@@ -235,7 +235,8 @@ class Model:
     cost: dict
     seconds: dict
     refinement: dict = None  # adaptive model: passes made and the target change after each
-    lamp_irradiance: np.ndarray = None  # (P, n_lamps, 3) W/m^2: each scene lamp's direct irradiance (fixed light)
+    lamp_irradiance: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct irradiance (fixed)
+    lamp_names: list = None  # [(name, kind, power)] per column of lamp_irradiance
 
 
 @dataclass
@@ -313,13 +314,13 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             raise Cancelled("solve cancelled")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
-        lamp_H = np.zeros((patches.n_patches, 0, 3))
+        lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
         e_start = None
         if mode == "inverse":
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
                 background = patches.exitance.copy()
-            lamp_H = lamps_irradiance(faces, patches, F, options.seed)
+            lamp_H, lamp_names = scene_light(faces, patches, F, options.seed)
             problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                                      mask, patches.center, patches.normal, lights=lights,
                                      first_bounce=first_bounce(faces, patches, F, mask | emitting),
@@ -343,16 +344,19 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         check_memory(solve_cost(patches, options, len(faces.triangles), mode),
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
-    if mode == "inverse" and (np.any(background > 0) or faces.lamps):
+    if mode == "inverse" and (np.any(background > 0) or has_scene_light(faces)):
         emitting = np.any(patches.exitance > 0, axis=1)
-        warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps)))
-    if mode == "direct" and faces.lamps:
-        warnings.append(f"the scene's {len(faces.lamps)} lamp(s) are not reduced by this mode (only emissive "
-                        f"materials are): they are left out of the reduction and of its radiosity "
-                        f"({', '.join(l.name for l in faces.lamps[:5])}{' ...' if len(faces.lamps) > 5 else ''})")
+        warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps),
+                                               world=", the World" if faces.world_radiance is not None else ""))
+    if mode == "direct" and has_scene_light(faces):
+        what = [lamp.name for lamp in faces.lamps] + ([faces.world_name or "World"] if faces.world_radiance is not None
+                                                      else [])
+        warnings.append(f"the scene's lamps and World are not reduced by this mode (only emissive materials are): "
+                        f"left out of the reduction and of its radiosity ({', '.join(what[:5])}"
+                        f"{' ...' if len(what) > 5 else ''})")
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H)
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H, lamp_names)
 
 
 def solve_stage(model: Model, options: JobOptions) -> tuple:
@@ -427,9 +431,9 @@ def fixed_light(model: Model) -> tuple:
         return float(np.sum(w[:, None] * B[tg]) / painted) if painted > 0 else None
 
     rows = []
-    for i, lamp in enumerate(faces.lamps):
+    for i, (name, kind, power) in enumerate(model.lamp_names or []):
         B = problem.forward_radiosity(zero, model.lamp_irradiance[:, i])
-        rows.append({"name": lamp.name, "kind": lamp.kind.lower(), "power": lamp.power, "share": share(B)})
+        rows.append({"name": name, "kind": kind, "power": power, "share": share(B)})
     emitting = np.any(model.background > 0, axis=1)
     for oi in np.unique(patches.object[emitting]):
         e = np.where((patches.object == oi)[:, None], model.background, 0.0)
@@ -443,16 +447,26 @@ def fixed_light(model: Model) -> tuple:
         got = float(np.sum(problem.area[sel, None] * B_bg[sel]))
         if want > 0 and got > want * (1 + ALREADY_BRIGHTER):
             notes.append(f"{faces.object_names[oi]}: its targets are already {100 * (got / want - 1):.0f} % brighter "
-                         "than painted without any new light (the scene's own lamps and emitters)")
+                         "than painted without any new light (the scene's own lamps, World and emitters)")
     return rows, notes
 
 
-def lamps_irradiance(faces: FaceSet, patches: PatchSet, F, seed=0) -> np.ndarray:
-    """(P, n_lamps, 3) W/m^2: the direct irradiance of the scene's lamps (engine.lamps), shadow rays
-    cast on the form factors' sampler (one Embree scene per solve)."""
-    if not faces.lamps:
-        return np.zeros((patches.n_patches, 0, 3))
-    return lamp_irradiance(patches, faces.lamps, sampler=getattr(F, "sampler", None), seed=seed)
+def scene_light(faces: FaceSet, patches: PatchSet, F, seed=0) -> tuple:
+    """The light the scene already has, besides its emissive materials: (H (P, n, 3) W/m^2, the
+    direct irradiance of each lamp and of the World (engine.lamps); [(name, kind, power)] per
+    column). Shadow and sky rays are cast on the form factors' sampler (one Embree scene)."""
+    sampler = getattr(F, "sampler", None)
+    cols = [lamp_irradiance(patches, faces.lamps, sampler=sampler, seed=seed)]
+    names = [(lamp.name, lamp.kind.lower(), lamp.power) for lamp in faces.lamps]
+    if faces.world_radiance is not None:
+        cols.append(world_irradiance(patches, faces.world_radiance, sampler=sampler, seed=seed)[:, None, :])
+        names.append((faces.world_name or "World", "world", None))
+    return np.concatenate(cols, axis=1), names
+
+
+def has_scene_light(faces: FaceSet) -> bool:
+    """Whether the scene has lamps or a World that lights it (engine.lamps)."""
+    return bool(faces.lamps) or faces.world_radiance is not None
 
 
 def first_bounce(faces: FaceSet, patches: PatchSet, F, sources):
