@@ -100,6 +100,23 @@ def test_lamp_direct_irradiance_against_cycles(name):
     assert np.all(ours[dark] <= 0.02 * E.max()), summary
 
 
+def _against_cycles(report, baked):
+    """Per face (every baked object), the report's radiosity / pi against Cycles' radiance, channels
+    summed: (relative errors, signed errors, a summary printed and returned)."""
+    rel, signed, lines = [], [], []
+    for name, cyc in baked.items():
+        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
+        lum = cyc.radiance.sum(axis=1)
+        rel.append(np.abs(ours.sum(axis=1) - lum) / lum)
+        signed.append((ours.sum(axis=1) - lum) / lum)
+        lines.append(f"{name}: mean {rel[-1].mean():.4f} max {rel[-1].max():.4f} signed {signed[-1].mean():+.4f}")
+    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
+        "\n".join(lines)
+    print(summary)
+    return rel, signed, summary
+
+
 def _lamp_room(path):
     cr.reset_blender()
     bpy.context.scene.world = None
@@ -140,18 +157,7 @@ def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
         baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, blend_path=str(blend))
     finally:
         cr.reset_blender()
-    rel, signed, lines = [], [], []
-    for name, cyc in baked.items():
-        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
-        lum = cyc.radiance.sum(axis=1)
-        e = np.abs(ours.sum(axis=1) - lum) / lum
-        rel.append(e)
-        signed.append((ours.sum(axis=1) - lum) / lum)
-        lines.append(f"{name}: mean {e.mean():.4f} max {e.max():.4f} signed {signed[-1].mean():+.4f}")
-    rel, signed = np.concatenate(rel), np.concatenate(signed)
-    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
-        "\n".join(lines)
-    print(summary)
+    rel, signed, summary = _against_cycles(report, baked)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.08, summary
 
@@ -252,17 +258,6 @@ def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
         baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
     finally:
         cr.reset_blender()
-    rel, signed, lines = [], [], []
-    for name, cyc in baked.items():
-        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
-        lum = cyc.radiance.sum(axis=1)
-        e = np.abs(ours.sum(axis=1) - lum) / lum
-        rel.append(e)
-        signed.append((ours.sum(axis=1) - lum) / lum)
-        lines.append(f"{name}: mean {e.mean():.4f} max {e.max():.4f} signed {signed[-1].mean():+.4f}")
-    rel, signed = np.concatenate(rel), np.concatenate(signed)
-    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
-        "\n".join(lines)
-    print(summary)
+    rel, signed, summary = _against_cycles(report, baked)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.10, summary
