@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import bpy
 import numpy as np
 
 from ..engine.lamps import Lamp
@@ -26,9 +27,17 @@ def _cycles(ld, name, default):
     return getattr(c, name, getattr(ld, name, default)) if c is not None else getattr(ld, name, default)
 
 
+def _uses_nodes(idblock) -> bool:
+    """Whether a World's or a light's node tree is what renders (``use_nodes`` is always on, and
+    deprecated, from Blender 5.0)."""
+    if getattr(idblock, "node_tree", None) is None:
+        return False
+    return bpy.app.version >= (5, 0, 0) or bool(getattr(idblock, "use_nodes", False))
+
+
 def _default_light_nodes(ld) -> bool:
     """True when the light has no node tree, or only the default Emission (strength 1, white)."""
-    if not getattr(ld, "use_nodes", False) or ld.node_tree is None:
+    if not _uses_nodes(ld):
         return True
     kinds = sorted(n.type for n in ld.node_tree.nodes)
     if kinds != ["EMISSION", "OUTPUT_LIGHT"]:
@@ -121,7 +130,7 @@ def world_light(scene) -> tuple:
     vis = getattr(world, "cycles_visibility", None)
     if vis is not None and not getattr(vis, "diffuse", True):
         return None, world.name, None  # Cycles does not light diffuse surfaces with it either
-    if getattr(world, "use_nodes", True) and world.node_tree is not None:
+    if _uses_nodes(world):
         out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
         if out is None:
             out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD"), None)
