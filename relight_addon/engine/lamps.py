@@ -247,20 +247,29 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
 WORLD_RAYS = 1024
 
 
+#: a patch whose form-factor rows leave less than this share of its hemisphere unaccounted for
+#: sees (almost) no sky: it casts no sky rays (its sky light is at most this x pi L)
+SKY_MIN = 1e-3
+
+
 def world_irradiance(patches, radiance, sampler: SceneSampler | None = None, seed: int = 0,
-                     rays_per_patch: int = WORLD_RAYS) -> np.ndarray:
+                     rays_per_patch: int = WORLD_RAYS, sky_share=None) -> np.ndarray:
     """(P, 3) direct irradiance (W/m^2) of a World of uniform ``radiance`` (3,) W/(m^2 sr) on each
     patch: pi L times the share of the patch's cosine-weighted hemisphere that escapes the scene
     (rays from stratified points, one cosine-weighted direction each, the directions stratified
-    over the hemisphere too; a ray that hits any triangle, front or back, sees no sky)."""
+    over the hemisphere too; a ray that hits any triangle, front or back, sees no sky).
+    ``sky_share`` (P,): an upper bound of each patch's escaping share, 1 - its form-factor row sum
+    (rays that leave the scene or hit a back side): patches below SKY_MIN cast no rays (a closed
+    room costs nothing)."""
     P = patches.n_patches
     L = np.asarray(radiance, dtype=np.float64).reshape(3)
     g = _Geometry(patches, rays_per_patch, sampler=sampler)
     sm = g.sampler
     rng = np.random.default_rng([int(seed), 11])
     out = np.zeros((P, 3))
-    for c0 in range(0, P, CHUNK_PATCHES):
-        s = np.arange(c0, min(P, c0 + CHUNK_PATCHES))
+    open_ = np.arange(P) if sky_share is None else np.flatnonzero(np.asarray(sky_share) > SKY_MIN)
+    for c0 in range(0, len(open_), CHUNK_PATCHES):
+        s = open_[c0:c0 + CHUNK_PATCHES]
         y, ny = _sample_patches(g, s, rays_per_patch, rng)
         y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
         ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)

@@ -459,7 +459,10 @@ def scene_light(faces: FaceSet, patches: PatchSet, F, seed=0) -> tuple:
     cols = [lamp_irradiance(patches, faces.lamps, sampler=sampler, seed=seed)]
     names = [(lamp.name, lamp.kind.lower(), lamp.power) for lamp in faces.lamps]
     if faces.world_radiance is not None:
-        cols.append(world_irradiance(patches, faces.world_radiance, sampler=sampler, seed=seed)[:, None, :])
+        M = getattr(F, "matrix", F)
+        rows = np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1)
+        cols.append(world_irradiance(patches, faces.world_radiance, sampler=sampler, seed=seed,
+                                     sky_share=1.0 - rows)[:, None, :])
         names.append((faces.world_name or "World", "world", None))
     return np.concatenate(cols, axis=1), names
 
