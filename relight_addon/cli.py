@@ -406,7 +406,7 @@ def run_radiosity_command(args, progress=None, cancel=None):
     if result.form_factors is not None and result.patches.n_patches <= viewing.MAX_PATCHES // 4:
         rows = viewing.normal_radiance(exp.faces, result.patches, result.form_factors, result.patch_radiosity,
                                        exp.face_material, exp.material_lobes, inputs["polygon_counts"],
-                                       exitance=result.patches.exitance)
+                                       exitance=result.patches.exitance, scene_light=result.scene_light)
     reports.finish(report, None, light_paths.assess_radiosity(bpy.context.scene, result), rows,
                    export_seconds=exp.seconds, input_path=os.path.abspath(args.scene))
 

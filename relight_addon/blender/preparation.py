@@ -69,4 +69,5 @@ class SolveJob:
         if self.mode == "inverse":
             e = e + outcome.patches.exitance  # the scene's own emitters (fixed background)
         return viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, self.exp.face_material,
-                                       self.exp.material_lobes, self.inputs["polygon_counts"], mask, exitance=e)
+                                       self.exp.material_lobes, self.inputs["polygon_counts"], mask, exitance=e,
+                                       scene_light=outcome.scene_light)

@@ -54,7 +54,7 @@ def _frame(n):
 
 
 def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
-                  source_glossy=True, max_pairs=MAX_PAIRS, exitance=None) -> np.ndarray:
+                  source_glossy=True, max_pairs=MAX_PAIRS, exitance=None, lamp_light=None) -> np.ndarray:
     """(len(patches), 3) radiance (W m^-2 sr^-1) seen along ``view`` (world unit vectors
     (len(patches), 3); default: each patch's normal, what a bake shows) on ``patches``.
 
@@ -65,7 +65,10 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     light through their own BSDF towards the patch (module docstring); skipped when
     patches x sources x emitters exceeds ``max_pairs``. ``exitance`` (P, 3): the emitters'
     exitance e; default B - rho F B (right when B was solved without engine.incidence's
-    first-reflection term, which B - rho F B would count as emission)."""
+    first-reflection term, which B - rho F B would count as emission). ``lamp_light``: [(towards
+    (P, 3) unit world directions from each patch to a lamp, or None for light from every
+    direction (the World), H (P, 3) its direct irradiance W/m^2)]: each lamp's light reflected
+    through the patch's BSDF at its direction, f(l, v) H (the World's: rho H / pi)."""
     M = getattr(F, "matrix", F)
     B = np.asarray(B, dtype=np.float64)
     rho = np.asarray(reflectance, dtype=np.float64)
@@ -111,6 +114,11 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         else:
             src = B[js] / np.pi
         out[k] = e[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
+        for towards, H in lamp_light or ():
+            if towards is None:
+                out[k] += rho[i] * H[i] / np.pi
+            elif np.any(H[i] > 0):
+                out[k] += tables[int(material[i])](v, _above((R @ towards[i])[None, :]))[0] * H[i]
     return out
 
 

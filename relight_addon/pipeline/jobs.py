@@ -47,6 +47,7 @@ class RadiosityResult:
     polygon_radiosity: dict  # object name -> (n_polygons, 3) W/m^2, base-mesh polygon order
     polygon_area: dict  # object name -> (n_polygons,) m^2 (world space; 0 for unreported polygons)
     form_factors: object = None
+    scene_light: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct light (jobs.scene_light)
 
 
 def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
@@ -92,8 +93,9 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
             source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
-        H = scene_light(faces, patches, F, options.seed)[0].sum(axis=1)
-        B, info = solve_radiosity(F, patches.reflectance, source + patches.reflectance * H)
+        H = scene_light(faces, patches, F, options.seed)[0] if has_scene_light(faces) else None
+        source = source if H is None else source + patches.reflectance * H.sum(axis=1)
+        B, info = solve_radiosity(F, patches.reflectance, source)
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
         if not info.get("converged", True):
@@ -108,7 +110,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     timings = {"export": 0.0, "meshing": t_mesh, "form_factors": t_ff, "solve": t_solve, "apply": 0.0,
                "total": time.perf_counter() - t0}
     report = radiosity_report(faces, patches, options, F, info, poly, cost, warnings, timings)
-    result = RadiosityResult(patches, B, B_face, poly, areas, F)
+    result = RadiosityResult(patches, B, B_face, poly, areas, F, None if F is None else H)
     return report, result
 
 
@@ -271,6 +273,7 @@ class SolveOutcome:
     problem: object
     inverse: object
     reduction: object
+    scene_light: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct light (fixed)
 
 
 def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
@@ -589,7 +592,7 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
              "curve_index": int(i)} for i in curve.keep]
     stored = StoredResult.from_solve(model, red, curve, report)
     return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
-                        model.problem, inv, red)
+                        model.problem, inv, red, model.lamp_irradiance)
 
 
 #: above this relative error, the final configuration is compared with the best positive one

@@ -19,19 +19,34 @@ MAX_PATCHES = 20000
 
 
 def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None,
-                    exitance=None) -> dict:
+                    exitance=None, scene_light=None) -> dict:
     """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
     a patch in ``mask`` (default: all), its patches' area-weighted mean. ``exitance`` (P, 3):
-    the emitters' (view_radiance's)."""
-    from .jobs import PolygonMap
+    the emitters' (view_radiance's). ``scene_light``: (H (P, n, 3) W/m^2, the direct light of
+    ``faces.lamps`` and then of the World: jobs.scene_light), reflected through each patch's BSDF
+    at the lamp's direction (from the patch's centre; the World's as the radiosity model does)."""
+    from .polygons import PolygonMap
 
     P = patches.n_patches
     mask = np.ones(P, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     sel = np.flatnonzero(mask)
     material = np.asarray(face_material)[patches.face]
     L = np.zeros((P, 3))
+    lamp_light = []
+    if scene_light is not None:
+        H = np.asarray(scene_light, dtype=np.float64)
+        for k in range(H.shape[1]):
+            lamp = faces.lamps[k] if k < len(faces.lamps) else None  # the columns after the lamps: the World
+            if lamp is None:
+                towards = None
+            elif lamp.kind == "SUN":
+                towards = np.broadcast_to(-lamp.direction, (P, 3))
+            else:
+                d = lamp.position[None, :] - patches.center
+                towards = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+            lamp_light.append((towards, H[:, k]))
     L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
-                           exitance=exitance)
+                           exitance=exitance, lamp_light=lamp_light)
     pmap = PolygonMap(faces, patches, polygon_counts)
     W = pmap.weights
     covered = np.asarray(W @ mask.astype(np.float64)).reshape(-1)
