@@ -100,6 +100,15 @@ def test_lamp_direct_irradiance_against_cycles(name):
     assert np.all(ours[dark] <= 0.02 * E.max()), summary
 
 
+def _relight(command, blend, report_path, *extra):
+    """`python -m relight_addon COMMAND BLEND --report R ...` (the real command line): its report."""
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", command, str(blend), "--report", str(report_path),
+                           "--quiet", *map(str, extra)], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(report_path.read_text())
+
+
 def _against_cycles(report, baked):
     """Per face (every baked object), the report's radiosity / pi against Cycles' radiance, channels
     summed: (relative errors, signed errors, a summary printed and returned)."""
@@ -148,11 +157,7 @@ def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
         _lamp_room(blend)
     finally:
         cr.reset_blender()
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", "radiosity", str(blend), "--report",
-                           str(report_path), "--quiet"], cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads(report_path.read_text())
+    report = _relight("radiosity", blend, report_path)
     try:
         baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, blend_path=str(blend))
     finally:
@@ -189,11 +194,7 @@ def test_solve_counts_the_lamps_closed_loop(tmp_path):
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     finally:
         cr.reset_blender()
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", "solve", str(blend), "--report", str(report_path),
-                           "--out", str(out), "--seed", "1", "--quiet"], cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads(report_path.read_text())
+    report = _relight("solve", blend, report_path, "--out", out, "--seed", "1")
     lamps = {r["name"]: r for r in report["fixed_light"] if r["kind"] in ("point", "spot")}
     assert set(lamps) == {"lamp_point", "lamp_spot"}, report["fixed_light"]
     share = sum(r["share"] for r in lamps.values())
@@ -249,11 +250,7 @@ def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     finally:
         cr.reset_blender()
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", "radiosity", str(blend), "--report",
-                           str(report_path), "--quiet"], cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads(report_path.read_text())
+    report = _relight("radiosity", blend, report_path)
     try:
         baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
     finally:
