@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .formfactors import _cosine_directions
+from .geometry import unit
 from .kernel_transfer import _Geometry, _sample_patches
 from .sampling import SceneSampler
 
@@ -92,6 +93,12 @@ def _spot_attenuation(lamp: Lamp, w_from_lamp):
     return x * x * (3.0 - 2.0 * x)
 
 
+def _tangents(normal):
+    """Two unit tangents (t1, t2), each (n, 3), completing the unit normals (n, 3) to a frame."""
+    t1 = unit(np.cross(normal, np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
+    return t1, np.cross(normal, t1)
+
+
 def _disk_offsets(u, radius, normal):
     """Points on disks of ``radius`` about the origin, perpendicular to ``normal`` (n, 3), from
     uniforms u (n, 2) (concentric map: stratification is kept)."""
@@ -100,9 +107,7 @@ def _disk_offsets(u, radius, normal):
     rr = np.where(big, a, b)
     phi = np.where(big, (math.pi / 4) * b / np.where(a == 0, 1, a), math.pi / 2 - (math.pi / 4) * a / np.where(b == 0, 1, b))
     rr = rr * radius
-    t1 = np.cross(normal, np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    t2 = np.cross(normal, t1)
+    t1, t2 = _tangents(normal)
     return (rr * np.cos(phi))[:, None] * t1 + (rr * np.sin(phi))[:, None] * t2
 
 
@@ -124,9 +129,7 @@ def _irradiance_at(lamp: Lamp, y, n, u, sampler, far):
             cz = 1.0 - u[:, 0] * (1.0 - math.cos(0.5 * lamp.angle))
             sz = np.sqrt(np.maximum(1.0 - cz * cz, 0.0))
             phi = 2.0 * math.pi * u[:, 1]
-            t1 = np.cross(w0, [1.0, 0.0, 0.0] if abs(w0[0]) < 0.9 else [0.0, 1.0, 0.0])
-            t1 /= np.linalg.norm(t1)
-            t2 = np.cross(w0, t1)
+            t1, t2 = (t[0] for t in _tangents(w0[None, :]))
             w = cz[:, None] * w0 + (sz * np.cos(phi))[:, None] * t1 + (sz * np.sin(phi))[:, None] * t2
         else:
             w = np.broadcast_to(w0, y.shape)
@@ -144,10 +147,10 @@ def _irradiance_at(lamp: Lamp, y, n, u, sampler, far):
                     ((u[:, 1] - 0.5) * lamp.size_v)[:, None] * lamp.axis_v
             q = q + lamp.position
         else:
-            toy = y - lamp.position
+            toy = y - lamp.position  # from the lamp to the points, and its unit direction
+            nd = unit(toy)
             q = np.broadcast_to(lamp.position, y.shape)
             if lamp.radius > 0:  # the disk facing the shading point (soft falloff)
-                nd = toy / np.maximum(np.linalg.norm(toy, axis=1, keepdims=True), 1e-300)
                 q = q + _disk_offsets(u, lamp.radius, nd)
         d = q - y
         t = np.linalg.norm(d, axis=1)
@@ -159,19 +162,15 @@ def _irradiance_at(lamp: Lamp, y, n, u, sampler, far):
             e = np.maximum(cos_r, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(math.pi * t * t, 1e-300)
         else:
             if lamp.radius > 0:  # radiance I / (pi r^2) over the disk of area pi r^2, facing y
-                toy = y - lamp.position
-                nd = toy / np.maximum(np.linalg.norm(toy, axis=1, keepdims=True), 1e-300)
                 cos_l = -np.einsum("ij,ij->i", w, nd)
                 e = np.maximum(cos_r, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(t * t, 1e-300)
             else:
                 e = np.maximum(cos_r, 0.0) / np.maximum(t * t, 1e-300)
             e = e / (4.0 * math.pi)  # intensity P / (4 pi) per W
-            toy = y - lamp.position
             d0 = np.maximum(np.einsum("ij,ij->i", toy, toy), 1e-300)
             ref = np.maximum(-np.einsum("ij,ij->i", n, toy), 0.0) / (4.0 * math.pi * d0 ** 1.5)
             if lamp.kind == "SPOT":
-                toy = y - lamp.position
-                e = e * _spot_attenuation(lamp, toy / np.maximum(np.linalg.norm(toy, axis=1, keepdims=True), 1e-300))
+                e = e * _spot_attenuation(lamp, nd)
     if lamp.cast_shadow:
         lit = e > 0
         if lit.any():
@@ -284,9 +283,7 @@ def world_irradiance(patches, radiance, sampler: SceneSampler | None = None, see
             u[..., 0] = (u[..., 0] + cells // gk) / gk
             u[..., 1] = (u[..., 1] + cells % gk) / gk
         local = _cosine_directions(u[..., 0].ravel(), u[..., 1].ravel())
-        t1 = np.cross(ny, np.where(np.abs(ny[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
-        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-        t2 = np.cross(ny, t1)
+        t1, t2 = _tangents(ny)
         d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:3] * ny
         o = (y + ny * sm.offset).astype(np.float32)
         escaped = np.asarray(sm.first_hit(o, d.astype(np.float32))) == -1
