@@ -94,7 +94,7 @@ def test_inverse_problem_subtracts_the_lamps_radiosity():
 
 
 def test_uniform_world_lights_what_sees_the_sky():
-    from relight_addon.engine.lamps import world_irradiance
+    from relight_addon.engine.world import world_irradiance
 
     L = np.array([1.0, 0.5, 0.25])
     ps, _ = _grid()  # a floor alone: its whole hemisphere is sky

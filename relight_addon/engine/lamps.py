@@ -31,12 +31,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .formfactors import _cosine_directions
 from .geometry import unit
 from .kernel_transfer import _Geometry, _sample_patches
 from .sampling import SceneSampler
 
-__all__ = ["Lamp", "KINDS", "lamp_irradiance", "world_irradiance"]
+__all__ = ["Lamp", "KINDS", "lamp_irradiance"]
 
 KINDS = ("POINT", "SPOT", "AREA", "SUN")
 #: receiver points per patch and lamp samples per receiver point (soft lamps; a point lamp of
@@ -195,9 +194,10 @@ def _solid_angles(tv, x):
 
 
 def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: int = 0,
-                    points_per_patch: int = POINTS_PER_PATCH) -> np.ndarray:
+                    points_per_patch: int = POINTS_PER_PATCH, only=None) -> np.ndarray:
     """(P, n_lamps, 3) direct irradiance (W/m^2) of each lamp on each patch (area mean), with
-    shadow rays on ``sampler`` (built here when not given: pass the form factors' one)."""
+    shadow rays on ``sampler`` (built here when not given: pass the form factors' one).
+    ``only``: the indices of the patches to light (the others get 0), default all."""
     P = patches.n_patches
     out = np.zeros((P, len(lamps), 3))
     if not lamps:
@@ -214,8 +214,9 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
             om = np.bincount(sm.tri_patch, weights=_solid_angles(sm.tv.astype(np.float64), lamp.position),
                              minlength=P)
             exact = om / (4.0 * math.pi * np.maximum(sm.area, 1e-300))
-        for c0 in range(0, P, CHUNK_PATCHES):
-            s = np.arange(c0, min(P, c0 + CHUNK_PATCHES))
+        todo = np.arange(P) if only is None else np.asarray(only, dtype=np.int64)
+        for c0 in range(0, len(todo), CHUNK_PATCHES):
+            s = todo[c0:c0 + CHUNK_PATCHES]
             y, ny = _sample_patches(g, s, k, rng)
             y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
             ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
@@ -239,53 +240,4 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
                 ok = rs > 0
                 per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
             out[s, li] = per_patch[:, None] * lamp.power[None, :]
-    return out
-
-
-#: hemisphere rays per patch for the World's light (one cosine-weighted direction per receiver point)
-WORLD_RAYS = 1024
-
-
-#: a patch whose form-factor rows leave less than this share of its hemisphere unaccounted for
-#: sees (almost) no sky: it casts no sky rays (its sky light is at most this x pi L)
-SKY_MIN = 1e-3
-
-
-def world_irradiance(patches, radiance, sampler: SceneSampler | None = None, seed: int = 0,
-                     rays_per_patch: int = WORLD_RAYS, sky_share=None) -> np.ndarray:
-    """(P, 3) direct irradiance (W/m^2) of a World of uniform ``radiance`` (3,) W/(m^2 sr) on each
-    patch: pi L times the share of the patch's cosine-weighted hemisphere that escapes the scene
-    (rays from stratified points, one cosine-weighted direction each, the directions stratified
-    over the hemisphere too; a ray that hits any triangle, front or back, sees no sky).
-    ``sky_share`` (P,): an upper bound of each patch's escaping share, 1 - its form-factor row sum
-    (rays that leave the scene or hit a back side): patches below SKY_MIN cast no rays (a closed
-    room costs nothing)."""
-    P = patches.n_patches
-    L = np.asarray(radiance, dtype=np.float64).reshape(3)
-    g = _Geometry(patches, rays_per_patch, sampler=sampler)
-    sm = g.sampler
-    rng = np.random.default_rng([int(seed), 11])
-    out = np.zeros((P, 3))
-    open_ = np.arange(P) if sky_share is None else np.flatnonzero(np.asarray(sky_share) > SKY_MIN)
-    for c0 in range(0, len(open_), CHUNK_PATCHES):
-        s = open_[c0:c0 + CHUNK_PATCHES]
-        y, ny = _sample_patches(g, s, rays_per_patch, rng)
-        y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
-        ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
-        # directions stratified too: a jittered gk x gk grid of the unit square per patch, paired
-        # with the points by a random permutation (the form factors' "stratified" sampling)
-        m, k = len(s), rays_per_patch
-        gk = int(math.isqrt(k))
-        cell = np.arange(k) if gk * gk == k else None
-        u = rng.random((m, k, 2), dtype=np.float32)
-        if cell is not None:
-            cells = rng.permuted(np.broadcast_to(cell, (m, k)), axis=1)
-            u[..., 0] = (u[..., 0] + cells // gk) / gk
-            u[..., 1] = (u[..., 1] + cells % gk) / gk
-        local = _cosine_directions(u[..., 0].ravel(), u[..., 1].ravel())
-        t1, t2 = _tangents(ny)
-        d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:3] * ny
-        o = (y + ny * sm.offset).astype(np.float32)
-        escaped = np.asarray(sm.first_hit(o, d.astype(np.float32))) == -1
-        out[s] = np.pi * escaped.reshape(len(s), rays_per_patch).mean(axis=1)[:, None] * L[None, :]
     return out

@@ -21,7 +21,8 @@ from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, est
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
 from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
-from ..engine.lamps import lamp_irradiance, world_irradiance
+from ..engine.lamps import lamp_irradiance
+from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, candidate_mask
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
