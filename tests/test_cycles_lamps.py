@@ -6,11 +6,7 @@ Direct irradiance: a grey floor (albedo 0.5) of 8 x 8 faces, one lamp, a small b
 a shadow on the floor; Cycles bakes the floor's radiance L = albedo E / pi; the engine's
 ``lamp_irradiance`` on the exported scene must give E on every lit face.
 """
-import json
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -18,20 +14,11 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
+from lit_rooms import (against_cycles, cut_window, lamp_room, light, relight, remove_lamps,  # noqa: E402
+                       solve_closed_loop, uniform_world)
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SAMPLES = 256
 ALBEDO = 0.5
-
-
-def _light(kind, location, rotation=(0.0, 0.0, 0.0), **props):
-    ld = bpy.data.lights.new(f"lamp_{kind.lower()}", kind)
-    for k, v in props.items():
-        setattr(ld, k, v)
-    ob = bpy.data.objects.new(ld.name, ld)
-    bpy.context.scene.collection.objects.link(ob)
-    ob.location, ob.rotation_euler = location, rotation
-    return ob
 
 
 def _floor_with_blocker():
@@ -67,7 +54,7 @@ def test_lamp_direct_irradiance_against_cycles(name):
     kind, loc, rot, props = LAMPS[name]
     try:
         floor = _floor_with_blocker()
-        _light(kind, loc, rot, **props)
+        light(kind, loc, rot, **props)
         exp = export.export_scene()
         assert [lamp.kind for lamp in exp.faces.lamps] == [kind]
         patches = mesh_patches(exp.faces, 10.0)
@@ -100,81 +87,22 @@ def test_lamp_direct_irradiance_against_cycles(name):
     assert np.all(ours[dark] <= 0.02 * E.max()), summary
 
 
-def _relight(command, blend, report_path, *extra):
-    """`python -m relight_addon COMMAND BLEND --report R ...` (the real command line): its report."""
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", command, str(blend), "--report", str(report_path),
-                           "--quiet", *map(str, extra)], cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(report_path.read_text())
-
-
-def _against_cycles(report, baked):
-    """Per face (every baked object), the report's radiosity / pi against Cycles' radiance, channels
-    summed: (relative errors, signed errors, a summary printed and returned)."""
-    rel, signed, lines = [], [], []
-    for name, cyc in baked.items():
-        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
-        lum = cyc.radiance.sum(axis=1)
-        rel.append(np.abs(ours.sum(axis=1) - lum) / lum)
-        signed.append((ours.sum(axis=1) - lum) / lum)
-        lines.append(f"{name}: mean {rel[-1].mean():.4f} max {rel[-1].max():.4f} signed {signed[-1].mean():+.4f}")
-    rel, signed = np.concatenate(rel), np.concatenate(signed)
-    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
-        "\n".join(lines)
-    print(summary)
-    return rel, signed, summary
-
-
-def _lamp_room(path):
-    cr.reset_blender()
-    bpy.context.scene.world = None
-    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
-    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=True)
-    W, D, H, n = 4.0, 3.0, 2.5, 4
-    quads = [  # inward-facing walls and ceiling, a floor
-        ("floor", (0, 0, 0), (W, 0, 0), (0, D, 0), floor_m),
-        ("ceiling", (0, D, H), (W, 0, 0), (0, -D, 0), walls),
-        ("wall_s", (0, 0, 0), (0, 0, H), (W, 0, 0), walls),
-        ("wall_n", (0, D, 0), (W, 0, 0), (0, 0, H), walls),
-        ("wall_w", (0, 0, 0), (0, D, 0), (0, 0, H), walls),
-        ("wall_e", (W, 0, 0), (0, 0, H), (0, D, 0), walls),
-    ]
-    for name, o, du, dv, m in quads:
-        v, f = cr.grid_quads(o, du, dv, n, n)
-        cr.add_mesh_object(name, v, f, m)
-    _light("POINT", (1.2, 1.5, 2.0), energy=150.0, shadow_soft_size=0.1)
-    _light("SPOT", (3.2, 1.0, 2.3), (0.4, 0.3, 0.0), energy=400.0, spot_size=math.radians(60), spot_blend=0.2)
-    bpy.context.scene["relight_max_patch_size"] = 0.5
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-
-
 def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
     """`radiosity` on a closed room lit only by a point and a spot lamp: every face's radiosity
     (direct and interreflected) against a Cycles bake of the same file."""
     blend, report_path = tmp_path / "room.blend", tmp_path / "r.json"
     try:
-        _lamp_room(blend)
+        lamp_room(blend)
     finally:
         cr.reset_blender()
-    report = _relight("radiosity", blend, report_path)
+    report = relight("radiosity", blend, report_path)
     try:
         baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, blend_path=str(blend))
     finally:
         cr.reset_blender()
-    rel, signed, summary = _against_cycles(report, baked)
+    rel, signed, summary = against_cycles(report, baked)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.08, summary
-
-
-def _paint(ob, polygons, rgb):
-    me = ob.data
-    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
-    col = np.zeros((len(me.loops), 4), dtype=np.float32)
-    for p in polygons:
-        poly = me.polygons[p]
-        col[poly.loop_start:poly.loop_start + poly.loop_total] = (*rgb, 1.0)
-    layer.data.foreach_set("color", col.ravel())
 
 
 def test_solve_counts_the_lamps_closed_loop(tmp_path):
@@ -182,48 +110,18 @@ def test_solve_counts_the_lamps_closed_loop(tmp_path):
     lamps give there, lights only on the ceiling: `solve --out`, then Cycles bakes the written
     file (its emitters object and the lamps). The targets show what the report predicts, and the
     lamps are listed as fixed light with a large share."""
-    blend, report_path, out = tmp_path / "room.blend", tmp_path / "r.json", tmp_path / "out.blend"
+    blend = tmp_path / "room.blend"
     try:
-        _lamp_room(blend)
-        bpy.ops.wm.open_mainfile(filepath=str(blend))
-        objs = bpy.data.objects
-        n = 4
-        _paint(objs["floor"], [j * n + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8))
-        for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
-            objs[name]["relight_no_lights"] = True
-        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+        lamp_room(blend)
     finally:
         cr.reset_blender()
-    report = _relight("solve", blend, report_path, "--out", out, "--seed", "1")
-    lamps = {r["name"]: r for r in report["fixed_light"] if r["kind"] in ("point", "spot")}
-    assert set(lamps) == {"lamp_point", "lamp_spot"}, report["fixed_light"]
-    share = sum(r["share"] for r in lamps.values())
-    assert 0.3 < share < 0.9, share  # a large share of the painted light, not all of it
-    try:
-        baked = cr.cycles_face_radiance(samples=1024, seed=2, blend_path=str(out), objects=None)
-    finally:
-        cr.reset_blender()
-    ours = np.asarray(report["objects"]["floor"]["radiosity"], dtype=np.float64) / math.pi
-    target = np.array([t is not None for t in report["objects"]["floor"]["target"]])
-    got = baked["floor"].radiance
-    e = np.abs(ours[target].sum(axis=1) - got[target].sum(axis=1)) / got[target].sum(axis=1)
-    signed = (ours[target].sum(axis=1) - got[target].sum(axis=1)) / got[target].sum(axis=1)
-    summary = (f"lamps' share {share:.2f}; {report['final']['n_lights']} lights, relative error "
-               f"{report['final']['relative_error']:.3f}; targets: mean {e.mean():.4f} max {e.max():.4f} "
-               f"signed {signed.mean():+.4f}")
-    print(summary)
+    n = 4
+    report, e, signed, share, summary = solve_closed_loop(
+        blend, tmp_path, [j * n + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8))
+    lamps = {r["name"] for r in report["fixed_light"] if r["kind"] in ("point", "spot")}
+    assert lamps == {"lamp_point", "lamp_spot"}, report["fixed_light"]
+    assert 0.3 < share < 0.9, summary  # a large share of the painted light, not all of it
     assert e.mean() < 0.02 and e.max() < 0.05, summary
-
-
-def _world(color, strength=1.0):
-    world = bpy.data.worlds.new("sky")
-    bpy.context.scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (*color, 1.0)
-    bg.inputs["Strength"].default_value = strength
-    return world
 
 
 def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
@@ -232,29 +130,20 @@ def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
     with its World."""
     blend, report_path = tmp_path / "window.blend", tmp_path / "r.json"
     try:
-        _lamp_room(blend)
+        lamp_room(blend)
         bpy.ops.wm.open_mainfile(filepath=str(blend))
-        for ob in [o for o in bpy.data.objects if o.type == "LIGHT"]:
-            bpy.data.objects.remove(ob)
-        import bmesh
-
-        me = bpy.data.objects["wall_s"].data
-        bm = bmesh.new()
-        bm.from_mesh(me)
-        bm.faces.ensure_lookup_table()
-        bmesh.ops.delete(bm, geom=[bm.faces[i] for i in (5, 6, 9, 10)], context="FACES_ONLY")  # a 2 x 1.25 m window
-        bm.to_mesh(me)
-        bm.free()
-        _world((0.4, 0.5, 0.7), 1.0)
-        _light("SUN", (0, 0, 5), (math.radians(-55), 0.0, 0.0), energy=2.0, angle=math.radians(2))
+        remove_lamps()
+        cut_window()  # a 2 x 1.25 m window
+        uniform_world((0.4, 0.5, 0.7), 1.0)
+        light("SUN", (0, 0, 5), (math.radians(-55), 0.0, 0.0), energy=2.0, angle=math.radians(2))
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     finally:
         cr.reset_blender()
-    report = _relight("radiosity", blend, report_path)
+    report = relight("radiosity", blend, report_path)
     try:
         baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
     finally:
         cr.reset_blender()
-    rel, signed, summary = _against_cycles(report, baked)
+    rel, signed, summary = against_cycles(report, baked)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.10, summary

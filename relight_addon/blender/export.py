@@ -68,7 +68,8 @@ import numpy as np
 
 from ..engine.scene import FaceSet, SceneError
 from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
-from .lamps import export_lamps, world_light
+from .lamps import export_lamps
+from .world import world_light
 
 DEFAULT_REFLECTANCE = 0.8
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
@@ -611,10 +612,10 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         e = np.maximum(e, 0.0)
     lamps, lamp_warnings = export_lamps(context, renderable, RELIGHT_OWNER_PROP)
     try:
-        world_L, world_name, world_note = world_light(context.scene)
+        world_L, world_name, world_notes = world_light(context.scene)
     except ValueError as exc:
         raise SceneError(str(exc)) from None
-    warnings.extend(w for w in lamp_warnings + ([world_note] if world_note else []) if w not in warnings)
+    warnings.extend(w for w in lamp_warnings + world_notes if w not in warnings)
     faces = FaceSet(
         vertices=np.concatenate(b.verts),
         triangles=np.concatenate(b.tris),

@@ -7,8 +7,7 @@ Read: Point (power, colour, radius = soft size), Spot (and its cone: size and bl
 diffuse visibility on), in world space; their shadows (Cast Shadow). Named in a warning, and
 not modelled: light node trees, area spread below 180 degrees, light and shadow linking, a
 point or spot lamp with soft falloff off (modelled as a point of the same intensity: exact
-where the whole sphere is seen) and instanced lamps. The World: a uniform colour is modelled
-(``world_light``); a texture or another shader is named and left out.
+where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
 """
 from __future__ import annotations
 
@@ -19,7 +18,7 @@ import numpy as np
 
 from ..engine.lamps import Lamp
 
-__all__ = ["export_lamps", "world_light"]
+__all__ = ["export_lamps"]
 
 
 def _cycles(ld, name, default):
@@ -27,7 +26,7 @@ def _cycles(ld, name, default):
     return getattr(c, name, getattr(ld, name, default)) if c is not None else getattr(ld, name, default)
 
 
-def _uses_nodes(idblock) -> bool:
+def uses_nodes(idblock) -> bool:
     """Whether a World's or a light's node tree is what renders (``use_nodes`` is always on, and
     deprecated, from Blender 5.0)."""
     if getattr(idblock, "node_tree", None) is None:
@@ -37,7 +36,7 @@ def _uses_nodes(idblock) -> bool:
 
 def _default_light_nodes(ld) -> bool:
     """True when the light has no node tree, or only the default Emission (strength 1, white)."""
-    if not _uses_nodes(ld):
+    if not uses_nodes(ld):
         return True
     kinds = sorted(n.type for n in ld.node_tree.nodes)
     if kinds != ["EMISSION", "OUTPUT_LIGHT"]:
@@ -117,38 +116,3 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
         warnings.append(f"{n_inst} instanced lamp(s) (in collection instances or particle systems) are not "
                         "modelled: Cycles renders their light, the prediction leaves it out")
     return lamps, warnings
-
-
-def world_light(scene) -> tuple:
-    """(uniform radiance (3,) W/(m^2 sr) or None, the World's name, a warning or None): the World
-    as Cycles lights diffuse surfaces with it. A uniform colour (Background: Color x Strength, or
-    the World colour without nodes) is modelled; a texture (a sky, an HDRI) or another shader is
-    named in a warning and left out."""
-    world = scene.world
-    if world is None:
-        return None, "", None
-    vis = getattr(world, "cycles_visibility", None)
-    if vis is not None and not getattr(vis, "diffuse", True):
-        return None, world.name, None  # Cycles does not light diffuse surfaces with it either
-    if _uses_nodes(world):
-        out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD" and n.is_active_output), None)
-        if out is None:
-            out = next((n for n in world.node_tree.nodes if n.type == "OUTPUT_WORLD"), None)
-        if out is None or not out.inputs["Surface"].is_linked:
-            return None, world.name, None
-        node = out.inputs["Surface"].links[0].from_node
-        if node.type == "BACKGROUND" and not node.inputs["Color"].is_linked and not node.inputs["Strength"].is_linked:
-            L = np.array(node.inputs["Color"].default_value, dtype=np.float64)[:3] * float(
-                node.inputs["Strength"].default_value)
-        else:
-            return None, world.name, (
-                f"the World ({world.name!r}) lights the scene through a texture or a shader node ({node.name}): "
-                "only a uniform colour is modelled yet, so its light (a sky, an HDRI) is left out and Cycles "
-                "renders brighter than predicted; set its Strength to 0 to match the prediction")
-    else:
-        L = np.array(world.color, dtype=np.float64)[:3]
-    if not np.all(np.isfinite(L)):
-        raise ValueError(f"the World ({world.name!r}) has a NaN or infinite colour or strength")
-    if not np.any(L > 0):
-        return None, world.name, None
-    return np.maximum(L, 0.0), world.name, None

@@ -65,9 +65,10 @@ class FaceSet:
     material_lobes: list = None
     #: the scene's lamps (engine.lamps.Lamp, world space): fixed light that lights the faces directly
     lamps: list = field(default_factory=list)
-    #: the World's uniform radiance (3,) W/(m^2 sr), or None: fixed light from every direction that
-    #: escapes the scene (engine.lamps.world_irradiance); ``world_name`` names it in the report
-    world_radiance: np.ndarray = None
+    #: the World's radiance, an engine.world.EnvironmentMap (or a uniform (3,) W/(m^2 sr)), or None:
+    #: fixed light from every direction that escapes the scene (engine.world.world_irradiance);
+    #: ``world_name`` names it in the report
+    world_radiance: object = None
     world_name: str = ""
 
     def __post_init__(self):

@@ -18,7 +18,7 @@ patch gets them exactly as a sun. Deterministic for a seed.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -27,7 +27,7 @@ from .kernel_transfer import _Geometry, _sample_patches
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
 from .sampling import SceneSampler
 
-__all__ = ["EnvironmentMap", "world_irradiance", "WORLD_RAYS", "SKY_MIN"]
+__all__ = ["EnvironmentMap", "Detail", "world_irradiance", "WORLD_RAYS", "SKY_MIN"]
 
 #: hemisphere rays per patch for the World's light (one cosine-weighted direction per receiver point)
 WORLD_RAYS = 1024
@@ -43,11 +43,56 @@ SUN_MAX_ANGLE = math.radians(12.0)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
+def _directions(H: int, W: int, rows, cols) -> np.ndarray:
+    """(len(rows), len(cols), 3) unit directions of the centres of texels (rows, cols) of an H x W map."""
+    elev = ((np.asarray(rows) + 0.5) / H - 0.5) * math.pi
+    phi = (0.75 - (np.asarray(cols) + 0.5) / W) * 2.0 * math.pi
+    ce = np.cos(elev)[:, None]
+    return np.stack([ce * np.cos(phi)[None, :], ce * np.sin(phi)[None, :],
+                     np.broadcast_to(np.sin(elev)[:, None], (len(elev), len(phi)))], axis=-1)
+
+
+def _solid_angles(H: int, W: int, rows, cols) -> np.ndarray:
+    """(len(rows), len(cols)) solid angles (sr) of texels (rows, cols) of an H x W map."""
+    rows = np.asarray(rows)
+    lo, hi = (rows / H - 0.5) * math.pi, ((rows + 1) / H - 0.5) * math.pi
+    band = (np.sin(hi) - np.sin(lo)) * (2.0 * math.pi / W)
+    return np.broadcast_to(band[:, None], (len(rows), len(cols)))
+
+
+def _sun(radiance, om, dirs, texel_angle) -> tuple:
+    """(power (3,) W/m^2 at normal incidence, unit direction towards it, the full angle of the
+    cone about it through the texels' centres plus one texel) of texels (n, 3) / (n,) / (n, 3)."""
+    power = np.einsum("i,ic->c", om, radiance)
+    d = np.einsum("i,ic->c", om * (radiance @ LUMA), dirs)
+    d /= max(np.linalg.norm(d), 1e-300)
+    spread = float(np.max(np.arccos(np.clip(dirs @ d, -1.0, 1.0))))
+    return power, d, 2.0 * spread + texel_angle
+
+
+@dataclass
+class Detail:
+    """A block of the map rendered ``scale`` times finer: it covers texels [row, row + h) x
+    [col, col + w) of the map, ``radiance`` (h scale, w scale, 3). Where a sun is, its direction
+    and size come from here (a sun disc is smaller than a texel)."""
+
+    row: int
+    col: int
+    scale: int
+    radiance: np.ndarray
+
+    def block(self) -> tuple:
+        h, w = (n // self.scale for n in self.radiance.shape[:2])
+        return slice(self.row, self.row + h), slice(self.col, self.col + w)
+
+
 @dataclass
 class EnvironmentMap:
-    """The World's radiance (H, W, 3) W/(m^2 sr), equirectangular (the module's conventions)."""
+    """The World's radiance (H, W, 3) W/(m^2 sr), equirectangular (the module's conventions), and
+    finer blocks of it where its suns are (``details``: Detail)."""
 
     radiance: np.ndarray
+    details: list = field(default_factory=list)
 
     def __post_init__(self):
         r = np.asarray(self.radiance, dtype=np.float64)
@@ -55,7 +100,7 @@ class EnvironmentMap:
             r = r.reshape(1, 1, 3)
         if r.ndim != 3 or r.shape[2] != 3:
             raise ValueError(f"an environment map is (H, W, 3) radiance, got shape {r.shape}")
-        if not np.all(np.isfinite(r)):
+        if not all(np.all(np.isfinite(a)) for a in [r] + [d.radiance for d in self.details]):
             raise ValueError("the World's radiance has NaN or infinite values")
         self.radiance = np.maximum(r, 0.0)
 
@@ -88,60 +133,82 @@ class EnvironmentMap:
     def directions(self) -> np.ndarray:
         """(H, W, 3) unit directions of the texel centres."""
         H, W = self.shape
-        elev = ((np.arange(H) + 0.5) / H - 0.5) * math.pi
-        phi = (0.75 - (np.arange(W) + 0.5) / W) * 2.0 * math.pi
-        ce = np.cos(elev)[:, None]
-        return np.stack([ce * np.cos(phi)[None, :], ce * np.sin(phi)[None, :],
-                         np.broadcast_to(np.sin(elev)[:, None], (H, W))], axis=-1)
+        return _directions(H, W, np.arange(H), np.arange(W))
 
     def solid_angles(self) -> np.ndarray:
         """(H, W) solid angle (sr) of each texel; they sum to 4 pi."""
         H, W = self.shape
-        e = np.linspace(-0.5 * math.pi, 0.5 * math.pi, H + 1)
-        band = (np.sin(e[1:]) - np.sin(e[:-1])) * (2.0 * math.pi / W)
-        return np.broadcast_to(band[:, None], (H, W))
+        return _solid_angles(H, W, np.arange(H), np.arange(W))
 
     def irradiance_up(self) -> np.ndarray:
         """(3,) irradiance (W/m^2) on an unshadowed surface facing +Z (a closed form to test with)."""
         cos = np.maximum(self.directions()[..., 2], 0.0)
         return np.einsum("hw,hwc->c", self.solid_angles() * cos, self.radiance)
 
+    def mean_luminance(self) -> float:
+        """The luminance (Rec.709) averaged over the sphere."""
+        return float(np.sum((self.radiance @ LUMA) * self.solid_angles()) / (4.0 * math.pi))
+
+    def sun_regions(self) -> list:
+        """The map's suns, each (mask (H, W) bool, unit direction (3,) towards it, cone angle): a
+        connected group of texels brighter than BRIGHT times the map's mean luminance, its
+        direction their power-weighted mean, within a cone of at most SUN_MAX_ANGLE."""
+        mean = self.mean_luminance()
+        if self.is_uniform or mean <= 0:
+            return []
+        from scipy import ndimage
+
+        labels, n = ndimage.label(self.radiance @ LUMA > BRIGHT * mean)
+        om, dirs = self.solid_angles(), self.directions()
+        out = []
+        for k in range(1, n + 1):
+            sel = labels == k
+            _, d, angle = _sun(self.radiance[sel], om[sel], dirs[sel], math.pi / self.shape[0])
+            if angle <= SUN_MAX_ANGLE:
+                out.append((sel, d, angle))
+        return out
+
+    def _detail(self, sel):
+        rows, cols = np.nonzero(sel)
+        for det in self.details:
+            rs, cs = det.block()
+            if rs.start <= rows.min() and rows.max() < rs.stop and cs.start <= cols.min() and cols.max() < cs.stop:
+                return det
+        return None
+
     def split_suns(self, name: str = "World") -> tuple:
         """(suns, rest): the map's suns as engine.lamps.Lamp (kind SUN: strength = the texels'
         radiance x solid angle, W/m^2; direction their power-weighted mean; angle the cone
-        holding them), and the map without them (an EnvironmentMap)."""
+        holding them), and the map without them (an EnvironmentMap). Where a Detail covers a
+        sun, the sun is its bright fine texels, and the block of the map the rest of it."""
         if self.is_uniform:
             return [], self
-        from scipy import ndimage
-
-        om = self.solid_angles()
-        lum = self.radiance @ LUMA
-        mean = float(np.sum(lum * om) / (4.0 * math.pi))
-        if mean <= 0:
-            return [], self
-        bright = lum > BRIGHT * mean
-        if not bright.any():
-            return [], self
-        labels, n = ndimage.label(bright)
-        dirs = self.directions()
+        H, W = self.shape
+        mean = self.mean_luminance()
+        om, dirs = self.solid_angles(), self.directions()
         rest = self.radiance.copy()
         suns = []
-        H, W = self.shape
-        texel_angle = math.pi / H
-        for k in range(1, n + 1):
-            sel = labels == k
-            power = np.einsum("i,ic->c", om[sel], self.radiance[sel])  # W/m^2 at normal incidence
-            wgt = om[sel] * lum[sel]
-            d = np.einsum("i,ic->c", wgt, dirs[sel])
-            d /= max(np.linalg.norm(d), 1e-300)
-            spread = float(np.max(np.arccos(np.clip(dirs[sel] @ d, -1.0, 1.0))))
-            angle = 2.0 * spread + texel_angle  # the cone through the texels' centres, plus one texel
-            if angle > SUN_MAX_ANGLE:
-                continue
+        for sel, d, angle in self.sun_regions():
+            det = self._detail(sel)
+            if det is None:
+                power = np.einsum("i,ic->c", om[sel], self.radiance[sel])
+                rest[sel] = 0.0
+            else:
+                k = det.scale
+                rs, cs = det.block()
+                rows, cols = np.arange(rs.start * k, rs.stop * k), np.arange(cs.start * k, cs.stop * k)
+                fine = det.radiance
+                om_f = _solid_angles(H * k, W * k, rows, cols)
+                bright = fine @ LUMA > BRIGHT * mean
+                power, d, angle = _sun(fine[bright], om_f[bright], _directions(H * k, W * k, rows, cols)[bright],
+                                       math.pi / (H * k))
+                left = np.where(bright[..., None], 0.0, fine) * om_f[..., None]
+                h, w = len(rows) // k, len(cols) // k
+                num = left.reshape(h, k, w, k, 3).sum(axis=(1, 3))
+                rest[rs, cs] = num / om_f.reshape(h, k, w, k).sum(axis=(1, 3))[..., None]
             t1, t2 = (t[0] for t in _tangents(d[None, :]))
             suns.append(Lamp(name=f"{name} (sun in the texture)", kind="SUN", position=np.zeros(3), direction=-d,
                              axis_u=t1, axis_v=t2, power=power, angle=angle))
-            rest[sel] = 0.0
         return suns, EnvironmentMap(rest)
 
 

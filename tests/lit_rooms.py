@@ -1,0 +1,149 @@
+"""Rooms lit by lamps and Worlds, built with bpy for the Cycles comparisons (tests/test_cycles_lamps.py,
+tests/test_cycles_world.py), and the command line run on them: `python -m relight_addon ...` and
+the report against Cycles' bake of the same file."""
+import json
+import math
+import os
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+
+import cycles_reference as cr
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def light(kind, location, rotation=(0.0, 0.0, 0.0), **props):
+    ld = bpy.data.lights.new(f"lamp_{kind.lower()}", kind)
+    for k, v in props.items():
+        setattr(ld, k, v)
+    ob = bpy.data.objects.new(ld.name, ld)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.location, ob.rotation_euler = location, rotation
+    return ob
+
+
+def relight(command, blend, report_path, *extra):
+    """`python -m relight_addon COMMAND BLEND --report R ...` (the real command line): its report."""
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", command, str(blend), "--report", str(report_path),
+                           "--quiet", *map(str, extra)], cwd=ROOT, capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": ROOT})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(report_path.read_text())
+
+
+def against_cycles(report, baked):
+    """Per face (every baked object), the report's radiosity / pi against Cycles' radiance, channels
+    summed: (relative errors, signed errors, a summary printed and returned)."""
+    rel, signed, lines = [], [], []
+    for name, cyc in baked.items():
+        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64) / math.pi
+        lum = cyc.radiance.sum(axis=1)
+        rel.append(np.abs(ours.sum(axis=1) - lum) / lum)
+        signed.append((ours.sum(axis=1) - lum) / lum)
+        lines.append(f"{name}: mean {rel[-1].mean():.4f} max {rel[-1].max():.4f} signed {signed[-1].mean():+.4f}")
+    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    summary = f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
+        "\n".join(lines)
+    print(summary)
+    return rel, signed, summary
+
+
+def lamp_room(path):
+    cr.reset_blender()
+    bpy.context.scene.world = None
+    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
+    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=True)
+    W, D, H, n = 4.0, 3.0, 2.5, 4
+    quads = [  # inward-facing walls and ceiling, a floor
+        ("floor", (0, 0, 0), (W, 0, 0), (0, D, 0), floor_m),
+        ("ceiling", (0, D, H), (W, 0, 0), (0, -D, 0), walls),
+        ("wall_s", (0, 0, 0), (0, 0, H), (W, 0, 0), walls),
+        ("wall_n", (0, D, 0), (W, 0, 0), (0, 0, H), walls),
+        ("wall_w", (0, 0, 0), (0, D, 0), (0, 0, H), walls),
+        ("wall_e", (W, 0, 0), (0, 0, H), (0, D, 0), walls),
+    ]
+    for name, o, du, dv, m in quads:
+        v, f = cr.grid_quads(o, du, dv, n, n)
+        cr.add_mesh_object(name, v, f, m)
+    light("POINT", (1.2, 1.5, 2.0), energy=150.0, shadow_soft_size=0.1)
+    light("SPOT", (3.2, 1.0, 2.3), (0.4, 0.3, 0.0), energy=400.0, spot_size=math.radians(60), spot_blend=0.2)
+    bpy.context.scene["relight_max_patch_size"] = 0.5
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+
+
+def paint(ob, polygons, rgb):
+    me = ob.data
+    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+    col = np.zeros((len(me.loops), 4), dtype=np.float32)
+    for p in polygons:
+        poly = me.polygons[p]
+        col[poly.loop_start:poly.loop_start + poly.loop_total] = (*rgb, 1.0)
+    layer.data.foreach_set("color", col.ravel())
+
+
+def uniform_world(color, strength=1.0):
+    world = bpy.data.worlds.new("sky")
+    bpy.context.scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (*color, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    return world
+
+
+def cut_window(wall="wall_s", faces=(5, 6, 9, 10)):
+    """Delete faces of a wall of lamp_room (the default: a 2 x 1.25 m window in the south wall)."""
+    import bmesh
+
+    me = bpy.data.objects[wall].data
+    bm = bmesh.new()
+    bm.from_mesh(me)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[i] for i in faces], context="FACES_ONLY")
+    bm.to_mesh(me)
+    bm.free()
+
+
+def remove_lamps():
+    for ob in [o for o in bpy.data.objects if o.type == "LIGHT"]:
+        bpy.data.objects.remove(ob)
+
+
+def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2):
+    """Paint ``targets`` (floor face indices) of the file's floor ``rgb``, forbid lights on the floor
+    and walls (only the ceiling may hold them), `solve --out`, and bake the floor of the written
+    file with its own World: (report, per-target relative errors, signed errors, the scene's
+    light's share of the targets, a summary)."""
+    report_path, out = tmp_path / "r.json", tmp_path / "out.blend"
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        objs = bpy.data.objects
+        paint(objs["floor"], targets, rgb)
+        for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
+            objs[name]["relight_no_lights"] = True
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        cr.reset_blender()
+    report = relight("solve", blend, report_path, "--out", out, "--seed", "1")
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(out))
+        baked = cr.cycles_face_radiance(samples=samples, seed=seed, objects=[bpy.data.objects["floor"]],
+                                        keep_world=True)
+    finally:
+        cr.reset_blender()
+    ours = np.asarray(report["objects"]["floor"]["radiosity"], dtype=np.float64) / math.pi
+    target = np.array([t is not None for t in report["objects"]["floor"]["target"]])
+    got = baked["floor"].radiance[target].sum(axis=1)
+    signed = (ours[target].sum(axis=1) - got) / got
+    e = np.abs(signed)
+    fixed = [r for r in report["fixed_light"] if r["kind"] != "emission"]
+    share = sum(r["share"] for r in fixed)
+    summary = (f"fixed light {[(r['name'], round(r['share'], 3)) for r in fixed]} (share {share:.2f}); "
+               f"{report['final']['n_lights']} lights, relative error {report['final']['relative_error']:.3f}; "
+               f"targets: mean {e.mean():.4f} max {e.max():.4f} signed {signed.mean():+.4f}")
+    print(summary)
+    return report, e, signed, share, summary
