@@ -85,11 +85,7 @@ def paint(ob, polygons, rgb):
 
 
 def uniform_world(color, strength=1.0):
-    world = bpy.data.worlds.new("sky")
-    bpy.context.scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    world, _, bg = world_tree()
     bg.inputs["Color"].default_value = (*color, 1.0)
     bg.inputs["Strength"].default_value = strength
     return world
@@ -147,3 +143,51 @@ def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2):
                f"targets: mean {e.mean():.4f} max {e.max():.4f} signed {signed.mean():+.4f}")
     print(summary)
     return report, e, signed, share, summary
+
+
+def world_tree(name="sky"):
+    world = bpy.data.worlds.new(name)
+    bpy.context.scene.world = world
+    if bpy.app.version < (5, 0, 0):
+        world.use_nodes = True
+    nt = world.node_tree
+    return world, nt, next(n for n in nt.nodes if n.type == "BACKGROUND")
+
+
+def sky_world(strength=0.06, sun_disc=True):
+    """A Sky Texture World (Blender's default sky model) whose sun stands 35 degrees high in the
+    south (-Y), shining through the south window."""
+    world, nt, bg = world_tree()
+    sky = nt.nodes.new("ShaderNodeTexSky")
+    sky.sun_elevation, sky.sun_rotation = math.radians(35), math.radians(200)
+    sky.sun_disc = sun_disc
+    nt.links.new(sky.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = strength
+    return world
+
+
+def hdri_world(path, sun=(0.0, -0.75, 0.66)):
+    """An Environment Texture World on a 512 x 256 float image written to ``path`` (OpenEXR): a
+    sky graded from the horizon to the zenith, a darker ground and a sun of 3 x 3 pixels."""
+    W, H = 512, 256
+    v = (np.arange(H) + 0.5) / H
+    elev = (v - 0.5) * math.pi
+    rgb = np.where(elev[:, None] > 0, np.array([0.5, 0.65, 1.0]) * (0.4 + 0.6 * np.sin(np.maximum(elev, 0)))[:, None],
+                   np.array([0.15, 0.12, 0.1]))
+    px = np.ones((H, W, 4), dtype=np.float32)
+    px[..., :3] = rgb[:, None, :]
+    # Cycles' equirectangular image lookup: u = (atan2(y, x) - pi) / -2 pi, v = 0.5 + elevation / pi
+    d = np.asarray(sun) / np.linalg.norm(sun)
+    u = (math.atan2(d[1], d[0]) - math.pi) / (-2 * math.pi)
+    r, c = int((0.5 + math.asin(d[2]) / math.pi) * H), int(u * W) % W
+    px[r - 1:r + 2, c - 1:c + 2, :3] = (4000.0, 3800.0, 3500.0)
+    img = bpy.data.images.new("hdri", W, H, float_buffer=True, alpha=True)
+    img.pixels.foreach_set(px.ravel())
+    img.filepath_raw = str(path)
+    img.file_format = "OPEN_EXR"
+    img.save()
+    world, nt, bg = world_tree("hdri")
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = bpy.data.images.load(str(path))
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    return world

@@ -10,60 +10,12 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to render with Cycles")
 
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import (against_cycles, cut_window, lamp_room, light, relight, remove_lamps,  # noqa: E402
-                       solve_closed_loop)
+from lit_rooms import (against_cycles, cut_window, hdri_world, lamp_room, light, relight,  # noqa: E402
+                       remove_lamps, sky_world, solve_closed_loop, world_tree)
 
 #: floor faces (4 x 4 grid, row-major from the south-west corner) painted as targets: the middle
 #: two rows, the sun patch of the window rooms among them
 TARGETS = [j * 4 + i for j in range(1, 3) for i in range(4)]
-
-
-def _world_tree(name="sky"):
-    world = bpy.data.worlds.new(name)
-    bpy.context.scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    nt = world.node_tree
-    return world, nt, next(n for n in nt.nodes if n.type == "BACKGROUND")
-
-
-def _sky_world(strength=0.06, sun_disc=True):
-    """A Sky Texture World (Blender's default sky model) whose sun stands 35 degrees high in the
-    south (-Y), shining through the south window."""
-    world, nt, bg = _world_tree()
-    sky = nt.nodes.new("ShaderNodeTexSky")
-    sky.sun_elevation, sky.sun_rotation = math.radians(35), math.radians(200)
-    sky.sun_disc = sun_disc
-    nt.links.new(sky.outputs["Color"], bg.inputs["Color"])
-    bg.inputs["Strength"].default_value = strength
-    return world
-
-
-def _hdri_world(path, sun=(0.0, -0.75, 0.66)):
-    """An Environment Texture World on a 512 x 256 float image written to ``path`` (OpenEXR): a
-    sky graded from the horizon to the zenith, a darker ground and a sun of 3 x 3 pixels."""
-    W, H = 512, 256
-    v = (np.arange(H) + 0.5) / H
-    elev = (v - 0.5) * math.pi
-    rgb = np.where(elev[:, None] > 0, np.array([0.5, 0.65, 1.0]) * (0.4 + 0.6 * np.sin(np.maximum(elev, 0)))[:, None],
-                   np.array([0.15, 0.12, 0.1]))
-    px = np.ones((H, W, 4), dtype=np.float32)
-    px[..., :3] = rgb[:, None, :]
-    # Cycles' equirectangular image lookup: u = (atan2(y, x) - pi) / -2 pi, v = 0.5 + elevation / pi
-    d = np.asarray(sun) / np.linalg.norm(sun)
-    u = (math.atan2(d[1], d[0]) - math.pi) / (-2 * math.pi)
-    r, c = int((0.5 + math.asin(d[2]) / math.pi) * H), int(u * W) % W
-    px[r - 1:r + 2, c - 1:c + 2, :3] = (4000.0, 3800.0, 3500.0)
-    img = bpy.data.images.new("hdri", W, H, float_buffer=True, alpha=True)
-    img.pixels.foreach_set(px.ravel())
-    img.filepath_raw = str(path)
-    img.file_format = "OPEN_EXR"
-    img.save()
-    world, nt, bg = _world_tree("hdri")
-    env = nt.nodes.new("ShaderNodeTexEnvironment")
-    env.image = bpy.data.images.load(str(path))
-    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
-    return world
 
 
 def test_world_map_conventions_and_units():
@@ -75,7 +27,7 @@ def test_world_map_conventions_and_units():
 
     try:
         cr.reset_blender()
-        world, nt, bg = _world_tree()
+        world, nt, bg = world_tree()
         tc, vm = nt.nodes.new("ShaderNodeTexCoord"), nt.nodes.new("ShaderNodeVectorMath")
         vm.operation = "MULTIPLY_ADD"
         vm.inputs[1].default_value = vm.inputs[2].default_value = (0.5, 0.5, 0.5)
@@ -120,7 +72,7 @@ def test_radiosity_under_a_sky_texture_against_cycles(tmp_path):
     """`radiosity` in the window room lit only by a Sky Texture World with its sun disc: every
     face against Cycles baking the same file with its World."""
     blend, report_path = tmp_path / "sky.blend", tmp_path / "r.json"
-    _window_room(blend, _sky_world)
+    _window_room(blend, sky_world)
     report = relight("radiosity", blend, report_path)
     try:
         baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
@@ -140,10 +92,10 @@ def test_solve_counts_the_world_closed_loop(scene, tmp_path):
     report predicts."""
     blend = tmp_path / "room.blend"
     if scene == "sun and sky":
-        _window_room(blend, lambda: _sky_world(strength=0.5, sun_disc=False), sun_lamp=True)
+        _window_room(blend, lambda: sky_world(strength=0.5, sun_disc=False), sun_lamp=True)
         kinds, rgb = {"sun", "world"}, (0.6, 0.55, 0.5)
     elif scene == "hdri":
-        _window_room(blend, lambda: _hdri_world(tmp_path / "sky.exr"))
+        _window_room(blend, lambda: hdri_world(tmp_path / "sky.exr"))
         kinds, rgb = {"world"}, (0.4, 0.37, 0.34)
     else:
         try:
@@ -159,3 +111,29 @@ def test_solve_counts_the_world_closed_loop(scene, tmp_path):
     assert {r["kind"] for r in report["fixed_light"]} >= kinds, report["fixed_light"]
     assert 0.25 < share < 0.95, summary  # a large share of the painted light, not all of it
     assert e.mean() < 0.02 and e.max() < 0.06, summary
+
+
+def test_a_closed_room_does_not_render_its_world(tmp_path, monkeypatch):
+    """A textured World around a closed room lights nothing: it is not rendered, and the export
+    says so; cut a window and it is rendered and counted."""
+    from relight_addon.blender import export, world as bworld
+
+    renders = []
+    real = bworld.render_world_map
+    monkeypatch.setattr(bworld, "render_world_map", lambda w, **kw: renders.append(w.name) or real(w, **kw))
+    blend = tmp_path / "room.blend"
+    try:
+        lamp_room(blend)
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        remove_lamps()
+        sky_world()
+        closed = export.export_scene()
+        cut_window()
+        opened = export.export_scene()
+    finally:
+        cr.reset_blender()
+    assert closed.faces.world_radiance is None and closed.faces.world_name == "sky"
+    assert any("seen from no face" in w for w in closed.faces.warnings), closed.faces.warnings
+    assert renders == ["sky"]  # only the room with a window
+    env = opened.faces.world_radiance
+    assert env.shape == (128, 256) and len(env.split_suns()[0]) == 1  # the sky and its sun disc

@@ -102,3 +102,31 @@ def test_bad_maps_are_refused():
         EnvironmentMap(np.full((4, 8, 3), np.nan))
     with pytest.raises(ValueError, match="shape"):
         EnvironmentMap(np.zeros((4, 8)))
+
+
+def test_sees_sky_finds_small_openings_and_nothing_in_a_closed_box():
+    from relight_addon.engine.world import sees_sky
+
+    box = cf.box_polygons((4.0, 3.0, 2.5))
+    assert not sees_sky(polygon_faceset(box))
+    # the same box with a 10 x 10 cm hole in its top (the top split around the hole): 0.03 % of its area
+    polys = [p for i, p in enumerate(box) if i != 1]
+    z = max(v[2] for p in box for v in p)
+    xs, ys = (0.0, 2.0, 2.1, 4.0), (0.0, 1.5, 1.6, 3.0)
+    top = [[(xs[i], ys[j], z), (xs[i], ys[j + 1], z), (xs[i + 1], ys[j + 1], z), (xs[i + 1], ys[j], z)]
+           for i in range(3) for j in range(3) if (i, j) != (1, 1)]
+    closed_top = top + [[(2.0, 1.5, z), (2.0, 1.6, z), (2.1, 1.6, z), (2.1, 1.5, z)]]
+    assert not sees_sky(polygon_faceset(polys + closed_top))  # the split top, closed: still no sky
+    assert sees_sky(polygon_faceset(polys + top))
+
+
+def test_sees_sky_ignores_a_face_lying_on_the_floor_unless_it_is_a_target():
+    from relight_addon.engine.world import sees_sky
+
+    box = cf.box_polygons((4.0, 3.0, 2.5))
+    rug = [(1.0, 1.0, 0.0), (1.0, 2.0, 0.0), (2.0, 2.0, 0.0), (2.0, 1.0, 0.0)]  # facing down, on the floor
+    faces = polygon_faceset(box + [rug])
+    assert not sees_sky(faces)  # its rays leave below the floor, but its light reaches nothing
+    faces.target = np.zeros(faces.n_faces, dtype=bool)
+    faces.target[-1] = True
+    assert sees_sky(faces)  # painted: the World's light on it is what the artist sees

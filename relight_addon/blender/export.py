@@ -68,6 +68,7 @@ import numpy as np
 
 from ..engine.scene import FaceSet, SceneError
 from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
+from ..engine.world import sees_sky
 from .lamps import export_lamps
 from .world import world_light
 
@@ -611,11 +612,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
     lamps, lamp_warnings = export_lamps(context, renderable, RELIGHT_OWNER_PROP)
-    try:
-        world_L, world_name, world_notes = world_light(context.scene)
-    except ValueError as exc:
-        raise SceneError(str(exc)) from None
-    warnings.extend(w for w in lamp_warnings + world_notes if w not in warnings)
+    warnings.extend(w for w in lamp_warnings if w not in warnings)
     faces = FaceSet(
         vertices=np.concatenate(b.verts),
         triangles=np.concatenate(b.tris),
@@ -635,9 +632,12 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         face_material=np.concatenate(b.f_mat),
         material_lobes=b.lobes,
         lamps=lamps,
-        world_radiance=world_L,
-        world_name=world_name,
     )
+    try:
+        faces.world_radiance, faces.world_name, world_notes = world_light(context.scene, lambda: sees_sky(faces))
+    except ValueError as exc:
+        raise SceneError(str(exc)) from None
+    faces.warnings.extend(w for w in world_notes if w not in faces.warnings)
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
                          np.concatenate(b.f_mat), b.lobes, notes=notes)

@@ -132,9 +132,11 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
             bpy.data.worlds.remove(made["world"])
 
 
-def world_light(scene) -> tuple:
+def world_light(scene, sees_sky=None) -> tuple:
     """(engine.world.EnvironmentMap or None, the World's name, [warnings]): the World as Cycles
-    lights diffuse surfaces with it."""
+    lights diffuse surfaces with it. ``sees_sky``: a callable, True when some face can see the
+    World (engine.world.sees_sky); asked before a textured World is rendered, so a closed scene
+    costs no render."""
     world = scene.world
     if world is None:
         return None, "", []
@@ -161,6 +163,10 @@ def world_light(scene) -> tuple:
             if any(n.type == "LIGHT_PATH" for n in tree.nodes):
                 notes.append(f"the World ({world.name!r}) uses a Light Path node: its light is read as camera rays "
                              "see it; if diffuse rays see something else, Cycles renders a different light")
+            if sees_sky is not None and not sees_sky():
+                notes.append(f"the World ({world.name!r}) is seen from no face (the scene is closed): it adds no "
+                             "light, and its texture was not rendered")
+                return None, world.name, notes
             env = render_world_map(world)
     else:
         env = EnvironmentMap.uniform(np.array(world.color, dtype=np.float64)[:3])

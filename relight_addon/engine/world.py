@@ -27,7 +27,7 @@ from .kernel_transfer import _Geometry, _sample_patches
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
 from .sampling import SceneSampler
 
-__all__ = ["EnvironmentMap", "Detail", "world_irradiance", "WORLD_RAYS", "SKY_MIN"]
+__all__ = ["EnvironmentMap", "Detail", "world_irradiance", "sees_sky", "WORLD_RAYS", "SKY_MIN"]
 
 #: hemisphere rays per patch for the World's light (one cosine-weighted direction per receiver point)
 WORLD_RAYS = 1024
@@ -39,6 +39,11 @@ BRIGHT = 50.0
 #: a group of bright texels is a sun when it spans at most this cone (full angle, radians); a
 #: larger bright region (a window in an interior HDRI) stays in the map, sampled by the sky rays
 SUN_MAX_ANGLE = math.radians(12.0)
+#: the test whether the World lights the scene at all (``sees_sky``): rays in all, at least so
+#: many per face, and the share of the scene's hemisphere that must escape
+SKY_TEST_RAYS = 200_000
+SKY_TEST_MIN_RAYS = 8
+SKY_TEST_SHARE = 1e-4
 #: luminance weights of linear Rec.709
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
@@ -263,3 +268,24 @@ def world_irradiance(patches, world, sampler: SceneSampler | None = None, seed: 
             L[escaped] = rest.lookup(d[escaped])
             out[s] += np.pi * L.reshape(m, k, 3).mean(axis=1)
     return out
+
+
+def sees_sky(faces, rays: int = SKY_TEST_RAYS, seed: int = 0) -> bool:
+    """Whether the World can light the scene: cosine-weighted rays from points spread over the
+    faces' fronts (each face one patch, at least SKY_TEST_MIN_RAYS each, ``rays`` in all) escape
+    it, as a share of the scene's area-weighted hemisphere above SKY_TEST_SHARE. Faces whose every
+    ray escapes count only when they are targets: a face lying on another (a rug's or a leg's
+    bottom on the floor) sees out through the floor, but the light it gets there reaches no other
+    face. An opening of a (share of the scene's area) is found when a > SKY_TEST_SHARE: a 10 x
+    10 cm hole in a 4 x 3 x 2.5 m room. The World's map is not rendered for a scene that fails
+    this (a closed room)."""
+    from .scene import mesh_patches, scene_scale
+
+    patches = mesh_patches(faces, 2.0 * scene_scale(faces) + 1.0)
+    per_patch = max(SKY_TEST_MIN_RAYS, int(rays) // max(patches.n_patches, 1))
+    share = world_irradiance(patches, np.ones(3), seed=seed, rays_per_patch=per_patch)[:, 0] / math.pi
+    counted = share < 1.0
+    if faces.target is not None:
+        counted |= np.asarray(faces.target, dtype=bool)[patches.face]
+    area = patches.area
+    return bool(np.sum(area * share * counted) > SKY_TEST_SHARE * np.sum(area))
