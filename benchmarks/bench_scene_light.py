@@ -5,7 +5,8 @@
 The suite's living room (tests/artist_scenes.living_room(2), 22k triangles) is written three
 times: as it is, with a Sun (strength 3, angle 0.5 degrees) and a uniform World (0.3, 0.4, 0.6),
 and with the same Sun and an HDRI World (tests/lit_rooms.hdri_world: a 512 x 256 OpenEXR sky with
-a sun). Each file is solved by `relight solve` (defaults) in fresh processes, in turn; the
+a sun); and the small window room of tests/test_cycles_world.py (1,200 patches) with a uniform
+World and with the HDRI, where the HDRI is rendered (engine.world's map and its sun). Each file is solved by `relight solve` (defaults) in fresh processes, in turn; the
 report's job total, export (where a textured World would be rendered), form factors and
 inverse (where the lamps' and the World's rays are cast) are compared. Rays: a sun 64 per patch,
 the World 1,024 per patch that sees the sky (engine.world), and 200k to find whether any face
@@ -29,7 +30,7 @@ BUILD = r"""
 import math, sys
 sys.path[:0] = [%r, %r]
 import bpy, artist_scenes, lit_rooms
-plain, lit, hdri, exr = sys.argv[-4:]
+plain, lit, hdri, win_uniform, win_hdri, exr = sys.argv[-6:]
 bpy.ops.wm.read_factory_settings(use_empty=True)
 artist_scenes.living_room(2)
 bpy.ops.wm.save_as_mainfile(filepath=plain)
@@ -42,6 +43,17 @@ ob.rotation_euler = (math.radians(40), 0.0, math.radians(30))
 bpy.ops.wm.save_as_mainfile(filepath=lit)
 lit_rooms.hdri_world(exr)
 bpy.ops.wm.save_as_mainfile(filepath=hdri)
+lit_rooms.lamp_room(win_uniform)
+bpy.ops.wm.open_mainfile(filepath=win_uniform)
+lit_rooms.remove_lamps()
+lit_rooms.cut_window()
+lit_rooms.paint(bpy.data.objects["floor"], [j * 4 + i for j in (1, 2) for i in range(4)], (0.6, 0.55, 0.5))
+for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
+    bpy.data.objects[name]["relight_no_lights"] = True
+lit_rooms.uniform_world((0.3, 0.4, 0.6))
+bpy.ops.wm.save_as_mainfile(filepath=win_uniform)
+lit_rooms.hdri_world(exr)
+bpy.ops.wm.save_as_mainfile(filepath=win_hdri)
 """
 
 
@@ -57,8 +69,8 @@ def main():
     ap.add_argument("--rounds", type=int, default=3)
     args = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="relight-bench-light-")
-    files = {name: os.path.join(tmp, f"room_{i}.blend") for i, name in enumerate(("plain", "sun + world",
-                                                                                  "sun + hdri"))}
+    files = {name: os.path.join(tmp, f"room_{i}.blend") for i, name in enumerate(
+        ("plain", "sun + world", "sun + hdri", "window + world", "window + hdri"))}
     subprocess.run([sys.executable, "-c", BUILD % (ROOT, os.path.join(ROOT, "tests")), *files.values(),
                     os.path.join(tmp, "sky.exr")], check=True, capture_output=True)
     runs = {name: [] for name in files}
@@ -71,7 +83,8 @@ def main():
             runs[name].append({k: t[k] for k in ("total", "export", "form_factors", "inverse")})
             last[name] = rep
     med = {n: {k: float(np.median([x[k] for x in v])) for k in v[0]} for n, v in runs.items()}
-    out = {"median_s": med, "ratio": {n: med[n]["total"] / med["plain"]["total"] for n in files if n != "plain"},
+    base = {n: "window + world" if n.startswith("window") else "plain" for n in files}
+    out = {"median_s": med, "ratio": {n: med[n]["total"] / med[base[n]]["total"] for n in files if base[n] != n},
            "runs": runs, "patches": last["plain"]["scene"]["patches"],
            "fixed_light": {n: last[n]["fixed_light"] for n in files if n != "plain"},
            "warnings": {n: [w for w in last[n]["warnings"] if "World" in w] for n in files},

@@ -80,6 +80,9 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
         made["world"] = w = world.copy()
         if not w.cycles_visibility.camera:
             w.cycles_visibility.camera = True  # the copy is what camera rays see, whatever the user's setting
+        # camera rays only: no importance map of the World as a light (Cycles would evaluate the
+        # World at its sample_map_resolution first, seconds for an HDRI)
+        w.cycles.sampling_method = "NONE"
         made["camera_data"] = cd = bpy.data.cameras.new("relight world map")
         cd.type = "PANO"
         cd.panorama_type = "EQUIRECTANGULAR"
