@@ -77,3 +77,108 @@ def _relight(*args):
                           capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ROOT})
     assert proc.returncode == 0, proc.stderr[-2000:]
     return proc
+
+
+def _against_cycles(predicted, baked, what):
+    """Per face (every baked object), the predicted radiosity / pi against Cycles' radiance,
+    channels summed: (relative errors, signed errors, a summary printed and returned)."""
+    rel, signed, lines = [], [], []
+    for name, cyc in baked.items():
+        ours = np.asarray(predicted[name], dtype=np.float64) / math.pi
+        lum = cyc.radiance.sum(axis=1)
+        s = (ours.sum(axis=1) - lum) / lum
+        rel.append(np.abs(s))
+        signed.append(s)
+        lines.append(f"  {name}: mean {rel[-1].mean():.4f} max {rel[-1].max():.4f} signed {s.mean():+.4f} "
+                     f"(Cycles noise {np.mean(cyc.rel_noise):.4f})")
+    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    summary = f"{what}: {len(rel)} faces, mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}\n" + \
+        "\n".join(lines)
+    print(summary)
+    return rel, signed, summary
+
+
+def _lamps_in(path=None):
+    """{lamp name: (Power, hide_render, hide_viewport, Relight's custom properties)} of the open
+    file (or of ``path``)."""
+    if path is not None:
+        bpy.ops.wm.open_mainfile(filepath=str(path))
+    return {o.name: (round(float(o.data.energy), 4), o.hide_render, o.hide_viewport,
+                     sorted(k for k in o.keys() if k.startswith("relight")))
+            for o in bpy.data.objects if o.type == "LIGHT"}
+
+
+@pytest.mark.parametrize("selection", ["greedy-swap", "exitance-elimination"])
+def test_reduce_thirty_point_lamps_rendered_by_cycles_as_predicted(tmp_path, selection):
+    """The final configuration (written by --out) and a second one of the curve (applied to the
+    written file as the add-on applies a row) against Cycles bakes of the file, every face;
+    the report's lamps as the file has them; Clear Results gives every lamp back."""
+    from relight_addon.blender import results
+
+    blend, report_path, out = tmp_path / "room.blend", tmp_path / "r.json", tmp_path / "out.blend"
+    try:
+        build_room(blend)
+        original = _lamps_in()
+    finally:
+        cr.reset_blender()
+    extra = ["--distribution", "distance"] if selection == "exitance-elimination" else []
+    _relight("reduce", blend, "--report", report_path, "--out", out, "--selection", selection, *extra)
+    report = json.loads(report_path.read_text())
+    nx, ny = GRID
+    assert report["model"]["lights_by_kind"]["lamp"] == nx * ny >= 30
+    every = [c for c in report["curve"] if c["n_lights"] == 30]  # e_x: the scene's own lamps, exact
+    assert every and min(c["relative_error"] for c in every) < 1e-9
+    fin = report["final"]
+    assert fin["n_lights"] == 3 and fin["n_negative"] == 0
+    lamps = {r["name"]: r for r in report["lamps"]}
+    assert len(lamps) == 30 and sum(r["kept"] for r in lamps.values()) == 3
+    for name, r in lamps.items():  # power before = the lamp as set; a white lamp stays white
+        i, j = map(int, name.split("_")[1:])
+        assert r["energy_before"] == pytest.approx(lamp_power(i, j)) and r["color_after"] == [1.0, 1.0, 1.0]
+    # the written copy: the kept lamps at their new Power, the others disabled, every one restorable
+    written = _lamps_in(out)
+    for name, (energy, hide_render, hide_viewport, props) in written.items():
+        r = lamps[name]
+        assert props == ["relight_lamp_original"]
+        if r["kept"]:
+            assert energy == pytest.approx(r["energy_after"], rel=1e-5) and not hide_render and not hide_viewport
+        else:
+            assert energy == pytest.approx(r["energy_before"], rel=1e-5) and hide_render and hide_viewport
+    try:
+        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, threads=THREADS, keep_light_paths=True,
+                                        keep_world=True)
+    finally:
+        cr.reset_blender()
+    predicted = {name: o["radiosity"] for name, o in report["objects"].items()}
+    rel, signed, summary = _against_cycles(predicted, baked, f"{selection}, final ({fin['n_lights']} lamps)")
+    assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01 and rel.max() < 0.08, summary
+
+    # a second configuration of the curve, applied to the written file (the add-on's row click)
+    second = tmp_path / "second.blend"
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(out))
+        scene = bpy.context.scene
+        data = results.load_result(scene)
+        row = int(np.flatnonzero(data.n_lights == 10)[0])
+        shown = results.apply_stored_point(scene, row)
+        assert shown["skipped"] == []
+        on = {o.name for o in bpy.data.objects if o.type == "LIGHT" and not o.hide_render}
+        assert len(on) == 10
+        rows = results.polygon_rows(data, data.radiosity[row].astype(np.float64))
+        off = data.polygon_offset
+        predicted = {name: rows[off[k]:off[k + 1]] for k, name in enumerate(data.objects)}
+        bpy.ops.wm.save_as_mainfile(filepath=str(second))
+        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=2, threads=THREADS, keep_light_paths=True,
+                                        keep_world=True)
+    finally:
+        cr.reset_blender()
+    rel, signed, summary = _against_cycles(predicted, baked, f"{selection}, curve row {row} (10 lamps)")
+    assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01 and rel.max() < 0.08, summary
+
+    # Clear Results: every lamp back as the user set it, no trace left
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(second))
+        results.clear_results(bpy.context.scene)
+        assert _lamps_in() == original
+    finally:
+        cr.reset_blender()

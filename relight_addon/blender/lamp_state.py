@@ -12,8 +12,9 @@ lamp is without Relight's changes (what a new solve sees: every new result repla
 from __future__ import annotations
 
 import bpy
+import numpy as np
 
-__all__ = ["STATE_PROP", "DATA_PROP", "before", "visible_before", "set_power", "disable", "restore"]
+__all__ = ["STATE_PROP", "DATA_PROP", "before", "world_matrix", "visible_before", "set_power", "disable", "restore"]
 
 STATE_PROP = "relight_lamp_original"
 DATA_PROP = "relight_lamp_original_data"
@@ -32,6 +33,16 @@ def before(ob) -> dict | None:
             "hide_render": bool(state["hide_render"]), "hide_viewport": bool(state["hide_viewport"]),
             "owner": str(state.get("owner", "")),
             "data": data if isinstance(data, bpy.types.Light) else ob.data}
+
+
+def world_matrix(ob) -> np.ndarray:
+    """(4, 4) world matrix of ``ob``. An object disabled in the viewports is not evaluated (a file
+    opened with it disabled has no ``matrix_world``): its own transform and its parents' are
+    composed instead (their constraints and drivers are not evaluated then)."""
+    if not ob.hide_viewport:
+        return np.array(ob.matrix_world, dtype=np.float64)
+    M = np.array(ob.matrix_parent_inverse, dtype=np.float64) @ np.array(ob.matrix_basis, dtype=np.float64)
+    return M if ob.parent is None else world_matrix(ob.parent) @ M
 
 
 def visible_before(ob, view_layer, was) -> bool:
@@ -62,6 +73,7 @@ def _remember(ob, rid):
                       "hide_render": bool(ob.hide_render), "hide_viewport": bool(ob.hide_viewport)}
     if ld.users > 1:
         own = ld.copy()
+        own.name = f"{ld.name} (Relight)"
         own[OWNER_PROP] = rid or ""
         ob[DATA_PROP] = ld
         ob.data = own

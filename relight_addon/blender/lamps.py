@@ -82,7 +82,7 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
         power = color * energy
         if not np.any(power > 0):
             continue
-        M = np.array(ob.matrix_world, dtype=np.float64)
+        M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
         X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
         sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
         if min(sx, sy, sz) <= 0:

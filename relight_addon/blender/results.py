@@ -394,6 +394,8 @@ def plan_lamps(scene, data, strength) -> tuple:
 
     plan, skipped = [], []
     light_lamp = np.asarray(data.light_lamp if data.light_lamp is not None else [], dtype=np.int64)
+    if np.any(light_lamp >= 0):
+        bpy.context.evaluated_depsgraph_get()  # the enabled lamps' matrix_world up to date (one just re-enabled)
     for j in np.flatnonzero(light_lamp >= 0):
         rec = data.lamps[int(light_lamp[j])]
         name = rec["name"]
@@ -404,7 +406,7 @@ def plan_lamps(scene, data, strength) -> tuple:
         ld = ob.data if was is None else was["data"]
         energy = float(ld.energy if was is None else was["energy"])
         color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
-        M = np.array(ob.matrix_world, dtype=np.float64)
+        M = lamp_state.world_matrix(ob)
         direction = -M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300)
         why = None
         if ld.type != rec["type"]:

@@ -283,7 +283,9 @@ class InverseProblem:
             empty = np.diff(B.tocsc().indptr) == 0
             H = None if lights is None else lights.irradiance
             if H is not None:  # a light of an irradiance kind has its source there
-                empty &= np.diff(sp.csc_matrix(H).indptr) == 0
+                Hc = sp.csc_matrix(H, copy=True)
+                Hc.eliminate_zeros()
+                empty &= np.diff(Hc.indptr) == 0
             if B.shape[1] == 0 or np.any(empty):
                 raise InverseError("every light must have a source: cover at least one candidate patch, "
                                    "or light at least one patch")
