@@ -178,3 +178,23 @@ def test_a_new_job_on_the_written_copy_sees_the_lamps_as_the_user_set_them(reduc
     again = json.loads(rep.read_text())
     before = {x["name"]: x["power_before"] for x in r["lamps"]}
     assert {x["name"]: x["power_before"] for x in again["lamps"]} == before
+
+
+def test_a_scene_whose_lamps_light_nothing_is_refused(tmp_path, run_cli):
+    try:
+        cr.reset_blender()
+        v, f = cr.grid_quads((0, 0, 0), (1, 0, 0), (0, 1, 0), 2, 2)
+        cr.add_mesh_object("floor", v, f, cr._material("grey", (0.5, 0.5, 0.5), lambertian=True))
+        _lamp("below", "POINT", (0.5, 0.5, -1.0), energy=100.0)  # under the one-sided floor
+        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "dark.blend"))
+    finally:
+        cr.reset_blender()
+    code, _, err = run_cli(["reduce", tmp_path / "dark.blend", "--report", tmp_path / "r.json", *FAST])
+    assert code == 2 and "no lamp lights any face (below)" in err, err
+
+
+def test_the_lamp_state_marks_its_copies_as_relight_made():
+    from relight_addon.blender import export, lamp_state
+
+    assert lamp_state.OWNER_PROP == export.RELIGHT_OWNER_PROP
+

@@ -395,6 +395,9 @@ def direct_lights(faces: FaceSet, patches: PatchSet, F, surface, seed=0) -> tupl
     if dark:
         notes.append(f"{len(dark)} lamp(s) light no face ({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}): "
                      "left out of the reduction, and left as they are in the written copy")
+    if surface is None and not len(lit):
+        raise SceneError(f"nothing to reduce: no material emits and no lamp lights any face "
+                         f"({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''})")
     C = np.flatnonzero(candidate_mask(patches, "direct"))
     n0 = 0 if surface is None else surface.n_lights
     lights = add_lamps(surface, C, P, [faces.lamps[i] for i in lit], unit[:, lit], patches.area)

@@ -5,7 +5,8 @@ A solve produces a sequence of configurations (the error curve, paper Fig. 11).
 the whole curve (for the chart), and for the configurations kept re-appliable (every one up to
 STORE_ALL_UP_TO lights, ~STORE_LOG_POINTS log-spaced above, e_x and the final one) each light's
 strength and every patch's radiosity; the lights (object, kind, area, centre, normal, polygons),
-their cells' triangles and reflectance, and the patches -> polygons weights. The solve builds it
+their cells' triangles and reflectance, the patches -> polygons weights, and (direct mode) the
+scene's lamps that are lights (``lamps``, ``light_lamp``: the lamp writer's, with what each was). The solve builds it
 (``StoredResult.from_solve``), results.py writes and reads it (``pack`` / ``unpack``: one string,
 zlib-compressed npz in base64, kept in the scene's custom property ``relight_result``).
 Floating-point arrays are stored as float32: no loss of range (float16 overflowed above
