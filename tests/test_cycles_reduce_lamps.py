@@ -11,11 +11,7 @@ back as the user set it.
 
 Reference: Cycles' COMBINED bake (tests/cycles_reference.py), an independent path tracer.
 """
-import json
 import math
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -23,8 +19,8 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
+import relight_scene  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 W, D, H = 4.0, 3.0, 2.5
 GRID = (6, 5)  # lamps along x and y
 POWERS = (15.0, 40.0, 90.0)  # W, a few distinct powers so that the reduction has a choice
@@ -38,8 +34,9 @@ def lamp_power(i, j):
 
 
 def build_room(path):
-    """The room (inward-facing walls, 4 x 4 quads each, a table top of 1 x 0.8 m, 5 cm thick, its sides open, at 0.7 m) and the
-    30 Point lamps (radius 5 cm) 0.3 m under the ceiling; saved to ``path``."""
+    """The room (inward-facing walls, 4 x 4 quads each; a table top of 1 x 0.8 m at 0.7 m, 5 cm
+    thick, its sides open) and the 30 Point lamps (radius 5 cm) 0.3 m under the ceiling; saved
+    to ``path``."""
     cr.reset_blender()
     bpy.context.scene.world = None  # no World light: only the lamps
     walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
@@ -72,13 +69,6 @@ def build_room(path):
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
 
-def _relight(*args):
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", *map(str, args), "--quiet"], cwd=ROOT,
-                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return proc
-
-
 def _against_cycles(predicted, baked, what):
     """Per face (every baked object), the predicted radiosity / pi against Cycles' radiance,
     channels summed: (relative errors, signed errors, a summary printed and returned)."""
@@ -98,16 +88,6 @@ def _against_cycles(predicted, baked, what):
     return rel, signed, summary
 
 
-def _lamps_in(path=None):
-    """{lamp name: (Power, hide_render, hide_viewport, Relight's custom properties)} of the open
-    file (or of ``path``)."""
-    if path is not None:
-        bpy.ops.wm.open_mainfile(filepath=str(path))
-    return {o.name: (round(float(o.data.energy), 4), o.hide_render, o.hide_viewport,
-                     sorted(k for k in o.keys() if k.startswith("relight")))
-            for o in bpy.data.objects if o.type == "LIGHT"}
-
-
 @pytest.mark.parametrize("selection", ["greedy-swap", "exitance-elimination"])
 def test_reduce_thirty_point_lamps_rendered_by_cycles_as_predicted(tmp_path, selection):
     """The final configuration (written by --out) and a second one of the curve (applied to the
@@ -115,15 +95,9 @@ def test_reduce_thirty_point_lamps_rendered_by_cycles_as_predicted(tmp_path, sel
     the report's lamps as the file has them; Clear Results gives every lamp back."""
     from relight_addon.blender import results
 
-    blend, report_path, out = tmp_path / "room.blend", tmp_path / "r.json", tmp_path / "out.blend"
-    try:
-        build_room(blend)
-        original = _lamps_in()
-    finally:
-        cr.reset_blender()
     extra = ["--distribution", "distance"] if selection == "exitance-elimination" else []
-    _relight("reduce", blend, "--report", report_path, "--out", out, "--selection", selection, *extra)
-    report = json.loads(report_path.read_text())
+    report, out, original = relight_scene.reduce_built(build_room, tmp_path, "--selection", selection, *extra,
+                                                       "--quiet")
     nx, ny = GRID
     assert report["model"]["lights_by_kind"]["lamp"] == nx * ny >= 30
     every = [c for c in report["curve"] if c["n_lights"] == 30]  # e_x: the scene's own lamps, exact
@@ -136,15 +110,15 @@ def test_reduce_thirty_point_lamps_rendered_by_cycles_as_predicted(tmp_path, sel
         i, j = map(int, name.split("_")[1:])
         assert r["energy_before"] == pytest.approx(lamp_power(i, j)) and r["color_after"] == [1.0, 1.0, 1.0]
     # the written copy: the kept lamps at their new Power, the others disabled, every one restorable
-    written = _lamps_in(out)
-    for name, (energy, hide_render, hide_viewport, props) in written.items():
-        r = lamps[name]
-        assert props == ["relight_lamp_original"]
-        if r["kept"]:
-            assert energy == pytest.approx(r["energy_after"], rel=1e-5) and not hide_render and not hide_viewport
-        else:
-            assert energy == pytest.approx(r["energy_before"], rel=1e-5) and hide_render and hide_viewport
     try:
+        bpy.ops.wm.open_mainfile(filepath=str(out))
+        for name, (_, energy, _, hide_render, hide_viewport, props) in relight_scene.lamps(bpy.data).items():
+            r = lamps[name]
+            assert props == ["relight_lamp_original"]
+            if r["kept"]:
+                assert energy == pytest.approx(r["energy_after"], rel=1e-5) and not (hide_render or hide_viewport)
+            else:
+                assert energy == pytest.approx(r["energy_before"], rel=1e-5) and hide_render and hide_viewport
         baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, threads=THREADS, keep_light_paths=True,
                                         keep_world=True)
     finally:
@@ -179,6 +153,6 @@ def test_reduce_thirty_point_lamps_rendered_by_cycles_as_predicted(tmp_path, sel
     try:
         bpy.ops.wm.open_mainfile(filepath=str(second))
         results.clear_results(bpy.context.scene)
-        assert _lamps_in() == original
+        assert relight_scene.lamps(bpy.data) == original
     finally:
         cr.reset_blender()

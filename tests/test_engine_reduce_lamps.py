@@ -55,6 +55,15 @@ def lamps_and_lights(r, positions=POSITIONS, powers=POWERS, surface=None):
     return lamps, H, add_lamps(surface, np.zeros(0, dtype=np.int64), P, lamps, H, r["area"])
 
 
+def lamp_problem(r, **kw):
+    """(lamps, H, problem, e_x): the direct problem of the closed-form lamps in room ``r``."""
+    lamps, H, lights = lamps_and_lights(r)
+    prob, e_x = direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((len(r["area"]), 3)),
+                                        r["center"], r["normal"], lights=lights,
+                                        strength=np.array([lamp.power for lamp in lamps]), **kw)
+    return lamps, H, prob, e_x
+
+
 def inverse_of_A(r, c):
     return np.linalg.inv(np.eye(len(r["area"])) - RHO[c] * r["F"])
 
@@ -77,10 +86,8 @@ def test_direct_problem_of_lamps_against_the_explicit_inverse(room):
     any configuration's radiosity = the sum of the lamps' columns scaled by their strength."""
     r = room
     P = len(r["area"])
-    lamps, H, lights = lamps_and_lights(r)
+    lamps, H, prob, e_x = lamp_problem(r)
     strength = np.array([lamp.power for lamp in lamps])
-    prob, e_x = direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((P, 3)), r["center"],
-                                        r["normal"], lights=lights, strength=strength)
     assert prob.n_lights == 4 and len(prob.candidates) == 0 and len(prob.targets) == P
     np.testing.assert_array_equal(e_x, strength)
     columns = [np.stack([inverse_of_A(r, c) @ (RHO[c] * H[:, l]) for c in range(3)], axis=1) for l in range(4)]
@@ -102,12 +109,9 @@ def test_the_world_is_fixed_background_in_direct_mode(room):
     """A fixed irradiance (the World) is transported into the background radiosity, left out of
     what the lamps must give (b_P) and counted in the norm the relative errors are of."""
     r = room
-    P = len(r["area"])
-    lamps, H, lights = lamps_and_lights(r)
-    strength = np.array([lamp.power for lamp in lamps])
     world = np.where((r["wall"] == "ceiling")[:, None], np.array([2.0, 3.0, 4.0]), 0.0)
-    prob, e_x = direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((P, 3)), r["center"],
-                                        r["normal"], lights=lights, strength=strength, background_irradiance=world)
+    lamps, H, prob, e_x = lamp_problem(r, background_irradiance=world)
+    strength = np.array([lamp.power for lamp in lamps])
     B_world = np.stack([inverse_of_A(r, c) @ (RHO[c] * world[:, c]) for c in range(3)], axis=1)
     B_lamps = np.stack([inverse_of_A(r, c) @ (RHO[c] * (H @ strength[:, c])) for c in range(3)], axis=1)
     np.testing.assert_allclose(prob.background_radiosity, B_world, rtol=1e-10)
@@ -127,11 +131,8 @@ def test_best_k_lamps_curve_against_exhaustive_search(room):
     """Best k Lights on 4 lamps: for every k its error is the exhaustive optimum (every subset,
     NNLS per channel on T formed from the explicit inverse); the 4-lamp point is the scene (0)."""
     r = room
-    P = len(r["area"])
-    lamps, H, lights = lamps_and_lights(r)
+    lamps, H, prob, e_x = lamp_problem(r)
     strength = np.array([lamp.power for lamp in lamps])
-    prob, e_x = direct_lighting_problem(r["F"], r["area"], r["reflectance"], np.zeros((P, 3)), r["center"],
-                                        r["normal"], lights=lights, strength=strength)
     T = [inverse_of_A(r, c) @ (RHO[c] * H) for c in range(3)]
     b = np.stack([T[c] @ strength[:, c] for c in range(3)], axis=1)
     red = reduce_lights(prob, e_x, selection="greedy-swap", max_lights=4)

@@ -8,9 +8,9 @@ Power, colour and switches as the report says, the user's values back after Clea
 (exactly, the shared data-block shared again), a lamp moved after the solve refused before
 anything is written, and a new job on the written copy seeing the lamps as the user set them.
 """
+import contextlib
 import json
 import math
-import os
 
 import numpy as np
 import pytest
@@ -18,28 +18,14 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import cycles_reference as cr  # noqa: E402
+import lit_rooms  # noqa: E402
+import relight_scene  # noqa: E402
 
 FAST = ["--rays-per-patch", "512", "--quiet"]
 
 
-def _lamp(name, kind, location, rotation=(0.0, 0.0, 0.0), data=None, **props):
-    ld = data or bpy.data.lights.new(name, kind)
-    for k, v in props.items():
-        setattr(ld, k, v)
-    ob = bpy.data.objects.new(name, ld)
-    bpy.context.scene.collection.objects.link(ob)
-    ob.location, ob.rotation_euler = location, rotation
-    return ob
-
-
 def build(path):
-    cr.reset_blender()
-    world = bpy.data.worlds.new("grey sky")
-    bpy.context.scene.world = world
-    if bpy.app.version < (5, 0, 0):
-        world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    lit_rooms.uniform_world((0.3, 0.3, 0.3))
     walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
     W, D, H, n = 3.0, 3.0, 2.5, 3
     for name, o, du, dv in [("floor", (0, 0, 0), (W, 0, 0), (0, D, 0)), ("ceiling", (0, D, H), (W, 0, 0), (0, -D, 0)),
@@ -54,37 +40,36 @@ def build(path):
     cr.add_mesh_object("panel", v, [tuple(reversed(q)) for q in f], panel)  # facing down
     shared = bpy.data.lights.new("shared", "POINT")
     shared.energy, shared.shadow_soft_size = 60.0, 0.05
-    _lamp("twin_a", "POINT", (0.7, 0.7, 2.0), data=shared)
-    _lamp("twin_b", "POINT", (2.3, 0.8, 2.0), data=shared)
-    _lamp("red", "POINT", (0.8, 2.2, 1.8), energy=40.0, color=(1.0, 0.3, 0.2), shadow_soft_size=0.05)
-    _lamp("spot", "SPOT", (1.5, 1.5, 2.3), energy=150.0, spot_size=math.radians(70), shadow_soft_size=0.0)
-    _lamp("sun", "SUN", (0, -3, 4), (math.radians(50), 0.0, 0.0), energy=2.0, angle=math.radians(1))
-    _lamp("outside", "POINT", (1.5, 4.0, 1.2), energy=100.0)  # behind the north wall: lights no face
+    light = lit_rooms.light
+    light("POINT", (0.7, 0.7, 2.0), name="twin_a", data=shared)
+    light("POINT", (2.3, 0.8, 2.0), name="twin_b", data=shared)
+    light("POINT", (0.8, 2.2, 1.8), name="red", energy=40.0, color=(1.0, 0.3, 0.2), shadow_soft_size=0.05)
+    light("SPOT", (1.5, 1.5, 2.3), name="spot", energy=150.0, spot_size=math.radians(70), shadow_soft_size=0.0)
+    light("SUN", (0, -3, 4), (math.radians(50), 0.0, 0.0), name="sun", energy=2.0, angle=math.radians(1))
+    light("POINT", (1.5, 4.0, 1.2), name="outside", energy=100.0)  # behind the north wall: lights no face
     bpy.context.scene["relight_max_patch_size"] = 0.5
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
 
 def lamps_now():
-    """{object: (Light data-block name, Power, colour, hide_render, hide_viewport, Relight props)}."""
-    return {o.name: (o.data.name, round(o.data.energy, 5), tuple(round(c, 5) for c in o.data.color), o.hide_render,
-                     o.hide_viewport, sorted(k for k in o.keys() if k.startswith("relight")))
-            for o in bpy.data.objects if o.type == "LIGHT"}
+    return relight_scene.lamps(bpy.data)
+
+
+@contextlib.contextmanager
+def opened(path):
+    """The Blender file ``path`` open (its scene); factory settings again afterwards."""
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(path))
+        yield bpy.context.scene
+    finally:
+        cr.reset_blender()
 
 
 @pytest.fixture(scope="module")
 def reduced(tmp_path_factory):
-    from relight_addon import cli
-
-    tmp = tmp_path_factory.mktemp("reduce_lamps")
-    blend, rep, out = tmp / "room.blend", tmp / "r.json", tmp / "out.blend"
-    try:
-        build(blend)
-        original = lamps_now()
-    finally:
-        cr.reset_blender()
-    code = cli.main(["reduce", str(blend), "--report", str(rep), "--out", str(out), "--max-lights", "3", *FAST])
-    assert code == 0
-    return blend, json.loads(rep.read_text()), out, original
+    report, out, original = relight_scene.reduce_built(build, tmp_path_factory.mktemp("reduce_lamps"),
+                                                       "--max-lights", "3", *FAST)
+    return None, report, out, original
 
 
 def test_the_report_lists_the_lamps_and_the_world(reduced):
@@ -101,16 +86,15 @@ def test_the_report_lists_the_lamps_and_the_world(reduced):
         if x["kept"]:
             np.testing.assert_allclose(np.array(x["color_after"]) * x["energy_after"], x["power_after"], rtol=1e-9)
     fixed = {x["name"]: x for x in r["fixed_light"]}
-    assert set(fixed) == {"grey sky"} and fixed["grey sky"]["kind"] == "world" and 0 < fixed["grey sky"]["share"] < 1
-    assert any("grey sky" in w and "fixed light" in w for w in r["warnings"])
+    assert set(fixed) == {"sky"} and fixed["sky"]["kind"] == "world" and 0 < fixed["sky"]["share"] < 1
+    assert any("sky" in w and "fixed light" in w for w in r["warnings"])
     assert min(c["relative_error"] for c in r["curve"] if c["n_lights"] == 6) < 1e-9  # the scene: its six lights
 
 
 def test_the_written_copy_sets_the_kept_lamps_and_disables_the_others(reduced):
     _, r, out, original = reduced
     lamps = {x["name"]: x for x in r["lamps"]}
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(out))
+    with opened(out):
         now = lamps_now()
         assert now["outside"] == original["outside"]  # not in the reduction: untouched
         for name, x in lamps.items():
@@ -125,33 +109,25 @@ def test_the_written_copy_sets_the_kept_lamps_and_disables_the_others(reduced):
             assert now["twin_a"][0] != now["twin_b"][0] or now["twin_a"][1:3] == original["twin_a"][1:3]
         assert bpy.data.lights["shared"].energy == pytest.approx(60.0)
         # the panel's own emission is switched off (the emitters object shows it if kept)
-        panel = bpy.data.objects["panel"].data
-        assert "relight_original_slots" in panel.keys()
-    finally:
-        cr.reset_blender()
+        assert "relight_original_slots" in bpy.data.objects["panel"].data.keys()
 
 
 def test_clear_results_gives_every_lamp_back(reduced):
     from relight_addon.blender import results
 
     _, _, out, original = reduced
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(out))
-        results.clear_results(bpy.context.scene)
+    with opened(out) as scene:
+        results.clear_results(scene)
         assert lamps_now() == original
         assert bpy.data.objects["twin_a"].data is bpy.data.objects["twin_b"].data
         assert not [ld for ld in bpy.data.lights if ld.get("relight_owner") is not None]  # the copies removed
-    finally:
-        cr.reset_blender()
 
 
 def test_every_row_of_the_curve_applies_and_a_moved_lamp_is_refused(reduced):
     from relight_addon.blender import results
 
     _, r, out, _ = reduced
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(out))
-        scene = bpy.context.scene
+    with opened(out) as scene:
         data = results.load_result(scene)
         for row in range(len(data.n_lights)):  # the add-on's list: each row shows its lamps
             results.apply_stored_point(scene, row)
@@ -163,8 +139,6 @@ def test_every_row_of_the_curve_applies_and_a_moved_lamp_is_refused(reduced):
         with pytest.raises(results.StaleResult, match="lamp 'red' has changed since the solve"):
             results.apply_stored_point(scene, 0)
         assert lamps_now() == before  # nothing written
-    finally:
-        cr.reset_blender()
 
 
 def test_a_new_job_on_the_written_copy_sees_the_lamps_as_the_user_set_them(reduced, tmp_path):
@@ -181,14 +155,11 @@ def test_a_new_job_on_the_written_copy_sees_the_lamps_as_the_user_set_them(reduc
 
 
 def test_a_scene_whose_lamps_light_nothing_is_refused(tmp_path, run_cli):
-    try:
-        cr.reset_blender()
-        v, f = cr.grid_quads((0, 0, 0), (1, 0, 0), (0, 1, 0), 2, 2)
-        cr.add_mesh_object("floor", v, f, cr._material("grey", (0.5, 0.5, 0.5), lambertian=True))
-        _lamp("below", "POINT", (0.5, 0.5, -1.0), energy=100.0)  # under the one-sided floor
-        bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "dark.blend"))
-    finally:
-        cr.reset_blender()
+    cr.reset_blender()
+    v, f = cr.grid_quads((0, 0, 0), (1, 0, 0), (0, 1, 0), 2, 2)
+    cr.add_mesh_object("floor", v, f, cr._material("grey", (0.5, 0.5, 0.5), lambertian=True))
+    lit_rooms.light("POINT", (0.5, 0.5, -1.0), name="below", energy=100.0)  # under the one-sided floor
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "dark.blend"))
     code, _, err = run_cli(["reduce", tmp_path / "dark.blend", "--report", tmp_path / "r.json", *FAST])
     assert code == 2 and "no lamp lights any face (below)" in err, err
 
