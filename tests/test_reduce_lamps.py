@@ -136,9 +136,14 @@ def test_every_row_of_the_curve_applies_and_a_moved_lamp_is_refused(reduced):
             assert on == {data.lamps[data.light_lamp[j]]["name"] for j in np.flatnonzero(lit & (data.light_lamp >= 0))}
         before = lamps_now()
         bpy.data.objects["red"].location.x += 0.3
-        with pytest.raises(results.StaleResult, match="lamp 'red' has changed since the solve"):
+        with pytest.raises(results.StaleResult, match="lamp 'red' has changed since the solve .it moved"):
             results.apply_stored_point(scene, 0)
         assert lamps_now() == before  # nothing written
+        bpy.data.objects["red"].location.x -= 0.3
+        results.clear_shown(scene)  # every lamp as the user set it
+        bpy.data.objects["spot"].hide_render = True  # the user's own switch, after the solve
+        with pytest.raises(results.StaleResult, match="lamp 'spot' has changed since the solve .it is disabled"):
+            results.apply_stored_point(scene, 0)
 
 
 def test_a_new_job_on_the_written_copy_sees_the_lamps_as_the_user_set_them(reduced, tmp_path):

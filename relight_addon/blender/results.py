@@ -411,6 +411,8 @@ def plan_lamps(scene, data, strength) -> tuple:
         why = None
         if ld.type != rec["type"]:
             why = f"a {ld.type} lamp, {rec['type']} when solved"
+        elif ob.hide_render if was is None else was["hide_render"]:
+            why = "it is disabled in renders"
         elif not np.allclose(color * energy, rec["power"], rtol=1e-5, atol=1e-9):
             why = f"its power is {energy:g} x {np.round(color, 4).tolist()}, {rec['energy']:g} x " \
                   f"{np.round(rec['color'], 4).tolist()} when solved"
