@@ -174,3 +174,28 @@ def test_the_lamp_state_marks_its_copies_as_relight_made():
 
     assert lamp_state.OWNER_PROP == export.RELIGHT_OWNER_PROP
 
+
+
+def test_the_add_on_clicks_through_the_curve_and_clears(reduced):
+    """With the add-on registered: the curve list is rebuilt from the written copy; selecting a
+    row (the list's click) shows its lamps; the Clear Results operator gives every lamp back."""
+    import relight_addon
+    from relight_addon.blender import results
+
+    _, _, out, original = reduced
+    relight_addon.register()
+    try:
+        with opened(out) as scene:
+            settings = scene.relight
+            data = results.load_result(scene)
+            assert len(settings.curve) == len(data.n_lights)
+            for k in range(len(settings.curve)):
+                settings.curve_index = k  # what a click in the list does (its update callback applies it)
+                on = {o.name for o in bpy.data.objects if o.type == "LIGHT" and not o.hide_render} - {"outside"}
+                kept = np.flatnonzero(np.any(data.exitance[k] > 0, axis=1) & (data.light_lamp >= 0))
+                assert on == {data.lamps[data.light_lamp[j]]["name"] for j in kept}, k
+                assert len(kept) <= settings.curve[k].n_lights
+            assert bpy.ops.relight.clear_results() == {"FINISHED"}
+            assert lamps_now() == original
+    finally:
+        relight_addon.unregister()
