@@ -125,10 +125,14 @@ def test_clear_results_gives_every_lamp_back(reduced):
 
 def test_every_row_of_the_curve_applies_and_a_moved_lamp_is_refused(reduced):
     from relight_addon.blender import results
+    from relight_addon.pipeline.stored import StoredResult
 
     _, r, out, _ = reduced
     with opened(out) as scene:
         data = results.load_result(scene)
+        again = StoredResult.unpack(data.pack())  # the lamps survive the round trip
+        assert again.lamps == data.lamps and np.array_equal(again.light_lamp, data.light_lamp)
+        assert [x["name"] for x in data.lamps] == [x["name"] for x in r["lamps"]]
         for row in range(len(data.n_lights)):  # the add-on's list: each row shows its lamps
             results.apply_stored_point(scene, row)
             lit = np.any(data.exitance[row] > 0, axis=1)
@@ -199,3 +203,29 @@ def test_the_add_on_clicks_through_the_curve_and_clears(reduced):
             assert lamps_now() == original
     finally:
         relight_addon.unregister()
+
+
+def test_a_result_stored_before_lamps_were_lights_reads_as_without_lamps(reduced):
+    """A stored result of the earlier layout (no lamps_json, no light_lamp) reads back with no
+    lamp; one that lacks anything else is still refused."""
+    import base64
+    import io
+    import zlib
+
+    from relight_addon.blender import results
+    from relight_addon.pipeline.stored import StoredResult
+
+    def without(text, *keys):
+        with np.load(io.BytesIO(zlib.decompress(base64.b64decode(text)))) as z:
+            arrays = {k: z[k] for k in z.files if k not in keys}
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        return base64.b64encode(zlib.compress(buf.getvalue())).decode("ascii")
+
+    _, _, out, _ = reduced
+    with opened(out) as scene:
+        text = results.load_result(scene).pack()
+    old = StoredResult.unpack(without(text, "lamps_json", "light_lamp"))
+    assert old.lamps == [] and np.all(old.light_lamp == -1)
+    with pytest.raises(ValueError, match="lacks objects"):
+        StoredResult.unpack(without(text, "objects_json"))

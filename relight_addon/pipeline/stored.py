@@ -6,7 +6,7 @@ the whole curve (for the chart), and for the configurations kept re-appliable (e
 STORE_ALL_UP_TO lights, ~STORE_LOG_POINTS log-spaced above, e_x and the final one) each light's
 strength and every patch's radiosity; the lights (object, kind, area, centre, normal, polygons),
 their cells' triangles and reflectance, the patches -> polygons weights, and (direct mode) the
-scene's lamps that are lights (``lamps``, ``light_lamp``: the lamp writer's, with what each was). The solve builds it
+scene's lamps that are lights (``lamps``, ``light_lamp``: what each was). The solve builds it
 (``StoredResult.from_solve``), results.py writes and reads it (``pack`` / ``unpack``: one string,
 zlib-compressed npz in base64, kept in the scene's custom property ``relight_result``).
 Floating-point arrays are stored as float32: no loss of range (float16 overflowed above
@@ -188,10 +188,11 @@ class StoredResult:
             out = {k: z[k] for k in z.files}
         if int(out.pop("format")) != FORMAT:
             raise ValueError("this file's Relight result was written by an incompatible version")
-        for name, empty in _JSON.items():
-            raw_json = out.pop(name + "_json", None)
-            out[name] = empty() if raw_json is None else json.loads(raw_json.tobytes().decode())
-        if "light_lamp" not in out and "light_area" in out:  # written before lamps were lights
+        for name in _JSON:
+            if name + "_json" in out:
+                out[name] = json.loads(out.pop(name + "_json").tobytes().decode())
+        if "lamps" not in out and "light_area" in out:  # written before lamps were lights: no lamp
+            out["lamps"] = []
             out["light_lamp"] = np.full(len(out["light_area"]), -1, dtype=np.int64)
         names = {f.name for f in dataclasses.fields(cls)}
         missing = names - set(out)
