@@ -107,11 +107,13 @@ def build_parser():
                         "highlights; Standard shows a radiance of 1 as white)")
 
     for name, helptext in (("solve", "inverse lighting: lights for the painted targets, then reduction"),
-                           ("reduce", "direct-lighting mode: reduce the scene's own emitters")):
+                           ("reduce", "direct-lighting mode: reduce the scene's own emitters (its lamps and "
+                                      "emissive polygons)")):
         s = sub.add_parser(name, help=helptext)
         s.add_argument("scene", help="input .blend file (never modified)")
         s.add_argument("--report", required=True, help="JSON report to write")
-        s.add_argument("--out", help="write a copy with the final lights as emissive materials, the "
+        s.add_argument("--out", help="write a copy with the final lights as emissive materials (reduce: the "
+                                     "kept lamps' power set, the others disabled, restorably), the "
                                      "relight_radiosity layer, the whole curve and Cycles light paths "
                                      "that render the prediction (no clamping, enough bounces)")
         # every job option and every method's parameter, from their declarations

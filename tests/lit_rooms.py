@@ -15,11 +15,12 @@ import cycles_reference as cr
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def light(kind, location, rotation=(0.0, 0.0, 0.0), **props):
-    ld = bpy.data.lights.new(f"lamp_{kind.lower()}", kind)
+def light(kind, location, rotation=(0.0, 0.0, 0.0), name=None, data=None, **props):
+    """A lamp object (named ``name``, default lamp_<kind>; ``data``: an existing Light to share)."""
+    ld = data or bpy.data.lights.new(name or f"lamp_{kind.lower()}", kind)
     for k, v in props.items():
         setattr(ld, k, v)
-    ob = bpy.data.objects.new(ld.name, ld)
+    ob = bpy.data.objects.new(name or ld.name, ld)
     bpy.context.scene.collection.objects.link(ob)
     ob.location, ob.rotation_euler = location, rotation
     return ob

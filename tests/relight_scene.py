@@ -43,3 +43,32 @@ def stored_polygon_radiosity(data, k):
     rows = results.polygon_rows(data, np.asarray(data.radiosity[k], dtype=np.float64))
     off = data.polygon_offset
     return {name: rows[off[i]:off[i + 1]] for i, name in enumerate(data.objects)}
+
+
+def lamps(data) -> dict:
+    """{lamp object: (its Light data-block's name, Power, colour, hide_render, hide_viewport, its
+    Relight custom properties)} of ``data`` (bpy.data), rounded to 5 digits (float32 storage)."""
+    return {o.name: (o.data.name, round(o.data.energy, 5), tuple(round(c, 5) for c in o.data.color), o.hide_render,
+                     o.hide_viewport, sorted(k for k in o.keys() if k.startswith("relight")))
+            for o in data.objects if o.type == "LIGHT"}
+
+
+def reduce_built(build, folder, *args):
+    """Build a scene with ``build(path)`` (bpy, from factory settings), then run `reduce --out` on
+    it in-process with ``args``: (report, the written copy's path, the lamps as built)."""
+    import json
+
+    import bpy
+
+    from relight_addon import cli
+
+    blend, report, out = folder / "built.blend", folder / "r.json", folder / "out.blend"
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    try:
+        build(blend)
+        built = lamps(bpy.data)
+    finally:
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+    code = cli.main(["reduce", str(blend), "--report", str(report), "--out", str(out), *map(str, args)])
+    assert code == 0
+    return json.loads(report.read_text()), out, built

@@ -48,7 +48,8 @@ def test_report_contract(solved):
     r, _, tris = solved
     assert r["scene"]["triangles"] >= 0.9 * tris and r["scene"]["patches"] > 0
     assert r["inverse"]["n_candidates"] >= 100  # cells, groups and whole polygons on 5 quads
-    assert set(r["model"]["lights_by_kind"]) == {"cell", "group", "polygon"}
+    assert set(r["model"]["lights_by_kind"]) == {"cell", "group", "polygon", "lamp", "sun"}  # every kind listed
+    assert r["model"]["lights_by_kind"]["lamp"] == r["model"]["lights_by_kind"]["sun"] == 0  # lamps: reduce only
     fin = r["final"]
     assert 1 <= len(fin["lights"]) <= 3
     for li in fin["lights"]:

@@ -17,6 +17,7 @@ import bpy
 import numpy as np
 
 from ..engine.lamps import Lamp
+from . import lamp_state
 
 __all__ = ["export_lamps"]
 
@@ -60,28 +61,36 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
     scene, view_layer = context.scene, context.view_layer
     lamps, warnings = [], []
     for ob in scene.objects:
-        if ob.type != "LIGHT" or ob.hide_render or ob.name not in renderable:
+        if ob.type != "LIGHT":
             continue
-        if not ob.visible_get(view_layer=view_layer) or ob.get(owner_prop) is not None:
+        # a lamp that a shown reduction changed is read as the user set it (a new result replaces that one)
+        was = lamp_state.before(ob)
+        if (ob.hide_render if was is None else was["hide_render"]) or ob.name not in renderable:
             continue
-        ld = ob.data
+        visible = (ob.visible_get(view_layer=view_layer) if was is None
+                   else lamp_state.visible_before(ob, view_layer, was))
+        if not visible or ob.get(owner_prop) is not None:
+            continue
+        ld = ob.data if was is None else was["data"]
         name = ob.name
         if not getattr(ob, "visible_diffuse", True):
             warnings.append(f"lamp {name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
                             "left out, as Cycles leaves it out of their light")
             continue
-        color = np.array(ld.color, dtype=np.float64)[:3]
-        power = color * float(ld.energy)
+        color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
+        energy = float(ld.energy if was is None else was["energy"])
+        power = color * energy
         if not np.any(power > 0):
             continue
-        M = np.array(ob.matrix_world, dtype=np.float64)
+        M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
         X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
         sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
         if min(sx, sy, sz) <= 0:
             warnings.append(f"lamp {name!r} is scaled to zero: left out")
             continue
         kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
-                  power=power, cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
+                  power=power, energy=energy, color=color,
+                  cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
         notes = []
         if ld.type in ("POINT", "SPOT"):
             kw["radius"] = float(ld.shadow_soft_size)

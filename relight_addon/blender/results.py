@@ -13,7 +13,9 @@ artist's faces, as:
 - **the radiosity layer** ``relight_radiosity`` on the artist's meshes (radiance B/pi per
   corner; the previous active and render colours are remembered and given back);
 - in direct-lighting mode ("reduce"), the scene's own emitter faces switched to an emission-free
-  copy of their material (``suppress_emission``; restored exactly by ``clear_suppression``);
+  copy of their material (``suppress_emission``; restored exactly by ``clear_suppression``), and
+  its lamps set: a kept lamp's Power (a Sun's Strength) and colour, the others disabled for
+  render and in the viewports (``plan_lamps``; restored exactly by lamp_state.restore);
 - the stored curve (scene property ``relight_result``) and the chart image.
 
 Everything Relight creates carries ``relight_owner`` = the result's id (scene property
@@ -40,6 +42,7 @@ from ..engine import lights  # noqa: F401  (registers the light kinds)
 from ..engine.registry import LIGHT_KINDS
 from ..engine.units import radiance_from_exitance
 from ..pipeline.stored import StoredResult
+from . import lamp_state
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -375,8 +378,65 @@ def polygon_rows(data, values):
 
 #: the light kinds' writers (engine.lights.LightKind.writer) this layer has: "surface" lights are
 #: shown as their emitting cells in the emitters object, and made into one area light per cell by
-#: make_area_lights. A new writer is a function here and its name in this tuple.
-WRITERS = ("surface",)
+#: make_area_lights; "lamp" lights (direct mode: the scene's own lamps) by the lamps themselves, their
+#: Power and colour set or the lamp disabled, restorably (``plan_lamps``, lamp_state.py). A new writer
+#: is a function here and its name in this tuple.
+WRITERS = ("surface", "lamp")
+
+
+def plan_lamps(scene, data, strength) -> tuple:
+    """The lamp writer's plan for configuration ``strength`` (n_lights, 3), computed and checked
+    before anything is written: [(object, (Power, colour) or None = disable)] and messages about
+    lamps that cannot be written (linked from a library). StaleResult when a stored lamp is no
+    longer in the scene or changed since the solve (its type, position, direction, Power or
+    colour as the user set them)."""
+    from ..engine.lights.lamp import blender_values
+
+    plan, skipped = [], []
+    light_lamp = np.asarray(data.light_lamp if data.light_lamp is not None else [], dtype=np.int64)
+    if np.any(light_lamp >= 0):
+        bpy.context.evaluated_depsgraph_get()  # the enabled lamps' matrix_world up to date (one just re-enabled)
+    for j in np.flatnonzero(light_lamp >= 0):
+        rec = data.lamps[int(light_lamp[j])]
+        name = rec["name"]
+        ob = scene.objects.get(name)
+        if ob is None or ob.type != "LIGHT":
+            raise StaleResult(f"lamp {name!r} of the stored result is no longer in the scene: solve again")
+        was = lamp_state.before(ob)
+        ld = ob.data if was is None else was["data"]
+        energy = float(ld.energy if was is None else was["energy"])
+        color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
+        M = lamp_state.world_matrix(ob)
+        direction = -M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300)
+        why = None
+        if ld.type != rec["type"]:
+            why = f"a {ld.type} lamp, {rec['type']} when solved"
+        elif ob.hide_render if was is None else was["hide_render"]:
+            why = "it is disabled in renders"
+        elif not np.allclose(color * energy, rec["power"], rtol=1e-5, atol=1e-9):
+            why = f"its power is {energy:g} x {np.round(color, 4).tolist()}, {rec['energy']:g} x " \
+                  f"{np.round(rec['color'], 4).tolist()} when solved"
+        elif not (np.allclose(M[:3, 3], rec["position"], rtol=1e-6, atol=1e-6)
+                  and np.allclose(direction, rec["direction"], atol=1e-6)):
+            why = "it moved or turned"
+        if why:
+            raise StaleResult(f"lamp {name!r} has changed since the solve ({why}): nothing applied; solve again")
+        if ob.library is not None or ld.library is not None:
+            skipped.append(f"lamp {name!r} is linked from a library (read-only): it renders as it is, not as this "
+                           "configuration sets it; make it local to see the reduction")
+            continue
+        s = np.asarray(strength[j], dtype=np.float64)
+        plan.append((ob, blender_values(s, rec["energy"], rec["color"]) if np.any(s > 0) else None))
+    return plan, skipped
+
+
+def write_lamps(plan, rid) -> None:
+    """Write ``plan_lamps``' plan: a kept lamp's Power and colour, the others disabled."""
+    for ob, values in plan:
+        if values is None:
+            lamp_state.disable(ob, rid)
+        else:
+            lamp_state.set_power(ob, rid, *values)
 
 
 def check_writers(data) -> None:
@@ -393,7 +453,8 @@ def check_writers(data) -> None:
 def apply_stored_point(scene, index) -> dict:
     """Show configuration ``index`` of the stored curve: the emitters object (cells with a positive
     exitance: a material cannot emit negative light), the radiosity layer, and in direct-lighting
-    mode the scene's emitters switched off. Everything is checked before anything is written.
+    mode the scene's emitters switched off and its lamps set (the kept ones' Power and colour,
+    the others disabled). Everything is checked before anything is written.
     Returns {"lights": lights shown, "negative": lights with a negative exitance, not shown,
     "skipped": [messages about objects that could not take the radiosity layer]}."""
     data = load_result(scene)
@@ -438,6 +499,8 @@ def apply_stored_point(scene, index) -> dict:
                                "alone")
             elif len(polys):
                 suppress.append((ob, polys - off[oi]))
+    lamp_plan, lamp_skipped = plan_lamps(scene, data, exitance)
+    skipped.extend(lamp_skipped)
     # write
     clear_shown(scene)
     if rid != result_id(scene):
@@ -448,6 +511,7 @@ def apply_stored_point(scene, index) -> dict:
     variants = {}
     for ob, polys in suppress:
         suppress_emission(ob, polys, rid, variants)
+    write_lamps(lamp_plan, rid)
     scene["relight_shown"] = index
     neg = np.any(exitance < 0, axis=1)
     lit = np.any(exitance > 0, axis=1) & ~neg
@@ -456,12 +520,16 @@ def apply_stored_point(scene, index) -> dict:
 
 def clear_shown(scene) -> int:
     """Remove what shows a configuration (emitters object, radiosity layers, suppressed
-    emitters), keeping the stored curve. Returns the number of objects cleaned."""
+    emitters; the lamps it set are given back as they were), keeping the stored curve. Returns
+    the number of objects cleaned."""
     rid = result_id(scene)
     n = 0
     if rid is not None:
         n += int(emitters_object(scene) is not None)
         _remove_emitters(rid)
+    for obj in scene.objects:
+        if obj.type == "LIGHT" and obj.library is None:
+            n += int(lamp_state.restore(obj))
     for obj in scene.objects:
         if obj.type != "MESH" or obj.data is None or obj.data.library is not None:
             continue

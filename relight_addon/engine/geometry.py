@@ -69,6 +69,7 @@ def group_mean_basis(basis, values, weights) -> np.ndarray:
     ``weights``-weighted mean of the member items' ``values`` (items, k)."""
     w = np.asarray(weights, dtype=np.float64).reshape(-1)
     values = np.asarray(values, dtype=np.float64)
-    num = np.asarray(basis.T @ (w[:, None] * values.reshape(len(w), -1)))
+    k = int(np.prod(values.shape[1:])) if values.ndim > 1 else 1  # (no items: still k columns)
+    num = np.asarray(basis.T @ (w[:, None] * values.reshape(len(w), k)))
     den = np.asarray(basis.T @ w).reshape(-1)
     return num / np.where(den > 0, den, 1.0)[:, None]

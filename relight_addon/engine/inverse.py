@@ -242,8 +242,8 @@ class InverseProblem:
         self.candidates = np.flatnonzero(self.candidate_mask)
         if len(self.targets) == 0:
             raise InverseError("no target: paint a radiosity on at least one face")
-        if len(self.candidates) == 0:
-            raise InverseError("no candidate light: every face is forbidden")
+        if len(self.candidates) == 0 and (lights is None or lights.irradiance is None):
+            raise InverseError("no candidate light: every face is forbidden")  # (lamps have no candidate patch)
         self.b_target = tr[self.targets].copy()  # (m, 3)
         if np.any(self.b_target < 0):
             raise InverseError("target radiosities must be non-negative")
@@ -283,7 +283,9 @@ class InverseProblem:
             empty = np.diff(B.tocsc().indptr) == 0
             H = None if lights is None else lights.irradiance
             if H is not None:  # a light of an irradiance kind has its source there
-                empty &= np.diff(sp.csc_matrix(H).indptr) == 0
+                Hc = sp.csc_matrix(H, copy=True)
+                Hc.eliminate_zeros()
+                empty &= np.diff(Hc.indptr) == 0
             if B.shape[1] == 0 or np.any(empty):
                 raise InverseError("every light must have a source: cover at least one candidate patch, "
                                    "or light at least one patch")
@@ -303,6 +305,11 @@ class InverseProblem:
         self.light_area = np.asarray(B.T @ aC).reshape(-1)
         self.light_center = group_mean_basis(B, self.center[C], aC)
         self.light_normal = unit(group_mean_basis(B, self.normal[C], aC))
+        if lights is not None and lights.irradiance is not None:  # lights without patches (lamps): their own
+            own = np.diff(B.tocsc().indptr) == 0
+            self.light_area[own] = np.asarray(lights.area, dtype=np.float64)[own]
+            self.light_center[own] = np.asarray(lights.center, dtype=np.float64)[own]
+            self.light_normal[own] = np.asarray(lights.normal, dtype=np.float64)[own]
         if lights is None:
             code = kind_code("polygon" if light_groups is not None else "cell")
             lights = LightSet(C, B, np.full(self.n_lights, code, dtype=np.int8), self.light_area,
@@ -323,14 +330,23 @@ class InverseProblem:
         return B.indices.astype(np.int64)
 
     def light_rows(self):
-        """Form-factor rows of the lights (n_lights, P): area-weighted means of their patches'."""
+        """Form-factor rows of the lights (n_lights, P): area-weighted means of their patches'; for
+        a light of an irradiance kind (a lamp), the share of its power that reaches each patch
+        directly (its irradiance x the patch's area / its watts)."""
         FC = self.F[self.candidates]
         FC = FC.toarray() if sp.issparse(FC) else np.asarray(FC, dtype=np.float64)
         FC = FC.astype(np.float64)
         if not self.grouped:
             return FC
         W = (self.light_basis.multiply(self.area[self.candidates][:, None])).T.tocsr()
-        return np.asarray(W @ FC) / self.light_area[:, None]
+        sized = self.light_area > 0
+        rows = np.asarray(W @ FC) / np.where(sized, self.light_area, 1.0)[:, None]
+        H = self.lights.irradiance
+        if H is not None:
+            own = np.diff(self.light_basis.tocsc().indptr) == 0
+            direct = np.asarray(sp.csc_matrix(H)[:, own].T.toarray()) * self.area[None, :]
+            rows[own] = direct / self.light_watts[own][:, None]
+        return rows
 
     # -- system ---------------------------------------------------------
     @property
@@ -493,14 +509,23 @@ class InverseProblem:
 
 
 def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None,
-                            light_basis=None, first_bounce=None, lights=None):
+                            light_basis=None, first_bounce=None, lights=None, strength=None,
+                            background_irradiance=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
     channel); every other patch is a target at the radiosity the full
     configuration gives it. Returns ``(problem, e_x)`` with e_x the lights'
-    exitances (|C|, 3), the starting configuration of a reduction. ``first_bounce``: the
+    strengths (n_lights, 3), the starting configuration of a reduction. ``first_bounce``: the
     problem's D (InverseProblem.first_bounce).
+
+    ``lights`` may end with lights of an irradiance kind (the scene's lamps, engine/lights/lamp.py:
+    no candidate patch, a column of ``lights.irradiance``); ``strength`` (their number, 3) is their
+    own strength (a lamp's power per channel), e_x's for them. ``background_irradiance`` (P, 3)
+    W/m^2: fixed light that no reduction can switch off (the World), transported into every
+    configuration's radiosity (``background_radiosity``). The targets' b_P is then the lights'
+    share of the scene's radiosity, and ``target_norm`` the norm of the whole radiosity on the
+    targets (relative errors are of the light the scene has, as in inverse mode of the painted).
     """
     exitance = np.asarray(exitance, dtype=np.float64)
     n = exitance.shape[0] if exitance.ndim == 2 else -1
@@ -509,19 +534,29 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
     if np.any(exitance < 0):
         raise InverseError("direct-lighting mode needs non-negative exitances")
     emitters = exitance.max(axis=1) > 0
-    if not emitters.any():
-        raise InverseError("the scene has no light (no patch with a positive exitance)")
+    own = np.zeros(0, dtype=bool)  # the lights without patches (lamps)
+    if lights is not None and lights.irradiance is not None:
+        own = np.diff(sp.csc_matrix(lights.basis).indptr) == 0
+    if not emitters.any() and not own.any():
+        raise InverseError("the scene has no light (no patch with a positive exitance, no lamp)")
     if emitters.all():
         raise InverseError("every patch is a light: no patch is left to compare radiosities on")
+    s_own = np.zeros((int(own.sum()), 3)) if strength is None else np.asarray(strength, dtype=np.float64)
+    if s_own.shape != (int(own.sum()), 3) or not np.all(np.isfinite(s_own)) or np.any(s_own < 0):
+        raise InverseError(f"the lamps' strength must be a finite non-negative ({int(own.sum())}, 3) array")
     prob = InverseProblem(F, area, reflectance, ~emitters, np.zeros((n, 3)), emitters, center, normal,
                           light_groups=light_groups, light_basis=light_basis, lights=lights,
-                          first_bounce=first_bounce)
-    B = prob.forward_radiosity(exitance)
-    prob.b_target = B[prob.targets].copy()
-    prob.target_norm = float(np.linalg.norm(prob.b_target))
-    prob.exitance = exitance.copy()
-    # power-conserving per light (the lights of direct-lighting mode partition the emitters)
+                          first_bounce=first_bounce, background_irradiance=background_irradiance)
+    # power-conserving per light (the surface lights of direct-lighting mode partition the emitters)
     e_x = group_mean_basis(prob.light_basis, exitance[prob.candidates], prob.area[prob.candidates])
+    H = None
+    if own.any():
+        e_x[own] = s_own
+        H = prob.lights.patch_irradiance(np.where(own[:, None], e_x, 0.0), n)
+    B = prob.forward_radiosity(exitance, H)
+    prob.b_target = B[prob.targets].copy()
+    prob.target_norm = float(np.linalg.norm(B[prob.targets] + prob.background_radiosity[prob.targets]))
+    prob.exitance = exitance.copy()
     return prob, e_x
 
 

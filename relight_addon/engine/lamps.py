@@ -68,12 +68,21 @@ class Lamp:
     angle: float = 0.0
     cast_shadow: bool = True
     notes: list = field(default_factory=list)
+    #: Blender's Power (W; a sun's Strength, W/m^2) and colour, power = colour x energy (default:
+    #: the largest channel of ``power``, and power / energy)
+    energy: float = None
+    color: np.ndarray = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"lamp {self.name!r}: unknown kind {self.kind!r}; one of {', '.join(KINDS)}")
         for k in ("position", "direction", "axis_u", "axis_v", "power"):
             setattr(self, k, np.asarray(getattr(self, k), dtype=np.float64).reshape(3))
+        if self.energy is None:
+            self.energy = float(self.power.max())
+        if self.color is None:
+            self.color = self.power / self.energy if self.energy > 0 else np.ones(3)
+        self.color = np.asarray(self.color, dtype=np.float64).reshape(3)
 
     @property
     def area(self) -> float:

@@ -24,6 +24,7 @@ from ..engine.inverse import InverseError, InverseProblem, direct_lighting_probl
 from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, candidate_mask
+from ..engine.lights.lamp import add_lamps
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
@@ -159,8 +160,8 @@ def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = N
         if not np.any(free & has_area):
             raise SceneError(_with_notes("no candidate light: the faces that may hold lights have no area",
                                          notes.get("candidates")))
-    elif not np.any(faces.exitance > 0):
-        raise SceneError("the scene has no emitter to reduce (no material with emission)")
+    elif not np.any(faces.exitance > 0) and not faces.lamps:
+        raise SceneError("the scene has no emitter to reduce (no lamp, no material with emission)")
 
 
 def _stage(progress, name, lo, hi):
@@ -238,8 +239,10 @@ class Model:
     cost: dict
     seconds: dict
     refinement: dict = None  # adaptive model: passes made and the target change after each
-    lamp_irradiance: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct irradiance (fixed)
+    lamp_irradiance: np.ndarray = None  # (P, n, 3) W/m^2: the fixed light's direct irradiance: each lamp's and
+    #                                     the World's (inverse mode), the World's (direct mode: the lamps are lights)
     lamp_names: list = None  # [(name, kind, power)] per column of lamp_irradiance
+    lamp_lights: tuple = None  # direct mode: (light indices, faces.lamps indices) of the lamps being reduced
 
 
 @dataclass
@@ -305,7 +308,9 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         scales = ("polygon",)
     for p in range(passes + 1):
         mask = candidate_mask(patches, mode)
-        lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
+        lights = None  # direct mode: the emitter polygons, if any (the lamps are added below)
+        if mode == "inverse" or mask.any():
+            lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
         pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
         lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
         # a model that will be refined only ranks patches by importance: a quarter of the rays
@@ -320,6 +325,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         background = np.zeros_like(patches.exitance)
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
         e_start = None
+        lamp_lights = None
         if mode == "inverse":
             emitting = np.any(patches.exitance > 0, axis=1)
             if emitting.any():
@@ -330,9 +336,14 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                                      first_bounce=first_bounce(faces, patches, F, mask | emitting),
                                      background=background, background_irradiance=lamp_H.sum(axis=1))
         else:
+            lights, lamp_lights, lamp_H, lamp_names, notes = direct_lights(faces, patches, F, lights, options.seed)
+            warnings.extend(n for n in notes if n not in warnings)
             problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
                                                        patches.center, patches.normal, lights=lights,
-                                                       first_bounce=first_bounce(faces, patches, F, mask))
+                                                       first_bounce=first_bounce(faces, patches, F, mask),
+                                                       strength=np.array([faces.lamps[i].power for i in lamp_lights[1]])
+                                                       .reshape(-1, 3),
+                                                       background_irradiance=lamp_H.sum(axis=1) if lamp_names else None)
         t_problem += time.perf_counter() - t1
         if p == passes:
             break
@@ -352,15 +363,59 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         emitting = np.any(patches.exitance > 0, axis=1)
         warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps),
                                                world=", the World" if faces.world_radiance is not None else ""))
-    if mode == "direct" and has_scene_light(faces):
-        what = [lamp.name for lamp in faces.lamps] + ([faces.world_name or "World"] if faces.world_radiance is not None
-                                                      else [])
-        warnings.append(f"the scene's lamps and World are not reduced by this mode (only emissive materials are): "
-                        f"left out of the reduction and of its radiosity ({', '.join(what[:5])}"
-                        f"{' ...' if len(what) > 5 else ''})")
+    if mode == "direct" and lamp_names:
+        warnings.append(DIRECT_FIXED_NOTE.format(", ".join(n for n, _, _ in lamp_names)))
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H, lamp_names)
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H, lamp_names,
+                 lamp_lights)
+
+
+DIRECT_FIXED_NOTE = ("the World ({}) is kept as fixed light: a reduction cannot switch it off; its light is part of "
+                     "the scene's radiosity and of every configuration's")
+
+
+def direct_lights(faces: FaceSet, patches: PatchSet, F, surface, seed=0) -> tuple:
+    """Direct-lighting mode: the lights to reduce -- the emitter polygons (``surface``, a LightSet,
+    or None without any) followed by the scene's lamps (engine/lights/lamp.py: each a light whose
+    source is its direct irradiance per unit of its power) -- and the fixed light (the World).
+    Returns (lights, (light indices, faces.lamps indices) of the lamps, H (P, n, 3) W/m^2 and
+    [(name, "world", None)] of the fixed light, warnings). A lamp that lights no face is left out
+    of the reduction (named; the written copy leaves it as it is)."""
+    P = patches.n_patches
+    H, names = scene_light(faces, patches, F, seed) if has_scene_light(faces) else (np.zeros((P, 0, 3)), [])
+    n = len(faces.lamps)
+    unit = np.zeros((P, n))
+    for i, lamp in enumerate(faces.lamps):  # H is the lamp's irradiance per W times its power per channel
+        c = int(np.argmax(lamp.power))
+        unit[:, i] = H[:, i, c] / lamp.power[c]
+    lit = np.flatnonzero(unit.max(axis=0) > 0) if n else np.zeros(0, dtype=np.int64)
+    notes = []
+    dark = [faces.lamps[i].name for i in range(n) if i not in set(lit.tolist())]
+    if dark:
+        notes.append(f"{len(dark)} lamp(s) light no face ({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}): "
+                     "left out of the reduction, and left as they are in the written copy")
+    if surface is None and not len(lit):
+        raise SceneError(f"nothing to reduce: no material emits and no lamp lights any face "
+                         f"({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''})")
+    C = np.flatnonzero(candidate_mask(patches, "direct"))
+    n0 = 0 if surface is None else surface.n_lights
+    lights = add_lamps(surface, C, P, [faces.lamps[i] for i in lit], unit[:, lit], patches.area)
+    return lights, (n0 + np.arange(len(lit)), lit), H[:, n:], names[n:], notes
+
+
+def scene_light_at(model: Model, strength) -> np.ndarray:
+    """(P, n, 3) W/m^2: the direct light of ``faces.lamps`` and then of the World (jobs.scene_light's
+    columns) in the configuration ``strength`` (n_lights, 3): in direct mode each lamp at its
+    strength in that configuration (0 when reduced away; a lamp outside the reduction as it is)."""
+    if model.mode == "inverse" or model.lamp_lights is None:
+        return model.lamp_irradiance
+    faces, P = model.faces, model.patches.n_patches
+    cols = np.zeros((P, len(faces.lamps), 3))
+    H = sp.csc_matrix(model.lights.irradiance)
+    for j, i in zip(*model.lamp_lights):
+        cols[:, i] = H[:, j].toarray() * np.asarray(strength, dtype=np.float64)[j][None, :]
+    return np.concatenate([cols, model.lamp_irradiance], axis=1)
 
 
 def solve_stage(model: Model, options: JobOptions) -> tuple:
@@ -422,13 +477,14 @@ ALREADY_BRIGHTER = 0.05
 
 
 def fixed_light(model: Model) -> tuple:
-    """The scene's own light that the solve keeps (inverse mode): per lamp and per emissive object
-    its share of the targets' painted radiosity (area-weighted, channels summed), and a warning
-    for each target object that this light alone already makes brighter than painted."""
+    """The scene's own light that the solve keeps: per lamp, the World and per emissive object
+    (inverse mode; direct mode: the World) its share of the targets' radiosity (painted; direct
+    mode: the scene's), area-weighted, channels summed, and (inverse mode) a warning for each
+    target object that this light alone already makes brighter than painted."""
     problem, patches, faces = model.problem, model.patches, model.faces
     tg = problem.targets
     w = problem.area[tg]
-    painted = float(np.sum(w[:, None] * patches.target_radiosity[tg]))
+    painted = float(np.sum(w[:, None] * (problem.b_target + problem.background_radiosity[tg])))
     zero = np.zeros((patches.n_patches, 3))
 
     def share(B):
@@ -445,7 +501,7 @@ def fixed_light(model: Model) -> tuple:
                      "share": share(problem.forward_radiosity(e))})
     notes = []
     B_bg = problem.background_radiosity
-    for oi in np.unique(patches.object[tg]):
+    for oi in np.unique(patches.object[tg]) if model.mode == "inverse" else ():
         sel = tg[patches.object[tg] == oi]
         want = float(np.sum(problem.area[sel, None] * patches.target_radiosity[sel]))
         got = float(np.sum(problem.area[sel, None] * B_bg[sel]))
@@ -578,7 +634,7 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
         warnings.extend(_positivity_notes(model.problem, inv, red.final))
         warnings.extend(certificate_notes(model.problem, bounds, red.final))
     fixed = None
-    if mode == "inverse":
+    if mode == "inverse" or model.lamp_names:
         fixed, notes = fixed_light(model)
         warnings.extend(notes)
     warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
@@ -593,7 +649,7 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
              "curve_index": int(i)} for i in curve.keep]
     stored = StoredResult.from_solve(model, red, curve, report)
     return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
-                        model.problem, inv, red, model.lamp_irradiance)
+                        model.problem, inv, red, scene_light_at(model, curve.exitance[curve.final_row]))
 
 
 #: above this relative error, the final configuration is compared with the best positive one

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records"]
+__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records"]
 
 
 def json_safe(x):
@@ -34,15 +34,51 @@ def json_safe(x):
     return x
 
 
+def lamp_records(model, strength) -> list:
+    """Direct mode: each of the scene's lamps in the reduction at ``strength`` (n_lights, 3), as
+    the written copy sets it: name, type (point, spot, area, sun), kind, kept, the unit of its
+    power per channel (W; a sun's W/m^2), power_before / power_after [r, g, b] (colour x Power),
+    and Blender's values before and after: energy (Power, W; a sun's Strength, W/m^2) and colour
+    (engine.lights.lamp.blender_values; a lamp not kept is disabled, its values unchanged)."""
+    from ..engine.lights.lamp import blender_values
+
+    if model.lamp_lights is None:
+        return []
+    out = []
+    for j, i in zip(*model.lamp_lights):
+        lamp = model.faces.lamps[i]
+        s = np.asarray(strength[j], dtype=np.float64)
+        kept = bool(np.any(s > 0))
+        energy, color = blender_values(s, lamp.energy, lamp.color) if kept else (lamp.energy, lamp.color)
+        out.append({"name": lamp.name, "type": lamp.kind.lower(), "kind": model.lights.kind_names[j], "kept": kept,
+                    "unit": model.lights.kind_of(j).strength_unit,
+                    "power_before": lamp.power, "power_after": s if kept else np.zeros(3),
+                    "energy_before": float(lamp.energy), "energy_after": float(energy) if kept else 0.0,
+                    "color_before": lamp.color, "color_after": color})
+    return out
+
+
 def light_records(model, curve, row: int) -> list:
     """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
     them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
-    exitance [r, g, b] (W/m^2) and power (W)."""
+    exitance [r, g, b] (W/m^2) and power (W). A lamp (direct mode): object = the lamp's name, no
+    polygons, its position and direction (none for a point lamp), area (an Area lamp's; a sun's:
+    the area it lights), exitance None, ``strength`` [r, g, b] (its power per channel) and
+    power, with the values ``lamp_records`` gives it."""
     lights = model.lights
     e = curve.exitance[row]
     watts, kinds = lights.watts, lights.kind_names
+    lamps = {r["name"]: r for r in lamp_records(model, e)}
+    lamp_of = dict(zip(*model.lamp_lights)) if model.lamp_lights is not None else {}
     out = []
     for j in np.flatnonzero(np.any(e != 0, axis=1)):
+        if j in lamp_of:
+            rec = lamps[model.faces.lamps[lamp_of[j]].name]
+            out.append({"object": rec["name"], "polygons": [], "kind": kinds[j], "center": lights.center[j],
+                        "normal": lights.normal[j], "area": float(lights.area[j]), "exitance": None,
+                        "strength": e[j], "power": float(e[j].sum() * watts[j]),
+                        **{k: v for k, v in rec.items() if k not in ("name", "kind")}})
+            continue
         pids = curve.light_polygons[j].indices
         obj = model.patches.object[lights.members(j)[0]]
         out.append({"object": model.faces.object_names[obj],
@@ -113,6 +149,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": light_records(model, curve, fi)},
         "fixed_light": fixed_light,
+        "lamps": lamp_records(model, curve.exitance[fi]) if model.mode != "inverse" else None,
         "objects": objects,
         "warnings": warnings,
     }

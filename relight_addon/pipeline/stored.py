@@ -5,7 +5,8 @@ A solve produces a sequence of configurations (the error curve, paper Fig. 11).
 the whole curve (for the chart), and for the configurations kept re-appliable (every one up to
 STORE_ALL_UP_TO lights, ~STORE_LOG_POINTS log-spaced above, e_x and the final one) each light's
 strength and every patch's radiosity; the lights (object, kind, area, centre, normal, polygons),
-their cells' triangles and reflectance, and the patches -> polygons weights. The solve builds it
+their cells' triangles and reflectance, the patches -> polygons weights, and (direct mode) the
+scene's lamps that are lights (``lamps``, ``light_lamp``: what each was). The solve builds it
 (``StoredResult.from_solve``), results.py writes and reads it (``pack`` / ``unpack``: one string,
 zlib-compressed npz in base64, kept in the scene's custom property ``relight_result``).
 Floating-point arrays are stored as float32: no loss of range (float16 overflowed above
@@ -73,6 +74,12 @@ class StoredResult:
     target_value: np.ndarray
     target_norm: np.ndarray
     meta: dict = field(default_factory=dict)
+    #: direct mode: the scene's lamps in the reduction, as the solve saw them ({name, type, energy
+    #: (Power W; a sun's Strength W/m^2), color, power [r, g, b] = colour x energy, position, direction}),
+    #: and per light the lamp it is (index into ``lamps``; -1 for a surface light). Results written
+    #: before lamps were lights have neither (read as no lamp).
+    lamps: list = field(default_factory=list)
+    light_lamp: np.ndarray = None
 
     # -- building ----------------------------------------------------------------------------
     @classmethod
@@ -91,10 +98,23 @@ class StoredResult:
         W = pmap.weights.tocsr()
         lp = curve.light_polygons
         basis_csc = lights.basis.tocsc()
+        first = basis_csc.indptr[:-1]
+        has_patch = np.diff(basis_csc.indptr) > 0  # a lamp has none
+        light_object = np.full(lights.n_lights, -1, dtype=np.int64)
+        light_object[has_patch] = model.patches.object[C[basis_csc.indices[first[has_patch]]]]
+        light_lamp = np.full(lights.n_lights, -1, dtype=np.int64)
+        lamps = []
+        for j, i in zip(*(model.lamp_lights or ((), ()))):
+            lamp = model.faces.lamps[i]
+            light_lamp[j] = len(lamps)
+            lamps.append({"name": lamp.name, "type": lamp.kind, "energy": float(lamp.energy),
+                          "color": [float(x) for x in lamp.color], "power": [float(x) for x in lamp.power],
+                          "position": [float(x) for x in lamp.position],
+                          "direction": [float(x) for x in lamp.direction]})
         return cls(
             objects=list(model.faces.object_names),
             polygon_offset=pmap.offset,
-            light_object=model.patches.object[C[basis_csc.indices[basis_csc.indptr[:-1]]]],
+            light_object=light_object,
             light_kind=lights.kind, light_area=lights.area, light_center=lights.center,
             light_normal=lights.normal, light_polygons_indptr=lp.indptr, light_polygons=lp.indices,
             basis_indptr=lights.basis.indptr, basis_indices=lights.basis.indices,
@@ -121,6 +141,7 @@ class StoredResult:
             target_value=patches.target_radiosity[model.problem.targets],
             target_norm=np.array(model.problem.target_norm),
             meta={"command": report["command"], "options": json_safe(report["options"])},
+            lamps=lamps, light_lamp=light_lamp,
         )
 
     def with_fingerprints(self, fingerprints) -> "StoredResult":
@@ -142,9 +163,12 @@ class StoredResult:
     def pack(self) -> str:
         buf = io.BytesIO()
         arrays = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)
-                  if f.name not in ("objects", "meta")}
-        arrays["objects_json"] = np.frombuffer(json.dumps(list(self.objects)).encode(), dtype=np.uint8)
-        arrays["meta_json"] = np.frombuffer(json.dumps(self.meta or {}).encode(), dtype=np.uint8)
+                  if f.name not in _JSON}
+        if self.light_lamp is None:
+            arrays["light_lamp"] = np.full(len(self.light_area), -1, dtype=np.int64)
+        for name in _JSON:
+            arrays[name + "_json"] = np.frombuffer(json.dumps(getattr(self, name) or _JSON[name]()).encode(),
+                                                   dtype=np.uint8)
         for k, a in arrays.items():
             if a.dtype.kind == "f":
                 if not np.all(np.isfinite(a)):
@@ -164,13 +188,21 @@ class StoredResult:
             out = {k: z[k] for k in z.files}
         if int(out.pop("format")) != FORMAT:
             raise ValueError("this file's Relight result was written by an incompatible version")
-        out["objects"] = json.loads(out.pop("objects_json").tobytes().decode())
-        out["meta"] = json.loads(out.pop("meta_json").tobytes().decode())
+        for name in _JSON:
+            if name + "_json" in out:
+                out[name] = json.loads(out.pop(name + "_json").tobytes().decode())
+        if "lamps" not in out and "light_area" in out:  # written before lamps were lights: no lamp
+            out["lamps"] = []
+            out["light_lamp"] = np.full(len(out["light_area"]), -1, dtype=np.int64)
         names = {f.name for f in dataclasses.fields(cls)}
         missing = names - set(out)
         if missing:
             raise ValueError(f"this file's Relight result lacks {', '.join(sorted(missing))}")
         return cls(**{k: v for k, v in out.items() if k in names})
+
+
+#: the fields kept as JSON, and their empty value
+_JSON = {"objects": list, "meta": dict, "lamps": list}
 
 
 def stored_points(n_lights, final_index):

@@ -14,8 +14,10 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
 
 - ``kind.py``: LightKind, the interface; ``lightset.py``: LightSet, candidate_mask.
 - ``surface.py``: what the surface kinds share; ``cell.py``, ``group.py``, ``polygon.py``.
+- ``lamp.py``: the scene's own lamps (``lamp``: Point, Spot, Area; ``sun``), irradiance sources of the
+  direct-lighting mode.
 """
-from . import cell, group, polygon  # noqa: F401  (registration order = the stored kind codes)
+from . import cell, group, polygon, lamp  # noqa: F401  (registration order = the stored kind codes)
 from .kind import LightKind
 from .lightset import LightSet, candidate_mask, kind_code, lights_from_groups
 

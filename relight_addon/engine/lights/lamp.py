@@ -1,0 +1,88 @@
+"""The scene's own lamps as lights of the direct-lighting mode ("reduce"; no bpy).
+
+A lamp is an *irradiance* source: its column of ``LightSet.irradiance`` is its direct irradiance
+on the patches per unit of its strength (engine.lamps, shadows included), and its column of T is
+A^-1 diag(rho) H (engine.inverse). Two kinds, written alike (writer "lamp": the Blender layer
+sets the Light's Power or Strength and colour, or disables the lamp, restorably):
+
+- ``lamp``: a Point, Spot or Area lamp. Strength: its power per channel in W (Blender's colour x
+  Power: the scene's own configuration is the lamp as the user set it); ``watts`` = 1.
+- ``sun``: a Sun lamp. Strength: colour x Strength in W/m^2 per channel. Its ``area`` is the area
+  it lights (m^2: the sum over the patches of its irradiance per unit strength x their area), so
+  that its power (``watts`` x strength) is the power it puts on the scene's faces.
+
+A Blender Light has one Power and one colour: ``blender_values`` turns a strength per channel
+into them (the user's colour kept when the reduction scaled every channel alike).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..registry import LIGHT_KINDS
+from .kind import LightKind
+from .lightset import LightSet, kind_code
+
+__all__ = ["LAMP", "SUN", "LAMP_KINDS", "add_lamps", "blender_values"]
+
+LAMP = LightKind("lamp", "Lamp", "One of the scene's Point, Spot or Area lamps: its power per channel (W)",
+                 source="irradiance", strength_unit="W", shape="lamp", writer="lamp")
+SUN = LightKind("sun", "Sun", "One of the scene's Sun lamps: its strength per channel (W/m^2)",
+                source="irradiance", strength_unit="W/m^2", shape="sun", writer="lamp")
+for _kind in (LAMP, SUN):
+    LIGHT_KINDS.register(_kind.name, _kind.label, _kind.description)(_kind)
+
+#: the LightKind of each engine.lamps.Lamp kind
+LAMP_KINDS = {"POINT": "lamp", "SPOT": "lamp", "AREA": "lamp", "SUN": "sun"}
+
+
+def add_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, irradiance, patch_area) -> LightSet:
+    """The surface ``lights`` (None: there are none; ``candidates`` are then their (empty) patches)
+    followed by one light per lamp of ``lamps`` (engine.lamps.Lamp), whose column of
+    ``irradiance`` (P, n_lamps) is its direct irradiance (W/m^2) per unit of strength.
+    ``patch_area`` (P,) m^2 gives a sun its lit area."""
+    H = sp.csc_matrix(np.asarray(irradiance, dtype=np.float64).reshape(n_patches, len(lamps)))
+    if lights is None:
+        C = np.asarray(candidates, dtype=np.int64)
+        lights = LightSet(C, sp.csr_matrix((len(C), 0)), np.zeros(0, dtype=np.int8), np.zeros(0),
+                          np.zeros((0, 3)), np.zeros((0, 3)))
+    n0 = lights.n_lights
+    kinds = np.array([kind_code(LAMP_KINDS[lamp.kind]) for lamp in lamps], dtype=np.int8)
+    lit = np.asarray(H.T @ np.asarray(patch_area, dtype=np.float64)).reshape(-1)
+    area = np.array([lit[i] if lamp.kind == "SUN" else (lamp.area if lamp.kind == "AREA" else 0.0)
+                     for i, lamp in enumerate(lamps)], dtype=np.float64)
+    center = np.array([lamp.position for lamp in lamps], dtype=np.float64).reshape(-1, 3)
+    # a point lamp shines every way: no normal (the coplanar distribution then finds no plane)
+    normal = np.array([np.zeros(3) if lamp.kind == "POINT" else lamp.direction for lamp in lamps],
+                      dtype=np.float64).reshape(-1, 3)
+    old = lights.irradiance if lights.irradiance is not None else sp.csc_matrix((n_patches, n0))
+    basis = sp.hstack([lights.basis, sp.csr_matrix((lights.basis.shape[0], len(lamps)))]).tocsr()
+    return LightSet(lights.patches, basis, np.concatenate([np.asarray(lights.kind, dtype=np.int8), kinds]),
+                    np.concatenate([np.asarray(lights.area, dtype=np.float64).reshape(-1), area]),
+                    np.concatenate([np.asarray(lights.center, dtype=np.float64).reshape(-1, 3), center]),
+                    np.concatenate([np.asarray(lights.normal, dtype=np.float64).reshape(-1, 3), normal]),
+                    irradiance=sp.hstack([sp.csc_matrix(old), H]).tocsc())
+
+
+#: relative difference between channels' scale factors below which a lamp keeps its colour
+SAME_FACTOR = 1e-6
+
+
+def blender_values(strength, energy, color) -> tuple:
+    """(Power, colour (3,)) of a Blender Light whose power per channel (colour x Power, W; for a
+    sun colour x Strength, W/m^2) is ``strength`` (3,), from its own ``energy`` and ``color``.
+    When the strength is the lamp's own scaled alike in every channel its colour is kept and
+    its Power scaled; otherwise Power = the largest channel, colour = strength / Power (each
+    channel's power as predicted; the colour changes). A strength of 0 gives (0, colour)."""
+    s = np.maximum(np.asarray(strength, dtype=np.float64).reshape(3), 0.0)
+    c = np.asarray(color, dtype=np.float64).reshape(3)
+    p0 = c * float(energy)
+    if not np.any(s > 0):
+        return 0.0, c.copy()
+    on = p0 > 0
+    if on.any() and not np.any(s[~on] > 0):
+        f = s[on] / p0[on]
+        if f.max() - f.min() <= SAME_FACTOR * f.max():
+            return float(energy) * float(f.mean()), c.copy()
+    top = float(s.max())
+    return top, s / top
