@@ -252,8 +252,9 @@ R["summary"] = [settings.last_summary, settings.last_warnings]
 R["area_lights"] = op(bpy.ops.relight.make_area_lights)
 area_objs = [o for o in scene.objects if o.type == "LIGHT"]
 R["n_area_lights"] = len(area_objs)
-R["area_light_power"] = float(sum(o.data.energy for o in area_objs))
-R["emitted_power_sum"] = float(sum(R["final_state"][0]))
+# per channel: Cycles emits colour x Power (W) in each
+R["area_light_power"] = np.sum([np.array(o.data.color) * o.data.energy for o in area_objs], axis=0).tolist()
+R["emitted_power"] = R["final_state"][0]
 mine = bpy.data.collections.new("Relight Lights")  # the artist's own collection of that name
 scene.collection.children.link(mine)
 cube = bpy.data.objects.new("artist_empty", None)

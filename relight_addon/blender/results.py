@@ -625,7 +625,8 @@ def make_area_lights(scene, index) -> int:
         values = np.concatenate([center, n, power, size, rot.ravel()])
         if not np.all(np.isfinite(values)):
             raise SceneError(f"light cell {int(c)} of the stored result has non-finite geometry: solve again")
-        plan.append((int(c), shape, size, float(power.sum()), power / max(power.max(), 1e-30),
+        # Cycles: a light emits colour x Power in each channel (intern/cycles/blender/light.cpp)
+        plan.append((int(c), shape, size, float(power.max()), power / max(power.max(), 1e-30),
                      center + offset * n, rot))
     # write: replace this result's own earlier lights (by identity), then add the new ones
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]

@@ -635,7 +635,8 @@ def scenario():
     power = float(data.curve_power[int(data.point_index[settings.curve_index])])
     yield from press(found, "bpy.ops.relight.make_area_lights()", settle=2.0)
     lights = [o.name for o in scene.objects if o.type == "LIGHT"]
-    energy = sum(scene.objects[n].data.energy for n in lights)
+    # summed over the channels, as the configuration's power: Cycles emits colour x Power in each
+    energy = sum(sum(scene.objects[n].data.color) * scene.objects[n].data.energy for n in lights)
     check("Make Area Lights: area lights carrying the configuration's power",
           lights and (power is None or row.n_negative or abs(energy - power) <= 1e-3 * power),
           f"{len(lights)} lights for {row.n_lights} light(s), {energy:.4g} W (configuration: {power} W)")
