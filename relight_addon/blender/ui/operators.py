@@ -323,6 +323,13 @@ def _summary(outcome):
     return text
 
 
+def _fixed_light_rows(outcome) -> str:
+    """The Results panel's list of the scene's own light: one line per lamp, World and emissive
+    object the solve kept, "kind<TAB>name<TAB>share" (share of the targets' painted light)."""
+    return "\n".join(f"{r['kind']}\t{r['name']}\t{r['share']:.6g}" for r in outcome.report.get("fixed_light") or []
+                     if r.get("share") is not None)
+
+
 class RELIGHT_OT_solve(bpy.types.Operator):
     """Solve the inverse lighting problem for the painted targets and reduce it to a few
     positive lights. ESC cancels and leaves the scene untouched"""
@@ -364,6 +371,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         warnings = list(outcome.warnings) + list(skipped or [])
         settings = context.scene.relight
         settings.last_summary = _summary(outcome)
+        settings.last_fixed_light = _fixed_light_rows(outcome)
         settings.last_warnings = "\n".join(warnings)
         if not bpy.app.background:
             viewport.show_radiosity(context)  # the lights and the predicted radiosity

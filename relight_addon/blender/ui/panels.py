@@ -373,6 +373,11 @@ def last_chart_geometry():
     return _chart["geometry"]
 
 
+#: the icon of each kind of the scene's own light (pipeline.jobs.fixed_light)
+FIXED_LIGHT_ICONS = {"point": "LIGHT_POINT", "spot": "LIGHT_SPOT", "area": "LIGHT_AREA", "sun": "LIGHT_SUN",
+                     "world": "WORLD", "emission": "MESH_DATA"}
+
+
 class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
     bl_label = "Results"
     bl_parent_id = "RELIGHT_PT_main"
@@ -392,6 +397,12 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         _wrap(box, summary, context, icon="CHECKMARK", width_px=context.region.width - 70)
         for w in filter(None, s.last_warnings.split("\n")):
             _wrap(box, w, context, icon="ERROR", width_px=context.region.width - 70)
+        rows = [line.split("\t") for line in s.last_fixed_light.split("\n") if line.count("\t") == 2]
+        if rows:  # the scene's own light the solve kept: each lamp, the World, each emissive object
+            col = layout.box().column(align=True)
+            col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
+            for kind, name, share in rows:
+                col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
         icon = chart_icon(context)
         if icon:
             ui = context.preferences.system.ui_scale

@@ -149,6 +149,10 @@ _SETTINGS = {
                                    description="Summary of the last Solve & Reduce (shown in the Results panel)"),
     "last_warnings": StringProperty(name="Warnings", default="",
                                     description="Warnings of the last Solve & Reduce, one per line"),
+    "last_fixed_light": StringProperty(name="Scene Light", default="",
+                                       description="The scene's own light the last Solve & Reduce kept (lamps, "
+                                                   "World, emissive objects): kind, name and share of the "
+                                                   "targets, one per line"),
     "view_restore": StringProperty(name="Viewport Shading to Restore", default="",
                                    description="The 3D Viewports' shading before Relight showed its radiosity "
                                                "(JSON); restored by Hide Radiosity and Clear Results"),
