@@ -52,11 +52,14 @@ def against_cycles(report, baked):
     return rel, signed, summary
 
 
-def lamp_room(path):
+def lamp_room(path, lambertian=True):
+    """A closed 4 x 3 x 2.5 m room (walls and ceiling 0.6, floor (0.4, 0.35, 0.3); Lambertian, or
+    default Principled BSDFs of that Base Color), 4 x 4 faces a side, no World, lit by a Point and
+    a Spot lamp; saved to ``path``."""
     cr.reset_blender()
     bpy.context.scene.world = None
-    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
-    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=True)
+    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=lambertian)
+    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=lambertian)
     W, D, H, n = 4.0, 3.0, 2.5, 4
     quads = [  # inward-facing walls and ceiling, a floor
         ("floor", (0, 0, 0), (W, 0, 0), (0, D, 0), floor_m),
@@ -110,10 +113,11 @@ def remove_lamps():
         bpy.data.objects.remove(ob)
 
 
-def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2):
+def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2, own_materials=False):
     """Paint ``targets`` (floor face indices) of the file's floor ``rgb``, forbid lights on the floor
     and walls (only the ceiling may hold them), `solve --out`, and bake the floor of the written
-    file with its own World: (report, per-target relative errors, signed errors, the scene's
+    file with its own World (``own_materials``: and its own materials and light paths, against the
+    report's radiance_normal): (report, per-target relative errors, signed errors, the scene's
     light's share of the targets, a summary)."""
     report_path, out = tmp_path / "r.json", tmp_path / "out.blend"
     try:
@@ -129,11 +133,15 @@ def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2):
     try:
         bpy.ops.wm.open_mainfile(filepath=str(out))
         baked = cr.cycles_face_radiance(samples=samples, seed=seed, objects=[bpy.data.objects["floor"]],
-                                        keep_world=True)
+                                        keep_world=True, keep_materials=own_materials,
+                                        keep_light_paths=own_materials)
     finally:
         cr.reset_blender()
-    ours = np.asarray(report["objects"]["floor"]["radiosity"], dtype=np.float64) / math.pi
-    target = np.array([t is not None for t in report["objects"]["floor"]["target"]])
+    floor = report["objects"]["floor"]
+    target = np.array([t is not None for t in floor["target"]])
+    # with the file's own (glossy) materials a bake shows the radiance along the normal
+    ours = (np.array([r if r is not None else [np.nan] * 3 for r in floor["radiance_normal"]], dtype=np.float64)
+            if own_materials else np.asarray(floor["radiosity"], dtype=np.float64) / math.pi)
     got = baked["floor"].radiance[target].sum(axis=1)
     signed = (ours[target].sum(axis=1) - got) / got
     e = np.abs(signed)

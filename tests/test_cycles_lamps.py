@@ -147,3 +147,24 @@ def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
     rel, signed, summary = against_cycles(report, baked)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.10, summary
+
+
+def test_solve_closed_loop_with_default_principled_materials(tmp_path):
+    """An artist's file: the lamp-lit room with default Principled BSDFs (Base Color only, so a
+    glossy layer), Blender's default grey World; `solve --out`, and Cycles bakes the written file
+    with its own materials, World and light paths. The bake views each face along its normal:
+    the report's radiance_normal (the lamps' light through each BSDF at its direction, and the
+    neighbours' reflection of it) is what it must show."""
+    blend = tmp_path / "room.blend"
+    try:
+        lamp_room(blend, lambertian=False)
+        bpy.ops.wm.open_mainfile(filepath=str(blend))
+        uniform_world((0.0508,) * 3)
+        bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    finally:
+        cr.reset_blender()
+    n = 4
+    report, e, signed, share, summary = solve_closed_loop(
+        blend, tmp_path, [j * n + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8), own_materials=True)
+    assert 0.3 < share < 0.9, summary
+    assert e.mean() < 0.02 and e.max() < 0.05, summary

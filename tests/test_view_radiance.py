@@ -50,3 +50,24 @@ def test_uniform_light_shows_the_directional_albedo():
     rho = np.zeros((P, 3))  # so that e_0 = B_0 - rho F B = 0
     L = view_radiance(F, B, rho, center, normal, [0], material, lobes)
     np.testing.assert_allclose(L[0] * np.pi, principled_albedo(params).normal, rtol=0.01)
+
+
+def test_lamp_lit_lambertian_view_radiance_is_b_over_pi():
+    """Lit by emitters and by lamps (direct irradiance H, B = A^-1 (e + rho H)), a Lambertian
+    scene shows B / pi whichever way the sources' light is gathered: the lamps' light reflected
+    by the neighbours counts as much as the emitters' (it was left out of the glossy gathering)."""
+    center, normal, F = _closed_scene()
+    P = len(F)
+    rho = np.full((P, 3), 0.6)
+    e = np.zeros((P, 3))
+    e[:5] = 3.0
+    rng = np.random.default_rng(4)
+    H1, H2 = rng.random((P, 3)) * 2.0, rng.random((P, 3))
+    B = np.stack([np.linalg.solve(np.eye(P) - 0.6 * F, e[:, c] + 0.6 * (H1 + H2)[:, c]) for c in range(3)], axis=1)
+    lobes = [[(1.0, "diffuse", (np.full(3, 0.6), 0.0))]]
+    lamp = center[0] * 0.2
+    towards = (lamp - center) / np.linalg.norm(lamp - center, axis=1, keepdims=True)
+    for glossy in (True, False):
+        L = view_radiance(F, B, rho, center, normal, np.arange(P), np.zeros(P, dtype=int), lobes, exitance=e,
+                          source_glossy=glossy, lamp_light=[(towards, H1), (None, H2)])
+        np.testing.assert_allclose(L, B / np.pi, rtol=1e-9)

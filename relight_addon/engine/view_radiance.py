@@ -90,7 +90,10 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), 1e-300)
         lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
         H_direct = FE @ e[E]
-        indirect = rho * (FB - H_direct) / np.pi  # the rest of the light, sent Lambertian
+        # the rest of the light, sent Lambertian: what the emitters' light leaves of F B, and the
+        # lamps' and the World's direct light (in B, not in F B)
+        H_lamps = sum((np.asarray(H, dtype=np.float64) for _, H in lamp_light or ()), np.zeros_like(B))
+        indirect = rho * (FB - H_direct + H_lamps) / np.pi
     out = np.empty((len(patches), 3))
     for k, i in enumerate(patches):
         if sp.issparse(rows):
