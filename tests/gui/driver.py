@@ -651,6 +651,28 @@ def scenario():
     yield from scroll_sidebar(-40)
     shot("17_cleared")
 
+    # 11. a textured World, rendered by Cycles from this window session (blender/world.py): a Sky
+    # Texture with its sun; the map comes back with the sun found, and nothing temporary is left
+    import importlib
+
+    bworld = importlib.import_module(PKG + ".blender.world")
+    sky_world = bpy.data.worlds.new("relight gui sky")
+    sky_world.use_nodes = True  # Blender 4.x: a new World has no node tree until then
+    sky = sky_world.node_tree.nodes.new("ShaderNodeTexSky")
+    bg = next(n for n in sky_world.node_tree.nodes if n.type == "BACKGROUND")
+    sky_world.node_tree.links.new(sky.outputs["Color"], bg.inputs["Color"])
+    before = (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras), len(bpy.data.worlds))
+    t0 = time.monotonic()
+    env = bworld.render_world_map(sky_world)
+    dt = time.monotonic() - t0
+    after = (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras), len(bpy.data.worlds))
+    suns = env.split_suns()[0]
+    check("a Sky Texture World is rendered to its map in the window session",
+          env.shape == (128, 256) and len(suns) == 1 and after == before and bpy.context.scene == scene,
+          f"{env.shape}, {len(suns)} sun(s), {dt:.1f} s, data {before} -> {after}")
+    bpy.data.worlds.remove(sky_world)
+    yield 0.5
+
 
 def finish(code=None):
     RESULT["timings"]["total_s"] = round(time.monotonic() - T0, 1)
