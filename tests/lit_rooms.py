@@ -52,6 +52,17 @@ def against_cycles(report, baked):
     return rel, signed, summary
 
 
+def radiosity_against_cycles(blend, report_path, samples=1024, seed=1):
+    """`radiosity` on ``blend``, and every face of it against Cycles baking the same file with its
+    World: (relative errors, signed errors, a summary; against_cycles)."""
+    report = relight("radiosity", blend, report_path)
+    try:
+        baked = cr.cycles_face_radiance(samples=samples, seed=seed, blend_path=str(blend), keep_world=True)
+    finally:
+        cr.reset_blender()
+    return against_cycles(report, baked)
+
+
 def lamp_room(path, lambertian=True):
     """A closed 4 x 3 x 2.5 m room (walls and ceiling 0.6, floor (0.4, 0.35, 0.3); Lambertian, or
     default Principled BSDFs of that Base Color), 4 x 4 faces a side, no World, lit by a Point and

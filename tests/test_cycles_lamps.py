@@ -14,7 +14,7 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import (against_cycles, cut_window, lamp_room, light, relight, remove_lamps,  # noqa: E402
+from lit_rooms import (cut_window, lamp_room, light, radiosity_against_cycles, remove_lamps,  # noqa: E402
                        solve_closed_loop, uniform_world)
 
 SAMPLES = 256
@@ -95,12 +95,7 @@ def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
         lamp_room(blend)
     finally:
         cr.reset_blender()
-    report = relight("radiosity", blend, report_path)
-    try:
-        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, blend_path=str(blend))
-    finally:
-        cr.reset_blender()
-    rel, signed, summary = against_cycles(report, baked)
+    rel, signed, summary = radiosity_against_cycles(blend, report_path, samples=SAMPLES)  # no World: black
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.08, summary
 
@@ -139,12 +134,7 @@ def test_radiosity_with_a_window_and_a_uniform_world_against_cycles(tmp_path):
         bpy.ops.wm.save_as_mainfile(filepath=str(blend))
     finally:
         cr.reset_blender()
-    report = relight("radiosity", blend, report_path)
-    try:
-        baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
-    finally:
-        cr.reset_blender()
-    rel, signed, summary = against_cycles(report, baked)
+    rel, signed, summary = radiosity_against_cycles(blend, report_path)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.10, summary
 

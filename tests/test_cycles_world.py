@@ -10,7 +10,7 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to render with Cycles")
 
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import (against_cycles, cut_window, hdri_world, lamp_room, light, relight,  # noqa: E402
+from lit_rooms import (cut_window, hdri_world, lamp_room, light, radiosity_against_cycles,  # noqa: E402
                        remove_lamps, sky_world, solve_closed_loop, world_tree)
 
 #: floor faces (4 x 4 grid, row-major from the south-west corner) painted as targets: the middle
@@ -73,12 +73,7 @@ def test_radiosity_under_a_sky_texture_against_cycles(tmp_path):
     face against Cycles baking the same file with its World."""
     blend, report_path = tmp_path / "sky.blend", tmp_path / "r.json"
     _window_room(blend, sky_world)
-    report = relight("radiosity", blend, report_path)
-    try:
-        baked = cr.cycles_face_radiance(samples=1024, seed=1, blend_path=str(blend), keep_world=True)
-    finally:
-        cr.reset_blender()
-    rel, signed, summary = against_cycles(report, baked)
+    rel, signed, summary = radiosity_against_cycles(blend, report_path)
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.10, summary
 
