@@ -94,8 +94,9 @@ TYPE_NAMES = {"FLOAT_COLOR": "Color", "BYTE_COLOR": "Byte Color", "BOOLEAN": "Bo
               "INT8": "8-Bit Integer", "FLOAT": "Float", "FLOAT_VECTOR": "Vector", "FLOAT2": "2D Vector",
               "INT32_2D": "2D Integer Vector", "QUATERNION": "Quaternion", "FLOAT4X4": "4x4 Matrix",
               "STRING": "String"}
-#: object types with geometry that are not exported (only meshes are)
-NON_MESH_GEOMETRY = ("CURVE", "FONT", "SURFACE", "META", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL")
+#: object types with geometry that are not exported (only meshes are); VOLUME objects are named
+#: apart (_not_modelled: a volume is not a surface)
+NON_MESH_GEOMETRY = ("CURVE", "FONT", "SURFACE", "META", "CURVES", "POINTCLOUD", "GREASEPENCIL")
 
 
 class BlendFileError(SceneError):
