@@ -38,6 +38,30 @@ Materials (per face, through ``material_index`` and the object's material slots)
 - No material: reflectance 0.8 grey.
 - Exitance e = pi * L_e (W/m^2). Reflectance is clamped to [0, MAX_REFLECTANCE] and
   negative emission to 0, with a warning.
+- Linked emission (a texture, a procedural, an attribute... on an Emission Color / Strength, or
+  a Mix Shader's linked factor over an emitting branch: materials.Closure.linked_emission): each
+  face's mean emitted radiance over its area, from a Cycles EMIT bake of temporary copies
+  (emission_bake.py; nothing of the user's data changes), then e = pi * L_e as above. Nothing
+  is baked in a scene without linked emission. Instanced objects are not baked, and a bake that
+  fails keeps the unlinked part: both named in a warning with the material and its linked input.
+
+The back side of emitters (_emitting_backs): Cycles' mesh emission leaves both sides of a face,
+the radiosity model's faces are one-sided. An emitting face on a closed island (every edge shared
+by two faces) faces its inside with its back: left out, as its light stays inside in Cycles too.
+For an emitting face of an open island (a plane), rays from its back (engine/backs.py) decide:
+- it sees nothing: nothing to do;
+- it sees the scene from afar (a median distance >= BACK_GAP x its island's size: a plane lamp
+  hanging in a room): its back is exported as a face of its own (the polygon reversed, set
+  BACK_OFFSET x the scene's diagonal behind it, emitting the back's exitance, reflecting the
+  front's reflectance, never a target or a light, not reported);
+- it lies against a surface (a lamp quad just under a ceiling): not modelled (the light caught in
+  the gap would be spread by the surface's patches), named in a warning with its power and the
+  estimated range of the light that leaks out of the gap, what Cycles renders more
+  (``ExportedScene.backs``).
+
+What Cycles renders and Relight does not model is named in a warning (_not_modelled): materials
+whose Volume output is linked, volume objects, a World volume (the light is taken as passing
+through), objects with Shadow Catcher or Holdout on (lit and reported as ordinary surfaces).
 
 Relight attributes (read from the base mesh)
 - ``relight_target``: a Face Corner colour attribute, FLOAT_COLOR or BYTE_COLOR (read as linear
@@ -126,8 +150,18 @@ def open_blend(path: str):
 # ------------------------------------------------------------------ materials
 def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo
-    and emitted radiance as Cycles renders it (materials.py; see the module docstring)."""
+    and emitted radiance as Cycles renders it (materials.py; see the module docstring). A linked
+    emission is not in ``radiance``: export_scene bakes it per face."""
     return material_closure(mat)[:3]
+
+
+def scene_material(mat):
+    """The scene's own material behind ``mat``: a Relight variant shown by an earlier solve has
+    its source as the scene's material (the variant's emission is Relight's result, not the
+    scene's light); None stays None."""
+    if mat is not None and mat.get("relight_generated"):
+        return bpy.data.materials.get(mat.get("relight_source", "")) or None
+    return mat
 
 
 def material_closure(mat):
@@ -136,10 +170,7 @@ def material_closure(mat):
     export_scene): (reflectance, radiance, note, lobes, linked_emission)."""
     from .materials import surface_closure
 
-    if mat is not None and mat.get("relight_generated"):
-        # a Relight emissive variant shown by an earlier solve: the scene's own material is
-        # its source (the variant's emission is Relight's result, not the scene's light)
-        mat = bpy.data.materials.get(mat.get("relight_source", "")) or None
+    mat = scene_material(mat)
     if mat is None:
         grey = np.full(3, DEFAULT_REFLECTANCE)
         return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))], []
@@ -596,8 +627,10 @@ def open_faces(geo) -> tuple:
 #: relative to the scene's bounding-box diagonal: 10 x the rays' origin offset
 #: (engine.sampling.RAY_OFFSET), so that a ray reaching the front hits the front first
 BACK_OFFSET = 10 * RAY_OFFSET
-#: rays per emitting face of an open island that tell what its back sees (engine.backs)
+#: rays per emitting face of an open island that tell what its back sees (engine.backs), and
+#: in all (fewer per face when there are many: at least 16)
 BACK_RAYS = 256
+BACK_RAY_BUDGET = 1 << 20
 #: a back whose rays reach front sides at a median distance below this fraction of its island's
 #: size (the square root of its emitting area) lies against a surface (_emitting_backs)
 BACK_GAP = 0.1
@@ -779,7 +812,7 @@ def _bake_linked_emission(b, objs, context) -> list:
         geo, _, name = b.geos[ci]
         mats = _linked_materials(b, geo, linked)
         if ci < len(objs):  # the real objects are the first chunks, one each, in order
-            requests.append(BakeRequest(name, objs[ci], linked, geo["slots"]))
+            requests.append(BakeRequest(name, objs[ci], linked, [scene_material(m) for m in geo["slots"]]))
             chunk_of[name] = ci
         else:
             inst.setdefault(name, set()).update(mats)
@@ -839,12 +872,15 @@ def _emitting_backs(b) -> tuple:
 
     areas = [_chunk_face_areas(b, ci) for ci in range(len(b.e))]
     emitted = float(sum(float((e * a[:, None]).sum()) for e, a in zip(b.e, areas)))
-    chosen, size, chunks = [], [], []
+    chosen, size, chunks, islands = [], [], [], {}
     for ci in range(len(b.e)):
         back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
         if b.geos[ci] is None or not np.any(back > 0):
             continue
-        is_open, island = open_faces(b.geos[ci][0])
+        geo = b.geos[ci][0]
+        if id(geo) not in islands:  # instances share their mesh's arrays
+            islands[id(geo)] = open_faces(geo)
+        is_open, island = islands[id(geo)]
         sel = np.flatnonzero(np.any(back > 0, axis=1) & is_open)
         if not len(sel):
             continue
@@ -856,7 +892,7 @@ def _emitting_backs(b) -> tuple:
         return [], []
     chosen, size = np.concatenate(chosen), np.concatenate(size)
     geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
-    view = back_view(*geometry, chosen, BACK_RAYS)
+    view = back_view(*geometry, chosen, int(np.clip(BACK_RAY_BUDGET // len(chosen), 16, BACK_RAYS)))
     modelled = (view.front > 0) & (view.distance >= BACK_GAP * size)
     against = (view.front > 0) & ~modelled
     rows = {}
