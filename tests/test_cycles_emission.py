@@ -10,11 +10,8 @@ black World, emission two-sided as Cycles has it).
   warning with the light that leaks out of the gap, an estimated range; Cycles' two-sided render
   against its one-sided one must fall in it.
 """
-import json
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -22,8 +19,9 @@ import pytest
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
+from lit_rooms import ROOT, against_cycles, lamp_room, relight, remove_lamps  # noqa: E402
+from test_emission import textured  # noqa: E402
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORNELL = os.path.join(ROOT, "sample_blends", "cornell_box.blend")
 THREADS = 2
 #: the checker's two colours x strength: radiance W/(m^2 sr); its mean is what Relight emits
@@ -32,21 +30,12 @@ STRENGTH = 6.0
 
 
 def _checker_room(path):
-    """A 4 x 3 x 2.5 m room of inward 4 x 4 grids (Lambertian), a 1 x 0.6 m panel (one quad, base
-    colour 0.5) facing down 0.6 m under the ceiling, emitting a 4 x 4 checker image (packed)."""
-    cr.reset_blender()
-    bpy.context.scene.world = None
-    walls = cr._material("walls", (0.6, 0.6, 0.6), lambertian=True)
-    floor_m = cr._material("floor", (0.4, 0.35, 0.3), lambertian=True)
-    W, D, H, n = 4.0, 3.0, 2.5, 4
-    for name, o, du, dv, m in [("floor", (0, 0, 0), (W, 0, 0), (0, D, 0), floor_m),
-                               ("ceiling", (0, D, H), (W, 0, 0), (0, -D, 0), walls),
-                               ("wall_s", (0, 0, 0), (0, 0, H), (W, 0, 0), walls),
-                               ("wall_n", (0, D, 0), (W, 0, 0), (0, 0, H), walls),
-                               ("wall_w", (0, 0, 0), (0, D, 0), (0, 0, H), walls),
-                               ("wall_e", (W, 0, 0), (0, 0, H), (0, D, 0), walls)]:
-        v, f = cr.grid_quads(o, du, dv, n, n)
-        cr.add_mesh_object(name, v, f, m)
+    """lit_rooms.lamp_room (a 4 x 3 x 2.5 m room of inward 4 x 4 grids, Lambertian) without its lamps,
+    lit by a 1 x 0.6 m panel (one quad, base colour 0.5) facing down 0.6 m under the ceiling,
+    emitting a 4 x 4 checker image (packed) of CHECKER x STRENGTH."""
+    lamp_room(path)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    remove_lamps()
     px = np.ones((4, 4, 4), dtype=np.float32)
     for j in range(4):
         for i in range(4):
@@ -55,27 +44,12 @@ def _checker_room(path):
     img.colorspace_settings.name = "Non-Color"
     img.pixels.foreach_set(px.ravel())
     img.pack()
-    lamp = cr._material("panel", (0.5, 0.5, 0.5), lambertian=True)
-    nt = lamp.node_tree
-    p = next(nd for nd in nt.nodes if nd.type == "BSDF_PRINCIPLED")
-    tex = nt.nodes.new("ShaderNodeTexImage")
-    tex.image, tex.interpolation = img, "Closest"
-    nt.links.new(tex.outputs["Color"], p.inputs["Emission Color"])
-    p.inputs["Emission Strength"].default_value = STRENGTH
+    lamp = textured(cr._material("panel", (0.5, 0.5, 0.5), lambertian=True), img, STRENGTH)
     v, f = cr.grid_quads((1.5, 1.2, 1.9), (0, 0.6, 0), (1.0, 0, 0), 1, 1)  # normal -z
     ob = cr.add_mesh_object("panel", v, f, lamp)
     uv = ob.data.uv_layers.new(name="UVMap")
     uv.data.foreach_set("uv", np.array([(0, 0), (1, 0), (1, 1), (0, 1)], dtype=np.float32).ravel())
-    bpy.context.scene["relight_max_patch_size"] = 0.5
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
-
-
-def _relight(command, blend, report_path, *extra):
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", command, str(blend), "--report", str(report_path),
-                           "--quiet", *map(str, extra)], cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": ROOT})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(report_path.read_text())
 
 
 def test_textured_hanging_panel_lights_the_room_as_cycles_renders_it(tmp_path):
@@ -86,7 +60,7 @@ def test_textured_hanging_panel_lights_the_room_as_cycles_renders_it(tmp_path):
         _checker_room(blend)
     finally:
         cr.reset_blender()
-    report = _relight("radiosity", blend, report_path, "--seed", "1")
+    report = relight("radiosity", blend, report_path, "--seed", "1")
     assert not [w for w in report["warnings"] if "emission" in w or "back side" in w], report["warnings"]
     try:
         baked = cr.cycles_face_radiance(samples=256, seed=1, blend_path=str(blend), threads=THREADS)
@@ -99,20 +73,13 @@ def test_textured_hanging_panel_lights_the_room_as_cycles_renders_it(tmp_path):
     emitted = STRENGTH * CHECKER.mean(axis=0)
     assert np.all(panel >= emitted * 0.999), (panel, emitted)
     assert np.allclose(panel, baked["panel"].radiance[0], rtol=0.01), (panel, baked["panel"].radiance[0])
-    rel, signed, lines = [], [], []
-    for name, cyc in baked.items():
-        ours = np.asarray(report["objects"][name]["radiosity"], dtype=np.float64).sum(axis=1) / math.pi
-        lum = cyc.radiance.sum(axis=1)
-        rel.append(np.abs(ours - lum) / lum)
-        signed.append((ours - lum) / lum)
-        lines.append(f"{name}: mean {rel[-1].mean():.4f} max {rel[-1].max():.4f} signed {signed[-1].mean():+.4f} "
-                     f"noise {np.mean(cyc.std_error.sum(axis=1) / lum):.4f}")
-    rel, signed = np.concatenate(rel), np.concatenate(signed)
+    rel, signed, summary = against_cycles(report, baked)
+    noise = np.mean([np.mean(c.std_error.sum(axis=1) / c.radiance.sum(axis=1)) for c in baked.values()])
     back_share = 1 - ceiling_one_sided.radiance.sum() / baked["ceiling"].radiance.sum()
-    summary = (f"{len(rel)} faces: mean {rel.mean():.4f} max {rel.max():.4f} signed {signed.mean():+.4f}; "
-               f"the ceiling's light from the panel's back (Cycles, two- vs one-sided): {back_share:.3f}\n"
-               + "\n".join(lines))
-    print(summary)
+    extra = (f"Cycles' noise on a face mean {noise:.4f}; the ceiling's light from the panel's back (Cycles, two- "
+             f"vs one-sided): {back_share:.3f}")
+    print(extra)
+    summary += "\n" + extra
     assert back_share > 0.3, summary  # the back matters: without it the ceiling would be far too dark
     assert rel.mean() < 0.02 and abs(signed.mean()) < 0.01, summary
     assert rel.max() < 0.08, summary

@@ -54,9 +54,9 @@ def image(bpy, pixels, name="tex"):
     return img
 
 
-def textured_principled(bpy, img, strength, name="textured"):
-    """A Principled BSDF whose Emission Color is an image (Closest), Emission Strength ``strength``."""
-    m = principled(bpy, name, (0.5, 0.5, 0.5))
+def textured(m, img, strength):
+    """Material ``m`` (a Principled BSDF) with an image (Closest) on its Emission Color, Emission
+    Strength ``strength``."""
     nt = m.node_tree
     p = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     t = nt.nodes.new("ShaderNodeTexImage")
@@ -64,6 +64,11 @@ def textured_principled(bpy, img, strength, name="textured"):
     nt.links.new(t.outputs["Color"], p.inputs["Emission Color"])
     p.inputs["Emission Strength"].default_value = strength
     return m
+
+
+def textured_principled(bpy, img, strength, name="textured"):
+    """A default Principled BSDF (base colour 0.5) emitting an image x ``strength``."""
+    return textured(principled(bpy, name, (0.5, 0.5, 0.5)), img, strength)
 
 
 def emission_of(exp, name):
@@ -305,7 +310,7 @@ def test_what_is_not_modelled_is_named(bpy_clean):
     text = "\n".join(warnings)
     assert any("'fog'" in w and "Volume output" in w for w in warnings), text
     assert any("'smoke'" in w and "volume" in w for w in warnings), text
-    assert any("'hazy'" in w and "Volume" in w for w in warnings), text
+    assert any("'hazy'" in w and "volume" in w for w in warnings), text  # blender/world.py's
     assert any("'catcher'" in w and "Shadow Catcher" in w for w in warnings), text
     assert any("'holdout'" in w and "Holdout" in w for w in warnings), text
     # the volume object is named once, as a volume (not as a mesh-like occluder)

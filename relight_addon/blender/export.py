@@ -60,8 +60,9 @@ For an emitting face of an open island (a plane), rays from its back (engine/bac
   (``ExportedScene.backs``).
 
 What Cycles renders and Relight does not model is named in a warning (_not_modelled): materials
-whose Volume output is linked, volume objects, a World volume (the light is taken as passing
-through), objects with Shadow Catcher or Holdout on (lit and reported as ordinary surfaces).
+whose Volume output is linked, volume objects (the light is taken as passing through; a World
+volume: world.py), objects with Shadow Catcher or Holdout on (lit and reported as ordinary
+surfaces).
 
 Relight attributes (read from the base mesh)
 - ``relight_target``: a Face Corner colour attribute, FLOAT_COLOR or BYTE_COLOR (read as linear
@@ -961,7 +962,7 @@ def _volume_output(mat) -> bool:
 
 def _not_modelled(context, objs, b, renderable) -> list:
     """Warnings naming what Cycles renders and Relight does not model: volumes (materials with a
-    Volume output, volume objects, a World volume), shadow catchers and holdouts."""
+    Volume output, volume objects; a World volume: world.py), shadow catchers and holdouts."""
     out = []
     vol = sorted(n for n, m in b.materials_used.items() if _volume_output(m))
     if vol:
@@ -974,12 +975,6 @@ def _not_modelled(context, objs, b, renderable) -> list:
     if volumes:
         out.append(f"volume object(s) {', '.join(map(repr, volumes[:10]))}{' ...' if len(volumes) > 10 else ''}: "
                    "volumes are not modelled (Relight treats light as passing through them)")
-    world = context.scene.world
-    if world is not None and world.node_tree is not None:
-        wout = next((n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeOutputWorld"
-                     and n.is_active_output), None)
-        if wout is not None and any(not l.is_muted for l in wout.inputs["Volume"].links):
-            out.append(f"World {world.name!r}: its Volume output is linked; a World volume (fog) is not modelled")
     catchers = [ob.name for ob in objs if getattr(ob, "is_shadow_catcher", False)]
     if catchers:
         out.append(f"object(s) {', '.join(map(repr, catchers))}: Shadow Catcher (Object > Visibility) is not modelled: "
