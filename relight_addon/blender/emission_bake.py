@@ -31,8 +31,9 @@ Random (the temporary object's own). A face too small for a texel of its cell ge
 its material on the object, counted in a warning. Cost: nothing happens without linked
 emission; with it, one bake of the faces that need it, at most TEXEL_BUDGET texels (cells of 32
 x 32 texels for up to 1024 faces, smaller above, at least 6 x 6; an image of at most 4096 x 4096):
-measured on 2 cores shared with other jobs, an open grid of 10^4 textured faces exports in
-2.2-2.3 s instead of 0.5-0.6 s untextured, one of 10^5 in 4.6-6.4 s instead of 1.8-1.9 s.
+benchmarks/bench_emission_bake.py on 2 cores shared with other jobs: an open grid of 10^4
+textured faces exports in 2.1-3.5 s instead of 0.4-0.6 s untextured, one of 10^5 in 4.6-11 s
+instead of 1.6-2.2 s.
 """
 from __future__ import annotations
 
