@@ -53,7 +53,8 @@ For an emitting face of an open island (a plane), rays from its back (engine/bac
 - it sees the scene from afar (a median distance >= BACK_GAP x its island's size: a plane lamp
   hanging in a room): its back is exported as a face of its own (the polygon reversed, set
   BACK_OFFSET x the scene's diagonal behind it, emitting the back's exitance, reflecting the
-  front's reflectance, never a target or a light, not reported);
+  front's reflectance, never a target or a light in `solve`, not reported; in `reduce`, an
+  emitter of the scene, it is a light of its own);
 - it lies against a surface (a lamp quad just under a ceiling): not modelled (the light caught in
   the gap would be spread by the surface's patches), named in a warning with its power and the
   estimated range of the light that leaks out of the gap, what Cycles renders more
