@@ -120,7 +120,8 @@ def test_attributes_mix_factor_and_modifiers(bpy_clean):
     nt = m.node_tree
     attr = nt.nodes.new("ShaderNodeAttribute")
     attr.attribute_name = "glow"
-    nt.links.new(attr.outputs["Color"], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeEmission").inputs["Color"])
+    emit = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeEmission")
+    nt.links.new(attr.outputs["Color"], emit.inputs["Color"])
     ob = grid(bpy, "painted", 3, 1, size=(3.0, 1.0), mat=m, uv=False)
     a = ob.data.attributes.new("glow", "FLOAT_COLOR", "FACE")
     a.data.foreach_set("color", np.concatenate([colours, np.ones((3, 1))], axis=1).astype(np.float32).ravel())
@@ -292,7 +293,8 @@ def test_what_is_not_modelled_is_named(bpy_clean):
     fog = principled(bpy, "fog", (0.5, 0.5, 0.5))
     nt = fog.node_tree
     vol = nt.nodes.new("ShaderNodeVolumePrincipled")
-    nt.links.new(vol.outputs[0], next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial").inputs["Volume"])
+    out = next(n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputMaterial")
+    nt.links.new(vol.outputs[0], out.inputs["Volume"])
     box.data.materials.append(fog)
     box.data.polygons[0].material_index = 1
     vdata = bpy.data.volumes.new("smoke")

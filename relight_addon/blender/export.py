@@ -935,8 +935,9 @@ def _emitting_backs(b) -> tuple:
         row["distance"] = float(np.median(row["distance"]))
         row["near"] = sorted(row["near"])
         lo, hi = (100 * x / emitted for x in row["leak"])
-        out.append(f"object {row['object']!r}: the back side of its emitting faces lies {1000 * row['distance']:.3g} mm "
-                   f"from {', '.join(map(repr, row['near']))} (median): Cycles emits from both sides of a mesh face, and "
+        out.append(f"object {row['object']!r}: the back side of its emitting faces lies "
+                   f"{1000 * row['distance']:.3g} mm from {', '.join(map(repr, row['near']))} (median): Cycles emits "
+                   "from both sides of a mesh face, and "
                    f"the light caught between them is not modelled ({row['power']:.3g} W, "
                    f"{100 * row['power'] / emitted:.3g} % of the scene's emitted power); Cycles renders the scene "
                    f"brighter by what leaks out of the gap, {lo:.2g} to {hi:.2g} % of the emitted power (estimated): "

@@ -29,10 +29,10 @@ All or Cycles), read through reroutes and muted nodes:
 Linked emission (an Emission Color / Strength or Emission shader Color / Strength fed by a
 texture, a procedural, an attribute..., or a Mix Shader with a linked factor over a branch that
 emits) cannot be read from the node tree: the Closure lists it in ``linked_emission`` ("node:
-input") and leaves it out of ``radiance`` (a linked Mix factor stays 0.5 there); export.py gets each face's mean emitted radiance from a
-Cycles bake instead (emission_bake.py). An emission input that is linked while its partner is
-an unlinked zero (a texture on Emission Color with Emission Strength 0) emits nothing and is not
-listed.
+input") and leaves it out of ``radiance`` (a linked Mix factor stays 0.5 there); export.py gets
+each face's mean emitted radiance from a Cycles bake instead (emission_bake.py). An emission
+input that is linked while its partner is an unlinked zero (a texture on Emission Color with
+Emission Strength 0) emits nothing and is not listed.
 """
 from __future__ import annotations
 
