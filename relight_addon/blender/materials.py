@@ -132,7 +132,13 @@ def active_output(mat):
         return None
     if bpy.app.version < (5, 0, 0) and not mat.use_nodes:
         return None
-    outputs = [n for n in tree.nodes if n.bl_idname == "ShaderNodeOutputMaterial"]
+    return tree_output(tree, "ShaderNodeOutputMaterial")
+
+
+def tree_output(tree, bl_idname: str):
+    """The tree's active output node of type ``bl_idname`` (a Material or World Output), target
+    All or Cycles first, or None."""
+    outputs = [n for n in tree.nodes if n.bl_idname == bl_idname]
     if not outputs:
         return None
     active = [n for n in outputs if n.is_active_output] or outputs

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..engine.world import Detail, EnvironmentMap, _solid_angles
 from .lamps import uses_nodes
+from .materials import tree_output
 
 __all__ = ["world_light", "render_world_map", "MAP_WIDTH", "MAP_SAMPLES", "SUN_SCALE", "SUN_SAMPLES"]
 
@@ -31,11 +32,6 @@ MAP_WIDTH = 256
 MAP_SAMPLES = 16
 SUN_SCALE = 8
 SUN_SAMPLES = 256
-
-
-def _active_output(tree, kind: str):
-    outs = [n for n in tree.nodes if n.type == kind]
-    return next((n for n in outs if getattr(n, "is_active_output", False)), outs[0] if outs else None)
 
 
 def _render(sc, width: int, H: int, samples: int, box=None, scale: int = 1) -> np.ndarray:
@@ -179,7 +175,7 @@ def world_light(scene, sees_sky=None) -> tuple:
     notes = []
     if uses_nodes(world):
         tree = world.node_tree
-        out = _active_output(tree, "OUTPUT_WORLD")
+        out = tree_output(tree, "ShaderNodeOutputWorld")
         if out is None:
             return None, world.name, []
         if out.inputs["Volume"].is_linked:
