@@ -19,6 +19,6 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
 """
 from . import cell, group, polygon, lamp  # noqa: F401  (registration order = the stored kind codes)
 from .kind import LightKind
-from .lightset import LightSet, candidate_mask, kind_code, lights_from_groups
+from .lightset import LightSet, append_lamps, candidate_mask, kind_code, lights_from_groups
 
-__all__ = ["LightKind", "LightSet", "candidate_mask", "kind_code", "lights_from_groups"]
+__all__ = ["LightKind", "LightSet", "append_lamps", "candidate_mask", "kind_code", "lights_from_groups"]
