@@ -206,7 +206,8 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
                     points_per_patch: int = POINTS_PER_PATCH, only=None) -> np.ndarray:
     """(P, n_lamps, 3) direct irradiance (W/m^2) of each lamp on each patch (area mean), with
     shadow rays on ``sampler`` (built here when not given: pass the form factors' one).
-    ``only``: the indices of the patches to light (the others get 0), default all."""
+    ``only``: the indices of the patches to light (the others get 0), default all; or a list of
+    such index arrays, one per lamp (e.g. the patches a spot's cone can reach)."""
     P = patches.n_patches
     out = np.zeros((P, len(lamps), 3))
     if not lamps:
@@ -214,16 +215,20 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
     g = _Geometry(patches, points_per_patch, sampler=sampler)
     sm = g.sampler
     far = 4.0 * float(np.linalg.norm(np.ptp(sm.tv.reshape(-1, 3), axis=0))) + 1.0
+    per_lamp = only is not None and not isinstance(only, np.ndarray) and len(only) == len(lamps) and \
+        all(np.ndim(o) == 1 for o in only)
     for li, lamp in enumerate(lamps):
         k = points_per_patch
         ns = _samples_per_point(lamp)
         rng = np.random.default_rng([int(seed), 7, li])
+        sel = only[li] if per_lamp else only
+        todo = np.arange(P) if sel is None else np.asarray(sel, dtype=np.int64).reshape(-1)
         exact = None
         if lamp.kind in ("POINT", "SPOT"):  # the bare point lamp's patch mean: I x solid angle / area
-            om = np.bincount(sm.tri_patch, weights=_solid_angles(sm.tv.astype(np.float64), lamp.position),
+            tri = slice(None) if sel is None else np.flatnonzero(np.isin(sm.tri_patch, todo))
+            om = np.bincount(sm.tri_patch[tri], weights=_solid_angles(sm.tv[tri].astype(np.float64), lamp.position),
                              minlength=P)
             exact = om / (4.0 * math.pi * np.maximum(sm.area, 1e-300))
-        todo = np.arange(P) if only is None else np.asarray(only, dtype=np.int64)
         for c0 in range(0, len(todo), CHUNK_PATCHES):
             s = todo[c0:c0 + CHUNK_PATCHES]
             y, ny = _sample_patches(g, s, k, rng)

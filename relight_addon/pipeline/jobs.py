@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..engine.best_lights import lower_bounds
+from ..engine.candidate_lamps import lamp_bound, offer_lamps, offered_kinds
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
@@ -30,7 +31,7 @@ from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
 from ..engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
-from ..engine.sampling import Cancelled
+from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from .polygons import PolygonMap
 from .report import json_safe, radiosity_report, solve_report
@@ -193,11 +194,13 @@ def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -
 
 
 def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mode: str = "inverse") -> dict:
-    """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
+    """Memory and time estimate of a solve (engine.cost), with warnings when they are high; the
+    candidate lamps counted at their bound (engine.candidate_lamps.lamp_bound)."""
     passes = options.param("refine_passes", 0)  # 0 unless the chosen patch model declares it
+    lamps = lamp_bound(patches, candidate_mask(patches, mode), options) if mode == "inverse" else 0
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
                                  n_triangles=n_triangles, refine_passes=passes,
-                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads)
+                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads, n_lamps=lamps)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -299,7 +302,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                         f"this solve ({patches.n_patches} patches)")  # refuse before any more work
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
-    t_ff = t_problem = 0.0
+    t_ff = t_problem = t_lamps = 0.0
     history = []
     # the paper's heuristics redistribute between lights that partition the candidates: single-scale;
     # direct-lighting mode reduces the scene's own lamps: one light per emitter polygon
@@ -311,6 +314,9 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         lights = None  # direct mode: the emitter polygons, if any (the lamps are added below)
         if mode == "inverse" or mask.any():
             lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
+            if mode == "inverse" and not options.param("surface_lights", True):  # lamps only
+                lights = LightSet(lights.patches, sp.csr_matrix((len(lights.patches), 0)), np.zeros(0, dtype=np.int8),
+                                  np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
         pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
         lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
         # a model that will be refined only ranks patches by importance: a quarter of the rays
@@ -321,6 +327,17 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         t_ff += F.seconds
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
+        if mode == "inverse" and offered_kinds(options):  # the candidate lamps, beside the cells
+            t1 = time.perf_counter()
+            sampler = getattr(F, "sampler", None) or SceneSampler(patches)
+            lights, _ = offer_lamps(lights, patches, mask, options, sampler, options.seed,
+                                    _stage(progress, "lamps", hi, hi + 0.05 / (passes + 1)))
+            t_lamps += time.perf_counter() - t1
+            if cancel is not None and cancel():
+                raise Cancelled("solve cancelled")
+        if lights is not None and lights.n_lights == 0:
+            raise SceneError("no candidate light: the surface lights are off (--no-surface-lights) and no candidate "
+                             "lamp lights any face")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
@@ -367,7 +384,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         warnings.append(DIRECT_FIXED_NOTE.format(", ".join(n for n, _, _ in lamp_names)))
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H, lamp_names,
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem, "lamps": t_lamps}, refinement,
+                 lamp_H, lamp_names,
                  lamp_lights)
 
 
@@ -641,7 +659,7 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
-               "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
+               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
                "apply": 0.0, "total": time.perf_counter() - t0}
     report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
