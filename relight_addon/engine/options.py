@@ -72,9 +72,11 @@ def _unused_without_lamps(o):
 
 #: the options offering each kind of candidate lamp (engine/candidate_lamps.py)
 LAMP_OPTIONS = ("spot_lamps", "area_lamps", "point_lamps")
-#: offered by default (off until the Blender layer writes them: results.py)
-DEFAULT_LAMPS = False
+#: offered by default (measured: docs/benchmarks.md, "Candidate lamps")
+DEFAULT_LAMPS = True
 PARAM_FLAGS = {n: ("--no-" if DEFAULT_LAMPS else "--") + n.replace("_", "-") for n in LAMP_OPTIONS}
+#: the options of a job offering no candidate lamp (the surface cells alone, as before issue 17)
+NO_LAMPS = {name: False for name in LAMP_OPTIONS}
 #: candidate lamps at most (measured: docs/benchmarks.md, "Candidate lamps")
 DEFAULT_MAX_LAMPS = 96
 
