@@ -235,7 +235,7 @@ def test_least_power_through_the_operator(addon):
     opts = JobOptions(selection="least-power", tolerance=tol, rays_per_patch=512).validate()
     model = jobs.build_model(exp.faces, opts, "inverse", exp.settings.get("max_patch_size"))
     p = model.problem
-    ref = least_power_within_tolerance(p.transfer, p.b_target, p.light_area, tol)
+    ref = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tol)
     assert ref.status in ("ok", "partial", "infeasible")
     assert e_op.shape == ref.exitance.shape
     scale = max(float(np.abs(ref.exitance).max()), 1e-12)
