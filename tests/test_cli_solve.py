@@ -214,3 +214,32 @@ def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_cle
     light_exitance = math.pi * np.array([50.0, 42.5, 30.0])
     assert out.report["inverse"]["relative_error"] < 1e-9
     assert np.abs(out.inverse.exitance).max() < 1e-9 * light_exitance.max()
+
+
+def test_the_certificate_is_relative_to_the_painted_targets_with_scene_light(run_cli, tmp_path):
+    """A room whose own lamps give part of the painted light (lit_rooms.lamp_room): the
+    certificate's relative bounds are of the painted targets' norm, like every relative error of
+    the report, so none exceeds the error a configuration reached (they were of what the lights
+    add to the lamps' light: 0.10 for the NNLS bound against a final 0.052)."""
+    import bpy
+
+    import lit_rooms
+
+    blend = tmp_path / "room.blend"
+    lit_rooms.lamp_room(blend)
+    bpy.ops.wm.open_mainfile(filepath=str(blend))
+    lit_rooms.paint(bpy.data.objects["floor"], [j * 4 + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8))
+    for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
+        bpy.data.objects[name]["relight_no_lights"] = True
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    code, r, err = run_cli(["solve", blend, "--report", tmp_path / "r.json", "--rays-per-patch", "512"])
+    assert code == 0, err
+    assert sum(row["share"] for row in r["fixed_light"]) > 0.3  # the lamps give a good part of it
+    cert = r["certificate"]
+    best = min(c["relative_error"] for c in r["curve"])
+    assert cert["nnls_relative_error"] <= best * (1 + 1e-9)
+    for row, point in zip(cert["by_lights"], sorted(r["curve"], key=lambda c: c["n_lights"])):
+        assert row["bound_relative_error"] <= point["relative_error"] * (1 + 1e-9) + 1e-12
+    assert r["final"]["bound_relative_error"] <= r["final"]["relative_error"] * (1 + 1e-9)
+    assert not any(f"below {cert['nnls_relative_error']:.3g}" in w and cert["nnls_relative_error"] >
+                   r["final"]["relative_error"] for w in r["warnings"])

@@ -69,6 +69,12 @@ def test_the_gallery_answers_with_a_spot_well_below_what_cells_allow(gallery):
     assert sum(by_kind[k] for k in ("spot", "area", "point")) <= 96  # --max-lamps' default
     painting = np.array(r["objects"]["Painting"]["radiosity"])[0]
     assert np.all(np.abs(painting / (1.2 * np.pi) - 1) < 0.15)  # the painting gets (nearly) what was painted
+    # Lambertian materials: the view along the normal shows B / pi, the spots' light included
+    for name in ("Painting", "Room", "Floor"):
+        o = r["objects"][name]
+        for b, lv, t in zip(o["radiosity"], o["radiance_normal"], o["target"]):
+            if t is not None:
+                np.testing.assert_allclose(lv, np.asarray(b) / np.pi, rtol=0.02, atol=1e-4)
     for li in r["final"]["lights"]:
         if li["kind"] == "spot":  # a cone that just covers the painting or a part of it: a narrow one
             assert 2 < li["cone_angle_deg"] < 40 and li["location"][2] < artist_scenes.GALLERY[2]

@@ -281,6 +281,7 @@ class SolveOutcome:
     inverse: object
     reduction: object
     scene_light: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct light (fixed)
+    placed_light: list = None  # [(Lamp, (P, 3) W/m^2)]: the final configuration's placed lamps' direct light
 
 
 def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
@@ -487,7 +488,7 @@ def certificate_notes(problem, bounds, final) -> list:
         return [f"{k} light(s): the best possible with {k} non-negative lights (exhaustive search), "
                 f"relative error {final.relative_error:.3g}"]
     return [f"{k} light(s): relative error {final.relative_error:.3g}; no {k} non-negative lights can go below "
-            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
+            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls / norm:.3g}"]
 
 
 #: a target object whose fixed light alone exceeds the painted radiosity by more than this is named
@@ -666,8 +667,23 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]
     stored = StoredResult.from_solve(model, red, curve, report)
+    final = curve.exitance[curve.final_row]
     return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
-                        model.problem, inv, red, scene_light_at(model, curve.exitance[curve.final_row]))
+                        model.problem, inv, red, scene_light_at(model, final), placed_light_at(model, final))
+
+
+def placed_light_at(model: Model, strength) -> list:
+    """[(engine.lamps.Lamp, (P, 3) W/m^2)]: the direct light of each placed lamp (engine/lights/
+    spot.py, area.py, point.py) that is on in the configuration ``strength`` (n_lights, 3)."""
+    lights = model.lights
+    if lights.irradiance is None:
+        return []
+    H = sp.csc_matrix(lights.irradiance)
+    out = []
+    for j in np.flatnonzero(np.any(np.asarray(strength) > 0, axis=1)):
+        if lights.kind_of(j).writer == "placed":
+            out.append((lights.lamp(j), H[:, j].toarray() * np.asarray(strength, dtype=np.float64)[j][None, :]))
+    return out
 
 
 #: above this relative error, the final configuration is compared with the best positive one

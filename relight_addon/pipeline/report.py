@@ -172,9 +172,11 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                    "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
                   for i, p in enumerate(red.curve)],
         "certificate": None if bounds is None else {
-            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
+            # relative to the painted targets' norm, as every relative error of the report (the bounds'
+            # own are of what the lights must add to the scene's fixed light)
+            "nnls_relative_error": bounds.nnls / norm, "seconds": bounds.seconds,
             "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
-                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
+                          for k, r, x in zip(bounds.k, bounds.bound / norm, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
                   "n_negative": final.n_negative, "power": _power(problem, final),
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
