@@ -9,6 +9,7 @@ applied shows its own lamps; Clear Results leaves the user's scene as it was; Ma
 copies them for keeps, and the export then reads those copies as the lamps the solve placed; a new
 solve of the written copy does not count Relight's own lamps as the scene's light.
 """
+import contextlib
 import json
 
 import numpy as np
@@ -48,6 +49,27 @@ def gallery(tmp_path_factory):
     return {"blend": blend, "cells": cells, "report": report, "out": out, "objects": objects, "folder": folder}
 
 
+@contextlib.contextmanager
+def written(gallery):
+    """The written copy open: (its scene, {lamp object: the report's record of it})."""
+    lamps = {li["object"]: li for li in gallery["report"]["final"]["lights"] if li["exitance"] is None}
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(gallery["out"]))
+        yield bpy.context.scene, lamps
+    finally:
+        cr.reset_blender()
+
+
+def _lamps_of_row(data, row):
+    """The names of the placed lamps on in stored configuration ``row``, sorted."""
+    from relight_addon.engine.registry import LIGHT_KINDS
+
+    names = LIGHT_KINDS.names()
+    on = np.flatnonzero(np.any(data.exitance[row] > 0, axis=1))
+    return sorted(data.lamps[int(data.light_lamp[j])]["name"] for j in on
+                  if names[data.light_kind[j]] in ("spot", "area", "point"))
+
+
 def _placed(scene):
     rid = scene["relight_result_id"]
     return {o.name: o for o in scene.objects if o.type == "LIGHT" and o.get(OWNER) == rid}
@@ -84,11 +106,7 @@ def test_the_gallery_answers_with_a_spot_well_below_what_cells_allow(gallery):
 
 
 def test_the_written_copy_holds_the_lamps_as_reported(gallery):
-    r = gallery["report"]
-    lamps = {li["object"]: li for li in r["final"]["lights"] if li["exitance"] is None}
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(gallery["out"]))
-        scene = bpy.context.scene
+    with written(gallery) as (scene, lamps):
         placed = _placed(scene)
         assert sorted(placed) == sorted(lamps)
         coll = next(c for c in bpy.data.collections if c.get(OWNER) == scene["relight_result_id"])
@@ -105,43 +123,31 @@ def test_the_written_copy_holds_the_lamps_as_reported(gallery):
                 assert ld.spot_blend == pytest.approx(li["spot_blend"], abs=1e-6) and ld.shadow_soft_size == 0
             if ld.type == "AREA":
                 assert ld.shape == li["shape"] and ld.size == pytest.approx(li["size"][0], rel=1e-6)
-    finally:
-        cr.reset_blender()
 
 
 def test_every_row_shows_its_own_lamps_and_clear_gives_the_scene_back(gallery):
     from relight_addon.blender import results
 
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(gallery["out"]))
-        scene = bpy.context.scene
+    with written(gallery) as (scene, _):
         data = results.load_result(scene)
-        placed_kinds = [results.LIGHT_KINDS.names().index(k) for k in ("spot", "area", "point")]
-        is_lamp = np.isin(data.light_kind, placed_kinds)
         for row in range(len(data.n_lights)):
             shown = results.apply_stored_point(scene, row)
-            on = np.any(data.exitance[row] > 0, axis=1)
-            want = sorted(data.lamps[int(data.light_lamp[j])]["name"] for j in np.flatnonzero(on & is_lamp))
+            want = _lamps_of_row(data, row)
             assert sorted(_placed(scene)) == want, row
-            assert shown["lights"] == int(on.sum())
+            assert shown["lights"] == int(np.any(data.exitance[row] > 0, axis=1).sum())
             owned = [c for c in bpy.data.collections if c.get(OWNER) is not None]
             assert len(owned) == (1 if want else 0)  # one collection of lamps at a time, none when there are none
         results.clear_results(scene)
         assert sorted(o.name for o in bpy.data.objects) == gallery["objects"]
         assert not [c for c in bpy.data.collections if c.get(OWNER) is not None]
         assert not [ld for ld in bpy.data.lights if ld.get(OWNER) is not None]
-    finally:
-        cr.reset_blender()
 
 
 def test_make_area_lights_copies_the_lamps_for_keeps_and_the_export_reads_them(gallery):
     from relight_addon.blender import export, results
 
     r = gallery["report"]
-    lamps = {li["object"]: li for li in r["final"]["lights"] if li["exitance"] is None}
-    try:
-        bpy.ops.wm.open_mainfile(filepath=str(gallery["out"]))
-        scene = bpy.context.scene
+    with written(gallery) as (scene, lamps):
         assert export.export_scene().faces.lamps == []  # Relight's own lamps are not the scene's light
         n_cells = sum(li["exitance"] is not None for li in r["final"]["lights"])
         made = results.make_area_lights(scene, int(scene["relight_shown"]))
@@ -160,8 +166,6 @@ def test_make_area_lights_copies_the_lamps_for_keeps_and_the_export_reads_them(g
             if lamp.kind == "SPOT":
                 assert lamp.spot_size == pytest.approx(li["spot_size"], rel=1e-6) and lamp.radius == 0
                 assert lamp.spot_blend == pytest.approx(li["spot_blend"], abs=1e-6)
-    finally:
-        cr.reset_blender()
 
 
 def test_a_new_solve_of_the_written_copy_does_not_count_relights_lamps(gallery):
@@ -178,20 +182,14 @@ def test_the_add_on_clicks_through_the_curve_and_clears(gallery):
 
     relight_addon.register()
     try:
-        bpy.ops.wm.open_mainfile(filepath=str(gallery["out"]))
-        scene = bpy.context.scene
-        settings = scene.relight
-        data = results.load_result(scene)
-        assert len(settings.curve) == len(data.n_lights)
-        names = results.LIGHT_KINDS.names()
-        for k in reversed(range(len(settings.curve))):
-            settings.curve_index = k
-            on = np.flatnonzero(np.any(data.exitance[k] > 0, axis=1))
-            want = sorted(data.lamps[int(data.light_lamp[j])]["name"] for j in on
-                          if names[data.light_kind[j]] in ("spot", "area", "point"))
-            assert sorted(_placed(scene)) == want, k
-        assert bpy.ops.relight.clear_results() == {"FINISHED"}
-        assert sorted(o.name for o in bpy.data.objects) == gallery["objects"]
+        with written(gallery) as (scene, _):
+            settings = scene.relight
+            data = results.load_result(scene)
+            assert len(settings.curve) == len(data.n_lights)
+            for k in reversed(range(len(settings.curve))):
+                settings.curve_index = k
+                assert sorted(_placed(scene)) == _lamps_of_row(data, k), k
+            assert bpy.ops.relight.clear_results() == {"FINISHED"}
+            assert sorted(o.name for o in bpy.data.objects) == gallery["objects"]
     finally:
-        cr.reset_blender()
         relight_addon.unregister()
