@@ -211,9 +211,12 @@ def test_operator_options_pass_only_the_chosen_methods_parameters(addon):
     o = operators.job_options(s)
     assert o.tolerance == 0.3 and o.max_lights == PARAMS["max_lights"].default  # the tolerance decides
     # the candidate lamps: passed as the sidebar sets them; with the paper's heuristics, cells only
-    s.selection, s.spot_lamps, s.lamp_drop, s.max_lamps = "greedy-swap", False, 0.3, 40
+    s.selection, s.spot_lamps, s.point_lamps, s.lamp_drop, s.max_lamps = "greedy-swap", False, True, 0.3, 40
     o = operators.job_options(s)
-    assert not o.spot_lamps and o.area_lamps and o.lamp_drop == pytest.approx(0.3) and o.max_lamps == 40
+    assert not o.spot_lamps and o.point_lamps and o.lamp_drop == pytest.approx(0.3) and o.max_lamps == 40
+    s.point_lamps = False  # no lamp offered: the lamps' drop and count are moot, at their defaults
+    o = operators.job_options(s)
+    assert o.lamp_drop is None and o.max_lamps == PARAMS["max_lamps"].default
     s.selection = "exitance-elimination"
     o = operators.job_options(s)  # not refused: the lamp options are moot, at their defaults
     assert o.spot_lamps == PARAMS["spot_lamps"].default and o.lamp_drop is None

@@ -22,7 +22,7 @@ import cycles_reference as cr  # noqa: E402
 from relight_addon import cli  # noqa: E402
 
 FAST = ["--quiet", "--seed", "1"]
-NO_LAMPS = ["--no-spot-lamps", "--no-area-lamps", "--no-point-lamps"]
+NO_LAMPS = ["--no-spot-lamps"]  # (area and point lamps are off by default)
 OWNER = "relight_owner"
 
 

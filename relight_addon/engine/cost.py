@@ -61,7 +61,7 @@ BASE_BYTES = 60 * 2 ** 20
 #: 4e-5 at 256 x 4)
 KERNEL_SECONDS_PER_PAIR = 2e-5
 #: a candidate lamp's irradiance per receiver point (sampling, the lamp's light, its shadow ray; measured)
-LAMP_SECONDS_PER_POINT = 1e-6
+LAMP_SECONDS_PER_POINT = 3e-7
 STORED_POINTS = STORE_ALL_UP_TO + STORE_LOG_POINTS  # at most, up to the ~40 log-spaced ones
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
