@@ -125,6 +125,7 @@ def test_final_configuration_is_shown_by_the_emitters_object(scenario):
     summary, warnings = scenario["summary"]
     n = scenario["final_row"][0]
     assert summary.startswith(f"{n} lights, relative error ")  # what the Results panel shows
+    assert "; offered " in summary and "; chose " in summary  # the kinds of light offered and chosen
     assert isinstance(warnings, str)
 
 

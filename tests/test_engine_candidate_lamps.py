@@ -93,6 +93,13 @@ def test_positions_hang_a_drop_in_front_of_the_candidate_surface():
     assert d.min() > 0.25
 
 
+def test_a_drop_blocked_everywhere_is_said_not_ignored(plain):
+    patches, sampler = plain
+    notes = []
+    lamps, _ = cl.plan_lamps(patches, candidate_mask(patches), _options(), sampler, drop=3.0, notes=notes)
+    assert lamps == [] and len(notes) == 1 and "3 m in front" in notes[0] and "--lamp-drop" in notes[0]
+
+
 def _solid_angle(tv, x):
     """Exact solid angle of triangles tv (n, 3, 3) seen from x (Van Oosterom and Strackee)."""
     a, b, c = tv[:, 0] - x, tv[:, 1] - x, tv[:, 2] - x

@@ -86,6 +86,9 @@ def test_the_gallery_answers_with_a_spot_well_below_what_cells_allow(gallery):
           f"({kinds}); lights by kind {r['model']['lights_by_kind']}")
     assert cells["final"]["relative_error"] > 0.8  # diffuse ceiling light cannot tell the painting from the wall
     assert r["final"]["relative_error"] < 0.4 * cells["final"]["relative_error"]
+    from relight_addon.pipeline.report import kinds_text
+
+    assert "spot" in kinds_text(r).split("chose")[1] and f"{r['model']['lights_by_kind']['spot']} spot" in kinds_text(r)
     by_kind = r["model"]["lights_by_kind"]
     assert by_kind["spot"] > 0 and by_kind["cell"] == cells["model"]["lights_by_kind"]["cell"]
     assert sum(by_kind[k] for k in ("spot", "area", "point")) <= 96  # --max-lamps' default

@@ -246,9 +246,10 @@ def enclosing_cone(directions, iterations=64) -> tuple:
     return a, float(np.arccos(np.clip((directions @ a).min(), -1.0, 1.0)))
 
 
-def plan_lamps(patches, candidates, options, sampler, drop=None) -> tuple:
+def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> tuple:
     """The candidate lamps (no irradiance yet): ([engine.lamps.Lamp], [kind name]) as the module
-    docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``)."""
+    docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``).
+    ``notes``: a list that gets a warning when no lamp can hang (every drop blocked)."""
     kinds = offered_kinds(options)
     if not kinds:
         return [], []
@@ -257,6 +258,9 @@ def plan_lamps(patches, candidates, options, sampler, drop=None) -> tuple:
     drop = float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches)) if drop is None \
         else float(drop)
     pos, nrm, _ = mount_positions(patches, candidates, M, drop, sampler)
+    if M and not len(pos) and notes is not None:
+        notes.append(f"no candidate lamp can hang {drop:.3g} m in front of the surfaces that may hold lights (something "
+                     "closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
     size = float(patches.light_size or patches.max_patch_size)
     lamps, names = [], []
 
@@ -303,12 +307,12 @@ def _reach(patches, lamps, radius):
     return out
 
 
-def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None):
+def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
     """``lights`` (the surface lights; None: none, over the candidate patches ``candidates``)
     followed by the candidate lamps (``plan_lamps``) that light at least one patch, each a light
     of its kind whose source is its direct irradiance per W (engine.lamps). Returns
-    (LightSet, number of lamps planned)."""
-    lamps, kinds = plan_lamps(patches, candidates, options, sampler)
+    (LightSet, number of lamps planned); ``notes`` gets plan_lamps' warning."""
+    lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
     if not lamps:
         return lights, 0
     radius = np.zeros(patches.n_patches)

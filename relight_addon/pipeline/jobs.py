@@ -331,8 +331,10 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         if mode == "inverse" and offered_kinds(options):  # the candidate lamps, beside the cells
             t1 = time.perf_counter()
             sampler = getattr(F, "sampler", None) or SceneSampler(patches)
+            lamp_notes = []
             lights, _ = offer_lamps(lights, patches, mask, options, sampler, options.seed,
-                                    _stage(progress, "lamps", hi, hi + 0.05 / (passes + 1)))
+                                    _stage(progress, "lamps", hi, hi + 0.05 / (passes + 1)), notes=lamp_notes)
+            warnings.extend(n for n in lamp_notes if n not in warnings)
             t_lamps += time.perf_counter() - t1
             if cancel is not None and cancel():
                 raise Cancelled("solve cancelled")

@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record"]
+__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
+           "kinds_text"]
 
 
 def json_safe(x):
@@ -186,6 +187,16 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def kinds_text(report) -> str:
+    """What kinds of light the solve offered and chose, in words: "offered 180 cell, 42 group, 1
+    polygon, 72 spot; chose 1 cell, 2 spot" (the report's model.lights_by_kind and final.lights)."""
+    offered = [f"{n} {k}" for k, n in report["model"]["lights_by_kind"].items() if n]
+    chosen = {}
+    for li in report["final"]["lights"]:
+        chosen[li["kind"]] = chosen.get(li["kind"], 0) + 1
+    return f"offered {', '.join(offered) or 'none'}; chose {', '.join(f'{n} {k}' for k, n in chosen.items()) or 'none'}"
 
 
 def _power(problem, point) -> float:
