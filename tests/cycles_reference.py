@@ -242,7 +242,7 @@ def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
 
 def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
                          blend_path: str | None = None, threads: int = 0, keep_materials: bool = False,
-                         keep_light_paths: bool = False, keep_world: bool = False) -> dict:
+                         keep_light_paths: bool = False, keep_world: bool = False, one_sided: bool = False) -> dict:
     """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
 
     Works on the current Blender data, or opens ``blend_path`` first. Modifies
@@ -252,7 +252,9 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     ``keep_materials``: bake the file's materials as they are (not made Lambertian; the
     bake views each face along its normal, so a glossy layer shows its normal-view
     radiance); ``keep_light_paths``: keep the file's clamping and bounce limits
-    (``configure_cycles``). Emission is made one-sided in every case (the radiosity model's).
+    (``configure_cycles``). Mesh emission is two-sided, as Cycles renders it and Relight models it
+    (export.py: the back side of an open emitter is a face of its own); ``one_sided``: made
+    one-sided first (``one_sided_emission``), for a comparison with a one-sided model.
     """
     if blend_path is not None:
         bpy.ops.wm.open_mainfile(filepath=str(blend_path))
@@ -260,7 +262,8 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     configure_cycles(scene, samples, seed, threads, keep_light_paths=keep_light_paths, keep_world=keep_world)
     if not keep_materials:
         make_lambertian()
-    one_sided_emission()  # Cycles' mesh emission is two-sided; the radiosity model's is not
+    if one_sided:
+        one_sided_emission()
     if objects is None:
         objects = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
     # Direct + indirect, diffuse + emission (+ glossy, transmission when the materials are

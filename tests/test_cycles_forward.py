@@ -62,7 +62,10 @@ def cornell_comparison(tmp_path_factory):
     assert proc.returncode == 0, proc.stderr[-2000:]
     report = json.loads(report_path.read_text())
     try:  # the bake changes the open file (UVs, materials); the sample on disk is never saved
-        cycles = cr.cycles_face_radiance(samples=CYCLES_SAMPLES, seed=1, cell_px=CELL_PX, blend_path=CORNELL)
+        # the sample's light lies 0.5 mm under the ceiling: its back's light, caught in the gap, is
+        # not modelled (named in a warning: tests/test_cycles_emission.py), so Cycles' is left out
+        cycles = cr.cycles_face_radiance(samples=CYCLES_SAMPLES, seed=1, cell_px=CELL_PX, blend_path=CORNELL,
+                                         one_sided=True)
     finally:
         cr.reset_blender()
     yield report, cycles
@@ -102,6 +105,8 @@ def test_cycles_bake_matches_closed_form():
 def test_forward_radiosity_against_cycles(cornell_comparison):
     report, cycles = cornell_comparison
     assert report["units"]["radiosity"] == "W/m^2"
+    assert any("'light'" in w and "back side" in w and "not modelled" in w for w in report["warnings"]), \
+        report["warnings"]
     objects = report["objects"]
     assert set(cycles) == set(objects)
     errors, signed, noise, lines = [], [], [], []

@@ -132,3 +132,32 @@ def test_a_closed_room_does_not_render_its_world(tmp_path, monkeypatch):
     assert renders == ["sky"]  # only the room with a window
     env = opened.faces.world_radiance
     assert env.shape == (128, 256) and len(env.split_suns()[0]) == 1  # the sky and its sun disc
+
+
+@pytest.mark.parametrize("elevation", [15.0, 35.0])
+def test_an_open_floor_under_a_sky_against_cycles(elevation):
+    """An open floor (albedo 0.5) under Blender's default Sky Texture, its sun at the default 15
+    degrees and at 35: the map's irradiance (its sun a Sun lamp) against Cycles' bake. At 15
+    degrees the first pass's samples all missed the sun disc (a third of a texel): 86 % of the
+    light was lost until the Sky Texture's own sun direction was rendered finer (sky_suns)."""
+    from relight_addon.blender.world import world_light
+
+    try:
+        cr.reset_blender()
+        world, nt, bg = world_tree()
+        sky = nt.nodes.new("ShaderNodeTexSky")
+        sky.sun_elevation = math.radians(elevation)
+        nt.links.new(sky.outputs["Color"], bg.inputs["Color"])
+        env, _, notes = world_light(bpy.context.scene)
+        v, f = cr.grid_quads((-1.0, -1.0, 0.0), (2.0, 0, 0), (0, 2.0, 0), 2, 2)
+        floor = cr.add_mesh_object("floor", v, f, cr._material("grey", (0.5,) * 3, lambertian=True))
+        baked = cr.cycles_face_radiance(samples=256, seed=1, objects=[floor], keep_world=True)["floor"]
+    finally:
+        cr.reset_blender()
+    suns = env.split_suns()[0]
+    ours = env.irradiance_up() * 0.5 / math.pi
+    got = baked.radiance.mean(axis=0)
+    summary = f"{elevation} degrees: {len(suns)} sun(s); ours {ours}, Cycles {got} (noise {baked.std_error.mean(axis=0)})"
+    print(summary)
+    assert len(suns) == 1 and notes == [], summary
+    np.testing.assert_allclose(ours, got, rtol=0.01, err_msg=summary)  # measured: 0.01 % and 0.15 %

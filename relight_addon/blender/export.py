@@ -38,6 +38,32 @@ Materials (per face, through ``material_index`` and the object's material slots)
 - No material: reflectance 0.8 grey.
 - Exitance e = pi * L_e (W/m^2). Reflectance is clamped to [0, MAX_REFLECTANCE] and
   negative emission to 0, with a warning.
+- Linked emission (a texture, a procedural, an attribute... on an Emission Color / Strength, or
+  a Mix Shader's linked factor over an emitting branch: materials.Closure.linked_emission): each
+  face's mean emitted radiance over its area, from a Cycles EMIT bake of temporary copies
+  (emission_bake.py; nothing of the user's data changes), then e = pi * L_e as above. Nothing
+  is baked in a scene without linked emission. Instanced objects are not baked, and a bake that
+  fails keeps the unlinked part: both named in a warning with the material and its linked input.
+
+The back side of emitters (_emitting_backs): Cycles' mesh emission leaves both sides of a face,
+the radiosity model's faces are one-sided. An emitting face on a closed island (every edge shared
+by two faces) faces its inside with its back: left out, as its light stays inside in Cycles too.
+For an emitting face of an open island (a plane), rays from its back (engine/backs.py) decide:
+- it sees nothing: nothing to do;
+- it sees the scene from afar (a median distance >= BACK_GAP x its island's size: a plane lamp
+  hanging in a room): its back is exported as a face of its own (the polygon reversed, set
+  BACK_OFFSET x the scene's diagonal behind it, emitting the back's exitance, reflecting the
+  front's reflectance, never a target or a light in `solve`, not reported; in `reduce`, an
+  emitter of the scene, it is a light of its own);
+- it lies against a surface (a lamp quad just under a ceiling): not modelled (the light caught in
+  the gap would be spread by the surface's patches), named in a warning with its power and the
+  estimated range of the light that leaks out of the gap, what Cycles renders more
+  (``ExportedScene.backs``).
+
+What Cycles renders and Relight does not model is named in a warning (_not_modelled): materials
+whose Volume output is linked, volume objects (the light is taken as passing through; a World
+volume: world.py), objects with Shadow Catcher or Holdout on (lit and reported as ordinary
+surfaces).
 
 Relight attributes (read from the base mesh)
 - ``relight_target``: a Face Corner colour attribute, FLOAT_COLOR or BYTE_COLOR (read as linear
@@ -66,6 +92,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
+from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
 from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
 from ..engine.world import sees_sky
@@ -93,8 +120,9 @@ TYPE_NAMES = {"FLOAT_COLOR": "Color", "BYTE_COLOR": "Byte Color", "BOOLEAN": "Bo
               "INT8": "8-Bit Integer", "FLOAT": "Float", "FLOAT_VECTOR": "Vector", "FLOAT2": "2D Vector",
               "INT32_2D": "2D Integer Vector", "QUATERNION": "Quaternion", "FLOAT4X4": "4x4 Matrix",
               "STRING": "String"}
-#: object types with geometry that are not exported (only meshes are)
-NON_MESH_GEOMETRY = ("CURVE", "FONT", "SURFACE", "META", "CURVES", "POINTCLOUD", "VOLUME", "GREASEPENCIL")
+#: object types with geometry that are not exported (only meshes are); VOLUME objects are named
+#: apart (_not_modelled: a volume is not a surface)
+NON_MESH_GEOMETRY = ("CURVE", "FONT", "SURFACE", "META", "CURVES", "POINTCLOUD", "GREASEPENCIL")
 
 
 class BlendFileError(SceneError):
@@ -124,25 +152,33 @@ def open_blend(path: str):
 # ------------------------------------------------------------------ materials
 def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo
-    and emitted radiance as Cycles renders it (materials.py; see the module docstring)."""
+    and emitted radiance as Cycles renders it (materials.py; see the module docstring). A linked
+    emission is not in ``radiance``: export_scene bakes it per face."""
     return material_closure(mat)[:3]
+
+
+def scene_material(mat):
+    """The scene's own material behind ``mat``: a Relight variant shown by an earlier solve has
+    its source as the scene's material (the variant's emission is Relight's result, not the
+    scene's light); None stays None."""
+    if mat is not None and mat.get("relight_generated"):
+        return bpy.data.materials.get(mat.get("relight_source", "")) or None
+    return mat
 
 
 def material_closure(mat):
     """``material_properties`` and the material's BSDFs (materials.Closure.lobes, for
-    view-dependent radiance): (reflectance, radiance, note, lobes)."""
+    view-dependent radiance) and linked emission (materials.Closure.linked_emission, baked by
+    export_scene): (reflectance, radiance, note, lobes, linked_emission)."""
     from .materials import surface_closure
 
-    if mat is not None and mat.get("relight_generated"):
-        # a Relight emissive variant shown by an earlier solve: the scene's own material is
-        # its source (the variant's emission is Relight's result, not the scene's light)
-        mat = bpy.data.materials.get(mat.get("relight_source", "")) or None
+    mat = scene_material(mat)
     if mat is None:
         grey = np.full(3, DEFAULT_REFLECTANCE)
-        return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))]
+        return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))], []
     c = surface_closure(mat)
     note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
-    return c.reflectance, c.radiance, note, c.lobes
+    return c.reflectance, c.radiance, note, c.lobes, c.linked_emission
 
 
 # ------------------------------------------------------------------ export
@@ -160,6 +196,9 @@ class ExportedScene:
     #: what an error about the scene should also say (jobs.check_solvable): "target": target layers
     #: found but not used, the target scale 0; "candidates": objects not exported, without area
     notes: dict = field(default_factory=dict)
+    #: the emitters whose back side lies against a surface (not modelled: export._emitting_backs),
+    #: one dict each: object, power (W), leak (low, high) W, emitted (W), distance (m), near (objects)
+    backs: list = field(default_factory=list)
 
 
 #: positions are compared within this fraction of the object's size (times sqrt(vertices))
@@ -425,8 +464,10 @@ def _mesh_geometry(ob_eval, me, name):
     loop_poly, starts, totals = loop_polygons(me)
     mat_index = foreach_array(me.polygons, "material_index", npoly, np.int64)
     slots = [getattr(s.material, "original", s.material) for s in ob_eval.material_slots]
+    loop_edge = foreach_array(me.loops, "edge_index", len(me.loops), np.int64)
     return {"V": V, "lt": lt, "lt_poly": lt_poly, "loop_vert": loop_vert, "loop_poly": loop_poly,
-            "loop_start": starts, "loop_total": totals, "mat_index": mat_index, "slots": slots}
+            "loop_start": starts, "loop_total": totals, "mat_index": mat_index, "slots": slots,
+            "loop_edge": loop_edge, "n_edges": len(me.edges)}
 
 
 class _Builder:
@@ -439,11 +480,17 @@ class _Builder:
         self.warnings = []
         self.mat_cache = {}
         self.mat_ids = {}  # material name (None: no material) -> index into self.lobes
+        self.materials_used = {}  # material name -> the material (the exported ones)
         self.lobes = []
         self.f_mat = []
+        #: per chunk (one add()): its faces whose material has a linked emission (bool), its geometry
+        #: (local arrays) and world matrix, and the back side's exitance (None: the front's)
+        self.linked, self.geos, self.e_back = [], [], []
+        self.base = []  # per chunk: its first vertex, face and loop
         self.nf = self.nv = self.nl = 0
 
     def materials(self, slots, mat_index):
+        """(reflectance, exitance, linked emission) per face of one mesh, from its slots."""
         props, ids = [], []
         for mi in range(max(len(slots), 1)):
             mat = slots[mi] if mi < len(slots) else None
@@ -452,13 +499,17 @@ class _Builder:
                 self.mat_cache[key] = material_closure(mat)
                 self.mat_ids[key] = len(self.lobes)
                 self.lobes.append(self.mat_cache[key][3])
+                if mat is not None:
+                    self.materials_used[key] = mat
                 if self.mat_cache[key][2]:
                     self.warnings.append(self.mat_cache[key][2])
             props.append(self.mat_cache[key])
             ids.append(self.mat_ids[key])
         mi = np.clip(mat_index, 0, len(props) - 1)
         self.f_mat.append(np.asarray(ids, dtype=np.int64)[mi])
-        return np.array([p[0] for p in props])[mi], exitance_from_radiance(np.array([p[1] for p in props]))[mi]
+        linked = np.array([bool(p[4]) for p in props])[mi]
+        return (np.array([p[0] for p in props])[mi], exitance_from_radiance(np.array([p[1] for p in props]))[mi],
+                linked)
 
     def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
         M = np.asarray(matrix, dtype=np.float64)
@@ -468,6 +519,7 @@ class _Builder:
         flip = np.linalg.det(M[:3, :3]) < 0
         lt = geo["lt"][:, ::-1] if flip else geo["lt"]
         nv, nf = self.nv, self.nf
+        self.base.append((nv, nf, self.nl))
         self.verts.append(W)
         self.tris.append(lt + nv)
         self.tri_face.append(geo["lt_poly"] + nf)
@@ -479,7 +531,10 @@ class _Builder:
         self.loop_start.append(ls + self.nl)
         self.loop_total.append(lt_)
         self.nl += len(lv)
-        rho, e = self.materials(geo["slots"], geo["mat_index"])
+        rho, e, linked = self.materials(geo["slots"], geo["mat_index"])
+        self.linked.append(linked)
+        self.geos.append((geo, M, name))
+        self.e_back.append(None)
         npoly = len(ls)
         self.rho.append(rho)
         self.e.append(e)
@@ -490,6 +545,99 @@ class _Builder:
         self.forb.append(forbidden)
         self.nf += npoly
         self.nv += len(W)
+
+    def add_backs(self, chunk, faces, offset):
+        """The back side of faces ``faces`` (bool, of chunk ``chunk``) as faces of their own: the
+        same polygons with their winding reversed, set ``offset`` (m) behind the front along the
+        vertex normals, emitting the chunk's back exitance and reflecting its reflectance; never
+        targets or lights (forbidden), not reported (face_index -1)."""
+        sel = np.flatnonzero(faces)
+        if not len(sel):
+            return 0
+        nv0, nf0, nl0 = self.base[chunk]
+        W = self.verts[chunk]
+        ls, lt = self.loop_start[chunk][sel] - nl0, self.loop_total[chunk][sel]
+        lpos = np.repeat(ls - np.cumsum(np.concatenate([[0], lt[:-1]])), lt) + np.arange(int(lt.sum()))
+        lface = np.repeat(np.arange(len(sel)), lt)
+        corners = self.loop_vert[chunk][lpos] - nv0  # chunk-local vertex of each loop of the chosen faces
+        used, local = np.unique(corners, return_inverse=True)
+        face_of = np.full(len(self.loop_start[chunk]), -1, dtype=np.int64)
+        face_of[sel] = np.arange(len(sel))
+        tri_sel = face_of[self.tri_face[chunk] - nf0] >= 0
+        tri = self.tris[chunk][tri_sel] - nv0
+        tv = W[tri]
+        tn = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])  # area vectors of the front
+        vn = np.zeros((len(W), 3))
+        for k in range(3):
+            np.add.at(vn, tri[:, k], tn)
+        vn = vn[used]
+        ln = np.linalg.norm(vn, axis=1)
+        vn = vn / np.where(ln > 0, ln, 1.0)[:, None]
+        remap = np.full(len(W), -1, dtype=np.int64)
+        remap[used] = np.arange(len(used))
+        # each polygon's loop reversed: its normal points the other way
+        start = np.concatenate([[0], np.cumsum(lt)[:-1]])
+        pos = np.arange(len(lpos))
+        rev = start[lface] + lt[lface] - 1 - (pos - start[lface])
+        nv, nf = self.nv, self.nf
+        self.verts.append(W[used] - offset * vn)
+        self.tris.append(remap[tri][:, ::-1] + nv)
+        self.tri_face.append(face_of[self.tri_face[chunk][tri_sel] - nf0] + nf)
+        self.loop_vert.append(local[rev] + nv)
+        self.loop_start.append(start + self.nl)
+        self.loop_total.append(lt.copy())
+        self.base.append((nv, nf, self.nl))
+        self.nl += len(lpos)
+        e_back = self.e[chunk] if self.e_back[chunk] is None else self.e_back[chunk]
+        self.rho.append(self.rho[chunk][sel])
+        self.e.append(e_back[sel])
+        self.f_mat.append(self.f_mat[chunk][sel])
+        self.f_obj.append(self.f_obj[chunk][sel])
+        self.f_idx.append(np.full(len(sel), -1, dtype=np.int64))
+        self.tgt.append(np.zeros(len(sel), dtype=bool))
+        self.tgt_b.append(np.zeros((len(sel), 3)))
+        self.forb.append(np.ones(len(sel), dtype=bool))
+        self.linked.append(np.zeros(len(sel), dtype=bool))
+        self.geos.append(None)
+        self.e_back.append(None)
+        self.nf += len(sel)
+        self.nv += len(used)
+        return len(sel)
+
+
+def open_faces(geo) -> tuple:
+    """((polygons,) bool, (polygons,) island label): the faces of a mesh (``_mesh_geometry``) on an
+    island (faces joined by shared edges) that is not closed, i.e. that has an edge with one face or
+    more than two: the back side of such a face may see the scene (a plane does), that of a closed
+    island faces its inside."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    npoly, ne = len(geo["loop_start"]), int(geo["n_edges"])
+    le, lp = geo["loop_edge"], geo["loop_poly"]
+    if npoly == 0:
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=np.int64)
+    count = np.bincount(le, minlength=ne)
+    graph = sp.coo_matrix((np.ones(len(le)), (lp, npoly + le)), shape=(npoly + ne, npoly + ne))
+    _, label = connected_components(graph, directed=False)
+    is_open = np.zeros(label.max() + 1, dtype=bool)
+    is_open[label[npoly:][(count != 2) & (count > 0)]] = True
+    return is_open[label[:npoly]], label[:npoly]
+
+
+#: how far behind its front the back side of an open emitter is set (``Builder.add_backs``),
+#: relative to the scene's bounding-box diagonal: 10 x the rays' origin offset
+#: (engine.sampling.RAY_OFFSET), so that a ray reaching the front hits the front first
+BACK_OFFSET = 10 * RAY_OFFSET
+#: rays per emitting face of an open island that tell what its back sees (engine.backs), and
+#: in all (fewer per face when there are many: at least 16)
+BACK_RAYS = 256
+BACK_RAY_BUDGET = 1 << 20
+#: a back whose rays reach front sides at a median distance below this fraction of its island's
+#: size (the square root of its emitting area) lies against a surface (_emitting_backs)
+BACK_GAP = 0.1
+#: rays (in all) that measure the light leaving the gaps of the backs against a surface
+LEAK_RAYS = 1 << 16
 
 
 def _instances(context, renderable):
@@ -589,6 +737,11 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     if not names:
         raise SceneError("the scene has no visible mesh objects"
                          + (f" ({notes['candidates'][0]})" if notes["candidates"] else ""))
+    b.warnings.extend(_bake_linked_emission(b, objs, context))
+    b.names = names
+    back_warnings, backs = _emitting_backs(b)
+    b.warnings.extend(back_warnings)
+    b.warnings.extend(_not_modelled(context, objs, b, renderable))
     warnings = warnings + b.warnings + [n for n in notes["target"] if n not in warnings]
     if settings["target_scale"] == 0:
         notes["target"].append("the target scale is 0 (scene custom property relight_target_scale, the add-on's "
@@ -640,7 +793,199 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     faces.warnings.extend(w for w in world_notes if w not in faces.warnings)
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
-                         np.concatenate(b.f_mat), b.lobes, notes=notes)
+                         np.concatenate(b.f_mat), b.lobes, notes=notes, backs=backs)
+
+
+def _linked_text(b, names) -> str:
+    """"'Mat' (Emission Color of Principled BSDF, ...)": the materials and their linked emission."""
+    return ", ".join(f"{n!r} ({', '.join(b.mat_cache[n][4])})" for n in names)
+
+
+def _bake_linked_emission(b, objs, context) -> list:
+    """Each face whose material has a linked emission gets its mean emitted radiance from a
+    Cycles bake (emission_bake.py): its exitance pi x that, front and back. Nothing happens when
+    no face has one. Returns the warnings (what could not be baked is named with its material)."""
+    from .emission_bake import BakeRequest, bake_emission
+
+    requests, chunk_of, inst = [], {}, {}
+    for ci, linked in enumerate(b.linked):
+        if b.geos[ci] is None or not linked.any():
+            continue
+        geo, _, name = b.geos[ci]
+        mats = _linked_materials(b, geo, linked)
+        if ci < len(objs):  # the real objects are the first chunks, one each, in order
+            requests.append(BakeRequest(name, objs[ci], linked, [scene_material(m) for m in geo["slots"]]))
+            chunk_of[name] = ci
+        else:
+            inst.setdefault(name, set()).update(mats)
+    out = []
+    for name, mats in inst.items():
+        out.append(f"instances {name!r}: the linked emission of material(s) {_linked_text(b, sorted(mats))} is not "
+                   "baked for instanced objects: their faces emit only its unlinked part (make the instances real: "
+                   "Object > Apply > Make Instances Real)")
+    if not requests:
+        return out
+    try:
+        baked, notes = bake_emission(requests, context.scene, context.evaluated_depsgraph_get())
+    except RuntimeError as exc:
+        mats = sorted(set().union(*(_linked_materials(b, b.geos[chunk_of[r.name]][0], r.faces) for r in requests)))
+        reason = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        return out + [f"the linked emission of material(s) {_linked_text(b, mats)} could not be evaluated by a Cycles "
+                      f"bake ({reason}): their faces emit only its unlinked part"]
+    for name, (front, back) in baked.items():
+        ci = chunk_of[name]
+        mask = b.linked[ci]
+        b.e[ci] = b.e[ci].copy()
+        b.e[ci][mask] = exitance_from_radiance(front[mask])
+        b.e_back[ci] = b.e[ci].copy()
+        b.e_back[ci][mask] = exitance_from_radiance(back[mask])
+    return out + notes
+
+
+def _linked_materials(b, geo, faces) -> set:
+    """Names of the materials with a linked emission on ``faces`` of a mesh."""
+    slots = geo["slots"]
+    mi = np.clip(geo["mat_index"][faces], 0, max(len(slots), 1) - 1)
+    return {slots[i].name for i in np.unique(mi) if i < len(slots) and slots[i] is not None}
+
+
+def _emitting_backs(b) -> tuple:
+    """Cycles' mesh emission is two-sided: the back side of an emitting face emits too (what the
+    front does, or the back's bake when the material reads Backfacing). For the emitting faces of
+    open islands (open_faces; the backs of closed islands face their own inside, where Cycles'
+    light stays too), engine.backs.back_view tells what the back sees:
+
+    - nothing (no front side: its light leaves the scene): nothing to do;
+    - the scene, from a median distance of at least BACK_GAP x the size of its island (a plane lamp
+      hanging in a room): the back becomes a face of its own (Builder.add_backs), modelled;
+    - a surface closer than that (a lamp quad just under a ceiling): the light caught between
+      them, which Cycles lets leak out at the edges, cannot be resolved by patches of constant
+      radiosity (the surface's patches would spread the caught light over their whole area, and
+      send it into the scene): not modelled, named in a warning with the light that leaks out
+      into the scene (what Cycles renders more): at least the light that leaves the gap directly
+      (the fraction f of the back's rays that reach the scene elsewhere than over the emitter),
+      at most f (1 + rho_n) / (1 - rho_n rho_b) of the back's power after the reflections inside
+      the gap (rho_n the surface's reflectance, rho_b the back's; the light reflected inside is
+      more central than the emitted light, so it leaves less easily: the truth lies between).
+
+    Returns (warnings, one dict per object whose back is against a surface: object, power (W,
+    summed over the channels), leak (low, high) W, emitted (W, the scene's), distance (m), near)."""
+    from ..engine.backs import back_view
+
+    areas = [_chunk_face_areas(b, ci) for ci in range(len(b.e))]
+    emitted = float(sum(float((e * a[:, None]).sum()) for e, a in zip(b.e, areas)))
+    chosen, size, chunks, islands = [], [], [], {}
+    for ci in range(len(b.e)):
+        back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
+        if b.geos[ci] is None or not np.any(back > 0):
+            continue
+        geo = b.geos[ci][0]
+        if id(geo) not in islands:  # instances share their mesh's arrays
+            islands[id(geo)] = open_faces(geo)
+        is_open, island = islands[id(geo)]
+        sel = np.flatnonzero(np.any(back > 0, axis=1) & is_open)
+        if not len(sel):
+            continue
+        island_area = np.bincount(island[sel], weights=areas[ci][sel], minlength=island.max() + 1)
+        chosen.append(b.base[ci][1] + sel)
+        size.append(np.sqrt(island_area[island[sel]]))
+        chunks.append((ci, sel, back))
+    if not chosen:
+        return [], []
+    chosen, size = np.concatenate(chosen), np.concatenate(size)
+    geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
+    view = back_view(*geometry, chosen, int(np.clip(BACK_RAY_BUDGET // len(chosen), 16, BACK_RAYS)))
+    modelled = (view.front > 0) & (view.distance >= BACK_GAP * size)
+    against = (view.front > 0) & ~modelled
+    rows = {}
+    if against.any():  # the light leaving a gap is a small fraction: counted on more rays
+        per = int(np.clip(LEAK_RAYS // int(against.sum()), BACK_RAYS, 16 * BACK_RAYS))
+        fine = back_view(*geometry, chosen[against], per, seed=1)
+        rho = np.concatenate(b.rho)
+        f_obj, f_rho = geometry[3], np.clip(rho, 0.0, MAX_REFLECTANCE).mean(axis=1)
+        for j, face in enumerate(chosen[against]):
+            ci = int(np.searchsorted([bs[1] for bs in b.base], face, side="right") - 1)
+            local = face - b.base[ci][1]
+            back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
+            rays = fine.ray_face == j
+            reach = rays & np.isfinite(fine.ray_length)
+            f = float(np.sum(reach & ~fine.over)) / max(int(np.sum(rays)), 1)
+            under = fine.ray_hit[reach & fine.over]
+            rho_n = float(f_rho[under].mean()) if len(under) else 0.0
+            rho_b = float(f_rho[face])
+            power = float(back[local].sum() * areas[ci][local])
+            row = rows.setdefault(int(f_obj[face]), {"object": b.names[int(f_obj[face])], "power": 0.0,
+                                                     "leak": [0.0, 0.0], "emitted": emitted, "distance": [],
+                                                     "near": set()})
+            row["power"] += power
+            row["leak"][0] += power * f
+            row["leak"][1] += power * f * (1 + rho_n) / (1 - rho_n * rho_b)
+            row["distance"].append(float(fine.distance[j]))
+            row["near"].add(b.names[int(fine.object[j])] if fine.object[j] >= 0 else "?")
+    V = geometry[0]
+    offset = BACK_OFFSET * max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-9)
+    k = 0
+    for ci, sel, _ in chunks:
+        pick = np.zeros(len(b.e[ci]), dtype=bool)
+        pick[sel[modelled[k:k + len(sel)]]] = True
+        b.add_backs(ci, pick, offset)
+        k += len(sel)
+    out, notes = [], []
+    for row in rows.values():
+        row["distance"] = float(np.median(row["distance"]))
+        row["near"] = sorted(row["near"])
+        lo, hi = (100 * x / emitted for x in row["leak"])
+        out.append(f"object {row['object']!r}: the back side of its emitting faces lies "
+                   f"{1000 * row['distance']:.3g} mm from {', '.join(map(repr, row['near']))} (median): Cycles emits "
+                   "from both sides of a mesh face, and "
+                   f"the light caught between them is not modelled ({row['power']:.3g} W, "
+                   f"{100 * row['power'] / emitted:.3g} % of the scene's emitted power); Cycles renders the scene "
+                   f"brighter by what leaks out of the gap, {lo:.2g} to {hi:.2g} % of the emitted power (estimated): "
+                   "give the emitter a closed shape, or move it away from the surface")
+        notes.append(row)
+    return out, notes
+
+
+def _chunk_face_areas(b, ci) -> np.ndarray:
+    """(faces,) world-space areas (m^2) of the faces of chunk ``ci`` of a Builder."""
+    from ..engine.geometry import group_sum, triangle_areas
+
+    nv0, nf0, _ = b.base[ci]
+    return group_sum(b.tri_face[ci] - nf0, triangle_areas(b.verts[ci][b.tris[ci] - nv0]), len(b.e[ci]))
+
+
+def _volume_output(mat) -> bool:
+    """Whether the material's active output (All or Cycles) has its Volume input linked."""
+    from .materials import active_output
+
+    out = active_output(mat)
+    return out is not None and "Volume" in out.inputs and any(not l.is_muted for l in out.inputs["Volume"].links)
+
+
+def _not_modelled(context, objs, b, renderable) -> list:
+    """Warnings naming what Cycles renders and Relight does not model: volumes (materials with a
+    Volume output, volume objects; a World volume: world.py), shadow catchers and holdouts."""
+    out = []
+    vol = sorted(n for n, m in b.materials_used.items() if _volume_output(m))
+    if vol:
+        out.append(f"material(s) {', '.join(map(repr, vol))}: a volume shader is linked to the Volume output; volumes "
+                   "(absorption, scattering, emission) are not modelled: Relight treats the light as passing through "
+                   "and reads only the surface")
+    view_layer = context.view_layer
+    volumes = [ob.name for ob in context.scene.objects if ob.type == "VOLUME" and not ob.hide_render
+               and ob.name in renderable and ob.visible_get(view_layer=view_layer)]
+    if volumes:
+        out.append(f"volume object(s) {', '.join(map(repr, volumes[:10]))}{' ...' if len(volumes) > 10 else ''}: "
+                   "volumes are not modelled (Relight treats light as passing through them)")
+    catchers = [ob.name for ob in objs if getattr(ob, "is_shadow_catcher", False)]
+    if catchers:
+        out.append(f"object(s) {', '.join(map(repr, catchers))}: Shadow Catcher (Object > Visibility) is not modelled: "
+                   "Relight lights and reports them as ordinary surfaces (their material reflects and occludes)")
+    holdouts = [ob.name for ob in objs if getattr(ob, "is_holdout", False)]
+    if holdouts:
+        out.append(f"object(s) {', '.join(map(repr, holdouts))}: Holdout (Object > Visibility) is not modelled: "
+                   "Relight treats them as ordinary surfaces (their material reflects and occludes)")
+    return out
 
 
 def _no_area(geo, M) -> bool:

@@ -25,6 +25,14 @@ All or Cycles), read through reroutes and muted nodes:
   BSDF's Base Color), with a note. Other linked inputs (a texture on Roughness, ...) use the
   socket's own unlinked value, with a note.
 - A material without a node tree: its viewport colour. No material: handled by the caller.
+
+Linked emission (an Emission Color / Strength or Emission shader Color / Strength fed by a
+texture, a procedural, an attribute..., or a Mix Shader with a linked factor over a branch that
+emits) cannot be read from the node tree: the Closure lists it in ``linked_emission`` ("node:
+input") and leaves it out of ``radiance`` (a linked Mix factor stays 0.5 there); export.py gets
+each face's mean emitted radiance from a Cycles bake instead (emission_bake.py). An emission
+input that is linked while its partner is an unlinked zero (a texture on Emission Color with
+Emission Strength 0) emits nothing and is not listed.
 """
 from __future__ import annotations
 
@@ -35,7 +43,7 @@ import numpy as np
 
 from ..engine.principled import PrincipledParams, oren_nayar_albedo, principled_albedo
 
-__all__ = ["material_properties", "surface_node", "Closure", "surface_closure"]
+__all__ = ["material_properties", "surface_node", "active_output", "Closure", "surface_closure"]
 
 _MAX_DEPTH = 64
 
@@ -51,14 +59,24 @@ class Closure:
     #: the BSDFs it sums, for view-dependent radiance (engine.principled.lobes_brdf):
     #: (weight, "principled", PrincipledParams) | (weight, "diffuse", (colour, roughness))
     lobes: list = field(default_factory=list)
+    #: the linked inputs that make the emission vary ("node: input"), left out of ``radiance``
+    #: (export.py bakes them: emission_bake.py)
+    linked_emission: list = field(default_factory=list)
 
     def scaled(self, k):
         return Closure(self.reflectance * k, self.radiance * k, self.specular * k, list(self.notes),
-                       [(w * k, kind, d) for w, kind, d in self.lobes])
+                       [(w * k, kind, d) for w, kind, d in self.lobes],
+                       list(self.linked_emission) if k > 0 else [])
 
     def __add__(self, other):
         return Closure(self.reflectance + other.reflectance, self.radiance + other.radiance,
-                       self.specular + other.specular, _merge(self.notes, other.notes), self.lobes + other.lobes)
+                       self.specular + other.specular, _merge(self.notes, other.notes), self.lobes + other.lobes,
+                       _merge(self.linked_emission, other.linked_emission))
+
+    @property
+    def emits(self) -> bool:
+        """Whether it emits anything (a radiance or a linked emission)."""
+        return bool(np.any(self.radiance > 0) or self.linked_emission)
 
 
 def _merge(a, b):
@@ -107,8 +125,8 @@ def _source(sock):
     return None
 
 
-def surface_node(mat):
-    """The shader node linked to the material's active output (All or Cycles), or None."""
+def active_output(mat):
+    """The material's active Material Output node (target All or Cycles), or None."""
     tree = getattr(mat, "node_tree", None)
     if tree is None:
         return None
@@ -118,8 +136,13 @@ def surface_node(mat):
     if not outputs:
         return None
     active = [n for n in outputs if n.is_active_output] or outputs
-    out = next((n for n in active if n.target in ("ALL", "CYCLES")), active[0])
-    return _source(out.inputs["Surface"])
+    return next((n for n in active if n.target in ("ALL", "CYCLES")), active[0])
+
+
+def surface_node(mat):
+    """The shader node linked to the material's active output (All or Cycles), or None."""
+    out = active_output(mat)
+    return None if out is None else _source(out.inputs["Surface"])
 
 
 def _viewport(mat):
@@ -153,13 +176,21 @@ def _principled(node, mat) -> Closure:
                               **kw)
     res = principled_albedo(params)
     notes.extend(res.notes)
-    radiance = np.zeros(3)
-    ec, es = node.inputs["Emission Color"], node.inputs["Emission Strength"]
-    if _linked(ec) or _linked(es):
-        notes.append(f"{node.name}: linked emission inputs are ignored")
-    else:
-        radiance = _rgb(ec) * float(es.default_value) * res.emission
-    return Closure(res.albedo, radiance, res.specular, notes, [(1.0, "principled", params)])
+    radiance, linked = _emission(node, "Emission Color", "Emission Strength")
+    return Closure(res.albedo, radiance * res.emission, res.specular, notes, [(1.0, "principled", params)],
+                   linked_emission=linked)
+
+
+def _emission(node, color_name, strength_name):
+    """(radiance (3,) of the unlinked inputs, [linked inputs "node: input"]): a linked input is
+    listed unless its partner is an unlinked zero (nothing emitted then)."""
+    c, s = node.inputs[color_name], node.inputs[strength_name]
+    lc, ls = _linked(c), _linked(s)
+    if not lc and not ls:
+        return _rgb(c) * float(s.default_value), []
+    if (not ls and float(s.default_value) == 0.0) or (not lc and not np.any(_rgb(c) != 0)):
+        return np.zeros(3), []
+    return np.zeros(3), [f"{node.name}: {name}" for name, lk in ((color_name, lc), (strength_name, ls)) if lk]
 
 
 def _eval(node, mat, depth=0) -> Closure:
@@ -178,10 +209,8 @@ def _eval(node, mat, depth=0) -> Closure:
         color = np.maximum(_rgb(c), 0.0)
         return Closure(oren_nayar_albedo(color, sigma), notes=notes, lobes=[(1.0, "diffuse", (color, sigma))])
     if kind == "ShaderNodeEmission":
-        c, s = node.inputs["Color"], node.inputs["Strength"]
-        if _linked(c) or _linked(s):
-            return Closure(notes=[f"{node.name}: linked emission inputs are ignored"])
-        return Closure(radiance=_rgb(c) * float(s.default_value))
+        radiance, linked = _emission(node, "Color", "Strength")
+        return Closure(radiance=radiance, linked_emission=linked)
     if kind == "ShaderNodeMixShader":
         fac_sock = node.inputs[0]
         notes = []
@@ -190,10 +219,11 @@ def _eval(node, mat, depth=0) -> Closure:
             notes.append(f"{node.name}: its factor is linked, taken as 0.5")
         else:
             fac = float(np.clip(fac_sock.default_value, 0.0, 1.0))
-        a = _eval(_source(node.inputs[1]), mat, depth + 1).scaled(1.0 - fac)
-        b = _eval(_source(node.inputs[2]), mat, depth + 1).scaled(fac)
-        out = a + b
+        a0, b0 = _eval(_source(node.inputs[1]), mat, depth + 1), _eval(_source(node.inputs[2]), mat, depth + 1)
+        out = a0.scaled(1.0 - fac) + b0.scaled(fac)
         out.notes = _merge(notes, out.notes)
+        if _linked(fac_sock) and (a0.emits or b0.emits):  # the emission varies with the factor: baked
+            out.linked_emission = _merge(out.linked_emission, [f"{node.name}: Fac"])
         return out
     if kind == "ShaderNodeAddShader":
         return _eval(_source(node.inputs[0]), mat, depth + 1) + _eval(_source(node.inputs[1]), mat, depth + 1)
@@ -221,7 +251,10 @@ def surface_closure(mat) -> Closure:
 
 
 def material_properties(mat):
-    """(reflectance (3,), radiance (3,), note or None) of a non-None material."""
+    """(reflectance (3,), radiance (3,), note or None) of a non-None material. A linked emission
+    is not in ``radiance`` (export.py bakes it per face), and the note says so."""
     c = surface_closure(mat)
-    note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
+    notes = c.notes + ([f"linked emission ({', '.join(c.linked_emission)}) is not included (export bakes it "
+                        "per face)"] if c.linked_emission else [])
+    note = f"material {mat.name!r}: " + "; ".join(notes) if notes else None
     return c.reflectance, c.radiance, note

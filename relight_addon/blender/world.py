@@ -66,14 +66,16 @@ def _render(sc, width: int, H: int, samples: int, box=None, scale: int = 1) -> n
 
 
 def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
-                     sun_scale: int = SUN_SCALE, sun_samples: int = SUN_SAMPLES) -> EnvironmentMap:
+                     sun_scale: int = SUN_SCALE, sun_samples: int = SUN_SAMPLES, sun_hints=()) -> EnvironmentMap:
     """The radiance (W/(m^2 sr)) of ``world`` in every direction, width x width / 2 texels,
     rendered by Cycles with an equirectangular camera (engine.world's conventions: row 0 the
     nadir, the centre column along +Y). The texels of a sun (EnvironmentMap.sun_regions), and
     one around them, are rendered again ``sun_scale`` times finer with ``sun_samples`` per
     pixel (engine.world.Detail): a sun disc smaller than a texel is otherwise counted to +-15 %
-    at 64 samples, and its direction only to the texel. Temporary data only; the user's World
-    is copied, not changed."""
+    at 64 samples, and its direction only to the texel. ``sun_hints``: unit directions where a
+    sun is known to be (a Sky Texture's: ``sky_suns``), rendered finer whether the first pass
+    found them or not (its samples can all miss a disc smaller than a texel). Temporary data
+    only; the user's World is copied, not changed."""
     H = max(width // 2, 1)
     made = {}
     try:
@@ -111,11 +113,19 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
         r.image_settings.file_format = "OPEN_EXR"
         r.image_settings.color_depth = "32"
         radiance = _render(sc, width, H, samples)
+        env = EnvironmentMap(radiance)
+        want = np.zeros((H, width), dtype=bool)  # the texels to render finer: the suns found, and the hinted
+        for sel, _, _ in env.sun_regions():
+            want |= sel
+        for d in sun_hints:
+            row, col = env.texel(np.asarray(d, dtype=np.float64).reshape(1, 3))
+            want[row[0], col[0]] = True
+        from scipy import ndimage
+
         details = []
-        for sel, _, _ in EnvironmentMap(radiance).sun_regions():
-            rows, cols = np.nonzero(sel)
-            r0, r1 = max(int(rows.min()) - 1, 0), min(int(rows.max()) + 2, H)
-            c0, c1 = max(int(cols.min()) - 1, 0), min(int(cols.max()) + 2, width)
+        labels, n = ndimage.label(ndimage.binary_dilation(want, np.ones((3, 3), dtype=bool)))
+        for rs, cs in ndimage.find_objects(labels):  # each block: the texels and one around them
+            r0, r1, c0, c1 = rs.start, rs.stop, cs.start, cs.stop
             fine = _render(sc, width, H, sun_samples, (r0, r1, c0, c1), sun_scale)
             details.append(Detail(r0, c0, sun_scale, fine))
             om = _solid_angles(H * sun_scale, width * sun_scale, np.arange(r0 * sun_scale, r1 * sun_scale),
@@ -133,6 +143,25 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
             bpy.data.cameras.remove(made["camera_data"])
         if "world" in made:
             bpy.data.worlds.remove(made["world"])
+
+
+#: Sky Texture models that draw a sun disc (Blender 4.x: NISHITA; 5.x: the scattering models)
+SUN_DISC_SKIES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
+
+
+def sky_suns(tree) -> list:
+    """Unit world directions of the sun discs of the tree's Sky Texture nodes (sun disc on, the
+    Vector input not linked): (cos e sin r, cos e cos r, sin e) for elevation e and rotation r
+    (measured on Cycles' render: rotation 0 is +Y, 90 degrees +X)."""
+    out = []
+    for n in tree.nodes:
+        if n.type != "TEX_SKY" or getattr(n, "sky_type", "") not in SUN_DISC_SKIES or not getattr(n, "sun_disc", False):
+            continue
+        if any(i.is_linked for i in n.inputs):  # a rotated or mapped sky: its sun is elsewhere
+            continue
+        e, r = float(n.sun_elevation), float(n.sun_rotation)
+        out.append((math.cos(e) * math.sin(r), math.cos(e) * math.cos(r), math.sin(e)))
+    return out
 
 
 def world_light(scene, sees_sky=None) -> tuple:
@@ -170,7 +199,7 @@ def world_light(scene, sees_sky=None) -> tuple:
                 notes.append(f"the World ({world.name!r}) is seen from no face (the scene is closed): it adds no "
                              "light, and its texture was not rendered")
                 return None, world.name, notes
-            env = render_world_map(world)
+            env = render_world_map(world, sun_hints=sky_suns(tree))
     else:
         env = EnvironmentMap.uniform(np.array(world.color, dtype=np.float64)[:3])
     if not np.any(env.radiance > 0):

@@ -146,9 +146,12 @@ class EnvironmentMap:
         return _solid_angles(H, W, np.arange(H), np.arange(W))
 
     def irradiance_up(self) -> np.ndarray:
-        """(3,) irradiance (W/m^2) on an unshadowed surface facing +Z (a closed form to test with)."""
-        cos = np.maximum(self.directions()[..., 2], 0.0)
-        return np.einsum("hw,hwc->c", self.solid_angles() * cos, self.radiance)
+        """(3,) irradiance (W/m^2) on an unshadowed surface facing +Z (a closed form to test
+        with): its suns (split_suns) at their directions, the rest of the map texel by texel."""
+        suns, rest = self.split_suns()
+        cos = np.maximum(rest.directions()[..., 2], 0.0)
+        return np.einsum("hw,hwc->c", rest.solid_angles() * cos, rest.radiance) + \
+            sum((s.power * max(-float(s.direction[2]), 0.0) for s in suns), np.zeros(3))
 
     def mean_luminance(self) -> float:
         """The luminance (Rec.709) averaged over the sphere."""

@@ -672,7 +672,7 @@ def scenario():
     sky_world.node_tree.links.new(sky.outputs["Color"], bg.inputs["Color"])
     before = (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras), len(bpy.data.worlds))
     t0 = time.monotonic()
-    env = bworld.render_world_map(sky_world)
+    env = bworld.render_world_map(sky_world, sun_hints=bworld.sky_suns(sky_world.node_tree))
     dt = time.monotonic() - t0
     after = (len(bpy.data.scenes), len(bpy.data.objects), len(bpy.data.cameras), len(bpy.data.worlds))
     suns = env.split_suns()[0]

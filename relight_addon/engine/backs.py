@@ -1,0 +1,136 @@
+"""What the back side of a face sees (no bpy): Cycles' mesh emission leaves both sides of a face.
+
+The radiosity model's faces are one-sided (a ray that reaches a back side is absorbed), while
+Cycles shades and emits both sides of a mesh face alike. blender/export.py decides with
+``back_view`` what to do with the back of each emitting face of an open mesh: cosine-weighted
+rays from points uniform by area on the face, leaving its back side, tell
+
+- ``front``: the fraction of the back's light that reaches the front side of some face (the
+  rest leaves the scene, or lands on back sides, which Relight takes as black);
+- ``distance``: the median length of those rays (m), and ``object``: the object they reach
+  most often (-1: none);
+- per ray, whether the point it reaches lies ``over`` the emitter (a second ray from there
+  towards the emitter's plane hits the chosen faces of the same object): a ray that reaches the
+  scene elsewhere has left the gap between a back and the surface it lies against.
+
+A back that sees the scene from afar (a plane lamp hanging in a room) is modelled as a face of
+its own; one that lies against a surface (``distance`` small against the emitter's size: a lamp
+quad just under a ceiling) would trap its light in the gap, which patch-constant radiosity
+cannot resolve, and is named in a warning instead (export.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .formfactors import _cosine_directions
+from .geometry import group_sum, triangle_cross, unit
+from .sampling import RAY_OFFSET
+
+__all__ = ["BackView", "back_view"]
+
+
+@dataclass
+class BackView:
+    """Per face asked for (in the order of ``faces``): see the module docstring."""
+
+    faces: np.ndarray  # (n,) FaceSet face indices
+    front: np.ndarray  # (n,) fraction of the back's (cosine-weighted) rays that reach a front side
+    distance: np.ndarray  # (n,) median length of those rays (m), inf when none
+    object: np.ndarray  # (n,) the object index those rays reach most often, -1 when none
+    ray_face: np.ndarray  # (n x rays,) the face (position in ``faces``) each ray leaves
+    ray_length: np.ndarray  # (n x rays,) how far each ray goes to a front side, inf when it reaches none
+    over: np.ndarray  # (n x rays,) the front side it reaches lies over the chosen faces of its object
+    ray_hit: np.ndarray  # (n x rays,) the face whose front side it reaches, -1 when none
+
+
+def back_view(vertices, triangles, triangle_face, face_object, chosen, rays_per_face: int = 64,
+              seed: int = 0) -> BackView:
+    """Cast ``rays_per_face`` cosine-weighted rays from the back side of every face of ``chosen``
+    ((F,) bool or face indices) against all the triangles: world-space ``vertices`` (V, 3),
+    ``triangles`` (T, 3), the face of each triangle ``triangle_face`` (T,) and the object of each
+    face ``face_object`` (F,) (a FaceSet's arrays; embreex)."""
+    from embreex import rtcore as rtc
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangle_face = np.asarray(triangle_face, dtype=np.int64)
+    face_object = np.asarray(face_object, dtype=np.int64)
+    n_faces = len(face_object)
+    chosen = np.asarray(chosen)
+    idx = np.flatnonzero(chosen) if chosen.dtype == bool else chosen.astype(np.int64)
+    n = len(idx)
+    if n == 0:
+        z, zi = np.zeros(0), np.zeros(0, dtype=np.int64)
+        return BackView(idx, z, z, zi, zi, z, np.zeros(0, dtype=bool), zi)
+    tv = vertices[np.asarray(triangles, dtype=np.int64)]
+    cross = triangle_cross(tv)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    tnorm = unit(cross)
+    rank = np.full(n_faces, -1, dtype=np.int64)
+    rank[idx] = np.arange(n)
+    tri = np.flatnonzero(rank[triangle_face] >= 0)
+    tri = tri[np.argsort(rank[triangle_face[tri]], kind="stable")]
+    trank = rank[triangle_face[tri]]
+    face_area = group_sum(trank, area[tri], n)
+    normal = unit(group_sum(trank, cross[tri], n))
+    # a triangle of each ray's face, chosen by area: the global key rank + within-face CDF
+    cdf = np.cumsum(area[tri]) - np.repeat(np.cumsum(face_area) - face_area, np.bincount(trank, minlength=n))
+    key = trank + cdf / np.where(face_area > 0, face_area, 1.0)[trank]
+    rng = np.random.default_rng(seed)
+    ray_face = np.repeat(np.arange(n), rays_per_face)
+    u = rng.random((len(ray_face), 4))
+    pick = tri[np.minimum(np.searchsorted(key, ray_face + u[:, 0], side="right"), len(tri) - 1)]
+    a, b = u[:, 1], u[:, 2]
+    flip = a + b > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    p = tv[pick, 0] + a[:, None] * (tv[pick, 1] - tv[pick, 0]) + b[:, None] * (tv[pick, 2] - tv[pick, 0])
+    back = -normal[ray_face]
+    t1 = unit(np.cross(back, np.where(np.abs(back[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
+    t2 = np.cross(back, t1)
+    local = _cosine_directions(u[:, 3].astype(np.float32), rng.random(len(ray_face)).astype(np.float32))
+    d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * back
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
+    org = (p + offset * back).astype(np.float32)
+    d = d.astype(np.float32)
+    scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
+    TriangleMesh(scene, tv.astype(np.float32))
+    hit = scene.run(org, d, output=1)
+    prim = np.asarray(hit["primID"], dtype=np.int64)
+    tfar = np.asarray(hit["tfar"], dtype=np.float64)
+    ok = prim >= 0
+    front = np.zeros(len(prim), dtype=bool)
+    front[ok] = np.einsum("ij,ij->i", tnorm[prim[ok]], d[ok]) < 0
+    hit_face = np.where(front, triangle_face[np.maximum(prim, 0)], -1)
+    # is the point a ray reaches over its emitter? a second ray from it, back towards the
+    # emitter's plane along the face's normal, hits one of the chosen faces of the same object
+    over = np.zeros(len(prim), dtype=bool)
+    if front.any():
+        q = (org[front] + d[front] * (tfar[front, None] - offset)).astype(np.float32)
+        d2 = np.ascontiguousarray(-back[ray_face[front]], dtype=np.float32)
+        prim2 = np.asarray(scene.run(q, d2), dtype=np.int64)
+        f2 = np.where(prim2 >= 0, triangle_face[np.maximum(prim2, 0)], -1)
+        src_obj = face_object[idx[ray_face[front]]]
+        over[front] = (f2 >= 0) & (rank[np.maximum(f2, 0)] >= 0) & (face_object[np.maximum(f2, 0)] == src_obj)
+    frac = np.bincount(ray_face[front], minlength=n) / rays_per_face
+    # per face: the median length of its front-reaching rays, and the object they reach most
+    rf, tf, of = ray_face[front], tfar[front], face_object[hit_face[front]]
+    dist = np.full(n, np.inf)
+    obj = np.full(n, -1, dtype=np.int64)
+    if len(rf):
+        order = np.lexsort((tf, rf))
+        rf_s, tf_s = rf[order], tf[order]
+        start = np.searchsorted(rf_s, np.arange(n), side="left")
+        count = np.bincount(rf_s, minlength=n)
+        has = count > 0
+        lo_i = start + (count - 1) // 2
+        hi_i = start + count // 2
+        dist[has] = 0.5 * (tf_s[lo_i[has]] + tf_s[hi_i[has]])
+        pair, pc = np.unique(np.stack([rf, of], axis=1), axis=0, return_counts=True)
+        best = np.lexsort((-pc, pair[:, 0]))  # per face, its most frequent object first
+        first = np.searchsorted(pair[best, 0], np.arange(n), side="left")
+        obj[has] = pair[best, 1][first[has]]
+    return BackView(idx, frac, dist, obj, ray_face, np.where(front, tfar, np.inf), over, hit_face)
