@@ -443,7 +443,8 @@ def new_lamp(rec, energy, color, owner=None):
             ld.size_y = float(rec["size_v"])
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
-    M[:3, 0], M[:3, 1], M[:3, 2], M[:3, 3] = rec["axis_u"], rec["axis_v"], -np.asarray(rec["direction"]), rec["position"]
+    M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]
+    M[:3, 2], M[:3, 3] = -np.asarray(rec["direction"]), rec["position"]
     ob.matrix_world = Matrix(M.tolist())
     if owner is not None:
         ld[OWNER_PROP] = owner

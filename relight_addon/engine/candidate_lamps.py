@@ -259,8 +259,8 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
         else float(drop)
     pos, nrm, _ = mount_positions(patches, candidates, M, drop, sampler)
     if M and not len(pos) and notes is not None:
-        notes.append(f"no candidate lamp can hang {drop:.3g} m in front of the surfaces that may hold lights (something "
-                     "closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
+        notes.append(f"no candidate lamp can hang {drop:.3g} m in front of the surfaces that may hold lights "
+                     "(something closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
     size = float(patches.light_size or patches.max_patch_size)
     lamps, names = [], []
 

@@ -388,8 +388,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
                  {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem, "lamps": t_lamps}, refinement,
-                 lamp_H, lamp_names,
-                 lamp_lights)
+                 lamp_H, lamp_names, lamp_lights)
 
 
 DIRECT_FIXED_NOTE = ("the World ({}) is kept as fixed light: a reduction cannot switch it off; its light is part of "
@@ -662,8 +661,8 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
-               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
-               "apply": 0.0, "total": time.perf_counter() - t0}
+               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds,
+               "solve": t_inverse + t_reduce, "apply": 0.0, "total": time.perf_counter() - t0}
     report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,

@@ -5,8 +5,8 @@ from __future__ import annotations
 from ..lamps import Lamp
 from .placed import UNIT_POWER, check_length, frame, register_placed_kind
 
-AREA = register_placed_kind("area", "Area Lamp", "An area lamp placed and aimed by the solve: its power per channel (W)",
-                            shape="area")
+AREA = register_placed_kind("area", "Area Lamp",
+                            "An area lamp placed and aimed by the solve: its power per channel (W)", shape="area")
 
 
 def area_lamp(name, position, direction, size_u, size_v=None, ellipse=False) -> Lamp:

@@ -13,4 +13,5 @@ def point_lamp(name, position, radius=0.0) -> Lamp:
     """The engine.lamps.Lamp of a placed point lamp (1 W per channel), ``radius`` (m, >= 0); its
     frame is the world's, pointing down (a point lamp has no direction: it only orients the object)."""
     d, u, v = frame((0.0, 0.0, -1.0))
-    return Lamp(name, "POINT", position, d, u, v, UNIT_POWER, radius=check_length(radius, "a point lamp's radius", False))
+    return Lamp(name, "POINT", position, d, u, v, UNIT_POWER,
+                radius=check_length(radius, "a point lamp's radius", False))
