@@ -57,8 +57,9 @@ bpy.ops.wm.save_as_mainfile(filepath=win_hdri)
 """
 
 
-def solve(scene, report):
-    subprocess.run([sys.executable, "-m", "relight_addon", "solve", scene, "--report", report, "--quiet"],
+def solve(scene, report, extra=()):
+    """`relight solve SCENE --report REPORT --quiet [extra]` in a fresh process: its report."""
+    subprocess.run([sys.executable, "-m", "relight_addon", "solve", scene, "--report", report, "--quiet", *extra],
                    check=True, cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT), capture_output=True)
     with open(report) as f:
         return json.load(f)

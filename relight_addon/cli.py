@@ -461,6 +461,8 @@ def run_solve_command(args, progress=None, cancel=None):
 
 
 def _summary(args, report):
+    from .pipeline.report import kinds_text
+
     if args.command == "radiosity":
         s = report["scene"]
         print(f"{PROG}: radiosity of {s['objects']} objects, {s['faces']} faces, {s['patches']} patches "
@@ -470,7 +472,7 @@ def _summary(args, report):
         print(f"{PROG}: {args.command}: {inv['n_targets']} target patches, {inv['n_candidates']} candidates; "
               f"e_x relative error {inv['relative_error']:.3g} with {inv['n_negative']} negative(s); "
               f"final {fin['n_lights']} light(s), relative error {fin['relative_error']:.3g}, "
-              f"{fin['n_negative']} negative(s); {len(report['curve'])} configurations; "
+              f"{fin['n_negative']} negative(s) ({kinds_text(report)}); {len(report['curve'])} configurations; "
               f"{report['timings_s']['total']:.2f} s; report {args.report}")
     for w in report["warnings"]:
         print(f"{PROG}: warning: {w}")

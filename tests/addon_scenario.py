@@ -181,11 +181,16 @@ def emitting_state():
 
 
 def expected_lights(k):
-    """From the stored curve: the power per channel and the area of configuration k's positive lights."""
+    """From the stored curve: the power per channel and the area of configuration k's positive
+    surface lights (the emitters object shows them), their number and the number of lamps on
+    (Light objects of Relight's)."""
     e = data.exitance[k].astype(float)
     pos = np.any(e > 0, axis=1) & ~np.any(e < 0, axis=1)
+    lamp = np.asarray(data.light_lamp) >= 0
+    cells = pos & ~lamp
     a = data.light_area.astype(float)
-    return [(e[pos] * a[pos, None]).sum(axis=0).tolist(), float(a[pos].sum()), int(pos.sum())]
+    return [(e[cells] * a[cells, None]).sum(axis=0).tolist(), float(a[cells].sum()), int(cells.sum()),
+            int((pos & lamp).sum())]
 
 
 def target_check(k):
@@ -206,7 +211,7 @@ R["final_lights"] = [[li_obj, li_polys] for li_obj, li_polys in (
     (data.objects[data.light_object[j]],
      (data.light_polygons[data.light_polygons_indptr[j]:data.light_polygons_indptr[j + 1]]
       - data.polygon_offset[data.light_object[j]]).tolist())
-    for j in np.flatnonzero(np.any(data.exitance[settings.curve_index] > 0, axis=1)))]
+    for j in np.flatnonzero(np.any(data.exitance[settings.curve_index] > 0, axis=1) & (data.light_object >= 0)))]
 # Select Light Faces selects exactly the polygons under the lights shown, on the selected objects
 lit_obj = bpy.data.objects[R["final_lights"][0][0]] if R["final_lights"] else floor
 bpy.context.view_layer.objects.active = lit_obj
@@ -250,11 +255,14 @@ R["summary"] = [settings.last_summary, settings.last_warnings]
 # are the artist's, as the button says), so do the artist's own objects in a collection that
 # happens to be called "Relight Lights"; the rest is exactly as before the solve
 R["area_lights"] = op(bpy.ops.relight.make_area_lights)
-area_objs = [o for o in scene.objects if o.type == "LIGHT"]
+made = next(c for c in bpy.data.collections if c.get("relight_area_lights") is not None)
+area_objs = [o for o in made.objects if o.type == "LIGHT"]  # (Relight's own lamps are elsewhere)
 R["n_area_lights"] = len(area_objs)
-# per channel: Cycles emits colour x Power (W) in each
+# per channel: Cycles emits colour x Power (W) in each; the lamps shown are copied with their power
 R["area_light_power"] = np.sum([np.array(o.data.color) * o.data.energy for o in area_objs], axis=0).tolist()
-R["emitted_power"] = R["final_state"][0]
+e_final = data.exitance[k_final].astype(float)
+lamp_on = (np.asarray(data.light_lamp) >= 0) & np.any(e_final > 0, axis=1)
+R["emitted_power"] = (np.asarray(R["final_state"][0]) + e_final[lamp_on].sum(axis=0)).tolist()
 mine = bpy.data.collections.new("Relight Lights")  # the artist's own collection of that name
 scene.collection.children.link(mine)
 cube = bpy.data.objects.new("artist_empty", None)

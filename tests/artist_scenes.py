@@ -155,3 +155,64 @@ def triangle_count(context=None):
             n += len(me.loop_triangles)
             ob.evaluated_get(dg).to_mesh_clear()
     return n
+
+
+GALLERY = (6.0, 5.0, 3.2)
+#: the painting: its size (m), its centre's height (m) and the painted radiances
+PAINTING = (1.0, 0.7, 1.6)
+BAND = 0.6
+
+
+def gallery(painting=1.2, band=0.08, floor=0.1):
+    """Issue 17's gallery, in the current (empty) scene: a 6 x 5 x 3.2 m room whose walls and
+    ceiling are one mesh ("Room": the ceiling and three walls one quad each, the north wall (+Y)
+    cut into a 5 x 5 grid so that a 0.6 m band around the painting is faces of its own), a 1.0 x
+    0.7 m painting ("Painting", 2 cm in front of the north wall, its centre 1.6 m high) and a
+    floor of 0.5 m faces ("Floor"); Lambertian materials (Principled, Specular IOR Level 0), no
+    World. Painted radiance (relight_target): the painting ``painting`` (grey), the band around
+    it ``band``, a 3 x 1 m floor strip in front of the wall ``floor``. Only the ceiling may hold
+    lights (the walls' faces relight_forbidden; the floor and the painting relight_no_lights).
+    Returns {name: object}."""
+    import cycles_reference as cr
+
+    W, D, H = GALLERY
+    pw, ph, pz = PAINTING
+    x0, y0 = -W / 2, -D / 2
+    walls = cr._material("Walls", (0.8, 0.78, 0.72), lambertian=True)
+    verts, faces = [], []
+
+    def quad(corners):
+        k = len(verts)
+        verts.extend(corners)
+        faces.append((k, k + 1, k + 2, k + 3))
+
+    # inward-facing: the ceiling, the south, west and east walls, each one quad
+    quad([(x0, y0, H), (x0, -y0, H), (-x0, -y0, H), (-x0, y0, H)])
+    quad([(x0, y0, 0), (x0, y0, H), (-x0, y0, H), (-x0, y0, 0)])
+    quad([(x0, y0, 0), (x0, -y0, 0), (x0, -y0, H), (x0, y0, H)])
+    quad([(-x0, y0, 0), (-x0, y0, H), (-x0, -y0, H), (-x0, -y0, 0)])
+    xs = [x0, -pw / 2 - BAND, -pw / 2, pw / 2, pw / 2 + BAND, -x0]
+    zs = [0.0, pz - ph / 2 - BAND, pz - ph / 2, pz + ph / 2, pz + ph / 2 + BAND, H]
+    north = []  # (column, row) of each north-wall face
+    for j in range(5):
+        for i in range(5):
+            quad([(xs[i], -y0, zs[j]), (xs[i + 1], -y0, zs[j]), (xs[i + 1], -y0, zs[j + 1]), (xs[i], -y0, zs[j + 1])])
+            north.append((i, j))
+    room = cr.add_mesh_object("Room", verts, faces, walls)
+    me = room.data
+    forbidden = me.attributes.new("relight_forbidden", "BOOLEAN", "FACE")
+    forbidden.data.foreach_set("value", [k > 0 for k in range(len(faces))])  # all but the ceiling
+    band_faces = [4 + k for k, (i, j) in enumerate(north) if 1 <= i <= 3 and 1 <= j <= 3 and (i, j) != (2, 2)]
+    paint(room, band_faces, (band,) * 3)
+    v, f = cr.grid_quads((-pw / 2, -y0 - 0.02, pz - ph / 2), (pw, 0, 0), (0, 0, ph), 1, 1)  # facing -Y
+    pic = cr.add_mesh_object("Painting", v, f, cr._material("Canvas", (0.6, 0.55, 0.5), lambertian=True))
+    paint(pic, [0], (painting,) * 3)
+    v, f = cr.grid_quads((x0, y0, 0.0), (W, 0, 0), (0, D, 0), 12, 10)
+    fl = cr.add_mesh_object("Floor", v, f, cr._material("Wood", (0.45, 0.3, 0.2), lambertian=True))
+    cen = np.array([fl.data.polygons[k].center[:] for k in range(len(fl.data.polygons))])
+    paint(fl, np.flatnonzero((np.abs(cen[:, 0]) < 1.5) & (cen[:, 1] > -y0 - 1.0)), (floor,) * 3)
+    for ob in (pic, fl):
+        ob["relight_no_lights"] = True
+    bpy.context.scene.world = None
+    bpy.context.scene.render.engine = "CYCLES"
+    return {"Room": room, "Painting": pic, "Floor": fl}

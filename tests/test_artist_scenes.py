@@ -48,12 +48,19 @@ def test_report_contract(solved):
     r, _, tris = solved
     assert r["scene"]["triangles"] >= 0.9 * tris and r["scene"]["patches"] > 0
     assert r["inverse"]["n_candidates"] >= 100  # cells, groups and whole polygons on 5 quads
-    assert set(r["model"]["lights_by_kind"]) == {"cell", "group", "polygon", "lamp", "sun"}  # every kind listed
-    assert r["model"]["lights_by_kind"]["lamp"] == r["model"]["lights_by_kind"]["sun"] == 0  # lamps: reduce only
+    kinds = {"cell", "group", "polygon", "lamp", "sun", "spot", "area", "point"}
+    assert set(r["model"]["lights_by_kind"]) == kinds  # every kind listed
+    assert r["model"]["lights_by_kind"]["lamp"] == r["model"]["lights_by_kind"]["sun"] == 0  # the scene's: reduce only
+    assert r["model"]["lights_by_kind"]["spot"] > 0  # candidate lamps beside the cells (issue 17)
     fin = r["final"]
     assert 1 <= len(fin["lights"]) <= 3
     for li in fin["lights"]:
         assert set(li) >= {"object", "polygons", "center", "normal", "area", "exitance", "power", "kind"}
+        if li["kind"] in ("spot", "area", "point"):  # a lamp placed in front of the walls or the ceiling
+            assert li["exitance"] is None and min(li["strength"]) >= 0 and li["power"] == pytest.approx(
+                sum(li["strength"]))
+            assert set(li) >= {"location", "direction", "color", "energy"}
+            continue
         assert li["object"] == "Room"  # only the walls and the ceiling may emit
         assert li["polygons"] and all(0 <= p < 5 for p in li["polygons"])
         assert np.linalg.norm(li["normal"]) == pytest.approx(1.0)
@@ -79,9 +86,13 @@ def test_out_file_shows_the_lights_and_resolves_without_counting_them(solved, tm
     r, out, _ = solved
     export.open_blend(str(out))
     em = emitted(bpy.context.scene)
-    assert em is not None
-    power = np.sum([np.asarray(li["exitance"]) * li["area"] for li in r["final"]["lights"]], axis=0)
-    np.testing.assert_allclose(emitted_power(bpy.context.scene), power, rtol=1e-4)
+    cells = [li for li in r["final"]["lights"] if li["exitance"] is not None]
+    assert (em is not None) == bool(cells)
+    if cells:
+        power = np.sum([np.asarray(li["exitance"]) * li["area"] for li in cells], axis=0)
+        np.testing.assert_allclose(emitted_power(bpy.context.scene), power, rtol=1e-4)
+    lamps = {o.name for o in bpy.data.objects if o.type == "LIGHT" and o.get("relight_owner")}
+    assert lamps == {li["object"] for li in r["final"]["lights"] if li["exitance"] is None}
     # the artist's Room mesh is untouched: its 5 polygons, no Relight material on it
     room = bpy.data.objects["Room"]
     assert len(room.data.polygons) == 5 and all(not m.get("relight_owner") for m in room.data.materials)
@@ -93,5 +104,6 @@ def test_out_file_shows_the_lights_and_resolves_without_counting_them(solved, tm
 
     r2 = json.loads((tmp_path / "r2.json").read_text())
     assert "Relight Emitters" not in r2["objects"]
-    assert not any("background light" in w for w in r2["warnings"])
+    assert not any("background light" in w for w in r2["warnings"])  # nor its lamps (issue 17)
+    assert not [row for row in r2["fixed_light"] if row["kind"] != "emission"]
     assert r2["scene"]["patches"] == r["scene"]["patches"]

@@ -169,8 +169,11 @@ def furnished(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("furnished")
     scene, rep, out = tmp / "room.blend", tmp / "report.json", tmp / "room_lit.blend"
     build_furnished_room(scene)
+    # cells only: what this checks is the cells' first reflection at the albedo of its incidence
+    # (engine/incidence.py); the lamps' is not modelled (with the default spots the answer has one:
+    # 2.10 % mean, signed -1.97 %: docs/validation.md, "Lamps a solve places")
     _cli("solve", scene, "--report", rep, "--out", out, "--rays-per-patch", ROOM_RAYS, "--seed", 1,
-         "--patch-model", "polygon")
+         "--patch-model", "polygon", "--no-spot-lamps")
     report = json.loads(rep.read_text())
     faces_of = {name: [i for i, x in enumerate(o.get("radiance_normal") or []) if x is not None]
                 for name, o in report["objects"].items()}

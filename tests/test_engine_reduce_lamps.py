@@ -102,6 +102,7 @@ def test_direct_problem_of_lamps_against_the_explicit_inverse(room):
                                    rtol=1e-10)
     # the lamps' geometry and their "form-factor rows": the share of their power reaching each patch
     np.testing.assert_allclose(prob.light_center, [lamp.position for lamp in lamps])
+    assert [prob.lights.lamp(j) for j in range(4)] == lamps  # each light carries its lamp (its geometry)
     np.testing.assert_allclose(prob.light_rows(), (H * r["area"][:, None]).T, rtol=1e-12)
 
 

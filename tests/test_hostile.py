@@ -490,7 +490,8 @@ CLI_CASES = [
     Cli("seed-negative", "room", ["--seed", "-1"], message="--seed: must be a non-negative integer"),
     Cli("seed-not-int", "room", ["--seed", "x"], message="--seed: not an integer"),
     Cli("rays-zero", "room", ["--rays-per-patch", "0"], message="must be at least 1"),
-    Cli("rays-one", "room", ["--rays-per-patch", "1", "--estimator", "raycast", "--patch-model", "polygon"],
+    Cli("rays-one", "room", ["--rays-per-patch", "1", "--estimator", "raycast", "--patch-model", "polygon",
+                             "--no-spot-lamps"],  # the cells' rays alone
         message="no ray from a candidate light reached a target with 1 ray(s) per patch"),
     Cli("rays-absurd", "room", ["--rays-per-patch", str(10 ** 11)], message="of memory (estimate), more than the"),
     Cli("patch-size-micro", "room", ["--max-patch-size", "1e-6"], message="of memory (estimate), more than the"),

@@ -191,6 +191,9 @@ def test_panel_rows_follow_the_chosen_methods(addon):
         drawn(panels.RELIGHT_PT_model))
     s.patch_model = "polygon"
     assert "refine_passes" not in drawn(panels.RELIGHT_PT_model)
+    # the kinds of candidate lights (issue 17), under Light Candidates
+    assert {"surface_lights", "spot_lamps", "area_lamps", "point_lamps", "lamp_drop", "max_lamps"} <= set(
+        drawn(panels.RELIGHT_PT_candidates))
 
 
 def test_operator_options_pass_only_the_chosen_methods_parameters(addon):
@@ -207,6 +210,16 @@ def test_operator_options_pass_only_the_chosen_methods_parameters(addon):
     s.selection = "least-power"
     o = operators.job_options(s)
     assert o.tolerance == 0.3 and o.max_lights == PARAMS["max_lights"].default  # the tolerance decides
+    # the candidate lamps: passed as the sidebar sets them; with the paper's heuristics, cells only
+    s.selection, s.spot_lamps, s.point_lamps, s.lamp_drop, s.max_lamps = "greedy-swap", False, True, 0.3, 40
+    o = operators.job_options(s)
+    assert not o.spot_lamps and o.point_lamps and o.lamp_drop == pytest.approx(0.3) and o.max_lamps == 40
+    s.point_lamps = False  # no lamp offered: the lamps' drop and count are moot, at their defaults
+    o = operators.job_options(s)
+    assert o.lamp_drop is None and o.max_lamps == PARAMS["max_lamps"].default
+    s.selection = "exitance-elimination"
+    o = operators.job_options(s)  # not refused: the lamp options are moot, at their defaults
+    assert o.spot_lamps == PARAMS["spot_lamps"].default and o.lamp_drop is None
 
 
 def test_least_power_through_the_operator(addon):
@@ -235,7 +248,7 @@ def test_least_power_through_the_operator(addon):
     opts = JobOptions(selection="least-power", tolerance=tol, rays_per_patch=512).validate()
     model = jobs.build_model(exp.faces, opts, "inverse", exp.settings.get("max_patch_size"))
     p = model.problem
-    ref = least_power_within_tolerance(p.transfer, p.b_target, p.light_area, tol)
+    ref = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tol)
     assert ref.status in ("ok", "partial", "infeasible")
     assert e_op.shape == ref.exitance.shape
     scale = max(float(np.abs(ref.exitance).max()), 1e-12)

@@ -16,6 +16,11 @@ artist's faces, as:
   copy of their material (``suppress_emission``; restored exactly by ``clear_suppression``), and
   its lamps set: a kept lamp's Power (a Sun's Strength) and colour, the others disabled for
   render and in the viewports (``plan_lamps``; restored exactly by lamp_state.restore);
+- the lamps a solve placed (Spot, Area and Point lamps chosen among the candidates) as new Light
+  objects with the solved Power, colour, cone, blend, size and orientation, in the collection
+  "Relight Lamps" (``plan_placed``, ``write_placed``): Relight's own, removed by Clear and
+  replaced when another configuration is shown (Make Area Lights copies them for keeps); the
+  export does not count them as the scene's light;
 - the stored curve (scene property ``relight_result``) and the chart image.
 
 Everything Relight creates carries ``relight_owner`` = the result's id (scene property
@@ -379,9 +384,96 @@ def polygon_rows(data, values):
 #: the light kinds' writers (engine.lights.LightKind.writer) this layer has: "surface" lights are
 #: shown as their emitting cells in the emitters object, and made into one area light per cell by
 #: make_area_lights; "lamp" lights (direct mode: the scene's own lamps) by the lamps themselves, their
-#: Power and colour set or the lamp disabled, restorably (``plan_lamps``, lamp_state.py). A new writer
-#: is a function here and its name in this tuple.
-WRITERS = ("surface", "lamp")
+#: Power and colour set or the lamp disabled, restorably (``plan_lamps``, lamp_state.py); "placed"
+#: lights (the Spot, Area and Point lamps a solve placed) as new Light objects in a collection
+#: Relight owns (``plan_placed``, ``write_placed``), copied for keeps by make_area_lights. A new
+#: writer is a function here and its name in this tuple.
+WRITERS = ("surface", "lamp", "placed")
+#: the collection of the lamps a solve placed (owned: Clear removes it, by identity)
+PLACED_COLLECTION = "Relight Lamps"
+
+
+def _lights_of_writer(data, writer) -> np.ndarray:
+    """Indices of the stored lights whose kind is written by ``writer``."""
+    names = LIGHT_KINDS.names()
+    kinds = np.asarray(data.light_kind, dtype=np.int64)
+    return np.array([j for j, code in enumerate(kinds) if 0 <= code < len(names)
+                     and LIGHT_KINDS[names[code]].impl.writer == writer], dtype=np.int64)
+
+
+def plan_placed(data, strength) -> list:
+    """The placed writer's plan for configuration ``strength`` (n_lights, 3), computed and checked
+    before anything is written: per placed lamp that is on, (its stored record, Blender's Power
+    (W) and colour: Power x colour = its power per channel; engine.lights.lamp.blender_values)."""
+    from ..engine.lights.lamp import blender_values
+
+    plan = []
+    for j in _lights_of_writer(data, "placed"):
+        s = np.asarray(strength[j], dtype=np.float64)
+        if not np.any(s > 0):
+            continue
+        rec = data.lamps[int(data.light_lamp[j])]
+        energy, color = blender_values(s, rec["energy"], rec["color"])
+        values = np.concatenate([[energy], color, rec["position"], rec["direction"], rec["axis_u"], rec["axis_v"]])
+        if not np.all(np.isfinite(values)):
+            raise SceneError(f"lamp {rec['name']!r} of the stored result has non-finite values: solve again")
+        plan.append((rec, float(energy), color))
+    return plan
+
+
+def new_lamp(rec, energy, color, owner=None):
+    """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
+    type, Power and colour, Spot Size and Blend, radius, area shape and sizes, and its frame
+    (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
+    from mathutils import Matrix
+
+    ld = bpy.data.lights.new(rec["name"], rec["type"])
+    ld.energy = float(energy)
+    ld.color = tuple(float(x) for x in color)
+    if rec["type"] in ("POINT", "SPOT"):
+        ld.shadow_soft_size = float(rec["radius"])
+    if rec["type"] == "SPOT":
+        ld.spot_size, ld.spot_blend = float(rec["spot_size"]), float(rec["spot_blend"])
+        ld.show_cone = True
+    if rec["type"] == "AREA":
+        same = abs(rec["size_u"] - rec["size_v"]) <= 1e-9 * max(rec["size_u"], rec["size_v"])
+        ld.shape = ("DISK" if same else "ELLIPSE") if rec["ellipse"] else ("SQUARE" if same else "RECTANGLE")
+        ld.size = float(rec["size_u"])
+        if not same:
+            ld.size_y = float(rec["size_v"])
+    ob = bpy.data.objects.new(rec["name"], ld)
+    M = np.eye(4)
+    M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]
+    M[:3, 2], M[:3, 3] = -np.asarray(rec["direction"]), rec["position"]
+    ob.matrix_world = Matrix(M.tolist())
+    if owner is not None:
+        ld[OWNER_PROP] = owner
+        ob[OWNER_PROP] = owner
+    return ob
+
+
+def write_placed(scene, rid, plan) -> None:
+    """Write ``plan_placed``'s plan: the lamps, owned by the result ``rid``, in a collection of their own."""
+    if not plan:
+        return
+    coll = bpy.data.collections.new(PLACED_COLLECTION)
+    coll[OWNER_PROP] = rid
+    scene.collection.children.link(coll)
+    for rec, energy, color in plan:
+        coll.objects.link(new_lamp(rec, energy, color, owner=rid))
+
+
+def _remove_placed(rid) -> int:
+    """Remove the lamps (objects, their Light data) and the collection that result ``rid`` placed."""
+    obs = [o for o in bpy.data.objects if o.type == "LIGHT" and o.get(OWNER_PROP) == rid]
+    for ob in obs:
+        ld = ob.data
+        bpy.data.objects.remove(ob)
+        if ld is not None and ld.users == 0 and _owned(ld, rid):
+            bpy.data.lights.remove(ld)
+    for coll in [c for c in bpy.data.collections if _owned(c, rid)]:
+        bpy.data.collections.remove(coll)
+    return len(obs)
 
 
 def plan_lamps(scene, data, strength) -> tuple:
@@ -394,9 +486,11 @@ def plan_lamps(scene, data, strength) -> tuple:
 
     plan, skipped = [], []
     light_lamp = np.asarray(data.light_lamp if data.light_lamp is not None else [], dtype=np.int64)
-    if np.any(light_lamp >= 0):
+    own = _lights_of_writer(data, "lamp") if len(light_lamp) else np.zeros(0, dtype=np.int64)
+    own = own[light_lamp[own] >= 0]
+    if len(own):
         bpy.context.evaluated_depsgraph_get()  # the enabled lamps' matrix_world up to date (one just re-enabled)
-    for j in np.flatnonzero(light_lamp >= 0):
+    for j in own:
         rec = data.lamps[int(light_lamp[j])]
         name = rec["name"]
         ob = scene.objects.get(name)
@@ -501,6 +595,7 @@ def apply_stored_point(scene, index) -> dict:
                 suppress.append((ob, polys - off[oi]))
     lamp_plan, lamp_skipped = plan_lamps(scene, data, exitance)
     skipped.extend(lamp_skipped)
+    placed = plan_placed(data, exitance)
     # write
     clear_shown(scene)
     if rid != result_id(scene):
@@ -512,6 +607,7 @@ def apply_stored_point(scene, index) -> dict:
     for ob, polys in suppress:
         suppress_emission(ob, polys, rid, variants)
     write_lamps(lamp_plan, rid)
+    write_placed(scene, rid, placed)
     scene["relight_shown"] = index
     neg = np.any(exitance < 0, axis=1)
     lit = np.any(exitance > 0, axis=1) & ~neg
@@ -527,6 +623,7 @@ def clear_shown(scene) -> int:
     if rid is not None:
         n += int(emitters_object(scene) is not None)
         _remove_emitters(rid)
+        n += _remove_placed(rid)
     for obj in scene.objects:
         if obj.type == "LIGHT" and obj.library is None:
             n += int(lamp_state.restore(obj))
@@ -579,7 +676,8 @@ def make_area_lights(scene, index) -> int:
     """Real Blender area lights for configuration ``index``: one per light cell that emits, a
     one-sided area light of the cell's area at its centre (set off like the emitters object),
     facing along its normal, power = exitance x area (W), in a new collection. Rectangular cells
-    (grid cells of quads) get a rectangle of their sides; others a square of their area.
+    (grid cells of quads) get a rectangle of their sides; others a square of their area. The
+    lamps the solve placed (Spot, Area, Point) are copied there too, as they are shown.
     All or nothing: every light is computed and checked (finite, positive area) before the
     previous lights of this result are replaced; cells without area are left out."""
     from mathutils import Matrix, Vector
@@ -628,6 +726,7 @@ def make_area_lights(scene, index) -> int:
         # Cycles: a light emits colour x Power in each channel (intern/cycles/blender/light.cpp)
         plan.append((int(c), shape, size, float(power.max()), power / max(power.max(), 1e-30),
                      center + offset * n, rot))
+    placed = plan_placed(data, exitance)  # the placed lamps: copies of their own type, the artist's
     # write: replace this result's own earlier lights (by identity), then add the new ones
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
     for coll in old:  # Make Area Lights again replaces its own lights of this result
@@ -651,7 +750,9 @@ def make_area_lights(scene, index) -> int:
         obj = bpy.data.objects.new(light.name, light)
         obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
         coll.objects.link(obj)
-    return len(plan)
+    for rec, energy, color in placed:
+        coll.objects.link(new_lamp(rec, energy, color))
+    return len(plan) + len(placed)
 
 
 # --- the chart ---------------------------------------------------------------------------------

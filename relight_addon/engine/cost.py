@@ -16,6 +16,9 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
   3 x 8 m L bytes; the solver: reduced/nnls m^2 L + m^3/3 flops per channel; the paper's
   formulation a P x P Gram matrix (8 P (P - m + L) + 8 P^2 bytes, P^2 (P - m + L) + P^3 / 3 flops);
 - the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR;
+- the candidate lamps (engine/candidate_lamps.py, at most their bound): each lamp's irradiance at
+  LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each;
+  they add to L;
 - the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
@@ -31,6 +34,7 @@ import os
 
 import numpy as np
 
+from .candidate_lamps import LAMP_POINTS
 from .formfactors import CHUNK_RAYS, DENSE_LIMIT
 from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
@@ -56,6 +60,8 @@ BASE_BYTES = 60 * 2 ** 20
 #: the kernel estimator per target x candidate pair at its defaults (100 penumbra points x 2 rays;
 #: 4e-5 at 256 x 4)
 KERNEL_SECONDS_PER_PAIR = 2e-5
+#: a candidate lamp's irradiance per receiver point (sampling, the lamp's light, its shadow ray; measured)
+LAMP_SECONDS_PER_POINT = 3e-7
 STORED_POINTS = STORE_ALL_UP_TO + STORE_LOG_POINTS  # at most, up to the ~40 log-spaced ones
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
@@ -88,7 +94,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                   rays_per_second: float = RAYS_PER_SECOND,
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
-                  threads: int | None = None) -> dict:
+                  threads: int | None = None, n_lamps: int = 0) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
     Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
@@ -98,7 +104,8 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     N = _count("rays_per_patch", rays_per_patch)
     C = _count("n_candidates", n_candidates)
     m = _count("n_targets", n_targets)
-    L = C if n_lights is None else _count("n_lights", n_lights)
+    n_lamps = _count("n_lamps", n_lamps)
+    L = (C if n_lights is None else _count("n_lights", n_lights)) + n_lamps
     tris = _count("n_triangles", n_triangles)
     passes = _count("refine_passes", refine_passes)
     g = max(1, min(3, int(channel_groups)))
@@ -115,6 +122,10 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     if kernel:
         pairs = float(m) * C
         parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
+    if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)
+        points = float(n_lamps) * P * LAMP_POINTS
+        parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
+                          points * LAMP_SECONDS_PER_POINT * (passes + 1))
     k = min(m, C)
     if P <= DIRECT_SOLVE_LIMIT:
         parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)

@@ -22,7 +22,8 @@ against Cycles bakes (tests/test_cycles_lamps.py):
 
 Shadows: every mesh occludes (both sides), as in Cycles; ``cast_shadow`` off: no shadow rays.
 Receiver points: stratified on each patch (kernel_transfer._sample_patches), each with its own
-lamp samples, so a patch's mean is a stratified estimate. Deterministic for a seed.
+lamp samples, so a patch's mean is a stratified estimate; the patches a spot's cone edge crosses
+(its blend ring) are sampled again with EDGE_POINTS times the points. Deterministic for a seed.
 """
 from __future__ import annotations
 
@@ -44,6 +45,8 @@ POINTS_PER_PATCH = 64
 LAMP_SAMPLES = 4
 #: patches per chunk of receiver points
 CHUNK_PATCHES = 4096
+#: a spot's patches that its cone's edge crosses get this many times the points (the edge is sampled)
+EDGE_POINTS = 16
 
 
 @dataclass
@@ -202,11 +205,55 @@ def _solid_angles(tv, x):
     return np.where(num < 0, omega, 0.0)  # num = a . (b x c) < 0 <=> x on the normal's side
 
 
+def _patch_means(lamp, g, s, k, ns, rng, far, exact):
+    """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
+    each and ns lamp samples per point; for a point or a spot, ``exact`` (P,) the bare point
+    lamp's exact patch means, times the sampled ratio (shadows, cone, disk)."""
+    sm = g.sampler
+    y, ny = _sample_patches(g, s, k, rng)
+    y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
+    ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
+    acc = np.zeros(len(y))
+    ref = np.zeros(len(y))
+    for j in range(ns):  # stratified lamp samples: one stratum of a ns-grid per pass
+        u = rng.random((len(y), 2))
+        if ns > 1:
+            gk = int(math.isqrt(ns))
+            if gk * gk == ns:
+                u = (u + np.array([j // gk, j % gk])) / gk
+            else:
+                u[:, 0] = (u[:, 0] + j) / ns
+        e, r = _irradiance_at(lamp, y, ny, u, sm, far)
+        acc += e
+        if r is not None:
+            ref += r
+    per_patch = (acc / ns).reshape(len(s), k).mean(axis=1)
+    if exact is not None:
+        rs = ref.reshape(len(s), k).sum(axis=1) / ns
+        ok = rs > 0
+        per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
+    return per_patch
+
+
+def _cone_edge(lamp: Lamp, g, todo) -> np.ndarray:
+    """The patches of ``todo`` that a spot's cone edge crosses: the directions to them (their
+    bounding spheres') span part of the ring between the full-strength cone and the cone's
+    limit, where the light changes across a patch."""
+    v = g.center[todo] - lamp.position
+    d = np.maximum(np.linalg.norm(v, axis=1), 1e-300)
+    ang = np.arccos(np.clip((v @ lamp.direction) / d, -1.0, 1.0))
+    spread = np.arcsin(np.clip(g.radius[todo] / d, 0.0, 1.0))
+    cos_half = math.cos(0.5 * lamp.spot_size)
+    inner = math.acos(min(1.0, cos_half + (1.0 - cos_half) * max(lamp.spot_blend, 0.0)))
+    return todo[(ang - spread < 0.5 * lamp.spot_size) & (ang + spread > inner)]
+
+
 def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: int = 0,
                     points_per_patch: int = POINTS_PER_PATCH, only=None) -> np.ndarray:
     """(P, n_lamps, 3) direct irradiance (W/m^2) of each lamp on each patch (area mean), with
     shadow rays on ``sampler`` (built here when not given: pass the form factors' one).
-    ``only``: the indices of the patches to light (the others get 0), default all."""
+    ``only``: the indices of the patches to light (the others get 0), default all; or a list of
+    such index arrays, one per lamp (e.g. the patches a spot's cone can reach)."""
     P = patches.n_patches
     out = np.zeros((P, len(lamps), 3))
     if not lamps:
@@ -214,39 +261,26 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
     g = _Geometry(patches, points_per_patch, sampler=sampler)
     sm = g.sampler
     far = 4.0 * float(np.linalg.norm(np.ptp(sm.tv.reshape(-1, 3), axis=0))) + 1.0
+    per_lamp = only is not None and not isinstance(only, np.ndarray) and len(only) == len(lamps) and \
+        all(np.ndim(o) == 1 for o in only)
     for li, lamp in enumerate(lamps):
         k = points_per_patch
         ns = _samples_per_point(lamp)
         rng = np.random.default_rng([int(seed), 7, li])
+        sel = only[li] if per_lamp else only
+        todo = np.arange(P) if sel is None else np.asarray(sel, dtype=np.int64).reshape(-1)
         exact = None
         if lamp.kind in ("POINT", "SPOT"):  # the bare point lamp's patch mean: I x solid angle / area
-            om = np.bincount(sm.tri_patch, weights=_solid_angles(sm.tv.astype(np.float64), lamp.position),
+            tri = slice(None) if sel is None else np.flatnonzero(np.isin(sm.tri_patch, todo))
+            om = np.bincount(sm.tri_patch[tri], weights=_solid_angles(sm.tv[tri].astype(np.float64), lamp.position),
                              minlength=P)
             exact = om / (4.0 * math.pi * np.maximum(sm.area, 1e-300))
-        todo = np.arange(P) if only is None else np.asarray(only, dtype=np.int64)
-        for c0 in range(0, len(todo), CHUNK_PATCHES):
-            s = todo[c0:c0 + CHUNK_PATCHES]
-            y, ny = _sample_patches(g, s, k, rng)
-            y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
-            ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
-            acc = np.zeros(len(y))
-            ref = np.zeros(len(y))
-            for j in range(ns):  # stratified lamp samples: one stratum of a ns-grid per pass
-                u = rng.random((len(y), 2))
-                if ns > 1:
-                    gk = int(math.isqrt(ns))
-                    if gk * gk == ns:
-                        u = (u + np.array([j // gk, j % gk])) / gk
-                    else:
-                        u[:, 0] = (u[:, 0] + j) / ns
-                e, r = _irradiance_at(lamp, y, ny, u, sm, far)
-                acc += e
-                if r is not None:
-                    ref += r
-            per_patch = (acc / ns).reshape(len(s), k).mean(axis=1)
-            if exact is not None:  # the exact bare mean times the sampled ratio (shadows, cone, disk)
-                rs = ref.reshape(len(s), k).sum(axis=1) / ns
-                ok = rs > 0
-                per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
-            out[s, li] = per_patch[:, None] * lamp.power[None, :]
+        passes = [(todo, k)]
+        if lamp.kind == "SPOT":  # the patches the cone's edge (its blend ring) crosses: EDGE_POINTS x the points
+            edge = _cone_edge(lamp, g, todo)
+            passes = [(np.setdiff1d(todo, edge), k), (edge, k * EDGE_POINTS)]
+        for patches_of_pass, kp in passes:
+            for c0 in range(0, len(patches_of_pass), max(1, CHUNK_PATCHES * k // kp)):
+                s = patches_of_pass[c0:c0 + max(1, CHUNK_PATCHES * k // kp)]
+                out[s, li] = _patch_means(lamp, g, s, kp, ns, rng, far, exact)[:, None] * lamp.power[None, :]
     return out

@@ -53,6 +53,34 @@ def _unused_by_least_power(o):
     return ""
 
 
+def _unused_by_single_scale(o):
+    if not SELECTIONS[o.selection].get("multiscale"):
+        users = ", ".join(m.name for m in SELECTIONS if m.get("multiscale"))
+        return (f"the {o.selection} selection runs on single-scale light cells, without candidate lamps "
+                f"(the selections that choose among cells and lamps: {users})")
+    return ""
+
+
+def _unused_without_lamps(o):
+    why = _unused_by_single_scale(o)
+    if why:
+        return why
+    if not any(getattr(o, name) for name in LAMP_OPTIONS):
+        return "no candidate lamp is offered (spot, area and point lamps all off)"
+    return ""
+
+
+#: the options offering each kind of candidate lamp (engine/candidate_lamps.py)
+LAMP_OPTIONS = ("spot_lamps", "area_lamps", "point_lamps")
+#: the kinds offered by default: spots (measured: docs/benchmarks.md, "Candidate lamps": with area and
+#: point lamps too the answers were no better on the gallery, the staircase and the living room)
+DEFAULT_LAMPS = {"spot_lamps": True, "area_lamps": False, "point_lamps": False}
+PARAM_FLAGS = {n: ("--no-" if DEFAULT_LAMPS[n] else "--") + n.replace("_", "-") for n in LAMP_OPTIONS}
+#: the options of a job offering no candidate lamp (the surface cells alone, as before issue 17)
+NO_LAMPS = {name: False for name in LAMP_OPTIONS}
+#: candidate lamps at most (measured: docs/benchmarks.md, "Candidate lamps")
+DEFAULT_MAX_LAMPS = 96
+
 JOB_PARAMS = (
     Param("rays_per_patch", int, None, min=1, label="Rays per Patch", ui="zero", soft_max=65536, none="automatic",
           description="Form-factor quality: rays cast from every patch (automatic: about 4 million rays in "
@@ -82,6 +110,30 @@ JOB_PARAMS = (
           description="How the scene becomes patches and candidate lights"),
     Param("estimator", str, DEFAULT_ESTIMATOR, registry=ESTIMATORS, label="Estimator",
           description="Form-factor estimator"),
+    # the candidate lights beside the cells (engine/candidate_lamps.py)
+    Param("surface_lights", bool, True, label="Cells", flag="--no-surface-lights", invert=True, inverse_only=True,
+          unused=_unused_by_single_scale,
+          description="Candidate lights: the candidate surfaces' own light cells, 2 x 2 groups and whole polygons"),
+    Param("spot_lamps", bool, DEFAULT_LAMPS["spot_lamps"], label="Spots",
+          flag=PARAM_FLAGS["spot_lamps"], invert=DEFAULT_LAMPS["spot_lamps"],
+          inverse_only=True, unused=_unused_by_single_scale,
+          description="Candidate lights: spot lamps mounted in front of the candidate surfaces, each cone just "
+                      "covering a target region"),
+    Param("area_lamps", bool, DEFAULT_LAMPS["area_lamps"], label="Area Lamps",
+          flag=PARAM_FLAGS["area_lamps"], invert=DEFAULT_LAMPS["area_lamps"],
+          inverse_only=True, unused=_unused_by_single_scale,
+          description="Candidate lights: area lamps mounted in front of the candidate surfaces, facing a target "
+                      "region"),
+    Param("point_lamps", bool, DEFAULT_LAMPS["point_lamps"], label="Points",
+          flag=PARAM_FLAGS["point_lamps"], invert=DEFAULT_LAMPS["point_lamps"],
+          inverse_only=True, unused=_unused_by_single_scale,
+          description="Candidate lights: point lamps mounted in front of the candidate surfaces"),
+    Param("lamp_drop", float, None, min=0.0, min_exclusive=True, unit="LENGTH", label="Lamp Drop", ui="zero",
+          inverse_only=True, unused=_unused_without_lamps, none="2 % of the scene's bounding-box diagonal",
+          description="Distance in metres in front of the candidate surfaces at which the candidate lamps hang"),
+    Param("max_lamps", int, DEFAULT_MAX_LAMPS, min=1, label="Max Lamps", soft_max=512, inverse_only=True,
+          unused=_unused_without_lamps,
+          description="Candidate lamps at most (the mounting positions are as many as this allows)"),
 )
 
 

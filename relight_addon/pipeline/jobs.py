@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..engine.best_lights import lower_bounds
+from ..engine.candidate_lamps import lamp_bound, offer_lamps, offered_kinds
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
@@ -30,7 +31,7 @@ from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
 from ..engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
-from ..engine.sampling import Cancelled
+from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from .polygons import PolygonMap
 from .report import json_safe, radiosity_report, solve_report
@@ -193,11 +194,13 @@ def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -
 
 
 def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mode: str = "inverse") -> dict:
-    """Memory and time estimate of a solve (engine.cost), with warnings when they are high."""
+    """Memory and time estimate of a solve (engine.cost), with warnings when they are high; the
+    candidate lamps counted at their bound (engine.candidate_lamps.lamp_bound)."""
     passes = options.param("refine_passes", 0)  # 0 unless the chosen patch model declares it
+    lamps = lamp_bound(patches, candidate_mask(patches, mode), options) if mode == "inverse" else 0
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
                                  n_triangles=n_triangles, refine_passes=passes,
-                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads)
+                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads, n_lamps=lamps)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -278,6 +281,7 @@ class SolveOutcome:
     inverse: object
     reduction: object
     scene_light: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct light (fixed)
+    placed_light: list = None  # [(Lamp, (P, 3) W/m^2)]: the final configuration's placed lamps' direct light
 
 
 def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
@@ -299,7 +303,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                         f"this solve ({patches.n_patches} patches)")  # refuse before any more work
     warnings.extend(cost["warnings"])
     passes = options.refine_passes if (mode == "inverse" and hasattr(pm, "refine")) else 0
-    t_ff = t_problem = 0.0
+    t_ff = t_problem = t_lamps = 0.0
     history = []
     # the paper's heuristics redistribute between lights that partition the candidates: single-scale;
     # direct-lighting mode reduces the scene's own lamps: one light per emitter polygon
@@ -311,6 +315,9 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         lights = None  # direct mode: the emitter polygons, if any (the lamps are added below)
         if mode == "inverse" or mask.any():
             lights = pm.lights(patches, mask, scales) if hasattr(pm, "refine") else pm.lights(patches, mask)
+            if mode == "inverse" and not options.param("surface_lights", True):  # lamps only
+                lights = LightSet(lights.patches, sp.csr_matrix((len(lights.patches), 0)), np.zeros(0, dtype=np.int8),
+                                  np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))
         pairs = (np.flatnonzero(patches.target), lights.patches) if mode == "inverse" else None
         lo, hi = 0.7 * p / (passes + 1), 0.7 * (p + 1) / (passes + 1)
         # a model that will be refined only ranks patches by importance: a quarter of the rays
@@ -321,6 +328,19 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         t_ff += F.seconds
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
+        if mode == "inverse" and offered_kinds(options):  # the candidate lamps, beside the cells
+            t1 = time.perf_counter()
+            sampler = getattr(F, "sampler", None) or SceneSampler(patches)
+            lamp_notes = []
+            lights, _ = offer_lamps(lights, patches, mask, options, sampler, options.seed,
+                                    _stage(progress, "lamps", hi, hi + 0.05 / (passes + 1)), notes=lamp_notes)
+            warnings.extend(n for n in lamp_notes if n not in warnings)
+            t_lamps += time.perf_counter() - t1
+            if cancel is not None and cancel():
+                raise Cancelled("solve cancelled")
+        if lights is not None and lights.n_lights == 0:
+            raise SceneError("no candidate light: the surface lights are off (--no-surface-lights) and no candidate "
+                             "lamp lights any face")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
@@ -367,8 +387,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         warnings.append(DIRECT_FIXED_NOTE.format(", ".join(n for n, _, _ in lamp_names)))
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
-                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem}, refinement, lamp_H, lamp_names,
-                 lamp_lights)
+                 {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem, "lamps": t_lamps}, refinement,
+                 lamp_H, lamp_names, lamp_lights)
 
 
 DIRECT_FIXED_NOTE = ("the World ({}) is kept as fixed light: a reduction cannot switch it off; its light is part of "
@@ -469,7 +489,7 @@ def certificate_notes(problem, bounds, final) -> list:
         return [f"{k} light(s): the best possible with {k} non-negative lights (exhaustive search), "
                 f"relative error {final.relative_error:.3g}"]
     return [f"{k} light(s): relative error {final.relative_error:.3g}; no {k} non-negative lights can go below "
-            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls_relative:.3g}"]
+            f"{lb:.3g}{' (exact optimum)' if exact else ''}, and no number of them below {bounds.nnls / norm:.3g}"]
 
 
 #: a target object whose fixed light alone exceeds the painted radiosity by more than this is named
@@ -641,15 +661,30 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
-               "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds, "solve": t_inverse + t_reduce,
-               "apply": 0.0, "total": time.perf_counter() - t0}
+               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds,
+               "solve": t_inverse + t_reduce, "apply": 0.0, "total": time.perf_counter() - t0}
     report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]
     stored = StoredResult.from_solve(model, red, curve, report)
+    final = curve.exitance[curve.final_row]
     return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
-                        model.problem, inv, red, scene_light_at(model, curve.exitance[curve.final_row]))
+                        model.problem, inv, red, scene_light_at(model, final), placed_light_at(model, final))
+
+
+def placed_light_at(model: Model, strength) -> list:
+    """[(engine.lamps.Lamp, (P, 3) W/m^2)]: the direct light of each placed lamp (engine/lights/
+    spot.py, area.py, point.py) that is on in the configuration ``strength`` (n_lights, 3)."""
+    lights = model.lights
+    if lights.irradiance is None:
+        return []
+    H = sp.csc_matrix(lights.irradiance)
+    out = []
+    for j in np.flatnonzero(np.any(np.asarray(strength) > 0, axis=1)):
+        if lights.kind_of(j).writer == "placed":
+            out.append((lights.lamp(j), H[:, j].toarray() * np.asarray(strength, dtype=np.float64)[j][None, :]))
+    return out
 
 
 #: above this relative error, the final configuration is compared with the best positive one

@@ -14,7 +14,8 @@ import math
 
 import numpy as np
 
-__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records"]
+__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
+           "kinds_text"]
 
 
 def json_safe(x):
@@ -58,6 +59,34 @@ def lamp_records(model, strength) -> list:
     return out
 
 
+def placed_record(lamp, kind, strength) -> dict:
+    """A lamp the solve placed (engine/lights/spot.py, area.py, point.py) at ``strength`` (3,)
+    (its power per channel, W), as the report lists it and the written copy makes it: object (the
+    Light object's name), kind (spot, area, point), type (Blender's), location and direction (its
+    -Z; a point lamp's is only its orientation), power (W, the channels' sum), strength [r, g, b],
+    energy (Blender's Power, W) and color (Power x colour = the strength), radius (m), a spot's
+    spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
+    shape and size [u, v] (m)."""
+    from ..engine.lights.area import blender_shape
+    from ..engine.lights.lamp import blender_values
+
+    s = np.asarray(strength, dtype=np.float64).reshape(3)
+    energy, color = blender_values(s, lamp.energy, lamp.color)
+    rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
+           "location": lamp.position, "direction": lamp.direction, "center": lamp.position,
+           "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
+           "area": float(lamp.area) if lamp.kind == "AREA" else 0.0, "exitance": None, "strength": s,
+           "power": float(s.sum()), "energy": float(energy), "color": color}
+    if lamp.kind in ("POINT", "SPOT"):
+        rec["radius"] = float(lamp.radius)
+    if lamp.kind == "SPOT":
+        rec.update(spot_size=float(lamp.spot_size), spot_blend=float(lamp.spot_blend),
+                   cone_angle_deg=float(np.degrees(lamp.spot_size)))
+    if lamp.kind == "AREA":
+        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)])
+    return rec
+
+
 def light_records(model, curve, row: int) -> list:
     """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
     them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
@@ -72,6 +101,9 @@ def light_records(model, curve, row: int) -> list:
     lamp_of = dict(zip(*model.lamp_lights)) if model.lamp_lights is not None else {}
     out = []
     for j in np.flatnonzero(np.any(e != 0, axis=1)):
+        if lights.kind_of(j).writer == "placed":
+            out.append(placed_record(lights.lamp(j), kinds[j], e[j]))
+            continue
         if j in lamp_of:
             rec = lamps[model.faces.lamps[lamp_of[j]].name]
             out.append({"object": rec["name"], "polygons": [], "kind": kinds[j], "center": lights.center[j],
@@ -141,9 +173,11 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                    "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
                   for i, p in enumerate(red.curve)],
         "certificate": None if bounds is None else {
-            "nnls_relative_error": bounds.nnls_relative, "seconds": bounds.seconds,
+            # relative to the painted targets' norm, as every relative error of the report (the bounds'
+            # own are of what the lights must add to the scene's fixed light)
+            "nnls_relative_error": bounds.nnls / norm, "seconds": bounds.seconds,
             "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
-                          for k, r, x in zip(bounds.k, bounds.relative, bounds.exact)]},
+                          for k, r, x in zip(bounds.k, bounds.bound / norm, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
                   "n_negative": final.n_negative, "power": _power(problem, final),
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
@@ -153,6 +187,16 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def kinds_text(report) -> str:
+    """What kinds of light the solve offered and chose, in words: "offered 180 cell, 42 group, 1
+    polygon, 72 spot; chose 1 cell, 2 spot" (the report's model.lights_by_kind and final.lights)."""
+    offered = [f"{n} {k}" for k, n in report["model"]["lights_by_kind"].items() if n]
+    chosen = {}
+    for li in report["final"]["lights"]:
+        chosen[li["kind"]] = chosen.get(li["kind"], 0) + 1
+    return f"offered {', '.join(offered) or 'none'}; chose {', '.join(f'{n} {k}' for k, n in chosen.items()) or 'none'}"
 
 
 def _power(problem, point) -> float:

@@ -74,10 +74,9 @@ class StoredResult:
     target_value: np.ndarray
     target_norm: np.ndarray
     meta: dict = field(default_factory=dict)
-    #: direct mode: the scene's lamps in the reduction, as the solve saw them ({name, type, energy
-    #: (Power W; a sun's Strength W/m^2), color, power [r, g, b] = colour x energy, position, direction}),
-    #: and per light the lamp it is (index into ``lamps``; -1 for a surface light). Results written
-    #: before lamps were lights have neither (read as no lamp).
+    #: the lights that are lamps, as the solve saw them (``lamp_record``: the scene's lamps of a
+    #: reduction, as the user set them), and per light the lamp it is (index into ``lamps``; -1 for a
+    #: surface light). Results written before lamps were lights have neither (read as no lamp).
     lamps: list = field(default_factory=list)
     light_lamp: np.ndarray = None
 
@@ -104,13 +103,11 @@ class StoredResult:
         light_object[has_patch] = model.patches.object[C[basis_csc.indices[first[has_patch]]]]
         light_lamp = np.full(lights.n_lights, -1, dtype=np.int64)
         lamps = []
-        for j, i in zip(*(model.lamp_lights or ((), ()))):
-            lamp = model.faces.lamps[i]
-            light_lamp[j] = len(lamps)
-            lamps.append({"name": lamp.name, "type": lamp.kind, "energy": float(lamp.energy),
-                          "color": [float(x) for x in lamp.color], "power": [float(x) for x in lamp.power],
-                          "position": [float(x) for x in lamp.position],
-                          "direction": [float(x) for x in lamp.direction]})
+        for j in range(lights.n_lights):
+            lamp = lights.lamp(j)
+            if lamp is not None:
+                light_lamp[j] = len(lamps)
+                lamps.append(lamp_record(lamp))
         return cls(
             objects=list(model.faces.object_names),
             polygon_offset=pmap.offset,
@@ -203,6 +200,19 @@ class StoredResult:
 
 #: the fields kept as JSON, and their empty value
 _JSON = {"objects": list, "meta": dict, "lamps": list}
+
+
+def lamp_record(lamp) -> dict:
+    """An engine.lamps.Lamp as the stored result keeps it (JSON): name, type (POINT, SPOT, AREA,
+    SUN), energy (Blender's Power, W; a sun's Strength, W/m^2), color, power [r, g, b] = colour x
+    energy, position (m), direction (its -Z), axis_u / axis_v (its X and Y), radius (m), spot_size
+    and spot_blend (rad, Blender's), size_u / size_v (m) and ellipse (an area lamp's shape)."""
+    vec = lambda v: [float(x) for x in v]  # noqa: E731
+    return {"name": lamp.name, "type": lamp.kind, "energy": float(lamp.energy), "color": vec(lamp.color),
+            "power": vec(lamp.power), "position": vec(lamp.position), "direction": vec(lamp.direction),
+            "axis_u": vec(lamp.axis_u), "axis_v": vec(lamp.axis_v), "radius": float(lamp.radius),
+            "spot_size": float(lamp.spot_size), "spot_blend": float(lamp.spot_blend),
+            "size_u": float(lamp.size_u), "size_v": float(lamp.size_v), "ellipse": bool(lamp.ellipse)}
 
 
 def stored_points(n_lights, final_index):

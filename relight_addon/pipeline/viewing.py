@@ -19,12 +19,14 @@ MAX_PATCHES = 20000
 
 
 def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None,
-                    exitance=None, scene_light=None) -> dict:
+                    exitance=None, scene_light=None, placed=None) -> dict:
     """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
     a patch in ``mask`` (default: all), its patches' area-weighted mean. ``exitance`` (P, 3):
     the emitters' (view_radiance's). ``scene_light``: (H (P, n, 3) W/m^2, the direct light of
     ``faces.lamps`` and then of the World: jobs.scene_light), reflected through each patch's BSDF
-    at the lamp's direction (from the patch's centre; the World's as the radiosity model does)."""
+    at the lamp's direction (from the patch's centre; the World's as the radiosity model does).
+    ``placed``: [(engine.lamps.Lamp, H (P, 3) W/m^2)], the direct light of the lamps the solve placed
+    (jobs.placed_light_at), reflected the same way."""
     from .polygons import PolygonMap
 
     P = patches.n_patches
@@ -45,6 +47,10 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
                 d = lamp.position[None, :] - patches.center
                 towards = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
             lamp_light.append((towards, H[:, k]))
+    for lamp, H in placed or ():
+        d = lamp.position[None, :] - patches.center
+        lamp_light.append((d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300),
+                           np.asarray(H, dtype=np.float64)))
     L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
                            exitance=exitance, lamp_light=lamp_light)
     pmap = PolygonMap(faces, patches, polygon_counts)

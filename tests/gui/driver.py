@@ -633,8 +633,16 @@ def scenario():
     row = settings.curve[settings.curve_index]
     data = results.load_result(scene)
     power = float(data.curve_power[int(data.point_index[settings.curve_index])])
+    # the lamps the solve placed (issue 17): Light objects of Relight's, as the stored configuration has them
+    rid = scene.get("relight_result_id")
+    placed = sorted(o.name for o in scene.objects if o.type == "LIGHT" and o.get("relight_owner") == rid)
+    e_shown = data.exitance[settings.curve_index]
+    want = sorted(data.lamps[int(data.light_lamp[j])]["name"] for j in range(len(e_shown))
+                  if data.light_lamp[j] >= 0 and max(e_shown[j]) > 0)
+    check("the configuration's lamps are Light objects in the viewport", placed == want, f"{placed} vs {want}")
     yield from press(found, "bpy.ops.relight.make_area_lights()", settle=2.0)
-    lights = [o.name for o in scene.objects if o.type == "LIGHT"]
+    made = next((c for c in bpy.data.collections if c.get("relight_area_lights") is not None), None)
+    lights = [o.name for o in made.objects if o.type == "LIGHT"] if made is not None else []
     # summed over the channels, as the configuration's power: Cycles emits colour x Power in each
     energy = sum(sum(scene.objects[n].data.color) * scene.objects[n].data.energy for n in lights)
     check("Make Area Lights: area lights carrying the configuration's power",
@@ -646,6 +654,7 @@ def scenario():
     check("Clear removes Relight's results", not traces and len(settings.curve) == 0, traces)
     check("Clear gives the viewport its shading back", shading() == initial_shading, shading())
     left = [n for n in lights if n in scene.objects]
+    check("Clear removes the placed lamps", not [n for n in placed if n in scene.objects], placed)
     check("the area lights Make Area Lights made survive Clear (as its tooltip says)", left == lights,
           f"{len(left)} of {len(lights)} left")
     yield from scroll_sidebar(-40)

@@ -214,6 +214,29 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         else:
             layout.label(text="Edit Mode: forbid selected faces", icon="EDITMODE_HLT")
         layout.operator("relight.select_faces", text="Select Forbidden").kind = "FORBIDDEN"
+        draw_light_kinds(layout, context.scene.relight)
+
+
+def draw_light_kinds(layout, settings):
+    """The kinds of candidate lights the solve offers on the surfaces that may hold lights: their
+    own cells, and lamps mounted in front of them (engine/candidate_lamps.py); greyed out, with
+    why, when the chosen selection runs on single-scale cells (the paper's heuristics)."""
+    from . import operators
+    from ...engine.options import LAMP_OPTIONS, PARAMS
+
+    options = operators.job_options(settings, validate=False)
+    box = layout.box()
+    used = options.uses("surface_lights")
+    box.label(text="Offer" if used else "Offer (this selection: cells only)", icon="LIGHT_SPOT")
+    col = box.column(align=True)
+    col.active = used
+    row = col.row(align=True)
+    for name in ("surface_lights",) + LAMP_OPTIONS:
+        row.prop(settings, name, toggle=True)
+    sub = col.column(align=True)
+    sub.active = used and options.uses("lamp_drop")
+    draw_option(sub, settings, PARAMS["lamp_drop"])
+    draw_option(sub, settings, PARAMS["max_lamps"])
 
 
 def draw_option(layout, settings, p):

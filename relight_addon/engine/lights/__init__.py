@@ -16,9 +16,11 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
 - ``surface.py``: what the surface kinds share; ``cell.py``, ``group.py``, ``polygon.py``.
 - ``lamp.py``: the scene's own lamps (``lamp``: Point, Spot, Area; ``sun``), irradiance sources of the
   direct-lighting mode.
+- ``placed.py``: what the lamps a solve places share; ``spot.py``, ``area.py``, ``point.py`` (candidate
+  lights beside the cells, engine/candidate_lamps.py; written as real Blender lights).
 """
-from . import cell, group, polygon, lamp  # noqa: F401  (registration order = the stored kind codes)
+from . import cell, group, polygon, lamp, spot, area, point  # noqa: F401  (registration order = the stored kind codes)
 from .kind import LightKind
-from .lightset import LightSet, candidate_mask, kind_code, lights_from_groups
+from .lightset import LightSet, append_lamps, candidate_mask, kind_code, lights_from_groups
 
-__all__ = ["LightKind", "LightSet", "candidate_mask", "kind_code", "lights_from_groups"]
+__all__ = ["LightKind", "LightSet", "append_lamps", "candidate_mask", "kind_code", "lights_from_groups"]

@@ -21,7 +21,7 @@ import scipy.sparse as sp
 
 from ..registry import LIGHT_KINDS
 from .kind import LightKind
-from .lightset import LightSet, kind_code
+from .lightset import LightSet, append_lamps
 
 __all__ = ["LAMP", "SUN", "LAMP_KINDS", "add_lamps", "blender_values"]
 
@@ -42,26 +42,10 @@ def add_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, irradi
     ``irradiance`` (P, n_lamps) is its direct irradiance (W/m^2) per unit of strength.
     ``patch_area`` (P,) m^2 gives a sun its lit area."""
     H = sp.csc_matrix(np.asarray(irradiance, dtype=np.float64).reshape(n_patches, len(lamps)))
-    if lights is None:
-        C = np.asarray(candidates, dtype=np.int64)
-        lights = LightSet(C, sp.csr_matrix((len(C), 0)), np.zeros(0, dtype=np.int8), np.zeros(0),
-                          np.zeros((0, 3)), np.zeros((0, 3)))
-    n0 = lights.n_lights
-    kinds = np.array([kind_code(LAMP_KINDS[lamp.kind]) for lamp in lamps], dtype=np.int8)
     lit = np.asarray(H.T @ np.asarray(patch_area, dtype=np.float64)).reshape(-1)
     area = np.array([lit[i] if lamp.kind == "SUN" else (lamp.area if lamp.kind == "AREA" else 0.0)
                      for i, lamp in enumerate(lamps)], dtype=np.float64)
-    center = np.array([lamp.position for lamp in lamps], dtype=np.float64).reshape(-1, 3)
-    # a point lamp shines every way: no normal (the coplanar distribution then finds no plane)
-    normal = np.array([np.zeros(3) if lamp.kind == "POINT" else lamp.direction for lamp in lamps],
-                      dtype=np.float64).reshape(-1, 3)
-    old = lights.irradiance if lights.irradiance is not None else sp.csc_matrix((n_patches, n0))
-    basis = sp.hstack([lights.basis, sp.csr_matrix((lights.basis.shape[0], len(lamps)))]).tocsr()
-    return LightSet(lights.patches, basis, np.concatenate([np.asarray(lights.kind, dtype=np.int8), kinds]),
-                    np.concatenate([np.asarray(lights.area, dtype=np.float64).reshape(-1), area]),
-                    np.concatenate([np.asarray(lights.center, dtype=np.float64).reshape(-1, 3), center]),
-                    np.concatenate([np.asarray(lights.normal, dtype=np.float64).reshape(-1, 3), normal]),
-                    irradiance=sp.hstack([sp.csc_matrix(old), H]).tocsc())
+    return append_lamps(lights, candidates, n_patches, lamps, [LAMP_KINDS[lamp.kind] for lamp in lamps], H, area)
 
 
 #: relative difference between channels' scale factors below which a lamp keeps its colour

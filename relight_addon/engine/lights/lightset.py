@@ -17,7 +17,7 @@ import scipy.sparse as sp
 from ..geometry import group_mean_basis, unit
 from ..registry import LIGHT_KINDS
 
-__all__ = ["LightSet", "candidate_mask", "kind_code", "lights_from_groups"]
+__all__ = ["LightSet", "candidate_mask", "kind_code", "lights_from_groups", "append_lamps"]
 
 
 def kind_code(name: str) -> int:
@@ -48,8 +48,12 @@ class LightSet:
     basis: (|C|, n_lights) CSR 0/1, patch c is part of the exitance source of light l (a
     light of an irradiance kind has an empty column and its source in ``irradiance``).
     kind: (n_lights,) codes of LIGHT_KINDS (``kind_code``). area (m^2), center, normal: per
-    light, area-weighted over its patches. irradiance: None, or (P, n_lights) sparse direct
-    irradiance (W/m^2) per unit strength, for the lights of irradiance kinds.
+    light, area-weighted over its patches (a lamp: its position, and its direction; a point lamp
+    none). irradiance: None, or (P, n_lights) sparse direct irradiance (W/m^2) per unit strength,
+    for the lights of irradiance kinds. lamps: None (no lamp), or per light the engine.lamps.Lamp
+    a light of an irradiance kind is -- its whole geometry (position, direction, axes, cone,
+    radius, size, shape), what the report and the Blender writers read -- and None for a surface
+    light (``lamp``).
     """
 
     patches: np.ndarray
@@ -59,10 +63,15 @@ class LightSet:
     center: np.ndarray = field(default=None)
     normal: np.ndarray = field(default=None)
     irradiance: object = None
+    lamps: list = None
 
     @property
     def n_lights(self) -> int:
         return int(self.basis.shape[1])
+
+    def lamp(self, light):
+        """The engine.lamps.Lamp light ``light`` is (its geometry), None for a surface light."""
+        return None if self.lamps is None else self.lamps[int(light)]
 
     def with_geometry(self, patch_set):
         a = patch_set.area[self.patches]
@@ -127,3 +136,32 @@ def lights_from_groups(patch_set, mask, groups, kind="cell") -> LightSet:
     n = int(light_of.max()) + 1 if len(C) else 0
     basis = sp.csr_matrix((np.ones(len(C)), (np.arange(len(C)), light_of)), shape=(len(C), n))
     return LightSet(C, basis, np.full(n, kind_code(kind), dtype=np.int8)).with_geometry(patch_set)
+
+
+def append_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, kinds, irradiance, area) -> LightSet:
+    """``lights`` (None: there are none; ``candidates`` are then their (empty) patches) followed
+    by one light of an irradiance kind per engine.lamps.Lamp of ``lamps``: its kind name in
+    ``kinds``, its column of ``irradiance`` (P, n) its direct irradiance (W/m^2) per unit of its
+    strength, its ``area`` (m^2; LightKind.watts reads it), its centre the lamp's position and its
+    normal the lamp's direction (none for a point lamp: it shines every way)."""
+    n = len(lamps)
+    H = sp.csc_matrix(irradiance, dtype=np.float64) if sp.issparse(irradiance) else \
+        sp.csc_matrix(np.asarray(irradiance, dtype=np.float64).reshape(n_patches, n))
+    if lights is None:
+        C = np.asarray(candidates, dtype=np.int64)
+        lights = LightSet(C, sp.csr_matrix((len(C), 0)), np.zeros(0, dtype=np.int8), np.zeros(0),
+                          np.zeros((0, 3)), np.zeros((0, 3)))
+    n0 = lights.n_lights
+    codes = np.array([kind_code(k) for k in kinds], dtype=np.int8).reshape(n)
+    center = np.array([lamp.position for lamp in lamps], dtype=np.float64).reshape(-1, 3)
+    normal = np.array([np.zeros(3) if lamp.kind == "POINT" else lamp.direction for lamp in lamps],
+                      dtype=np.float64).reshape(-1, 3)
+    old = lights.irradiance if lights.irradiance is not None else sp.csc_matrix((n_patches, n0))
+    basis = sp.hstack([lights.basis, sp.csr_matrix((lights.basis.shape[0], n))]).tocsr()
+    own = list(lights.lamps) if lights.lamps is not None else [None] * n0
+    return LightSet(lights.patches, basis, np.concatenate([np.asarray(lights.kind, dtype=np.int8), codes]),
+                    np.concatenate([np.asarray(lights.area, dtype=np.float64).reshape(-1),
+                                    np.asarray(area, dtype=np.float64).reshape(n)]),
+                    np.concatenate([np.asarray(lights.center, dtype=np.float64).reshape(-1, 3), center]),
+                    np.concatenate([np.asarray(lights.normal, dtype=np.float64).reshape(-1, 3), normal]),
+                    irradiance=sp.hstack([sp.csc_matrix(old), H]).tocsc(), lamps=own + list(lamps))

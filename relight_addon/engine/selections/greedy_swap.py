@@ -5,11 +5,24 @@ then local search swapping one light at a time while the error drops (engine.bes
 seeded with the exact optima of the certificate where the subsets are few enough to enumerate.
 The curve is monotone (never worse with more lights), every point non-negative; among equal
 errors the least total power wins. Works over the multi-scale candidates (cells, groups, whole
-polygons), so a light is as large or as small as the targets need."""
+polygons), so a light is as large or as small as the targets need. With candidate lamps beside
+the surface lights (engine/candidate_lamps.py), the surface lights' own curve is found as well and
+kept wherever it is better (``never_worse``): the curve with lamps is never worse than the cells'
+alone, at any number of lights."""
 from __future__ import annotations
 
-from ..best_lights import best_k_with_certificate
+from dataclasses import replace
+
+import numpy as np
+
+from ..best_lights import EQUAL_ERROR_RTOL, best_k_curve, best_k_with_certificate
 from ..registry import SELECTIONS
+
+
+def surface_lights(problem) -> np.ndarray:
+    """Indices of the problem's lights of exitance kinds (the surface cells, groups, polygons)."""
+    kinds = problem.lights
+    return np.array([j for j in range(problem.n_lights) if kinds.kind_of(j).source == "exitance"], dtype=np.int64)
 
 #: the curve covers at least this many lights
 CURVE_LIGHTS = 32
@@ -23,13 +36,39 @@ def greedy_swap(s):
     p = s.problem
     k_max = min(p.n_lights, max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
     stop = {"cancel": False}
+    surface = surface_lights(p)
+    both = 0 < len(surface) < p.n_lights  # cells and lamps: the cells' own curve too
 
-    def progress(done, total):
-        stop["cancel"] = s.step(done, total)
+    def progress(done, total, part=0):
+        stop["cancel"] = s.step(done + part * total, (2 if both else 1) * total)
 
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts,
                                             cancel=lambda: stop["cancel"], progress=progress)
+    if both and not stop["cancel"]:
+        columns = {}
+        T = [columns.setdefault(id(t), t[:, surface]) for t in p.transfer]
+        cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
+                             cancel=lambda: stop["cancel"], progress=lambda d, t: progress(d, t, 1))
+        curve = never_worse(curve, cells, surface, tol=EQUAL_ERROR_RTOL * max(float(np.linalg.norm(p.b_target)),
+                                                                              1e-300))
     s.certificate = bounds  # the reduction's result carries it to the certificate stage
     for pt in curve:
         on = pt.exitance.max(axis=1) > 0
         s.record(pt.lights[on], pt.exitance[on], pt.changed)
+
+
+def never_worse(curve, other, columns, tol=0.0) -> list:
+    """Per k the better of ``curve``'s point and ``other``'s (a curve over the lights ``columns``
+    only, its lights mapped back), then monotone again (a point no better than the one before is
+    replaced by it): a curve no worse than either at any k."""
+    by_k = {pt.k: pt for pt in other}
+    out = []
+    for pt in curve:
+        alt = by_k.get(pt.k)
+        if alt is not None and alt.error < pt.error - tol:
+            pt = replace(alt, lights=np.asarray(columns)[alt.lights], source="surface")
+        if out and out[-1].error <= pt.error:
+            prev = out[-1]
+            pt = replace(prev, k=pt.k, source="fewer") if prev.error < pt.error else pt
+        out.append(pt)
+    return out

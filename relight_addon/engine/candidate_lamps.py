@@ -1,0 +1,333 @@
+"""Candidate lamps: Spot, Area and Point lamps offered beside the surface cells (no bpy).
+
+From the patches that may hold lights (the candidate surfaces) and the painted targets, a solve
+offers lamps as a lighting designer would mount them, each one light of the candidate set that
+Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells stay):
+
+- **Mounting positions.** The candidate patches are grouped into at most ``positions`` groups by
+  k-means on their centres (with their normals, so that a ceiling and a wall are not mixed); each
+  group's position is the candidate patch nearest its centroid, moved ``drop`` (m) in front of it
+  along its normal. ``drop`` defaults to DROP_FRACTION of the scene's bounding-box diagonal (17 cm
+  in issue 17's 6 x 5 x 3.2 m gallery), and a patch whose drop is blocked (something closer in
+  front of it) mounts nothing.
+- **Target regions.** The painted targets that ask for light are grouped by object, orientation
+  (normal_bucket) and painted value; each group and its halves and quarters (split across its
+  principal axis, down to about the patch size) is a *cluster*, ranked by the power it asks for
+  (area x painted radiosity); the first MAX_CLUSTERS are aimed at.
+- **Spots**: from every position that sees a cluster (VISIBLE_SHARE of its area), one spot whose
+  cone just covers it: its axis the centre of the smallest cone holding every vertex of the
+  cluster's patches (Badoiu-Clarkson iterations), its Spot Size twice that cone's half-angle and
+  CONE_MARGIN more, blend SPOT_BLEND, radius 0. So each position has several cones, one per
+  cluster it sees: the whole painting, its halves, the band around it, ...
+- **Area lamps**: from every position, facing each of the first AREA_CLUSTERS clusters it sees, a
+  square of the light size (Spread 180 degrees: Lambertian, one-sided).
+- **Point lamps**: one per position (radius 0).
+
+The count is bounded by ``max_lamps`` (the positions are as many as it allows:
+``positions_for``), so the cost estimate holds (engine.cost: ``lamp_bound``). Each lamp's source is
+its direct irradiance per W on the patches its light can reach (engine.lamps.lamp_irradiance,
+LAMP_POINTS receiver points per patch, shadow rays on the form factors' sampler); a lamp that
+lights no patch is left out. Deterministic for a seed.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import unit
+from .lamps import lamp_irradiance
+from .lights import append_lamps
+from .lights.area import area_lamp
+from .lights.point import point_lamp
+from .lights.spot import spot_lamp
+from .patch_models.adaptive import normal_bucket
+
+__all__ = ["KIND_OPTIONS", "DROP_FRACTION", "offered_kinds", "default_drop", "lamp_bound", "plan_lamps",
+           "offer_lamps", "target_clusters", "mount_positions", "Cluster"]
+
+#: the job option that offers each kind of candidate lamp (engine/options.py)
+KIND_OPTIONS = {"spot": "spot_lamps", "area": "area_lamps", "point": "point_lamps"}
+#: the default drop in front of the candidate surfaces, x the scene's bounding-box diagonal
+DROP_FRACTION = 0.02
+#: target clusters aimed at by spots, and by area lamps
+MAX_CLUSTERS = 6
+AREA_CLUSTERS = 2
+#: a cluster is split across its principal axis while its extent along it is above this many
+#: patch sizes, at most SPLIT_DEPTH times (halves, quarters)
+SPLIT_EXTENT = 2.0
+SPLIT_DEPTH = 2
+#: a position aims at a cluster when at least this share of the cluster's area sees it
+VISIBLE_SHARE = 0.5
+#: a spot's cone: its half-angle is the cluster's and this much more (relative)
+CONE_MARGIN = 0.02
+#: the spots per position and cluster: (cone, Blender's Blend); cone "cover": the smallest cone
+#: holding the whole cluster, "area": the cone of the cluster's solid angle (as large as it)
+CONES = (("cover", 0.3), ("area", 0.3))
+#: receiver points per patch of a candidate lamp's irradiance (engine.lamps)
+LAMP_POINTS = 16
+#: k-means iterations of the mounting positions
+KMEANS_ITERATIONS = 12
+
+
+@dataclass
+class Cluster:
+    """A target region aimed at: its patches, its area-weighted centre, the vertices of its
+    patches' triangles and the power it asks for (W: area x painted radiosity, channels summed)."""
+
+    patches: np.ndarray
+    center: np.ndarray
+    points: np.ndarray
+    power: float
+
+
+def offered_kinds(options) -> tuple:
+    """The kinds of candidate lamps the job offers ("spot", "area", "point"), from its options
+    (none when the chosen selection runs on single-scale cells: engine/options.py)."""
+    return tuple(k for k, name in KIND_OPTIONS.items() if options.param(name, False))
+
+
+def default_drop(patches) -> float:
+    """DROP_FRACTION x the bounding-box diagonal of the patches (m)."""
+    v = patches.tri_vertices.reshape(-1, 3)
+    return DROP_FRACTION * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+
+
+def _per_position(kinds, n_clusters) -> int:
+    return (("point" in kinds) + ("spot" in kinds) * len(CONES) * min(n_clusters, MAX_CLUSTERS)
+            + ("area" in kinds) * min(n_clusters, AREA_CLUSTERS))
+
+
+def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
+    """How many mounting positions ``max_lamps`` lamps allow (at least one when any kind is offered)."""
+    per = _per_position(kinds, n_clusters)
+    if per == 0 or n_candidates == 0:
+        return 0
+    return int(min(n_candidates, max(1, max_lamps // per)))
+
+
+def lamp_bound(patches, candidates, options) -> int:
+    """An upper bound of the number of candidate lamps ``plan_lamps`` makes (engine.cost)."""
+    kinds = offered_kinds(options)
+    if not kinds:
+        return 0
+    n_cand = int(np.count_nonzero(candidates))
+    n_tg = int(np.count_nonzero(patches.target))
+    M = positions_for(options.max_lamps, kinds, max(n_tg, 1), n_cand)
+    return int(min(options.max_lamps, M * _per_position(kinds, max(n_tg, 1))))
+
+
+# -- target regions ---------------------------------------------------------------------------
+
+def _patch_vertices(patches, idx):
+    sel = np.isin(patches.tri_patch, idx)
+    return np.unique(patches.tri_vertices[sel].reshape(-1, 3), axis=0)
+
+
+def _splits(patches, idx, size, depth):
+    """``idx`` and its halves across its principal axis (recursively, ``depth`` times) while its
+    extent along the axis exceeds SPLIT_EXTENT x ``size``."""
+    out = [idx]
+    if depth == 0 or len(idx) < 2:
+        return out
+    c, w = patches.center[idx], patches.area[idx]
+    mean = (c * w[:, None]).sum(axis=0) / w.sum()
+    _, _, vt = np.linalg.svd((c - mean) * np.sqrt(w)[:, None], full_matrices=False)
+    t = (c - mean) @ vt[0]
+    if np.ptp(t) <= SPLIT_EXTENT * size:
+        return out
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    cuts = np.flatnonzero(np.diff(ts) > 1e-6 * max(np.ptp(ts), 1e-300)) + 1  # between distinct positions
+    if not len(cuts):
+        return out
+    cum = np.concatenate([[0.0], np.cumsum(w[order])])
+    half = int(cuts[np.argmin(np.abs(cum[cuts] - 0.5 * w.sum()))])  # the cut nearest the area's median
+    for part in (np.sort(idx[order[:half]]), np.sort(idx[order[half:]])):
+        out.extend(_splits(patches, part, size, depth - 1))
+    return out
+
+
+def target_clusters(patches, max_clusters=MAX_CLUSTERS) -> list:
+    """The target regions aimed at (see the module docstring), most power first."""
+    want = patches.target_radiosity.sum(axis=1)
+    tg = np.flatnonzero(patches.target & (want > 0))
+    if not len(tg):
+        return []
+    key = np.column_stack([patches.object[tg], normal_bucket(patches.normal[tg]), patches.target_radiosity[tg]])
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    size = float(patches.max_patch_size)
+    found = []
+    for g in range(int(group.max()) + 1):
+        for idx in _splits(patches, tg[group == g], size, SPLIT_DEPTH):
+            w = patches.area[idx]
+            found.append((float((w * want[idx]).sum()), idx))
+    found.sort(key=lambda x: (-x[0], int(x[1][0]), len(x[1])))
+    out = []
+    for power, idx in found[:max_clusters]:
+        w = patches.area[idx]
+        out.append(Cluster(idx, (patches.center[idx] * w[:, None]).sum(axis=0) / w.sum(), _patch_vertices(patches, idx),
+                           power))
+    return out
+
+
+# -- mounting positions -----------------------------------------------------------------------
+
+def mount_positions(patches, candidates, count, drop, sampler) -> tuple:
+    """(positions (M, 3), normals (M, 3), patches (M,)) of at most ``count`` mounting positions: the
+    candidate patches nearest the centroids of k-means groups of the candidates (centres with
+    their normals), moved ``drop`` along their normal; a patch whose drop is blocked is not used."""
+    C = np.flatnonzero(candidates)
+    if count <= 0 or not len(C):
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    n = patches.normal[C]
+    o = (patches.center[C] + n * sampler.offset).astype(np.float32)
+    free = sampler.visible(o, n.astype(np.float32), np.full(len(C), 1.5 * drop, dtype=np.float32))
+    C, n = C[free], n[free]
+    if not len(C):
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    v = patches.tri_vertices.reshape(-1, 3)
+    scale = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    X = np.column_stack([patches.center[C], 0.5 * scale * n])
+    w = patches.area[C]
+    k = min(int(count), len(C))
+    # farthest-point start (from the candidate nearest the candidates' centroid), then Lloyd
+    first = int(np.argmin(np.linalg.norm(X - (X * w[:, None]).sum(axis=0) / w.sum(), axis=1)))
+    centers = [X[first]]
+    d = np.linalg.norm(X - centers[0], axis=1)
+    for _ in range(1, k):
+        j = int(np.argmax(d))
+        centers.append(X[j])
+        d = np.minimum(d, np.linalg.norm(X - X[j], axis=1))
+    centers = np.array(centers)
+    for _ in range(KMEANS_ITERATIONS):
+        label = np.argmin(((X[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2), axis=1)
+        for j in range(k):
+            m = label == j
+            if m.any():
+                centers[j] = (X[m] * w[m, None]).sum(axis=0) / w[m].sum()
+    pick = np.unique([int(np.argmin(np.linalg.norm(X - c, axis=1))) for c in centers])
+    P = C[pick]
+    return patches.center[P] + drop * patches.normal[P], patches.normal[P].copy(), P
+
+
+def _visible_share(sampler, position, cluster, patches):
+    """The share of the cluster's area whose centre sees ``position`` (shadow rays)."""
+    c = patches.center[cluster.patches]
+    d = position[None, :] - c
+    t = np.linalg.norm(d, axis=1)
+    d = d / np.maximum(t, 1e-300)[:, None]
+    o = (c + patches.normal[cluster.patches] * sampler.offset).astype(np.float32)
+    ok = sampler.visible(o, d.astype(np.float32), np.maximum(t - 2 * sampler.offset, 0).astype(np.float32))
+    ok &= (patches.normal[cluster.patches] * d).sum(axis=1) > 0
+    w = patches.area[cluster.patches]
+    return float(w[ok].sum() / w.sum())
+
+
+def _solid_angle(patches, cluster, position) -> float:
+    """The solid angle (sr) the cluster's patches subtend at ``position`` (sum of A cos / d^2)."""
+    v = position[None, :] - patches.center[cluster.patches]
+    d2 = np.maximum((v * v).sum(axis=1), 1e-300)
+    cos = np.maximum((patches.normal[cluster.patches] * v).sum(axis=1), 0.0) / np.sqrt(d2)
+    return float(min((patches.area[cluster.patches] * cos / d2).sum(), 4 * math.pi))
+
+
+def enclosing_cone(directions, iterations=64) -> tuple:
+    """(axis, half-angle) of a small cone holding the unit ``directions`` (n, 3): Badoiu-Clarkson
+    steps toward the farthest direction (within a few per cent of the smallest cone)."""
+    a = unit(directions.mean(axis=0)[None, :])[0]
+    if not np.any(a):
+        a = directions[0].copy()
+    for i in range(iterations):
+        far = directions[int(np.argmin(directions @ a))]
+        a = unit((a + (far - a) / (i + 2))[None, :])[0]
+    return a, float(np.arccos(np.clip((directions @ a).min(), -1.0, 1.0)))
+
+
+def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> tuple:
+    """The candidate lamps (no irradiance yet): ([engine.lamps.Lamp], [kind name]) as the module
+    docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``).
+    ``notes``: a list that gets a warning when no lamp can hang (every drop blocked)."""
+    kinds = offered_kinds(options)
+    if not kinds:
+        return [], []
+    clusters = target_clusters(patches)
+    M = positions_for(options.max_lamps, kinds, max(len(clusters), 1), int(np.count_nonzero(candidates)))
+    drop = float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches)) if drop is None \
+        else float(drop)
+    pos, nrm, _ = mount_positions(patches, candidates, M, drop, sampler)
+    if M and not len(pos) and notes is not None:
+        notes.append(f"no candidate lamp can hang {drop:.3g} m in front of the surfaces that may hold lights "
+                     "(something closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
+    size = float(patches.light_size or patches.max_patch_size)
+    lamps, names = [], []
+
+    def add(kind, lamp):
+        lamps.append(lamp)
+        names.append(kind)
+
+    for p, n in zip(pos, nrm):
+        seen = [c for c in clusters if _visible_share(sampler, p, c, patches) >= VISIBLE_SHARE]
+        if "point" in kinds:
+            add("point", point_lamp(f"Relight Point {len(lamps) + 1}", p))
+        for rank, c in enumerate(seen):
+            d = unit(c.points - p[None, :])
+            axis, half = enclosing_cone(d)
+            if axis @ n <= 0:  # the cluster is behind the mounting surface
+                continue
+            for cone, blend in CONES if "spot" in kinds else ():
+                if cone == "cover":
+                    spot = 2.0 * half * (1.0 + CONE_MARGIN)
+                else:  # the cone of the cluster's solid angle: 2 pi (1 - cos(half)) = omega
+                    spot = 2.0 * math.acos(max(-1.0, 1.0 - _solid_angle(patches, c, p) / (2 * math.pi)))
+                if 0 < spot <= math.pi:
+                    add("spot", spot_lamp(f"Relight Spot {len(lamps) + 1}", p, axis, spot, blend))
+            if "area" in kinds and rank < AREA_CLUSTERS:
+                add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
+    return lamps[:options.max_lamps], names[:options.max_lamps]
+
+
+def _reach(patches, lamps, radius):
+    """Per lamp, the patches its light can reach (a spot: those its cone meets; an area lamp: those
+    in front of its plane; a point lamp: all)."""
+    out = []
+    for lamp in lamps:
+        v = patches.center - lamp.position[None, :]
+        dist = np.linalg.norm(v, axis=1)
+        if lamp.kind == "SPOT":
+            cos_a = (v @ lamp.direction) / np.maximum(dist, 1e-300)
+            ang = np.arccos(np.clip(cos_a, -1.0, 1.0)) - np.arcsin(np.clip(radius / np.maximum(dist, 1e-300), 0, 1))
+            out.append(np.flatnonzero(ang < 0.5 * lamp.spot_size))
+        elif lamp.kind == "AREA":
+            out.append(np.flatnonzero(v @ lamp.direction > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))))
+        else:
+            out.append(np.arange(patches.n_patches))
+    return out
+
+
+def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
+    """``lights`` (the surface lights; None: none, over the candidate patches ``candidates``)
+    followed by the candidate lamps (``plan_lamps``) that light at least one patch, each a light
+    of its kind whose source is its direct irradiance per W (engine.lamps). Returns
+    (LightSet, number of lamps planned); ``notes`` gets plan_lamps' warning."""
+    lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
+    if not lamps:
+        return lights, 0
+    radius = np.zeros(patches.n_patches)
+    corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
+    np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
+    H = np.zeros((patches.n_patches, len(lamps)))
+    reach = _reach(patches, lamps, radius)
+    step = 16
+    for i in range(0, len(lamps), step):
+        H[:, i:i + step] = lamp_irradiance(patches, lamps[i:i + step], sampler=sampler,
+                                           seed=int(seed) + 1_000_003 * (i // step + 1),
+                                           points_per_patch=LAMP_POINTS, only=reach[i:i + step])[:, :, 0]
+        if progress is not None:
+            progress(min(i + step, len(lamps)) / len(lamps))
+    lit = np.flatnonzero(H.max(axis=0) > 0)
+    area = np.array([lamps[i].area if lamps[i].kind == "AREA" else 0.0 for i in lit])
+    return append_lamps(lights, np.flatnonzero(candidates), patches.n_patches, [lamps[i] for i in lit],
+                        [kinds[i] for i in lit], H[:, lit], area), len(lamps)
