@@ -162,14 +162,14 @@ def test_infeasible_contrast_reports_the_positive_floor():
 def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     """The engine's reductions end positive with a large error and no message of their own; the
     job (what `relight solve` and the add-on run) adds one, with the NNLS bound."""
-    from relight_addon.pipeline.jobs import _positivity_notes
+    from relight_addon.pipeline.jobs import _positivity_notes, positive_bound
     from relight_addon.engine.reduction import reduce_lights
 
     prob = CASES["infeasible contrast"][1]()
     inv = solve_inverse(prob, "reduced")
     red = reduce_lights(prob, inv.exitance, max_lights=3)
     assert red.final.n_negative == 0 and red.final.relative_error > 0.1
-    notes = _positivity_notes(prob, inv, red.final)
+    notes = _positivity_notes(positive_bound(prob, inv, red.final), red.final)
     nn = solve_inverse(prob, "nnls")
     assert len(notes) == 1 and "no positive lighting meets these targets" in notes[0]
     assert f"{nn.relative_error:.3g}" in notes[0]
@@ -178,5 +178,5 @@ def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     if base is not None:
         inv2 = solve_inverse(base, "reduced")
         red2 = reduce_lights(base, inv2.exitance, max_lights=1)
-        for note in _positivity_notes(base, inv2, red2.final):
+        for note in _positivity_notes(positive_bound(base, inv2, red2.final), red2.final):
             assert "allow more lights" in note or "no positive lighting" in note

@@ -18,7 +18,10 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
 - the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR;
 - the candidate lamps (engine/candidate_lamps.py, at most their bound): each lamp's irradiance at
   LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each;
-  they add to L;
+  they add to L; the refinement of the chosen lamps (engine/lamp_refinement.py): at most
+  k (k + 1) / 2 lamps for k = Max Lights (the final configuration's and the smaller ones'),
+  ROUNDS x MAX_EVALUATIONS evaluations each at SEARCH_POINTS points on every patch, and the
+  targets' rows of A^-1 diag(rho) (3 x 8 P m bytes);
 - the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
@@ -35,6 +38,7 @@ import os
 import numpy as np
 
 from .candidate_lamps import LAMP_POINTS
+from .lamp_refinement import MAX_EVALUATIONS as REFINE_EVALUATIONS, ROUNDS as REFINE_ROUNDS, SEARCH_POINTS
 from .formfactors import CHUNK_RAYS, DENSE_LIMIT
 from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
@@ -94,7 +98,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                   rays_per_second: float = RAYS_PER_SECOND,
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
-                  threads: int | None = None, n_lamps: int = 0) -> dict:
+                  threads: int | None = None, n_lamps: int = 0, lamp_refinements: int = 0) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
     Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
@@ -105,6 +109,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     C = _count("n_candidates", n_candidates)
     m = _count("n_targets", n_targets)
     n_lamps = _count("n_lamps", n_lamps)
+    refinements = _count("lamp_refinements", lamp_refinements)
     L = (C if n_lights is None else _count("n_lights", n_lights)) + n_lamps
     tris = _count("n_triangles", n_triangles)
     passes = _count("refine_passes", refine_passes)
@@ -126,6 +131,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         points = float(n_lamps) * P * LAMP_POINTS
         parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
                           points * LAMP_SECONDS_PER_POINT * (passes + 1))
+    if refinements:  # each a lamp's Nelder-Mead search, its shadow rays on every patch (at most)
+        points = float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS * P * SEARCH_POINTS
+        parts["lamp_refinement"] = (3 * 8.0 * P * m, points * LAMP_SECONDS_PER_POINT)
     k = min(m, C)
     if P <= DIRECT_SOLVE_LIMIT:
         parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)

@@ -428,6 +428,19 @@ class InverseProblem:
             self._check_reachable()
         return self._transfer
 
+    def add_lights(self, lights, columns):
+        """Extend the problem to ``lights`` (a LightSet: the problem's lights followed by new ones,
+        engine.lights.append_lamps) whose new lights' columns of T are ``columns`` (3 arrays (m, n_new),
+        computed by the caller from their sources, e.g. engine.lamp_refinement.Transport)."""
+        n0 = self.n_lights
+        T = self.transfer
+        self._init_lights(None, lights.basis, lights)
+        if self.n_lights < n0 or any(np.shape(columns[c]) != (self.m, self.n_lights - n0) for c in range(3)):
+            raise InverseError(f"{self.n_lights - n0} new light(s) need 3 transfer blocks of shape "
+                               f"({self.m}, {self.n_lights - n0})")
+        self._transfer = [np.ascontiguousarray(np.hstack([T[c], np.asarray(columns[c], dtype=np.float64)]))
+                          for c in range(3)]
+
     def _irradiance_transfer(self, fac, c, H):
         """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
         lights whose source is a direct irradiance H (P, n_lights)."""

@@ -17,14 +17,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..engine.best_lights import lower_bounds
-from ..engine.candidate_lamps import lamp_bound, offer_lamps, offered_kinds
+from ..engine.best_lights import _nnls
+from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
+from ..engine.lamp_refinement import Mount, Transport, refine_configuration
+from ..engine.lights.placed import WRITER as PLACED, frame
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables
 from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
 from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
-from ..engine.lights import LightSet, candidate_mask
+from ..engine.lights import LightSet, append_lamps, candidate_mask
 from ..engine.lights.lamp import add_lamps
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
@@ -198,9 +201,11 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
     candidate lamps counted at their bound (engine.candidate_lamps.lamp_bound)."""
     passes = options.param("refine_passes", 0)  # 0 unless the chosen patch model declares it
     lamps = lamp_bound(patches, candidate_mask(patches, mode), options) if mode == "inverse" else 0
+    k = min(options.max_lights, lamps) if lamps and options.param("refine_lamps", False) else 0
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
                                  n_triangles=n_triangles, refine_passes=passes,
-                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads, n_lamps=lamps)
+                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads, n_lamps=lamps,
+                                 lamp_refinements=k * (k + 1) // 2)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -246,6 +251,7 @@ class Model:
     #                                     the World's (inverse mode), the World's (direct mode: the lamps are lights)
     lamp_names: list = None  # [(name, kind, power)] per column of lamp_irradiance
     lamp_lights: tuple = None  # direct mode: (light indices, faces.lamps indices) of the lamps being reduced
+    lamp_refinement: dict = None  # refine_stage: the chosen lamps' refinement, per curve point
 
 
 @dataclass
@@ -462,29 +468,94 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     return red
 
 
+def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progress=None, cancel=None) -> dict:
+    """Stage 3b: the placed lamps of the final configuration and of the curve's smaller ones refined (engine.lamp_refinement): each refined lamp becomes a new light
+    of the problem (its kind, its column of T), the point's lights and strengths (NNLS per channel)
+    and error follow. Returns what the report says of it (``None`` when nothing was refined)."""
+    if model.mode != "inverse" or not options.param("refine_lamps", False) or not offered_kinds(options):
+        return None
+    problem, lights, patches = model.problem, model.lights, model.patches
+    todo = [i for i, pt in enumerate(red.curve)
+            if (pt.n_lights <= red.final.n_lights or i == red.final_index) and pt.n_negative == 0
+            and any(lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED for j in pt.lights)]
+    if not todo:
+        return None
+    t0 = time.perf_counter()
+    sampler = getattr(model.form_factors, "sampler", None) or SceneSampler(patches)
+    drop = float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches))
+    mount = Mount(patches, problem.candidate_mask, drop, sampler)
+    transport = Transport(problem)
+    step = float(patches.light_size or patches.max_patch_size)
+    T = problem.transfer
+    new_lamps, new_kinds, new_H, new_cols = [], [], [], [[], [], []]
+    rows, evaluations = [], 0
+    for n_done, i in enumerate(todo):
+        if cancel is not None and cancel():
+            raise Cancelled("solve cancelled")
+        pt = red.curve[i]
+        placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights)
+                  if lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED}
+        refined, cols, before, after, n_eval = refine_configuration(
+            problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step, frame,
+            seed=options.seed, cancel=cancel)
+        evaluations += n_eval
+        rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
+                     "lamps_refined": len(refined), "evaluations": n_eval})
+        if refined:
+            ids = np.array(pt.lights, dtype=np.int64)
+            for r in refined:
+                ids[r.index] = lights.n_lights + len(new_lamps)
+                new_lamps.append(r.lamp)
+                new_kinds.append(lights.kind_names[int(pt.lights[r.index])])
+                new_H.append(r.irradiance)
+                for c in range(3):
+                    new_cols[c].append(cols[c][:, r.index])
+            e = np.stack([_nnls(cols[c], problem.b_target[:, c]) for c in range(3)], axis=1)
+            order = np.argsort(ids, kind="stable")
+            on = e[order].max(axis=1) > 0
+            error = float(np.linalg.norm(np.stack([cols[c] @ e[:, c] for c in range(3)], axis=1) - problem.b_target))
+            red.curve[i] = replace(pt, n_lights=int(on.sum()), lights=ids[order][on], exitance=e[order][on],
+                                   error=error, relative_error=error / (problem.target_norm or 1.0))
+        if progress is not None:
+            progress("refining lamps", 0.95 + 0.03 * (n_done + 1) / len(todo))
+    offered = lights.count_by_kind()
+    if new_lamps:
+        area = np.array([lamp.area if lamp.kind == "AREA" else 0.0 for lamp in new_lamps])
+        model.lights = append_lamps(lights, lights.patches, patches.n_patches, new_lamps, new_kinds,
+                                    np.stack(new_H, axis=1), area)
+        problem.add_lights(model.lights, [np.stack(new_cols[c], axis=1) for c in range(3)])
+    return {"points": rows, "offered": offered, "lamps_refined": len(new_lamps), "evaluations": evaluations,
+            "seconds": time.perf_counter() - t0}
+
+
 #: the certificate (lower bounds) covers the curve up to this many lights; above, the NNLS bound
 CERTIFICATE_LIGHTS = 32
 
 
 def certificate(problem: InverseProblem, red: ReductionResult):
-    """Lower bounds on the best error any non-negative configuration of at most k lights can reach
-    (engine.best_lights.lower_bounds: exact by exhaustive search where small enough, else the
-    all-lights NNLS bound), and per curve point its bound (W/m^2)."""
+    """Lower bounds on the best error any non-negative configuration of at most k of the candidate
+    lights can reach (engine.best_lights.lower_bounds: exact by exhaustive search where small
+    enough, else the all-lights NNLS bound; ``bounds.at(k)``, W/m^2)."""
     k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
     bounds = red.certificate  # the greedy-swap selection computed it already
     if bounds is None or len(bounds.bound) < k_top:
         bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
-    return bounds, np.array([bounds.at(p.n_lights) for p in red.curve])
+    return bounds
 
 
-def certificate_notes(problem, bounds, final) -> list:
-    """How good the final configuration is against the certificate."""
+def certificate_notes(problem, bounds, final, refined=None) -> list:
+    """How good the final configuration is against the certificate (of the candidate lights;
+    ``refined``: refine_stage's account, whose lamps may take the error below it)."""
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     k = final.n_lights
     exact = 1 <= k <= len(bounds.exact) and bool(bounds.exact[k - 1])
     lb = bounds.at(k) / norm
     if final.n_negative or final.relative_error <= 1e-9:
         return []
+    if refined and refined["lamps_refined"] and final.relative_error < lb * (1 - 1e-6):
+        return [f"{k} light(s): relative error {final.relative_error:.3g}, below the {lb:.3g} that no {k} of the "
+                f"candidate lights can go below{' (exact optimum)' if exact else ''}: the chosen lamps' aim, cone, "
+                "size and position were refined"]
     if exact and final.relative_error <= lb * (1 + 1e-6) + 1e-12:
         return [f"{k} light(s): the best possible with {k} non-negative lights (exhaustive search), "
                 f"relative error {final.relative_error:.3g}"]
@@ -644,15 +715,19 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
         raise Cancelled("solve cancelled")
     t2 = time.perf_counter()
     red = reduce_stage(model, e_x, options, progress, cancel)
-    t_reduce = time.perf_counter() - t2
+    bounds = point_bounds = positive = None
+    if mode == "inverse":  # of the candidate lights (the refined lamps are found after, outside them)
+        bounds = certificate(model.problem, red)
+        positive = positive_bound(model.problem, inv, red.final)
+    t_refine = time.perf_counter()
+    model.lamp_refinement = refine_stage(model, red, options, progress, cancel)
+    t_refine = time.perf_counter() - t_refine
+    t_reduce = time.perf_counter() - t2 - t_refine
     warnings = list(model.warnings)
-    bounds = point_bounds = None
     if mode == "inverse":
-        t3 = time.perf_counter()
-        bounds, point_bounds = certificate(model.problem, red)
-        t_reduce += time.perf_counter() - t3
-        warnings.extend(_positivity_notes(model.problem, inv, red.final))
-        warnings.extend(certificate_notes(model.problem, bounds, red.final))
+        point_bounds = np.array([bounds.at(p.n_lights) for p in red.curve])
+        warnings.extend(_positivity_notes(positive, red.final))
+        warnings.extend(certificate_notes(model.problem, bounds, red.final, refined=model.lamp_refinement))
     fixed = None
     if mode == "inverse" or model.lamp_names:
         fixed, notes = fixed_light(model)
@@ -661,8 +736,9 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
                     if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
-               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "curve": curve.seconds,
-               "solve": t_inverse + t_reduce, "apply": 0.0, "total": time.perf_counter() - t0}
+               "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "lamp_refinement": t_refine,
+               "curve": curve.seconds,
+               "solve": t_inverse + t_reduce + t_refine, "apply": 0.0, "total": time.perf_counter() - t0}
     report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
@@ -691,18 +767,24 @@ def placed_light_at(model: Model, strength) -> list:
 POSITIVE_GAP = 0.1
 
 
-def _positivity_notes(problem, inv, final):
+def positive_bound(problem, inv, final):
+    """NNLS on T when ``final`` misses the targets by more than POSITIVE_GAP (the best any set of
+    the candidate lights, non-negative, can do: an InverseResult), else None."""
+    if not final.relative_error > POSITIVE_GAP:
+        return None
+    return inv if inv is not None and inv.solver == "nnls" else solve_inverse(problem, "nnls")
+
+
+def _positivity_notes(bound, final):
     """Say so when the final configuration misses the targets by much: whether no positive
     lighting can do better (targets brighter or darker than light can make them) or whether
-    more lights / another selection would. The bound is NNLS on T: the best any set of
-    non-negative lights can do."""
-    if not final.relative_error > POSITIVE_GAP:
+    more lights / another selection would. ``bound``: positive_bound's."""
+    if bound is None or not final.relative_error > POSITIVE_GAP:
         return []
-    bound = inv if inv is not None and inv.solver == "nnls" else solve_inverse(problem, "nnls")
     n_pos = int((bound.exitance.max(axis=1) > 0).sum())
     if bound.relative_error > POSITIVE_GAP:
-        return [f"no positive lighting meets these targets: the best any non-negative lights can do is a "
-                f"relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
+        return [f"no positive lighting meets these targets: the best any non-negative set of the candidate lights "
+                f"can do is a relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
                 f"is {final.relative_error:.3g}"]
     return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
             f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "

@@ -237,6 +237,7 @@ def draw_light_kinds(layout, settings):
     sub.active = used and options.uses("lamp_drop")
     draw_option(sub, settings, PARAMS["lamp_drop"])
     draw_option(sub, settings, PARAMS["max_lamps"])
+    sub.prop(settings, "refine_lamps")
 
 
 def draw_option(layout, settings, p):

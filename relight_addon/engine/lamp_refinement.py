@@ -1,0 +1,258 @@
+"""Refinement of the chosen lamps (issue 17, item 3; no bpy).
+
+Best k Lights chooses among a finite set of candidate lamps (engine/candidate_lamps.py): a few
+mounting positions, a cone or a size per target cluster. Once a configuration is chosen, each of
+its placed lamps' continuous parameters is refined to lower the configuration's true error (Eq. 1
+over the targets, with every light's strength re-fitted by non-negative least squares per channel):
+
+- a spot: its aim (two angles about its axis), its Spot Size (log scale), its Blend and its
+  position on the mounting surface;
+- an area lamp: its aim, its size (log scale, each side) and its position;
+- a point lamp: its position.
+
+A lamp stays valid: a cone within (0, pi], a blend within [0, 1], a size within
+[SIZE_RANGE] x its first size, and its position ``drop`` in front of a surface that may hold lights
+(a ray from the lamp back along the mounting normal hits a candidate patch facing it, with
+nothing closer than the drop): it slides along the surface it hangs from and never into a wall
+or past a forbidden face.
+
+The transfer is linear in the powers: a lamp's column of T is rows P of A^-1 diag(rho) h for its
+direct irradiance h (engine.lamps, LAMP_POINTS receiver points per patch, shadow rays), so one
+evaluation costs one lamp's shadow rays on the patches its light can reach, a (P, m) product per
+channel and k-column NNLS fits. The lamps are refined one at a time (the others fixed) by scipy's
+Nelder-Mead on parameters scaled to unit steps, at most MAX_EVALUATIONS evaluations each, for
+ROUNDS rounds; a lamp's refinement is kept only when it lowers the error. Each evaluation draws the
+same receiver points (one seed), so the error is a deterministic function of the parameters and a
+result is reproducible.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.optimize as sopt
+
+from .best_lights import _nnls
+from .geometry import unit
+from .lamps import lamp_irradiance
+
+__all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
+
+#: receiver points per patch of a lamp's irradiance while searching, and for the lamp kept
+#: (as candidate_lamps.LAMP_POINTS)
+SEARCH_POINTS = 4
+LAMP_POINTS = 16
+#: Nelder-Mead evaluations per lamp and round, and rounds over the configuration's lamps
+MAX_EVALUATIONS = 60
+ROUNDS = 2
+#: a round that lowers the relative error by less than this stops the refinement
+MIN_GAIN = 1e-4
+#: a size stays within this range of factors of its first size
+SIZE_RANGE = (0.25, 4.0)
+#: the parameters refined per lamp kind (engine.lamps.Lamp.kind)
+PARAMETERS = {"SPOT": ("aim_u", "aim_v", "log_size", "blend", "slide_u", "slide_v"),
+              "AREA": ("aim_u", "aim_v", "log_size_u", "log_size_v", "slide_u", "slide_v"),
+              "POINT": ("slide_u", "slide_v")}
+
+
+class Transport:
+    """Rows P (the targets) of A^-1 diag(rho) per channel, from an InverseProblem's solvers: the
+    targets' radiosity per unit of direct irradiance on each patch (``column``)."""
+
+    def __init__(self, problem):
+        facs = problem.factors()
+        m, P = problem.m, problem.n_patches
+        self.Z = []
+        done = {}
+        for c in range(3):
+            key = (id(facs[c]), problem.reflectance[:, c].tobytes())
+            if key not in done:
+                Y = np.zeros((P, m))
+                Y[problem.targets, np.arange(m)] = 1.0
+                done[key] = problem.reflectance[:, c:c + 1] * facs[c].solve(Y, trans=True)  # (P, m)
+            self.Z.append(done[key])
+
+    def column(self, h) -> np.ndarray:
+        """(m, 3): the targets' radiosity per unit strength of a light of direct irradiance ``h`` (P,)."""
+        nz = np.flatnonzero(h)
+        return np.stack([h[nz] @ Z[nz] for Z in self.Z], axis=1)
+
+
+@dataclass
+class Mount:
+    """Where a lamp may hang: ``drop`` (m) in front of the candidate patches ``candidates`` (P,)
+    bool, on ``sampler`` (the solve's Embree scene)."""
+
+    patches: object
+    candidates: np.ndarray
+    drop: float
+    sampler: object
+
+    def normal_at(self, position) -> np.ndarray | None:
+        """The normal of the candidate surface ``position`` hangs from: of the candidate patches
+        whose plane lies ``drop`` behind it along their normal, the nearest to the foot of the
+        drop, if the lamp ``holds`` there; else None."""
+        C = np.flatnonzero(self.candidates)
+        if not len(C):
+            return None
+        n, c = self.patches.normal[C], self.patches.center[C]
+        height = np.einsum("ij,ij->i", position[None, :] - c, n)
+        on = np.flatnonzero(np.abs(height - self.drop) <= 1e-6 * max(self.drop, 1.0) + 1e-9)
+        if not len(on):
+            return None
+        foot = position[None, :] - self.drop * n[on]
+        i = on[int(np.argmin(np.linalg.norm(foot - c[on], axis=1)))]
+        return n[i].copy() if self.holds(position, n[i]) else None
+
+    def holds(self, position, normal) -> bool:
+        """Whether a lamp at ``position`` hangs ``drop`` in front of a candidate patch facing ``normal``."""
+        o = np.asarray(position, dtype=np.float32).reshape(1, 3)
+        d = (-np.asarray(normal, dtype=np.float32)).reshape(1, 3)
+        hit = int(self.sampler.front_hit_patches(o, d)[0])
+        if hit >= self.patches.n_patches or not self.candidates[hit] or self.patches.normal[hit] @ normal < 0.99:
+            return False
+        return bool(self.sampler.visible(o, d, np.array([0.95 * self.drop], dtype=np.float32))[0])
+
+
+@dataclass
+class RefinedLamp:
+    """A lamp of a configuration after refinement: its position ``index`` in the configuration,
+    ``lamp`` (engine.lamps.Lamp) and its direct irradiance per W ``irradiance`` (P,)."""
+
+    index: int
+    lamp: object
+    irradiance: np.ndarray
+
+
+def _tangents(n):
+    ref = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    u = unit((ref - (ref @ n) * n)[None, :])[0]
+    return u, np.cross(n, u)
+
+
+class _LampParameters:
+    """A lamp's refined parameters as a vector x scaled to unit steps (x = 0: the lamp as it is);
+    it slides along the surface it hangs from (``mount``, Mount.normal_at) if any."""
+
+    def __init__(self, lamp, mount, step_length, frame):
+        normal = mount.normal_at(lamp.position)
+        self.lamp, self.mount, self.normal, self.frame = lamp, mount, normal, frame
+        self.names = PARAMETERS[lamp.kind] if normal is not None else \
+            tuple(p for p in PARAMETERS[lamp.kind] if not p.startswith("slide"))
+        self.mount_u, self.mount_v = _tangents(normal) if normal is not None else (None, None)
+        self.step_length = float(step_length)
+        half = 0.5 * lamp.spot_size if lamp.kind == "SPOT" else 0.25
+        self.step_angle = 0.25 * half  # radians of aim per unit
+        self.step_log = 0.15
+        self.step_blend = 0.2
+
+    def lamp_at(self, x):
+        """The engine.lamps.Lamp at parameters ``x``; None when the lamp would not be valid."""
+        lamp, values = self.lamp, dict(zip(self.names, x))
+        position = lamp.position.copy()
+        if values.get("slide_u", 0.0) or values.get("slide_v", 0.0):
+            position = position + self.step_length * (values["slide_u"] * self.mount_u + values["slide_v"] * self.mount_v)
+            if not self.mount.holds(position, self.normal):
+                return None
+        direction = lamp.direction
+        if "aim_u" in values:
+            direction = unit((lamp.direction + math.tan(self.step_angle * values["aim_u"]) * lamp.axis_u
+                              + math.tan(self.step_angle * values["aim_v"]) * lamp.axis_v)[None, :])[0]
+            if self.normal is not None and direction @ self.normal <= 0:
+                return None  # aimed behind its mounting surface
+        d, u, v = self.frame(direction)
+        out = replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[])
+        if lamp.kind == "SPOT":
+            size = lamp.spot_size * math.exp(self.step_log * values["log_size"])
+            blend = lamp.spot_blend + self.step_blend * values["blend"]
+            if not (0.0 < size <= math.pi and 0.0 <= blend <= 1.0):
+                return None
+            out = replace(out, spot_size=size, spot_blend=blend)
+        if lamp.kind == "AREA":
+            fu, fv = (math.exp(self.step_log * values[k]) for k in ("log_size_u", "log_size_v"))
+            if not all(SIZE_RANGE[0] <= f <= SIZE_RANGE[1] for f in (fu, fv)):
+                return None
+            out = replace(out, size_u=lamp.size_u * fu, size_v=lamp.size_v * fv)
+        return out
+
+
+def _reach(patches, lamp, radius):
+    from .candidate_lamps import _reach as reach
+    return reach(patches, [lamp], radius)[0]
+
+
+def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
+                         frame, seed=0, max_evaluations=None, rounds=None, cancel=None) -> tuple:
+    """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
+    channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
+    (see the module docstring). ``step_length``: the slide of one unit (m); ``frame``: the lamps'
+    frame of a direction (engine.lights.placed.frame). Returns ([RefinedLamp] of the lamps whose
+    refinement lowered the error, the columns with theirs replaced, the relative error before and
+    after, evaluations)."""
+    patches = mount.patches
+    max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
+    rounds = ROUNDS if rounds is None else int(rounds)
+    b = problem.b_target
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
+    radius = np.zeros(patches.n_patches)
+    corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
+    np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
+
+    def error(cs):
+        err2 = 0.0
+        for c in range(3):
+            s = _nnls(cs[c], b[:, c])
+            r = cs[c] @ s - b[:, c]
+            err2 += float(r @ r)
+        return math.sqrt(err2) / norm
+
+    def irradiance(lamp, points=SEARCH_POINTS):
+        return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,
+                               only=[_reach(patches, lamp, radius)])[:, 0, 0]
+
+    def with_column(cs, j, h):
+        col = transport.column(h)
+        out = [c.copy() for c in cs]
+        for c in range(3):
+            out[c][:, j] = col[:, c]
+        return out
+
+    start = error(cols)
+    best, evaluations, refined = start, 0, {}
+    current = dict(lamps)
+    for _ in range(rounds):
+        round_start = best
+        for j in list(current):
+            if cancel is not None and cancel():
+                break
+            params = _LampParameters(current[j], mount, step_length, frame)
+            seen = {}
+
+            def f(x):
+                key = tuple(np.round(x, 9))
+                if key not in seen:
+                    cand = params.lamp_at(x)
+                    h = None if cand is None else irradiance(cand)
+                    val = error(with_column(cols, j, h)) if h is not None and np.any(h > 0) else math.inf
+                    seen[key] = (val, cand)
+                return seen[key][0]
+
+            x0 = np.zeros(len(params.names))
+            base = f(x0)  # this lamp as it is, with the search's receiver points
+            res = sopt.minimize(f, x0, method="Nelder-Mead",
+                                options={"maxfev": max_evaluations, "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
+                                         "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
+            evaluations += len(seen)
+            val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
+            if cand is not None and val < base - 1e-12:  # kept if it lowers the error at the full points
+                h = irradiance(cand, LAMP_POINTS)
+                kept = with_column(cols, j, h)
+                err = error(kept)
+                if err < best:
+                    cols, best, current[j] = kept, err, cand
+                    refined[j] = RefinedLamp(j, cand, h)
+        if round_start - best < MIN_GAIN * max(round_start, 1e-12):
+            break
+    return list(refined.values()), cols, start, best, evaluations
