@@ -10,9 +10,11 @@ Scenes (each written once, then solved by `relight solve` in fresh processes, in
 - the suite's other solved rooms: the cube room of tests/test_cycles_closed_loop.py (two target
   regions) and the lamp-lit room of tests/test_cycles_lamps.py's closed loop (lit_rooms.lamp_room,
   floor targets, ceiling lights).
-Each solve runs three ways: `--no-spot-lamps` (cells alone, as before issue 17), the defaults
-(cells and spots) and `--area-lamps --point-lamps` (every kind); per scene and way the
-median of the job's total, form factors, lamps (their irradiance), inverse and reduction times, the
+Each solve runs four ways: `--no-spot-lamps` (cells alone, as before issue 17),
+`--no-lamp-refinement` (cells and spots, the chosen lamps as offered), the defaults (cells and
+spots, the chosen lamps refined: engine/lamp_refinement.py) and `--area-lamps --point-lamps`
+(every kind); per scene and way the median of the job's total, form factors, lamps (their
+irradiance), inverse, reduction and lamp refinement times (and its evaluations), the
 final (3-light) relative error, the kinds of its lights and the lamps offered. Writes
 benchmarks/results/bench_candidate_lamps.json.
 """
@@ -31,7 +33,8 @@ from bench_scene_light import solve  # noqa: E402  (benchmarks/ is the script's 
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
-MODES = {"cells": ["--no-spot-lamps"], "cells + spots": [], "cells + spots, areas, points": ["--area-lamps", "--point-lamps"]}
+MODES = {"cells": ["--no-spot-lamps"], "cells + spots, unrefined": ["--no-lamp-refinement"], "cells + spots": [],
+         "cells + spots, areas, points": ["--area-lamps", "--point-lamps"]}
 
 BUILD = r"""
 import sys
@@ -55,7 +58,7 @@ for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
     objs[name]["relight_no_lights"] = True
 bpy.ops.wm.save_as_mainfile(filepath=lamp_room)
 """
-TIMES = ("total", "form_factors", "lamps", "inverse", "reduction")
+TIMES = ("total", "form_factors", "lamps", "inverse", "reduction", "lamp_refinement")
 
 
 def main():
@@ -86,10 +89,13 @@ def main():
                      "bound_relative_error": rep["final"]["bound_relative_error"],
                      "kinds": [li["kind"] for li in rep["final"]["lights"]],
                      "lamps_offered": {k: by_kind[k] for k in ("spot", "area", "point")},
+                     "lamp_refinement": {k: (rep["model"]["lamp_refinement"] or {}).get(k, 0)
+                                         for k in ("lamps_refined", "evaluations")},
                      "estimate_s": rep["estimate"]["seconds"], "runs": v})
     for row in rows:
         print(f"{row['scene']:12s} {row['mode']:28s} error {row['relative_error']:.4f} {row['kinds']} "
-              f"total {row['median_s']['total']:.2f} s (lamps {row['median_s']['lamps']:.2f} s, "
+              f"total {row['median_s']['total']:.2f} s (lamps {row['median_s']['lamps']:.2f} s, refinement "
+              f"{row['median_s']['lamp_refinement']:.2f} s, {row['lamp_refinement']['evaluations']} evaluations, "
               f"estimate {row['estimate_s']:.2f} s) offered {row['lamps_offered']}")
     out = {"command": "benchmarks/bench_candidate_lamps.py", "rounds": args.rounds, "load": os.getloadavg(),
            "rows": rows}
