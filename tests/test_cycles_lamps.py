@@ -5,7 +5,8 @@ the Blender layer, and the gallery's closed loop: its `solve --out` baked.
 
 Direct irradiance: a grey floor (albedo 0.5) of 8 x 8 faces, one lamp, a small blocker casting
 a shadow on the floor; Cycles bakes the floor's radiance L = albedo E / pi; the engine's
-``lamp_irradiance`` on the exported scene must give E on every lit face.
+``lamp_irradiance`` on the exported scene must give E on every lit face. Area lamps at Blender's
+Spread 180 degrees (Lambertian), 120, 60 and 0 (a collimated beam), the scene's and placed ones.
 """
 import math
 
@@ -42,6 +43,13 @@ LAMPS = {
     "area rectangle": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
                                                                       size_y=0.4)),
     "area disk": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6)),
+    # Blender's Spread (Cycles' soft-box grid: engine.lamps.spread_attenuation); 0: a collimated beam
+    "area spread 60": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
+                                                                      size_y=0.4, spread=math.radians(60))),
+    "area disk spread 120": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6,
+                                                                       spread=math.radians(120))),
+    "area spread 0": ("AREA", (0.0, 0.25, 1.2), (0.0, 0.0, 0.0), dict(energy=200.0, shape="RECTANGLE", size=2.0,
+                                                                      size_y=1.5, spread=0.0)),
     "sun": ("SUN", (0, 0, 3.0), (0.5, 0.2, 0.0), dict(energy=3.0, angle=math.radians(8))),
 }
 
@@ -58,7 +66,10 @@ def _placed(make, strength):
 
     lamp = make()
     energy, color = blender_values(np.asarray(strength, dtype=np.float64), lamp.energy, lamp.color)
-    bpy.context.scene.collection.objects.link(results.new_lamp(lamp_record(lamp), energy, color))
+    ob = results.new_lamp(lamp_record(lamp), energy, color)
+    if lamp.kind == "AREA":
+        assert ob.data.spread == pytest.approx(lamp.spread, abs=1e-6)
+    bpy.context.scene.collection.objects.link(ob)
     return dataclasses.replace(lamp, power=np.asarray(strength, dtype=np.float64), energy=energy, color=color)
 
 
@@ -71,6 +82,10 @@ def _placed_lamps():
         "placed spot": (lambda: spot_lamp("s", (0.3, -0.2, 1.6), (-0.3, 0.25, -1.0), math.radians(50), 0.3),
                         (260.0, 260.0, 260.0)),
         "placed area": (lambda: area_lamp("a", (0.2, 0.3, 1.2), (-0.4, -0.2, -1.0), 0.5), (150.0, 150.0, 150.0)),
+        "placed area spread 60": (lambda: area_lamp("a", (0.2, 0.3, 1.2), (-0.4, -0.2, -1.0), 0.5,
+                                                    spread=math.radians(60)), (150.0, 150.0, 150.0)),
+        "placed disk spread 120": (lambda: area_lamp("a", (-0.2, 0.1, 1.1), (0.3, 0.1, -1.0), 0.6, ellipse=True,
+                                                     spread=math.radians(120)), (150.0, 150.0, 150.0)),
         "placed point": (lambda: point_lamp("p", (-0.1, 0.2, 1.3)), (90.0, 90.0, 90.0)),
     }
 
@@ -91,6 +106,8 @@ def test_lamp_direct_irradiance_against_cycles(name):
             exp = export.export_scene()
             assert [lamp.kind for lamp in exp.faces.lamps] == [kind]
             lamps = exp.faces.lamps
+            if kind == "AREA":  # Blender's Spread, read as Cycles takes it
+                assert lamps[0].spread == pytest.approx(props.get("spread", math.pi), abs=1e-6)
         else:
             lamps = [_placed(*_placed_lamps()[name])]
             exp = export.export_scene()

@@ -2,16 +2,15 @@
 engine.lamps.Lamp, and a warning for every part of the scene's light that is not modelled.
 
 Read: Point (power, colour, radius = soft size), Spot (and its cone: size and blend), Area
-(square, rectangle, disk, ellipse; the object's scale scales the sizes, as in Cycles) and Sun
-(strength, angle) lamps that render (visible in the view layer, not disabled for rendering,
-diffuse visibility on), in world space; their shadows (Cast Shadow). Named in a warning, and
-not modelled: light node trees, area spread below 180 degrees, light and shadow linking, a
-point or spot lamp with soft falloff off (modelled as a point of the same intensity: exact
-where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
+(square, rectangle, disk, ellipse; the object's scale scales the sizes, as in Cycles; its Spread,
+which Cycles takes as it is: ``light->set_spread(b_area_light.spread())``,
+intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (visible in the
+view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
+(Cast Shadow). Named in a warning, and not modelled: light node trees, light and shadow
+linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
+exact where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
 """
 from __future__ import annotations
-
-import math
 
 import bpy
 import numpy as np
@@ -104,10 +103,7 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
         elif ld.type == "AREA":
             su = float(ld.size)
             sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
-            kw.update(size_u=su * sx, size_v=sv * sy, ellipse=ld.shape in ("DISK", "ELLIPSE"))
-            if float(getattr(ld, "spread", math.pi)) < math.pi - 1e-6:
-                notes.append(f"spread {math.degrees(ld.spread):.0f} degrees is modelled as 180 (the lamp's light is "
-                             "less focused than Cycles renders it)")
+            kw.update(size_u=su * sx, size_v=sv * sy, ellipse=ld.shape in ("DISK", "ELLIPSE"), spread=float(ld.spread))
         elif ld.type == "SUN":
             kw["angle"] = float(ld.angle)
         if not _default_light_nodes(ld):

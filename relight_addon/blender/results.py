@@ -34,6 +34,7 @@ written and the message names the object.
 """
 from __future__ import annotations
 
+import math
 import os
 import uuid
 import warnings as _warnings
@@ -423,7 +424,7 @@ def plan_placed(data, strength) -> list:
 
 def new_lamp(rec, energy, color, owner=None):
     """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
-    type, Power and colour, Spot Size and Blend, radius, area shape and sizes, and its frame
+    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, and its frame
     (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
 
@@ -441,6 +442,7 @@ def new_lamp(rec, energy, color, owner=None):
         ld.size = float(rec["size_u"])
         if not same:
             ld.size_y = float(rec["size_v"])
+        ld.spread = float(rec.get("spread", math.pi))  # (a record stored before the spread was kept: 180 degrees)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
     M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]

@@ -19,8 +19,12 @@ Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells 
   cluster's patches (Badoiu-Clarkson iterations), its Spot Size twice that cone's half-angle and
   CONE_MARGIN more, blend SPOT_BLEND, radius 0. So each position has several cones, one per
   cluster it sees: the whole painting, its halves, the band around it, ...
-- **Area lamps**: from every position, facing each of the first AREA_CLUSTERS clusters it sees, a
-  square of the light size (Spread 180 degrees: Lambertian, one-sided).
+- **Area lamps**: from every position, for each of the first AREA_CLUSTERS clusters it sees, a
+  square of the light size per beam of AREA_BEAMS: "wide", facing the cluster's centre at Spread
+  180 degrees (Lambertian, one-sided), and "cover", along the spot's axis (the smallest cone
+  holding the cluster, of half-angle c) at the Spread whose radiance at c is half the axis' one:
+  Cycles' attenuation falls linearly in tan a to 0 at half the spread (engine.lamps), so
+  tan(spread / 2) = AREA_EDGE tan(c), AREA_EDGE = 2.
 - **Point lamps**: one per position (radius 0).
 
 The count is bounded by ``max_lamps`` (the positions are as many as it allows:
@@ -65,6 +69,10 @@ CONE_MARGIN = 0.02
 #: the spots per position and cluster: (cone, Blender's Blend); cone "cover": the smallest cone
 #: holding the whole cluster, "area": the cone of the cluster's solid angle (as large as it)
 CONES = (("cover", 0.3), ("area", 0.3))
+#: the area lamps per position and cluster: "wide" (Spread 180 degrees) and "cover" (the beam whose
+#: radiance at the edge of the cone holding the cluster is 1 / AREA_EDGE of its axis' one)
+AREA_BEAMS = ("wide", "cover")
+AREA_EDGE = 2.0
 #: receiver points per patch of a candidate lamp's irradiance (engine.lamps)
 LAMP_POINTS = 16
 #: k-means iterations of the mounting positions
@@ -96,7 +104,7 @@ def default_drop(patches) -> float:
 
 def _per_position(kinds, n_clusters) -> int:
     return (("point" in kinds) + ("spot" in kinds) * len(CONES) * min(n_clusters, MAX_CLUSTERS)
-            + ("area" in kinds) * min(n_clusters, AREA_CLUSTERS))
+            + ("area" in kinds) * len(AREA_BEAMS) * min(n_clusters, AREA_CLUSTERS))
 
 
 def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
@@ -108,14 +116,16 @@ def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
 
 
 def lamp_bound(patches, candidates, options) -> int:
-    """An upper bound of the number of candidate lamps ``plan_lamps`` makes (engine.cost)."""
+    """An upper bound of the number of candidate lamps ``plan_lamps`` makes (engine.cost): the
+    most that its positions x lamps per position can be for any number of target clusters (more
+    clusters, more lamps per position but fewer positions), and at most ``max_lamps``."""
     kinds = offered_kinds(options)
     if not kinds:
         return 0
     n_cand = int(np.count_nonzero(candidates))
-    n_tg = int(np.count_nonzero(patches.target))
-    M = positions_for(options.max_lamps, kinds, max(n_tg, 1), n_cand)
-    return int(min(options.max_lamps, M * _per_position(kinds, max(n_tg, 1))))
+    most = max(positions_for(options.max_lamps, kinds, n, n_cand) * _per_position(kinds, n)
+               for n in range(1, MAX_CLUSTERS + 1))
+    return int(min(options.max_lamps, most))
 
 
 # -- target regions ---------------------------------------------------------------------------
@@ -284,8 +294,12 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
                     spot = 2.0 * math.acos(max(-1.0, 1.0 - _solid_angle(patches, c, p) / (2 * math.pi)))
                 if 0 < spot <= math.pi:
                     add("spot", spot_lamp(f"Relight Spot {len(lamps) + 1}", p, axis, spot, blend))
-            if "area" in kinds and rank < AREA_CLUSTERS:
-                add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
+            for beam in AREA_BEAMS if "area" in kinds and rank < AREA_CLUSTERS else ():
+                if beam == "wide":
+                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
+                elif half > 0:
+                    spread = 2.0 * math.atan(AREA_EDGE * math.tan(min(half, 0.5 * math.pi)))
+                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, axis, size, spread=spread))
     return lamps[:options.max_lamps], names[:options.max_lamps]
 
 

@@ -66,7 +66,7 @@ def placed_record(lamp, kind, strength) -> dict:
     -Z; a point lamp's is only its orientation), power (W, the channels' sum), strength [r, g, b],
     energy (Blender's Power, W) and color (Power x colour = the strength), radius (m), a spot's
     spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
-    shape and size [u, v] (m)."""
+    shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg."""
     from ..engine.lights.area import blender_shape
     from ..engine.lights.lamp import blender_values
 
@@ -83,7 +83,8 @@ def placed_record(lamp, kind, strength) -> dict:
         rec.update(spot_size=float(lamp.spot_size), spot_blend=float(lamp.spot_blend),
                    cone_angle_deg=float(np.degrees(lamp.spot_size)))
     if lamp.kind == "AREA":
-        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)])
+        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)],
+                   spread=float(lamp.spread), spread_deg=float(np.degrees(lamp.spread)))
     return rec
 
 
