@@ -27,15 +27,20 @@ against Cycles bakes (tests/test_cycles_lamps.py):
   2.53 x at 120). Spread 0 (h = 0): a collimated beam along -Z, E = (c P / A) cos(theta) where
   the receiver's projection on the lamp's plane falls inside the lamp (Cycles' delta branch:
   f = pi within tan a <= 1e-5). Sampled over the part of the surface that can reach each
-  receiver point: the disk of radius t tan h around its projection (t its distance to the
-  plane), as Cycles' ``area_light_spread_clamp_light``, bounded by a rectangle.
+  receiver point, the disk of radius t tan h about its projection (t its distance to the
+  plane), as Cycles' ``area_light_spread_clamp_light`` does: the smallest of the lamp, the
+  rectangle bounding that disk within the lamp, and the disk itself (with a density that cancels
+  f); a beam (spread below 180 degrees) takes SPREAD_POINTS x the receiver points, and the
+  patches it lights partly (its edge, or a shadow's, crosses them) EDGE_POINTS x.
 - **Sun** of strength S (W/m^2) and angle alpha: irradiance c S cos(theta) at normal incidence,
   its directions sampled in the cone of half-angle alpha / 2.
 
 Shadows: every mesh occludes (both sides), as in Cycles; ``cast_shadow`` off: no shadow rays.
 Receiver points: stratified on each patch (kernel_transfer._sample_patches), each with its own
-lamp samples, so a patch's mean is a stratified estimate; the patches a spot's cone edge crosses
-(its blend ring) are sampled again with EDGE_POINTS times the points. Deterministic for a seed.
+lamp samples, stratified too: a point's samples in distinct cells of the lamp, and the patch's
+points in distinct sub-cells of each (``_lamp_uniforms``), so a patch's mean is a stratified
+estimate; the patches a spot's cone edge crosses (its blend ring) are sampled again with
+EDGE_POINTS times the points. Deterministic for a seed.
 """
 from __future__ import annotations
 
@@ -63,7 +68,8 @@ EDGE_POINTS = 16
 #: times the points, and the patches partly lit by it (its edge crosses them) EDGE_POINTS times
 SPREAD_POINTS = 4
 #: an area lamp's spread this close to pi (rad) is pi, Lambertian (Blender's 180 degrees is a float32,
-#: 8.7e-8 above pi; Cycles compares it with M_PI_F)
+#: 8.7e-8 above pi; Cycles compares it with M_PI_F; 1e-6 below pi its attenuation differs from 1 by
+#: tan a / 4e6)
 SPREAD_TOLERANCE = 1e-6
 
 
@@ -105,7 +111,7 @@ class Lamp:
         if not 0.0 <= spread <= math.pi + SPREAD_TOLERANCE:  # (Blender keeps pi as a float32, a little above)
             raise ValueError(f"lamp {self.name!r}: its spread (Blender's Spread, the full angle) must be in [0, pi] "
                              f"radians, got {self.spread!r}")
-        self.spread = min(spread, math.pi)
+        self.spread = math.pi if spread >= math.pi - SPREAD_TOLERANCE else spread
         if self.energy is None:
             self.energy = float(self.power.max())
         if self.color is None:
@@ -197,7 +203,8 @@ def _area_samples(lamp: Lamp, y, u):
 
 def _collimated(lamp: Lamp, y, n):
     """Spread 0 (Cycles' delta branch): per W, E = cos(theta) / A where y's projection on the
-    lamp's plane lies inside it (in front of it), else 0; the point q and direction w to it."""
+    lamp's plane lies inside it (in front of it), else 0. Returns (E (n,), the direction to the
+    lamp (n, 3), the distance to it (n,)) for the shadow rays."""
     rel = y - lamp.position
     t = rel @ lamp.direction
     su, sv = rel @ lamp.axis_u / (0.5 * lamp.size_u), rel @ lamp.axis_v / (0.5 * lamp.size_v)
