@@ -211,6 +211,11 @@ def test_offered_lamps_are_lights_whose_source_is_their_irradiance(plain):
     seen[patches.tri_patch[inside.any(axis=1)]] = True
     front = (patches.normal * (lamps[s].position - patches.center)).sum(axis=1) > 0
     assert np.all(H[seen & front & (full > 0.1 * full.max()), s] > 0)  # (a patch the edge crosses: sampled)
+    # an area beam's too: every patch its light reaches (all of them computed) is in its column
+    b = next(j for j, lamp in enumerate(lamps) if lamp.kind == "AREA" and lamp.spread < math.pi)
+    full = lamp_irradiance(patches, [lamps[b]], sampler=sampler, seed=5, points_per_patch=cl.LAMP_POINTS)[:, 0, 0]
+    assert H[:, b] @ patches.area == pytest.approx(full @ patches.area, rel=0.02)
+    assert np.all(H[full > 0.02 * full.max(), b] > 0) and np.count_nonzero(full) < 0.5 * patches.n_patches
 
 
 def _exhaustive(T, b, k, cols):

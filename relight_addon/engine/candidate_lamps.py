@@ -29,7 +29,7 @@ Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells 
   (rho - s / 2) / t of the cluster's vertices (at least MIN_PENUMBRA s / (2 t): where the square
   alone is wider than the cluster, a projector of it).
   Measured on issue 17's gallery with area lamps alone (``--area-lamps --no-spot-lamps``, 3
-  lights): "wide" only 0.864 (no better than the cells), with "cover" 0.352 (docs/benchmarks.md).
+  lights): "wide" only 0.864 (no better than the cells), with "cover" 0.350 (docs/benchmarks.md).
 - **Point lamps**: one per position (radius 0).
 
 The count is bounded by ``max_lamps`` (the positions are as many as it allows:
@@ -329,7 +329,9 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
 
 def _reach(patches, lamps, radius):
     """Per lamp, the patches its light can reach (a spot: those its cone meets; an area lamp: those
-    in front of its plane; a point lamp: all)."""
+    in front of its plane, and of a beam those whose bounding sphere's projection on the lamp's plane
+    comes within (t + radius) tan(spread / 2) of the lamp's rectangle, t the depth of its centre:
+    engine.lamps; a point lamp: all)."""
     out = []
     for lamp in lamps:
         v = patches.center - lamp.position[None, :]
@@ -339,7 +341,13 @@ def _reach(patches, lamps, radius):
             ang = np.arccos(np.clip(cos_a, -1.0, 1.0)) - np.arcsin(np.clip(radius / np.maximum(dist, 1e-300), 0, 1))
             out.append(np.flatnonzero(ang < 0.5 * lamp.spot_size))
         elif lamp.kind == "AREA":
-            out.append(np.flatnonzero(v @ lamp.direction > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))))
+            t = v @ lamp.direction
+            ok = t > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))
+            if lamp.spread < math.pi:
+                gap = np.hypot(np.maximum(np.abs(v @ lamp.axis_u) - 0.5 * lamp.size_u, 0.0),
+                               np.maximum(np.abs(v @ lamp.axis_v) - 0.5 * lamp.size_v, 0.0))
+                ok &= gap <= (t + radius) * math.tan(0.5 * lamp.spread) + radius
+            out.append(np.flatnonzero(ok))
         else:
             out.append(np.arange(patches.n_patches))
     return out
