@@ -4,8 +4,10 @@ on the patches, with shadow rays (no bpy).
 A lamp lights the patches directly; what it puts into the radiosity system before the first
 reflection is rho x H, H its direct irradiance (W/m^2 per channel): B = A^-1 (e + rho H)
 (engine.inverse, ``background_irradiance``). Units and conventions, read from Cycles
-(``intern/cycles/blender/light.cpp``: strength = colour x power; ``kernel/light/``) and measured
-against Cycles bakes (tests/test_cycles_lamps.py):
+(``intern/cycles/blender/light.cpp``: strength = colour x power x 2^exposure, the temperature's
+colour, and the area when Normalize is off: blender/lamps.py; ``kernel/light/``) and measured
+against Cycles bakes (tests/test_cycles_lamps.py). P below is the lamp's ``power``, what Cycles
+emits:
 
 - **Point** of power P (W) and colour c: radiant intensity I = c P / (4 pi) W/sr. Radius 0:
   E = I cos(theta) / d^2. Radius r > 0 (Blender's *soft falloff*, the default): a disk of
@@ -75,8 +77,8 @@ SPREAD_TOLERANCE = 1e-6
 
 @dataclass
 class Lamp:
-    """One lamp in world space. ``power``: (3,) colour x power (W) per channel, or for a sun
-    colour x strength (W/m^2). ``direction``: the unit -Z axis of the lamp (where a spot, an
+    """One lamp in world space. ``power``: (3,) what Cycles emits per channel (W; a sun's
+    W/m^2): Blender's colour x Power (a sun's Strength) x ``gain``. ``direction``: the unit -Z axis of the lamp (where a spot, an
     area lamp or the sun points); ``axis_u`` / ``axis_v``: its unit X and Y axes. ``spread``: an
     area lamp's Spread (rad, Blender's: the full angle, in [0, pi]; pi = Lambertian)."""
 
@@ -97,10 +99,13 @@ class Lamp:
     angle: float = 0.0
     cast_shadow: bool = True
     notes: list = field(default_factory=list)
-    #: Blender's Power (W; a sun's Strength, W/m^2) and colour, power = colour x energy (default:
-    #: the largest channel of ``power``, and power / energy)
+    #: Blender's Power (W; a sun's Strength, W/m^2) and colour, and what Cycles multiplies their
+    #: product by (3,): power = colour x energy x gain (blender/lamps.py, ``cycles_gain``: the
+    #: Light's Exposure, Temperature and Normalize; default 1). Defaults: gain 1, energy the
+    #: largest channel of power / gain, colour power / (gain x energy)
     energy: float = None
     color: np.ndarray = None
+    gain: np.ndarray = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -112,10 +117,15 @@ class Lamp:
             raise ValueError(f"lamp {self.name!r}: its spread (Blender's Spread, the full angle) must be in [0, pi] "
                              f"radians, got {self.spread!r}")
         self.spread = math.pi if spread >= math.pi - SPREAD_TOLERANCE else spread
+        self.gain = np.ones(3) if self.gain is None else np.asarray(self.gain, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(self.gain) & (self.gain >= 0)):
+            raise ValueError(f"lamp {self.name!r}: its gain (what Cycles multiplies colour x Power by) must be finite "
+                             f"and non-negative, got {self.gain.tolist()}")
+        base = np.divide(self.power, self.gain, out=np.zeros(3), where=self.gain > 0)
         if self.energy is None:
-            self.energy = float(self.power.max())
+            self.energy = float(base.max())
         if self.color is None:
-            self.color = self.power / self.energy if self.energy > 0 else np.ones(3)
+            self.color = base / self.energy if self.energy > 0 else np.ones(3)
         self.color = np.asarray(self.color, dtype=np.float64).reshape(3)
 
     @property
