@@ -7,7 +7,7 @@ Direct irradiance: a grey floor (albedo 0.5) of 8 x 8 faces, one lamp, a small b
 a shadow on the floor; Cycles bakes the floor's radiance L = albedo E / pi; the engine's
 ``lamp_irradiance`` on the exported scene must give E on every lit face. Area lamps at Blender's
 Spread 180 degrees (Lambertian), 120, 60 and 0 (a collimated beam), the scene's and placed ones;
-and the Light settings Cycles multiplies colour x Power by (Blender 4.4 on): a point lamp of
+and the Light settings Cycles multiplies colour x Power by (Blender 4.5 on; 4.2 lacks them): a point lamp of
 Exposure 1 at 3,000 K (each channel compared), a spot, an area and a sun lamp with Normalize off.
 """
 import math
@@ -53,7 +53,7 @@ LAMPS = {
     "area spread 0": ("AREA", (0.0, 0.25, 1.2), (0.0, 0.0, 0.0), dict(energy=200.0, shape="RECTANGLE", size=2.0,
                                                                       size_y=1.5, spread=0.0)),
     "sun": ("SUN", (0, 0, 3.0), (0.5, 0.2, 0.0), dict(energy=3.0, angle=math.radians(8))),
-    # what Cycles emits (blender/lamps.cycles_gain; Blender 4.4 on): colour x Power x 2^Exposure x the
+    # what Cycles emits (blender/lamps.cycles_gain; Blender 4.5 on): colour x Power x 2^Exposure x the
     # blackbody colour, and Normalize off, x Light::area (4 at a point's radius 0; the area lamp's area;
     # pi sin^2(angle / 2) for a sun)
     "point exposure temperature": ("POINT", (0.2, 0.1, 1.2), (0, 0, 0),
@@ -67,7 +67,7 @@ LAMPS = {
     "sun normalize off": ("SUN", (0, 0, 3.0), (0.5, 0.2, 0.0), dict(energy=196.0, angle=math.radians(8),
                                                                     normalize=False)),
 }
-#: the Light settings of Blender 4.4 on (Blender 4.2 lacks them: those cases are skipped there)
+#: the Light settings of Blender 4.5 on (Blender 4.2 lacks them: those cases are skipped there)
 NEWER = ("exposure", "use_temperature", "temperature", "normalize")
 
 

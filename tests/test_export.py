@@ -168,7 +168,7 @@ def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
 
 
 def test_lamps_are_read_with_the_power_cycles_emits(bpy_clean):
-    """A Light's Exposure, Temperature and Normalize (Blender 4.4 on), read as Cycles' sync_light
+    """A Light's Exposure, Temperature and Normalize (Blender 4.5 on; 4.2 lacks them), read as Cycles' sync_light
     (intern/cycles/blender/light.cpp) and Light::area (intern/cycles/scene/light.cpp) take them:
     power = colour x Power x 2^Exposure x the blackbody colour (Temperature on) x, Normalize off,
     4 pi r^2 (a point or spot; 4 at r = 0), the area lamp's world area, pi sin^2(angle / 2) (a sun).

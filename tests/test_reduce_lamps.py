@@ -22,7 +22,7 @@ import lit_rooms  # noqa: E402
 import relight_scene  # noqa: E402
 
 FAST = ["--rays-per-patch", "512", "--quiet"]
-#: the red lamp's Power and Exposure (Blender 4.4 on): Cycles emits colour x Power x 2^Exposure
+#: the red lamp's Power and Exposure (Blender 4.5 on; 4.2 lacks them): Cycles emits colour x Power x 2^Exposure
 EXPOSURE = "exposure" in bpy.types.Light.bl_rna.properties
 RED_POWER = dict(energy=20.0, exposure=1.0) if EXPOSURE else dict(energy=40.0)
 

@@ -12,7 +12,7 @@ exact where the whole sphere is seen) and instanced lamps. The World: blender/wo
 
 What a lamp emits (``cycles_gain``, the one place Blender's light values become the engine's
 Lamp.power, and through Lamp.gain back: engine.lights.lamp.blender_values): Cycles'
-``BlenderSync::sync_light`` (intern/cycles/blender/light.cpp, Blender 4.4 on) sets the strength
+``BlenderSync::sync_light`` (intern/cycles/blender/light.cpp, Blender 4.5 on) sets the strength
 colour x Power x 2^Exposure, times the Light's ``temperature_color`` (its blackbody colour) when
 Use Temperature is on, and ``normalize``; ``intern/cycles/scene/light.cpp`` divides the strength by
 ``Light::area`` only when Normalize is on, so a Light with it off emits ``Light::area`` times its
