@@ -132,6 +132,38 @@ def test_each_spot_just_covers_a_cluster(plain):
         assert s.position[2] == pytest.approx(H - 0.15) and s.direction[2] < 0
 
 
+def test_area_lamps_come_wide_and_as_a_beam_whose_footprint_holds_a_cluster(plain):
+    """Per position and cluster two area lamps: Spread 180 degrees facing the cluster's centre,
+    and a beam whose footprint holds the cluster: with Cycles' Spread a lamp point lights the
+    directions within half the spread of the axis, so a vertex is lit when the lamp's square
+    comes within t tan(spread / 2) of its projection on the lamp's plane (t its depth) -- checked
+    by the exact distance to the square -- and the beam is no wider than that needs (its widest
+    vertex: the disk of radius size / 2 the square holds just reaches it)."""
+    patches, sampler = plain
+    lamps, kinds = cl.plan_lamps(patches, candidate_mask(patches), _options(spot_lamps=False, point_lamps=False),
+                                 sampler, drop=0.15)
+    wide = [a for a in lamps if a.spread == math.pi]
+    beams = [a for a in lamps if a.spread < math.pi]
+    assert set(kinds) == {"area"} and len(wide) == len(beams) >= 2 and len(wide) + len(beams) == len(lamps)
+    clusters = cl.target_clusters(patches)
+    for a in wide:  # facing a cluster's centre
+        assert any(np.allclose(a.direction, (c.center - a.position) / np.linalg.norm(c.center - a.position))
+                   for c in clusters)
+    tri = [patches.tri_vertices[np.isin(patches.tri_patch, c.patches)].reshape(-1, 3) for c in clusters]
+    for a in beams:
+        tan_h, held = math.tan(a.spread / 2), []
+        for v in tri:
+            d = v - a.position
+            t = d @ a.direction
+            pu, pv = np.abs(d @ a.axis_u), np.abs(d @ a.axis_v)  # the projection, in the lamp's frame
+            gap = np.hypot(np.maximum(pu - a.size_u / 2, 0), np.maximum(pv - a.size_v / 2, 0))
+            rho = np.hypot(pu, pv)
+            held.append(bool(np.all(gap <= t * tan_h * (1 + 1e-9) + 1e-12)) and
+                        np.max((rho - a.size_u / 2) / t) == pytest.approx(tan_h, rel=1e-9))
+        assert any(held), math.degrees(a.spread)
+        assert a.size_u == a.size_v == wide[0].size_u
+
+
 def test_the_kinds_and_the_count_follow_the_options(plain):
     patches, sampler = plain
     cand = candidate_mask(patches)
@@ -139,10 +171,13 @@ def test_the_kinds_and_the_count_follow_the_options(plain):
                       (dict(spot_lamps=False, area_lamps=False), {"point"})):
         lamps, names = cl.plan_lamps(patches, cand, _options(**kw), sampler)
         assert set(names) == kinds, kw
-    for n in (1, 7, 30):
+    for n in (1, 7, 11, 17, 22, 30, 45):
         o = _options(max_lamps=n)
         lamps, _ = cl.plan_lamps(patches, cand, o, sampler)
         assert 1 <= len(lamps) <= n and len(lamps) <= cl.lamp_bound(patches, cand, o)
+        # the receiver-point work the cost estimate counts: an area lamp 4 rays a point, a beam 4 x the points
+        work = sum(1 if lamp.kind != "AREA" else (4 if lamp.spread == math.pi else 16) for lamp in lamps)
+        assert work <= cl.lamp_bound(patches, cand, o, work=True), n
     none = JobOptions(spot_lamps=False, area_lamps=False, point_lamps=False).validate()
     assert cl.offered_kinds(none) == () and cl.plan_lamps(patches, cand, none, sampler) == ([], [])
     assert cl.lamp_bound(patches, cand, none) == 0
@@ -176,6 +211,11 @@ def test_offered_lamps_are_lights_whose_source_is_their_irradiance(plain):
     seen[patches.tri_patch[inside.any(axis=1)]] = True
     front = (patches.normal * (lamps[s].position - patches.center)).sum(axis=1) > 0
     assert np.all(H[seen & front & (full > 0.1 * full.max()), s] > 0)  # (a patch the edge crosses: sampled)
+    # an area beam's too: every patch its light reaches (all of them computed) is in its column
+    b = next(j for j, lamp in enumerate(lamps) if lamp.kind == "AREA" and lamp.spread < math.pi)
+    full = lamp_irradiance(patches, [lamps[b]], sampler=sampler, seed=5, points_per_patch=cl.LAMP_POINTS)[:, 0, 0]
+    assert H[:, b] @ patches.area == pytest.approx(full @ patches.area, rel=0.02)
+    assert np.all(H[full > 0.02 * full.max(), b] > 0) and np.count_nonzero(full) < 0.5 * patches.n_patches
 
 
 def _exhaustive(T, b, k, cols):

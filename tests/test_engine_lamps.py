@@ -112,3 +112,158 @@ def test_uniform_world_lights_what_sees_the_sky():
     floor = np.flatnonzero(open_box.center[:, 2] < 1e-9)
     F = cf.parallel_rectangles(1.0, 1.0, 1.0)
     assert E[floor, 0].mean() == pytest.approx(np.pi * L[0] * F, rel=0.03)
+
+
+# -- an area lamp's Spread: Cycles' soft-box grid (intern/cycles/kernel/light/area.h) ----------
+
+def _cycles_spread(cos_a, spread):
+    """Cycles' area_light_spread_attenuation with light.cpp's normalisation, transcribed here
+    (the test's reference, not the engine's code): max(tan h - tan a, 0) / (tan h - h), 3 / h^3
+    for h <= 0.05 instead of 1 / (tan h - h)."""
+    h = spread / 2
+    norm = 1 / (math.tan(h) - h) if h > 0.05 else 3 / h ** 3
+    tan_a = np.sqrt(np.maximum(1 - cos_a ** 2, 0)) / cos_a
+    return np.maximum(math.tan(h) - tan_a, 0) * norm
+
+
+@pytest.mark.parametrize("deg", [150.0, 120.0, 60.0, 20.0, 5.0, 2.0])
+def test_spread_keeps_the_lamps_power(deg):
+    """Cycles normalises the attenuation so that the emitted power does not depend on the spread:
+    2 pi int_0^h f(a) cos a sin a da = pi, the Lambertian value (exactly (tan h - h) N = 1 above
+    h = 0.05; Cycles' Taylor branch below, 3 / h^3, gives (1 + 2 h^2 / 5) of it)."""
+    import scipy.integrate as si
+
+    from relight_addon.engine.lamps import spread_attenuation
+
+    h = math.radians(deg) / 2
+    got = 2 * math.pi * si.quad(lambda a: float(spread_attenuation(math.cos(a), 2 * h)) * math.cos(a) * math.sin(a),
+                                0, h, epsabs=0, epsrel=1e-12, limit=200)[0]
+    assert got / math.pi == pytest.approx(1.0 if h > 0.05 else 3 * (math.tan(h) - h) / h ** 3, rel=1e-9)
+    cos_a = np.cos(np.linspace(0, 0.999 * h, 50))
+    np.testing.assert_allclose(spread_attenuation(cos_a, 2 * h), _cycles_spread(cos_a, 2 * h), rtol=1e-12)
+    assert np.all(spread_attenuation(np.cos([1.001 * h, 0.5 * (h + math.pi / 2)]), 2 * h) == 0)  # outside the beam
+    np.testing.assert_array_equal(spread_attenuation(cos_a, math.pi), 1.0)  # 180 degrees: Lambertian
+
+
+def _receiver(side, center, n=1):
+    """A square receiver of ``side`` (m) centred at ``center`` (z up), cut into n x n patches."""
+    s = side / n
+    x0, y0, z = center[0] - side / 2, center[1] - side / 2, center[2]
+    polys = [[(x0 + i * s, y0 + j * s, z), (x0 + (i + 1) * s, y0 + j * s, z), (x0 + (i + 1) * s, y0 + (j + 1) * s, z),
+              (x0 + i * s, y0 + (j + 1) * s, z)] for j in range(n) for i in range(n)]
+    return mesh_patches(polygon_faceset(polys, reflectance=0.5), 10.0)
+
+
+@pytest.mark.parametrize("deg", [180.0, 120.0, 60.0, 20.0])
+def test_a_disk_lamps_irradiance_on_its_axis_is_the_closed_form(deg):
+    """A disk lamp of radius R, d above a small receiver on its axis, facing it, radiance
+    L = P / (pi A) f(a): E = 2 pi L int_0^m f(a) sin a cos a da, m = min(atan(R / d), h), so
+    E = 2 pi L N (tan h sin^2 m / 2 - m / 2 + sin 2m / 4) (pi L sin^2 m at 180 degrees), and
+    E = pi L, the exitance, when the disk holds the whole beam (m = h)."""
+    R, d = 0.3, 1.0
+    lamp = Lamp("d", "AREA", (0, 0, d), DOWN, X, Y, (1.0,) * 3, size_u=2 * R, size_v=2 * R, ellipse=True,
+                spread=math.radians(deg))
+    L = 1 / (math.pi * math.pi * R * R)
+    h, m = math.radians(deg) / 2, math.atan(R / d)
+    if deg == 180:
+        ref = math.pi * L * math.sin(m) ** 2
+    else:
+        m = min(m, h)
+        ref = 2 * math.pi * L * (math.tan(h) * math.sin(m) ** 2 / 2 - m / 2 + math.sin(2 * m) / 4) / (math.tan(h) - h)
+    if m == h:
+        assert ref == pytest.approx(math.pi * L, rel=1e-12)
+    ps = _receiver(0.004, (0, 0, 0))  # 4 mm: its mean is the value at its centre to 1e-5
+    E = lamp_irradiance(ps, [lamp], points_per_patch=1024, seed=3)[0, 0, 0]
+    assert E == pytest.approx(ref, rel=1e-3)
+
+
+def _quadrature(lamp, y, m=400):
+    """The irradiance per W at points y (n, 3) (normal +z) of a rectangular area lamp: a midpoint
+    rule over m x m cells of its surface of Cycles' radiance f(a) / (pi A), no occluders."""
+    g = (np.arange(m) + 0.5) / m - 0.5
+    q = lamp.position + (g[:, None, None] * lamp.size_u * lamp.axis_u +
+                         g[None, :, None] * lamp.size_v * lamp.axis_v).reshape(-1, 3)
+    out = []
+    for yi in y:
+        v = q - yi
+        t = np.linalg.norm(v, axis=1)
+        cos_r, cos_l = np.maximum(v[:, 2] / t, 0), -(v @ lamp.direction) / t
+        f = np.where(cos_l > 0, _cycles_spread(np.maximum(cos_l, 1e-12), lamp.spread), 0.0)
+        out.append(np.mean(f * cos_r * np.maximum(cos_l, 0) / (math.pi * t * t)))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("deg,ellipse", [(120.0, False), (60.0, False), (60.0, True), (20.0, False)])
+def test_a_tilted_area_lamps_irradiance_on_and_off_its_axis_is_the_quadrature(deg, ellipse):
+    """A 0.6 x 0.3 m lamp 1 m up, tilted 20 degrees: small receivers on its axis and off it (at
+    the beam's flank and at its edge), against a brute-force quadrature of Cycles' formula over
+    the lamp's surface (an ellipse: the rectangle's cells inside it, the radiance over its own
+    area)."""
+    tilt = math.radians(20)
+    d = np.array([math.sin(tilt), 0, -math.cos(tilt)])
+    u = np.array([math.cos(tilt), 0, math.sin(tilt)])
+    lamp = Lamp("a", "AREA", (0, 0, 1.0), d, u, np.cross(-d, u), (1.0,) * 3, size_u=0.6, size_v=0.3,
+                ellipse=ellipse, spread=math.radians(deg))
+    on_axis = lamp.position + d / -d[2]  # where the axis meets the floor
+    h = math.radians(deg) / 2
+    points = [on_axis, on_axis + [0.4 * math.tan(h), 0.1, 0], on_axis + [-0.2, 0.9 * math.tan(h) + 0.1, 0]]
+    patches = [_receiver(0.004, p) for p in points]
+    got = np.array([lamp_irradiance(ps, [lamp], points_per_patch=1024, seed=5)[0, 0, 0] for ps in patches])
+    if ellipse:  # the quadrature over the bounding rectangle, with the cells outside the ellipse dark
+        m = 600
+        g = (np.arange(m) + 0.5) / m - 0.5
+        inside = ((2 * g[:, None]) ** 2 + (2 * g[None, :]) ** 2 <= 1).reshape(-1)
+        ref = []
+        q = lamp.position + (g[:, None, None] * 0.6 * u + g[None, :, None] * 0.3 * lamp.axis_v).reshape(-1, 3)
+        for yi in points:
+            v = q - yi
+            t = np.linalg.norm(v, axis=1)
+            cos_l = -(v @ d) / t
+            f = _cycles_spread(cos_l, lamp.spread) * inside
+            ref.append(np.sum(f * (v[:, 2] / t) * cos_l / (math.pi * t * t)) * (0.6 * 0.3 / m ** 2) / lamp.area)
+        ref = np.array(ref)
+    else:
+        ref = _quadrature(lamp, np.array(points))
+    assert np.all(ref > 0)
+    np.testing.assert_allclose(got, ref, rtol=2e-3)
+
+
+def test_spread_zero_is_a_collimated_beam():
+    """Spread 0 (Cycles' delta branch: f = pi along the axis): a beam of exitance P / A along the
+    lamp's axis, E = (P / A) cos(theta) where the floor point's projection on the lamp lies inside
+    it: patches inside the footprint get exactly that, those outside nothing, and the floor all
+    the power."""
+    ps, s = _grid(n=12)  # 0.25 m patches
+    tilt = math.radians(30)
+    d = np.array([0, math.sin(tilt), -math.cos(tilt)])
+    u = np.array([1.0, 0, 0])
+    # a 1 x 0.5 m lamp whose footprint on the floor is the rectangle x in [-0.5, 0.5], y in [0, 0.5 / cos]
+    size_v = 0.5
+    c_floor = np.array([0.0, 0.25 / math.cos(tilt), 0.0])
+    lamp = Lamp("c", "AREA", c_floor - 1.2 * d, d, u, np.cross(-d, u), (10.0,) * 3, size_u=1.0, size_v=size_v,
+                spread=0.0)
+    H = lamp_irradiance(ps, [lamp])[:, 0, 0]
+    E = 10.0 / 0.5 * math.cos(tilt)
+    lo, hi = ps.tri_vertices.min(axis=1), ps.tri_vertices.max(axis=1)
+    corner_lo = np.zeros((ps.n_patches, 3))
+    corner_hi = np.zeros((ps.n_patches, 3))
+    for p in range(ps.n_patches):
+        corner_lo[p], corner_hi[p] = lo[ps.tri_patch == p].min(axis=0), hi[ps.tri_patch == p].max(axis=0)
+    y_hi = 0.5 / math.cos(tilt)
+    inside = (corner_lo[:, 0] >= -0.5) & (corner_hi[:, 0] <= 0.5) & (corner_lo[:, 1] >= 0) & (corner_hi[:, 1] <= y_hi)
+    outside = (corner_hi[:, 0] <= -0.5) | (corner_lo[:, 0] >= 0.5) | (corner_hi[:, 1] <= 0) | (corner_lo[:, 1] >= y_hi)
+    assert inside.sum() == 8 and np.all(H[inside] == pytest.approx(E, rel=1e-12))
+    np.testing.assert_array_equal(H[outside], 0.0)
+    assert float(H @ ps.area) == pytest.approx(10.0, rel=0.01)  # (the partly lit patches: sampled)
+
+
+def test_bad_spreads_are_refused_and_blenders_float32_pi_is_pi():
+    with pytest.raises(ValueError, match="spread"):
+        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=-0.1)
+    with pytest.raises(ValueError, match="spread"):
+        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=3.2)
+    with pytest.raises(ValueError, match="spread"):
+        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=float("nan"))
+    lamp = Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5,
+                spread=float(np.float32(math.pi)))
+    assert lamp.spread == math.pi

@@ -62,6 +62,10 @@ def test_bad_lamp_values_are_refused_with_their_name():
         area_lamp("a", (0, 0, 2), (0, 0, -1), float("nan"))
     with pytest.raises(ValueError, match="direction"):
         area_lamp("a", (0, 0, 2), (0, 0, 0), 0.5)
+    for spread in (0.0, -0.2, 3.2, float("nan")):  # Blender's Spread: (0, pi] here (0 is a collimated beam)
+        with pytest.raises(ValueError, match="area lamp's spread"):
+            area_lamp("a", (0, 0, 2), (0, 0, -1), 0.5, spread=spread)
+    assert area_lamp("a", (0, 0, 2), (0, 0, -1), 0.5).spread == math.pi  # Lambertian by default
     assert blender_shape(area_lamp("a", (0, 0, 2), (0, 0, -1), 0.5)) == "SQUARE"
     assert blender_shape(area_lamp("a", (0, 0, 2), (0, 0, -1), 0.5, 0.3)) == "RECTANGLE"
     assert blender_shape(area_lamp("a", (0, 0, 2), (0, 0, -1), 0.5, ellipse=True)) == "DISK"
@@ -83,6 +87,25 @@ def test_a_spot_puts_its_cones_share_of_its_power_on_a_closed_box(box, size, ble
 def test_a_point_and_an_area_lamp_put_all_their_power_on_a_closed_box(box):
     assert _on_walls(box, point_lamp("p", INSIDE)) == pytest.approx(1.0, rel=1e-3)
     assert _on_walls(box, area_lamp("a", INSIDE, (0.3, 0.2, -1.0), 0.4, 0.2)) == pytest.approx(1.0, rel=0.01)
+
+
+@pytest.mark.parametrize("deg", [120.0, 60.0, 20.0, 5.0])
+def test_an_area_lamps_power_does_not_depend_on_its_spread(box, deg):
+    """Cycles normalises the spread (engine.lamps): a narrower beam is brighter along its axis,
+    its power the same; all of it on the closed box's walls."""
+    lamp = area_lamp("a", INSIDE, (0.3, 0.2, -1.0), 0.4, 0.2, spread=math.radians(deg))
+    assert _on_walls(box, lamp) == pytest.approx(1.0, rel=0.01)
+
+
+def test_an_area_lamps_report_record_and_stored_record_keep_its_spread():
+    from relight_addon.pipeline.report import placed_record
+    from relight_addon.pipeline.stored import lamp_record
+
+    lamp = area_lamp("a", INSIDE, (0.3, 0.2, -1.0), 0.4, 0.2, ellipse=True, spread=math.radians(45))
+    rec = placed_record(lamp, "area", np.array([3.0, 2.0, 1.0]))
+    assert rec["shape"] == "ELLIPSE" and rec["size"] == [0.4, 0.2]
+    assert rec["spread"] == pytest.approx(math.radians(45)) and rec["spread_deg"] == pytest.approx(45.0)
+    assert lamp_record(lamp)["spread"] == pytest.approx(math.radians(45))
 
 
 def test_a_placed_lamps_column_is_A_inverse_rho_H(box):

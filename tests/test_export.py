@@ -165,3 +165,66 @@ def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
     expect = {0: 1.0, 3: 1.0, 1: shared, 4: shared, 2: 4.0, 5: 4.0}
     assert col[:, 0] == pytest.approx([expect[v] for v in lv], rel=1e-6)
     assert np.all(col[:, 3] == 1.0)
+
+
+def test_lamps_are_read_with_the_power_cycles_emits(bpy_clean):
+    """A Light's Exposure, Temperature and Normalize (Blender 4.5 on; 4.2 lacks them), read as Cycles' sync_light
+    (intern/cycles/blender/light.cpp) and Light::area (intern/cycles/scene/light.cpp) take them:
+    power = colour x Power x 2^Exposure x the blackbody colour (Temperature on) x, Normalize off,
+    4 pi r^2 (a point or spot; 4 at r = 0), the area lamp's world area, pi sin^2(angle / 2) (a sun).
+    Blender's own Power and colour come back through blender_values (the reduce writer)."""
+    from relight_addon.engine.lights.lamp import blender_values
+
+    bpy = bpy_clean
+    has = all(k in bpy.types.Light.bl_rna.properties for k in ("exposure", "use_temperature", "normalize"))
+    add_mesh(bpy, "floor", QUAD, [(0, 1, 2, 3)])
+    specs = {  # name: (type, Light settings, object scale, the factor on colour x Power when the settings exist)
+        "warm": ("POINT", dict(shadow_soft_size=0.25, exposure=1.0, use_temperature=True, temperature=3000.0,
+                               normalize=False), (1, 1, 1), None),
+        "spot": ("SPOT", dict(shadow_soft_size=0.0, normalize=False), (1, 1, 1), 4.0),
+        "box": ("AREA", dict(shape="RECTANGLE", size=0.8, size_y=0.4, normalize=False, exposure=-2.0),
+                (2.0, 1.5, 1.0), 0.8 * 2.0 * 0.4 * 1.5 / 4),
+        "oval": ("AREA", dict(shape="ELLIPSE", size=0.8, size_y=0.4, normalize=False), (1, 1, 1),
+                 math.pi / 4 * 0.8 * 0.4),
+        "sun": ("SUN", dict(angle=math.radians(10), normalize=False), (1, 1, 1),
+                math.pi * math.sin(math.radians(5)) ** 2),
+        "sun 0": ("SUN", dict(angle=0.0, normalize=False), (1, 1, 1), 1.0),
+        "plain": ("AREA", dict(shape="SQUARE", size=0.5), (3, 3, 3), 1.0),
+    }
+    colour = (1.0, 0.8, 0.6)
+    for name, (kind, props, scale, _) in specs.items():
+        ld = bpy.data.lights.new(name, kind)
+        ld.energy, ld.color = 50.0, colour
+        for k, v in props.items():
+            if hasattr(ld, k):
+                setattr(ld, k, v)
+        ob = bpy.data.objects.new(name, ld)
+        ob.location, ob.scale = (0.5, 0.5, 1.0), scale
+        bpy.context.scene.collection.objects.link(ob)
+    lamps = {lamp.name: lamp for lamp in export.export_scene().faces.lamps}
+    assert set(lamps) == set(specs)
+    if has:  # the blackbody colour of 3000 K as Blender gives it (the colour Cycles multiplies by)
+        warm = np.array(bpy.data.lights["warm"].temperature_color)
+        np.testing.assert_allclose(warm, [1.7708, 0.8443, 0.2722], atol=2e-4)
+    for name, (kind, props, scale, factor) in specs.items():
+        lamp = lamps[name]
+        if not has:  # Blender 4.2: its lights emit colour x Power
+            factor = 1.0
+        elif name == "warm":
+            factor = 2.0 * warm * 4 * math.pi * 0.25 ** 2
+        want = np.array(colour) * 50.0 * factor
+        np.testing.assert_allclose(lamp.power, want, rtol=1e-6, err_msg=name)
+        assert lamp.energy == pytest.approx(50.0) and np.allclose(lamp.color, colour, atol=1e-6)
+        # the reduce writer: the Power and colour that emit a power, through the same gain
+        energy, color = blender_values(lamp.power, lamp.energy, lamp.color, lamp.gain)
+        assert energy == pytest.approx(50.0, rel=1e-9) and np.allclose(color, lamp.color, atol=1e-12)
+        energy, color = blender_values(3 * lamp.power, lamp.energy, lamp.color, lamp.gain)
+        assert energy == pytest.approx(150.0, rel=1e-9) and np.allclose(color, lamp.color, atol=1e-12)
+        energy, color = blender_values(want * [1, 2, 1], lamp.energy, lamp.color, lamp.gain)  # a new colour
+        np.testing.assert_allclose(np.array(color) * energy * lamp.gain, want * [1, 2, 1], rtol=1e-9)
+    if has:  # a channel the lamp cannot emit (Blender's blackbody has no blue below about 1,700 K): a
+        # configuration that needs it cannot be shown by Power and colour
+        low = blender_values(lamps["warm"].power * [1, 1, 0], 50.0, colour, lamps["warm"].gain * [1, 1, 0])
+        assert low[0] > 0
+        with pytest.raises(ValueError, match="cannot emit blue .its Temperature's colour has none"):
+            blender_values(lamps["warm"].power, 50.0, colour, lamps["warm"].gain * [1, 1, 0])

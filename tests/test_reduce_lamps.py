@@ -22,6 +22,9 @@ import lit_rooms  # noqa: E402
 import relight_scene  # noqa: E402
 
 FAST = ["--rays-per-patch", "512", "--quiet"]
+#: the red lamp's Power and Exposure (Blender 4.5 on; 4.2 lacks them): Cycles emits colour x Power x 2^Exposure
+EXPOSURE = "exposure" in bpy.types.Light.bl_rna.properties
+RED_POWER = dict(energy=20.0, exposure=1.0) if EXPOSURE else dict(energy=40.0)
 
 
 def build(path):
@@ -43,7 +46,8 @@ def build(path):
     light = lit_rooms.light
     light("POINT", (0.7, 0.7, 2.0), name="twin_a", data=shared)
     light("POINT", (2.3, 0.8, 2.0), name="twin_b", data=shared)
-    light("POINT", (0.8, 2.2, 1.8), name="red", energy=40.0, color=(1.0, 0.3, 0.2), shadow_soft_size=0.05)
+    light("POINT", (0.8, 2.2, 1.8), name="red", color=(1.0, 0.3, 0.2), shadow_soft_size=0.05,
+          **RED_POWER)  # 40 W emitted in red, from 20 W at Exposure 1 where Blender has it
     light("SPOT", (1.5, 1.5, 2.3), name="spot", energy=150.0, spot_size=math.radians(70), shadow_soft_size=0.0)
     light("SUN", (0, -3, 4), (math.radians(50), 0.0, 0.0), name="sun", energy=2.0, angle=math.radians(1))
     light("POINT", (1.5, 4.0, 1.2), name="outside", energy=100.0)  # behind the north wall: lights no face
@@ -79,12 +83,16 @@ def test_the_report_lists_the_lamps_and_the_world(reduced):
     lamps = {x["name"]: x for x in r["lamps"]}
     assert set(lamps) == {"twin_a", "twin_b", "red", "spot", "sun"}  # "outside" lights no face
     assert any("outside" in w and "light no face" in w for w in r["warnings"])
-    assert lamps["red"]["power_before"] == pytest.approx([40.0, 12.0, 8.0])
+    assert lamps["red"]["power_before"] == pytest.approx([40.0, 12.0, 8.0])  # what Cycles emits (Exposure 1)
+    assert lamps["red"]["energy_before"] == pytest.approx(RED_POWER["energy"])
     assert lamps["sun"]["unit"] == "W/m^2" and lamps["twin_a"]["unit"] == "W"
     assert sum(x["kept"] for x in lamps.values()) <= 3 and r["final"]["n_lights"] <= 3
-    for x in lamps.values():  # what is written gives each channel its predicted power
+    assert lamps["red"]["kept"]
+    for x in lamps.values():  # what is written gives each channel its predicted power, through the lamp's gain
+        assert x["gain"] == pytest.approx([2.0] * 3 if x["name"] == "red" and EXPOSURE else [1.0] * 3)
         if x["kept"]:
-            np.testing.assert_allclose(np.array(x["color_after"]) * x["energy_after"], x["power_after"], rtol=1e-9)
+            np.testing.assert_allclose(np.array(x["color_after"]) * x["energy_after"] * np.array(x["gain"]),
+                                       x["power_after"], rtol=1e-9)
     fixed = {x["name"]: x for x in r["fixed_light"]}
     assert set(fixed) == {"sky"} and fixed["sky"]["kind"] == "world" and 0 < fixed["sky"]["share"] < 1
     assert any("sky" in w and "fixed light" in w for w in r["warnings"])
@@ -103,6 +111,12 @@ def test_the_written_copy_sets_the_kept_lamps_and_disables_the_others(reduced):
             if x["kept"]:
                 assert energy == pytest.approx(x["energy_after"], rel=1e-5) and not hide_render and not hide_viewport
                 np.testing.assert_allclose(color, x["color_after"], atol=1e-5)
+                # with the user's Exposure kept, Cycles emits colour x Power x 2^Exposure: the solved power
+                ld = bpy.data.objects[name].data
+                emitted = np.array(ld.color) * ld.energy * 2.0 ** getattr(ld, "exposure", 0.0)
+                np.testing.assert_allclose(emitted, x["power_after"], rtol=1e-5)
+                if name == "red" and EXPOSURE:
+                    assert ld.exposure == 1.0
             else:
                 assert (energy, color) == original[name][1:3] and hide_render and hide_viewport
         if lamps["twin_a"]["kept"] or lamps["twin_b"]["kept"]:  # the shared data-block is not changed for both
@@ -144,6 +158,12 @@ def test_every_row_of_the_curve_applies_and_a_moved_lamp_is_refused(reduced):
             results.apply_stored_point(scene, 0)
         assert lamps_now() == before  # nothing written
         bpy.data.objects["red"].location.x -= 0.3
+        if EXPOSURE:  # what it emits changed: its Exposure
+            bpy.data.objects["red"].data.exposure = 2.0
+            with pytest.raises(results.StaleResult, match=r"lamp 'red' has changed since the solve .it emits \[80"):
+                results.apply_stored_point(scene, 0)
+            assert lamps_now() == before
+            bpy.data.objects["red"].data.exposure = 1.0
         results.clear_shown(scene)  # every lamp as the user set it
         bpy.data.objects["spot"].hide_render = True  # the user's own switch, after the solve
         with pytest.raises(results.StaleResult, match="lamp 'spot' has changed since the solve .it is disabled"):

@@ -1,7 +1,8 @@
 """The scene's lamps as Relight changes them, and gives them back (bpy).
 
 In direct-lighting mode ("reduce") a configuration is shown by the scene's own lamps: a kept lamp
-gets its new Power (a Sun: Strength) and colour, the others are disabled for render and in the
+gets its new Power (a Sun: Strength) and colour (its Exposure, Temperature and Normalize are kept:
+results.plan_lamps' Power and colour emit the solved power through them), the others are disabled for render and in the
 viewports (``hide_render``, ``hide_viewport``). Before the first change, what the lamp was is kept
 on its object (custom property ``relight_lamp_original``: Power, colour, the two switches and the
 id of the result that changed it), and when its Light data-block is shared with other objects it

@@ -2,16 +2,25 @@
 engine.lamps.Lamp, and a warning for every part of the scene's light that is not modelled.
 
 Read: Point (power, colour, radius = soft size), Spot (and its cone: size and blend), Area
-(square, rectangle, disk, ellipse; the object's scale scales the sizes, as in Cycles) and Sun
-(strength, angle) lamps that render (visible in the view layer, not disabled for rendering,
-diffuse visibility on), in world space; their shadows (Cast Shadow). Named in a warning, and
-not modelled: light node trees, area spread below 180 degrees, light and shadow linking, a
-point or spot lamp with soft falloff off (modelled as a point of the same intensity: exact
-where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
+(square, rectangle, disk, ellipse; the object's scale scales the sizes, as in Cycles; its Spread,
+which Cycles takes as it is: ``light->set_spread(b_area_light.spread())``,
+intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (visible in the
+view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
+(Cast Shadow). Named in a warning, and not modelled: light node trees, light and shadow
+linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
+exact where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
+
+What a lamp emits (``cycles_gain``, the one place Blender's light values become the engine's
+Lamp.power, and through Lamp.gain back: engine.lights.lamp.blender_values): Cycles'
+``BlenderSync::sync_light`` (intern/cycles/blender/light.cpp, Blender 4.5 on) sets the strength
+colour x Power x 2^Exposure, times the Light's ``temperature_color`` (its blackbody colour) when
+Use Temperature is on, and ``normalize``; ``intern/cycles/scene/light.cpp`` divides the strength by
+``Light::area`` only when Normalize is on, so a Light with it off emits ``Light::area`` times its
+Power: a point or spot 4 pi r^2 (4 at radius 0), an area lamp its area (its object's scale
+included; a disk or ellipse pi/4 of the rectangle), a sun pi sin^2(angle / 2) (1 at angle 0). Blender
+4.2 has none of the three (its lights emit colour x Power): read with their defaults.
 """
 from __future__ import annotations
-
-import math
 
 import bpy
 import numpy as np
@@ -19,12 +28,57 @@ import numpy as np
 from ..engine.lamps import Lamp
 from . import lamp_state
 
-__all__ = ["export_lamps"]
+__all__ = ["export_lamps", "cycles_gain", "make_plain"]
+
+#: the values of the Light settings Cycles multiplies colour x Power by, at which it emits colour x
+#: Power (what Relight writes on the lamps it makes); Blender 4.2 lacks them
+PLAIN = {"exposure": 0.0, "use_temperature": False, "normalize": True}
 
 
 def _cycles(ld, name, default):
     c = getattr(ld, "cycles", None)
     return getattr(c, name, getattr(ld, name, default)) if c is not None else getattr(ld, name, default)
+
+
+def make_plain(ld) -> None:
+    """Give the Light ``ld`` the PLAIN settings (where this Blender has them): it emits colour x Power."""
+    for k, v in PLAIN.items():
+        if hasattr(ld, k):
+            setattr(ld, k, v)
+
+
+def _area_size(ld, M) -> tuple:
+    """An area Light's (size u, size v, ellipse) in world space: its sizes x its object's X and Y
+    scale, from its world matrix ``M`` (4, 4)."""
+    su = float(ld.size)
+    sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
+    return su * float(np.linalg.norm(M[:3, 0])), sv * float(np.linalg.norm(M[:3, 1])), ld.shape in ("DISK", "ELLIPSE")
+
+
+def _cycles_area(ld, M) -> float:
+    """Cycles' ``Light::area`` (intern/cycles/scene/light.cpp), what it divides a Light's strength by
+    when Normalize is on: a point or spot 4 pi r^2 (4 at r = 0), an area lamp its area (world
+    space), a sun pi sin^2(angle / 2) (1 at angle 0)."""
+    if ld.type in ("POINT", "SPOT"):
+        a = 4.0 * np.pi * float(ld.shadow_soft_size) ** 2
+        return a if a > 0 else 4.0
+    if ld.type == "AREA":
+        su, sv, ellipse = _area_size(ld, M)
+        return su * sv * (np.pi / 4 if ellipse else 1.0)
+    angle = float(ld.angle)
+    return float(np.pi * np.sin(0.5 * angle) ** 2) if angle > 0 else 1.0
+
+
+def cycles_gain(ld, M) -> np.ndarray:
+    """(3,) what Cycles multiplies the Light ``ld``'s colour x Power (a sun's Strength) by, ``M``
+    its object's world matrix (4, 4): 2^Exposure, the blackbody colour with Use Temperature on, and
+    ``Light::area`` with Normalize off (the module's docstring). 1 where this Blender lacks them."""
+    gain = np.full(3, 2.0 ** float(getattr(ld, "exposure", 0.0)))
+    if getattr(ld, "use_temperature", False):
+        gain = gain * np.array(ld.temperature_color, dtype=np.float64)[:3]
+    if not getattr(ld, "normalize", True):
+        gain = gain * _cycles_area(ld, M)
+    return gain
 
 
 def uses_nodes(idblock) -> bool:
@@ -79,8 +133,7 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
             continue
         color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
         energy = float(ld.energy if was is None else was["energy"])
-        power = color * energy
-        if not np.any(power > 0):
+        if not np.any(color * energy > 0):
             continue
         M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
         X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
@@ -88,8 +141,12 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
         if min(sx, sy, sz) <= 0:
             warnings.append(f"lamp {name!r} is scaled to zero: left out")
             continue
+        gain = cycles_gain(ld, M)
+        power = color * energy * gain  # what Cycles emits
+        if not np.any(power > 0):
+            continue
         kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
-                  power=power, energy=energy, color=color,
+                  power=power, energy=energy, color=color, gain=gain,
                   cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
         notes = []
         if ld.type in ("POINT", "SPOT"):
@@ -102,12 +159,8 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
                 if max(sx, sy, sz) - min(sx, sy, sz) > 1e-6 * max(sx, sy, sz):
                     notes.append("a non-uniform scale (an elliptic cone) is modelled as a round cone")
         elif ld.type == "AREA":
-            su = float(ld.size)
-            sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
-            kw.update(size_u=su * sx, size_v=sv * sy, ellipse=ld.shape in ("DISK", "ELLIPSE"))
-            if float(getattr(ld, "spread", math.pi)) < math.pi - 1e-6:
-                notes.append(f"spread {math.degrees(ld.spread):.0f} degrees is modelled as 180 (the lamp's light is "
-                             "less focused than Cycles renders it)")
+            su, sv, ellipse = _area_size(ld, M)
+            kw.update(size_u=su, size_v=sv, ellipse=ellipse, spread=float(ld.spread))
         elif ld.type == "SUN":
             kw["angle"] = float(ld.angle)
         if not _default_light_nodes(ld):

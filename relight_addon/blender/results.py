@@ -34,6 +34,7 @@ written and the message names the object.
 """
 from __future__ import annotations
 
+import math
 import os
 import uuid
 import warnings as _warnings
@@ -48,6 +49,7 @@ from ..engine.registry import LIGHT_KINDS
 from ..engine.units import radiance_from_exitance
 from ..pipeline.stored import StoredResult
 from . import lamp_state
+from .lamps import cycles_gain, make_plain
 from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -423,11 +425,12 @@ def plan_placed(data, strength) -> list:
 
 def new_lamp(rec, energy, color, owner=None):
     """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
-    type, Power and colour, Spot Size and Blend, radius, area shape and sizes, and its frame
+    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, and its frame
     (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
 
     ld = bpy.data.lights.new(rec["name"], rec["type"])
+    make_plain(ld)  # Cycles emits colour x Power
     ld.energy = float(energy)
     ld.color = tuple(float(x) for x in color)
     if rec["type"] in ("POINT", "SPOT"):
@@ -441,6 +444,7 @@ def new_lamp(rec, energy, color, owner=None):
         ld.size = float(rec["size_u"])
         if not same:
             ld.size_y = float(rec["size_v"])
+        ld.spread = float(rec.get("spread", math.pi))  # (a record stored before the spread was kept: 180 degrees)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
     M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]
@@ -480,8 +484,11 @@ def plan_lamps(scene, data, strength) -> tuple:
     """The lamp writer's plan for configuration ``strength`` (n_lights, 3), computed and checked
     before anything is written: [(object, (Power, colour) or None = disable)] and messages about
     lamps that cannot be written (linked from a library). StaleResult when a stored lamp is no
-    longer in the scene or changed since the solve (its type, position, direction, Power or
-    colour as the user set them)."""
+    longer in the scene or changed since the solve (its type, position, direction, or what it
+    emits: its Power, colour, Exposure, Temperature, Normalize as the user set them). A kept lamp's
+    Power and colour make Cycles emit the solved power through its own Exposure, Temperature and
+    Normalize (blender/lamps.cycles_gain); SceneError when they cannot (a channel its Temperature's
+    colour lacks)."""
     from ..engine.lights.lamp import blender_values
 
     plan, skipped = [], []
@@ -502,14 +509,16 @@ def plan_lamps(scene, data, strength) -> tuple:
         color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
         M = lamp_state.world_matrix(ob)
         direction = -M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300)
+        gain = cycles_gain(ld, M)  # (Relight changes only a lamp's Power and colour: its Exposure etc. are the user's)
         why = None
         if ld.type != rec["type"]:
             why = f"a {ld.type} lamp, {rec['type']} when solved"
         elif ob.hide_render if was is None else was["hide_render"]:
             why = "it is disabled in renders"
-        elif not np.allclose(color * energy, rec["power"], rtol=1e-5, atol=1e-9):
-            why = f"its power is {energy:g} x {np.round(color, 4).tolist()}, {rec['energy']:g} x " \
-                  f"{np.round(rec['color'], 4).tolist()} when solved"
+        elif not np.allclose(color * energy * gain, rec["power"], rtol=1e-5, atol=1e-9):
+            why = f"it emits {np.round(color * energy * gain, 4).tolist()} (Power {energy:g}, colour " \
+                  f"{np.round(color, 4).tolist()}, its Exposure, Temperature and Normalize), " \
+                  f"{np.round(rec['power'], 4).tolist()} when solved"
         elif not (np.allclose(M[:3, 3], rec["position"], rtol=1e-6, atol=1e-6)
                   and np.allclose(direction, rec["direction"], atol=1e-6)):
             why = "it moved or turned"
@@ -520,7 +529,11 @@ def plan_lamps(scene, data, strength) -> tuple:
                            "configuration sets it; make it local to see the reduction")
             continue
         s = np.asarray(strength[j], dtype=np.float64)
-        plan.append((ob, blender_values(s, rec["energy"], rec["color"]) if np.any(s > 0) else None))
+        try:
+            plan.append((ob, blender_values(s, rec["energy"], rec["color"], gain) if np.any(s > 0) else None))
+        except ValueError as e:
+            raise SceneError(f"lamp {name!r}: {e}; Relight sets only its Power and colour: turn its Temperature "
+                             "off (or raise it) and solve again") from None
     return plan, skipped
 
 
@@ -741,6 +754,7 @@ def make_area_lights(scene, index) -> int:
     scene.collection.children.link(coll)
     for c, shape, size, energy, color, location, rot in plan:
         light = bpy.data.lights.new(f"Relight light {c}", "AREA")
+        make_plain(light)  # Cycles emits colour x Power
         light.shape = shape
         light.size = size[0]
         if shape == "RECTANGLE":

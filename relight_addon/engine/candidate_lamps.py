@@ -19,8 +19,17 @@ Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells 
   cluster's patches (Badoiu-Clarkson iterations), its Spot Size twice that cone's half-angle and
   CONE_MARGIN more, blend SPOT_BLEND, radius 0. So each position has several cones, one per
   cluster it sees: the whole painting, its halves, the band around it, ...
-- **Area lamps**: from every position, facing each of the first AREA_CLUSTERS clusters it sees, a
-  square of the light size (Spread 180 degrees: Lambertian, one-sided).
+- **Area lamps**: from every position, for each of the first AREA_CLUSTERS clusters it sees, a
+  square of the light size s per beam of AREA_BEAMS: "wide", facing the cluster's centre at
+  Spread 180 degrees (Lambertian, one-sided), and "cover", along the spot's axis (the smallest
+  cone holding the cluster), at the Spread whose footprint just holds the cluster: with Cycles'
+  Spread (engine.lamps) a point of the lamp lights only the directions within half the spread of
+  its axis, so a point at depth t along the axis and rho from it is lit when the lamp's square
+  comes within t tan(spread / 2) of its projection: tan(spread / 2) = the largest
+  (rho - s / 2) / t of the cluster's vertices (at least MIN_PENUMBRA s / (2 t): where the square
+  alone is wider than the cluster, a projector of it).
+  Measured on issue 17's gallery with area lamps alone (``--area-lamps --no-spot-lamps``, 3
+  lights): "wide" only 0.864 (no better than the cells), with "cover" 0.350 (docs/benchmarks.md).
 - **Point lamps**: one per position (radius 0).
 
 The count is bounded by ``max_lamps`` (the positions are as many as it allows:
@@ -37,7 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import unit
-from .lamps import lamp_irradiance
+from .lamps import LAMP_SAMPLES, SPREAD_POINTS, lamp_irradiance
 from .lights import append_lamps
 from .lights.area import area_lamp
 from .lights.point import point_lamp
@@ -65,6 +74,11 @@ CONE_MARGIN = 0.02
 #: the spots per position and cluster: (cone, Blender's Blend); cone "cover": the smallest cone
 #: holding the whole cluster, "area": the cone of the cluster's solid angle (as large as it)
 CONES = (("cover", 0.3), ("area", 0.3))
+#: the area lamps per position and cluster: "wide" (Spread 180 degrees) and "cover" (the beam whose
+#: footprint just holds the cluster; where the lamp's square alone is wider, a projector whose
+#: penumbra at the cluster is MIN_PENUMBRA x the lamp's size)
+AREA_BEAMS = ("wide", "cover")
+MIN_PENUMBRA = 0.1
 #: receiver points per patch of a candidate lamp's irradiance (engine.lamps)
 LAMP_POINTS = 16
 #: k-means iterations of the mounting positions
@@ -94,9 +108,14 @@ def default_drop(patches) -> float:
     return DROP_FRACTION * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
 
 
-def _per_position(kinds, n_clusters) -> int:
+def _per_position(kinds, n_clusters, work=False) -> int:
+    """The lamps a position holds for ``n_clusters`` clusters; ``work``: their receiver-point
+    work instead, in a spot's (engine.lamps: an area lamp takes LAMP_SAMPLES lamp samples a
+    point, and a beam narrower than 180 degrees SPREAD_POINTS times the points)."""
+    area = sum(LAMP_SAMPLES * (1 if beam == "wide" else SPREAD_POINTS) for beam in AREA_BEAMS) if work \
+        else len(AREA_BEAMS)
     return (("point" in kinds) + ("spot" in kinds) * len(CONES) * min(n_clusters, MAX_CLUSTERS)
-            + ("area" in kinds) * min(n_clusters, AREA_CLUSTERS))
+            + ("area" in kinds) * area * min(n_clusters, AREA_CLUSTERS))
 
 
 def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
@@ -107,15 +126,18 @@ def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
     return int(min(n_candidates, max(1, max_lamps // per)))
 
 
-def lamp_bound(patches, candidates, options) -> int:
-    """An upper bound of the number of candidate lamps ``plan_lamps`` makes (engine.cost)."""
+def lamp_bound(patches, candidates, options, work=False) -> int:
+    """An upper bound of the number of candidate lamps ``plan_lamps`` makes (engine.cost): the
+    most that its positions x lamps per position can be for any number of target clusters (more
+    clusters, more lamps per position but fewer positions), and at most ``max_lamps``. ``work``:
+    the bound of their receiver-point work instead, in spots (``_per_position``)."""
     kinds = offered_kinds(options)
     if not kinds:
         return 0
     n_cand = int(np.count_nonzero(candidates))
-    n_tg = int(np.count_nonzero(patches.target))
-    M = positions_for(options.max_lamps, kinds, max(n_tg, 1), n_cand)
-    return int(min(options.max_lamps, M * _per_position(kinds, max(n_tg, 1))))
+    most = max(positions_for(options.max_lamps, kinds, n, n_cand) * _per_position(kinds, n, work)
+               for n in range(1, MAX_CLUSTERS + 1))
+    return int(most if work else min(options.max_lamps, most))
 
 
 # -- target regions ---------------------------------------------------------------------------
@@ -246,6 +268,16 @@ def enclosing_cone(directions, iterations=64) -> tuple:
     return a, float(np.arccos(np.clip((directions @ a).min(), -1.0, 1.0)))
 
 
+def _cover_tan(v, t, size) -> float:
+    """tan(spread / 2) of the "cover" area lamp (a square of side ``size``) whose footprint just
+    holds the points at ``v`` (n, 3) from its centre, of depths ``t`` (n,) along its axis: a point
+    whose projection on the lamp's plane is rho from the centre is lit when the square (holding
+    the disk of radius size / 2) comes within t tan(spread / 2) of the projection, so the largest
+    (rho - size / 2) / t; at least MIN_PENUMBRA size / (2 t) (a projector)."""
+    rho = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v) - t * t, 0.0))
+    return float(max(np.max((rho - 0.5 * size) / t), 0.5 * MIN_PENUMBRA * size / float(t.max())))
+
+
 def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> tuple:
     """The candidate lamps (no irradiance yet): ([engine.lamps.Lamp], [kind name]) as the module
     docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``).
@@ -284,14 +316,22 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
                     spot = 2.0 * math.acos(max(-1.0, 1.0 - _solid_angle(patches, c, p) / (2 * math.pi)))
                 if 0 < spot <= math.pi:
                     add("spot", spot_lamp(f"Relight Spot {len(lamps) + 1}", p, axis, spot, blend))
-            if "area" in kinds and rank < AREA_CLUSTERS:
-                add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
+            v = c.points - p[None, :]
+            t = v @ axis  # the vertices' depths along the axis
+            for beam in AREA_BEAMS if "area" in kinds and rank < AREA_CLUSTERS else ():
+                if beam == "wide":
+                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
+                elif np.all(t > 0):  # "cover" (none for a cluster reaching behind the lamp's plane)
+                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, axis, size,
+                                          spread=2.0 * math.atan(_cover_tan(v, t, size))))
     return lamps[:options.max_lamps], names[:options.max_lamps]
 
 
 def _reach(patches, lamps, radius):
     """Per lamp, the patches its light can reach (a spot: those its cone meets; an area lamp: those
-    in front of its plane; a point lamp: all)."""
+    in front of its plane, and of a beam those whose bounding sphere's projection on the lamp's plane
+    comes within (t + radius) tan(spread / 2) of the lamp's rectangle, t the depth of its centre:
+    engine.lamps; a point lamp: all)."""
     out = []
     for lamp in lamps:
         v = patches.center - lamp.position[None, :]
@@ -301,7 +341,13 @@ def _reach(patches, lamps, radius):
             ang = np.arccos(np.clip(cos_a, -1.0, 1.0)) - np.arcsin(np.clip(radius / np.maximum(dist, 1e-300), 0, 1))
             out.append(np.flatnonzero(ang < 0.5 * lamp.spot_size))
         elif lamp.kind == "AREA":
-            out.append(np.flatnonzero(v @ lamp.direction > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))))
+            t = v @ lamp.direction
+            ok = t > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))
+            if lamp.spread < math.pi:
+                gap = np.hypot(np.maximum(np.abs(v @ lamp.axis_u) - 0.5 * lamp.size_u, 0.0),
+                               np.maximum(np.abs(v @ lamp.axis_v) - 0.5 * lamp.size_v, 0.0))
+                ok &= gap <= (t + radius) * math.tan(0.5 * lamp.spread) + radius
+            out.append(np.flatnonzero(ok))
         else:
             out.append(np.arange(patches.n_patches))
     return out

@@ -17,11 +17,13 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
   formulation a P x P Gram matrix (8 P (P - m + L) + 8 P^2 bytes, P^2 (P - m + L) + P^3 / 3 flops);
 - the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR;
 - the candidate lamps (engine/candidate_lamps.py, at most their bound): each lamp's irradiance at
-  LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each;
-  they add to L; the refinement of the chosen lamps (engine/lamp_refinement.py): at most
-  k (k + 1) / 2 lamps for k = Max Lights (the final configuration's and the smaller ones'),
-  ROUNDS x MAX_EVALUATIONS evaluations each, BUDGET in all, at SEARCH_POINTS points on every patch, and the
-  targets' rows of A^-1 diag(rho) (3 x 8 P m bytes);
+  LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each
+  for a spot's (one shadow ray a point), ``lamp_work`` spots' worth in all (an area lamp takes 4
+  rays a point, a beam 4 times the points: candidate_lamps.lamp_bound(work=True)); they add to L;
+  the refinement of the chosen lamps (engine/lamp_refinement.py): at most k (k + 1) / 2 lamps for
+  k = Max Lights (the final configuration's and the smaller ones'), ROUNDS x MAX_EVALUATIONS
+  evaluations each, BUDGET in all, at SEARCH_POINTS points on every patch, and the targets' rows
+  of A^-1 (3 x 8 P m bytes);
 - the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
@@ -99,9 +101,11 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                   rays_per_second: float = RAYS_PER_SECOND,
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
-                  threads: int | None = None, n_lamps: int = 0, lamp_refinements: int = 0) -> dict:
+                  threads: int | None = None, n_lamps: int = 0, lamp_work: int | None = None,
+                  lamp_refinements: int = 0) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
+    ``lamp_work``: the candidate lamps' receiver-point work in spots' (default ``n_lamps``).
     Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
     ``warnings`` is empty unless memory > ``memory_limit`` or time > ``seconds_limit``.
     """
@@ -110,6 +114,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     C = _count("n_candidates", n_candidates)
     m = _count("n_targets", n_targets)
     n_lamps = _count("n_lamps", n_lamps)
+    lamp_work = n_lamps if lamp_work is None else _count("lamp_work", lamp_work)
     refinements = _count("lamp_refinements", lamp_refinements)
     L = (C if n_lights is None else _count("n_lights", n_lights)) + n_lamps
     tris = _count("n_triangles", n_triangles)
@@ -129,7 +134,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         pairs = float(m) * C
         parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
     if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)
-        points = float(n_lamps) * P * LAMP_POINTS
+        points = float(lamp_work) * P * LAMP_POINTS
         parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
                           points * LAMP_SECONDS_PER_POINT * (passes + 1))
     if refinements:  # each a lamp's Nelder-Mead search, its shadow rays on every patch (at most)

@@ -4,8 +4,10 @@ on the patches, with shadow rays (no bpy).
 A lamp lights the patches directly; what it puts into the radiosity system before the first
 reflection is rho x H, H its direct irradiance (W/m^2 per channel): B = A^-1 (e + rho H)
 (engine.inverse, ``background_irradiance``). Units and conventions, read from Cycles
-(``intern/cycles/blender/light.cpp``: strength = colour x power; ``kernel/light/``) and measured
-against Cycles bakes (tests/test_cycles_lamps.py):
+(``intern/cycles/blender/light.cpp``: strength = colour x power x 2^exposure, the temperature's
+colour, and the area when Normalize is off: blender/lamps.py; ``kernel/light/``) and measured
+against Cycles bakes (tests/test_cycles_lamps.py). P below is the lamp's ``power``, what Cycles
+emits:
 
 - **Point** of power P (W) and colour c: radiant intensity I = c P / (4 pi) W/sr. Radius 0:
   E = I cos(theta) / d^2. Radius r > 0 (Blender's *soft falloff*, the default): a disk of
@@ -14,16 +16,33 @@ against Cycles bakes (tests/test_cycles_lamps.py):
 - **Spot**: a point lamp times Cycles' cone attenuation smoothstep((cos a - cos(size/2)) /
   ((1 - cos(size/2)) blend)), a the angle from the lamp's -Z axis (1 inside the cone when the
   blend is 0, 0 outside).
-- **Area** of power P, shape square / rectangle / disk / ellipse of sizes (u, v): a one-sided
-  Lambertian emitter along the lamp's -Z of radiance c P / (pi A) (exitance P / A); sampled
-  over its surface. Spread below 180 degrees is not modelled (a warning at export).
+- **Area** of power P, shape square / rectangle / disk / ellipse of sizes (u, v), Blender's
+  Spread s (the full angle, rad): a one-sided emitter along the lamp's -Z of radiance
+  c P / (pi A) x f(a), a the angle between the emitted direction and the -Z axis. Spread 180
+  degrees: f = 1 (Lambertian). Below, Cycles' soft-box grid (``area_light_spread_attenuation``,
+  intern/cycles/kernel/light/area.h, and ``LightManager::device_update_lights``,
+  intern/cycles/scene/light.cpp; the same from Blender 4.0 to 5.1), with h = s / 2:
+  f(a) = max(tan h - tan a, 0) N(h), N(h) = 1 / (tan h - h) (3 / h^3 for h <= 0.05, Cycles'
+  Taylor branch). N makes the power independent of the spread, since
+  2 pi int_0^h (tan h - tan a) cos a sin a da = pi (tan h - h): the exitance stays P / A and
+  the radiance along the axis is tan h N(h) times the Lambertian one (10.7 x at 60 degrees,
+  2.53 x at 120). Spread 0 (h = 0): a collimated beam along -Z, E = (c P / A) cos(theta) where
+  the receiver's projection on the lamp's plane falls inside the lamp (Cycles' delta branch:
+  f = pi within tan a <= 1e-5). Sampled over the part of the surface that can reach each
+  receiver point, the disk of radius t tan h about its projection (t its distance to the
+  plane), as Cycles' ``area_light_spread_clamp_light`` does: the smallest of the lamp, the
+  rectangle bounding that disk within the lamp, and the disk itself (with a density that cancels
+  f); a beam (spread below 180 degrees) takes SPREAD_POINTS x the receiver points, and the
+  patches it lights partly (its edge, or a shadow's, crosses them) EDGE_POINTS x.
 - **Sun** of strength S (W/m^2) and angle alpha: irradiance c S cos(theta) at normal incidence,
   its directions sampled in the cone of half-angle alpha / 2.
 
 Shadows: every mesh occludes (both sides), as in Cycles; ``cast_shadow`` off: no shadow rays.
 Receiver points: stratified on each patch (kernel_transfer._sample_patches), each with its own
-lamp samples, so a patch's mean is a stratified estimate; the patches a spot's cone edge crosses
-(its blend ring) are sampled again with EDGE_POINTS times the points. Deterministic for a seed.
+lamp samples, stratified too: a point's samples in distinct cells of the lamp, and the patch's
+points in distinct sub-cells of each (``_lamp_uniforms``), so a patch's mean is a stratified
+estimate; the patches a spot's cone edge crosses (its blend ring) are sampled again with
+EDGE_POINTS times the points. Deterministic for a seed.
 """
 from __future__ import annotations
 
@@ -36,7 +55,7 @@ from .geometry import unit
 from .kernel_transfer import _Geometry, _sample_patches
 from .sampling import SceneSampler
 
-__all__ = ["Lamp", "KINDS", "lamp_irradiance"]
+__all__ = ["Lamp", "KINDS", "lamp_irradiance", "spread_normalization", "spread_attenuation"]
 
 KINDS = ("POINT", "SPOT", "AREA", "SUN")
 #: receiver points per patch and lamp samples per receiver point (soft lamps; a point lamp of
@@ -47,13 +66,21 @@ LAMP_SAMPLES = 4
 CHUNK_PATCHES = 4096
 #: a spot's patches that its cone's edge crosses get this many times the points (the edge is sampled)
 EDGE_POINTS = 16
+#: an area lamp of spread below pi (a beam: its light changes faster across a patch) gets this many
+#: times the points, and the patches partly lit by it (its edge crosses them) EDGE_POINTS times
+SPREAD_POINTS = 4
+#: an area lamp's spread this close to pi (rad) is pi, Lambertian (Blender's 180 degrees is a float32,
+#: 8.7e-8 above pi; Cycles compares it with M_PI_F; 1e-6 below pi its attenuation differs from 1 by
+#: tan a / 4e6)
+SPREAD_TOLERANCE = 1e-6
 
 
 @dataclass
 class Lamp:
-    """One lamp in world space. ``power``: (3,) colour x power (W) per channel, or for a sun
-    colour x strength (W/m^2). ``direction``: the unit -Z axis of the lamp (where a spot, an
-    area lamp or the sun points); ``axis_u`` / ``axis_v``: its unit X and Y axes."""
+    """One lamp in world space. ``power``: (3,) what Cycles emits per channel (W; a sun's
+    W/m^2): Blender's colour x Power (a sun's Strength) x ``gain``. ``direction``: the unit -Z axis of the lamp (where a spot, an
+    area lamp or the sun points); ``axis_u`` / ``axis_v``: its unit X and Y axes. ``spread``: an
+    area lamp's Spread (rad, Blender's: the full angle, in [0, pi]; pi = Lambertian)."""
 
     name: str
     kind: str
@@ -68,23 +95,37 @@ class Lamp:
     size_u: float = 0.0
     size_v: float = 0.0
     ellipse: bool = False
+    spread: float = math.pi
     angle: float = 0.0
     cast_shadow: bool = True
     notes: list = field(default_factory=list)
-    #: Blender's Power (W; a sun's Strength, W/m^2) and colour, power = colour x energy (default:
-    #: the largest channel of ``power``, and power / energy)
+    #: Blender's Power (W; a sun's Strength, W/m^2) and colour, and what Cycles multiplies their
+    #: product by (3,): power = colour x energy x gain (blender/lamps.py, ``cycles_gain``: the
+    #: Light's Exposure, Temperature and Normalize; default 1). Defaults: gain 1, energy the
+    #: largest channel of power / gain, colour power / (gain x energy)
     energy: float = None
     color: np.ndarray = None
+    gain: np.ndarray = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"lamp {self.name!r}: unknown kind {self.kind!r}; one of {', '.join(KINDS)}")
         for k in ("position", "direction", "axis_u", "axis_v", "power"):
             setattr(self, k, np.asarray(getattr(self, k), dtype=np.float64).reshape(3))
+        spread = float(self.spread)
+        if not 0.0 <= spread <= math.pi + SPREAD_TOLERANCE:  # (Blender keeps pi as a float32, a little above)
+            raise ValueError(f"lamp {self.name!r}: its spread (Blender's Spread, the full angle) must be in [0, pi] "
+                             f"radians, got {self.spread!r}")
+        self.spread = math.pi if spread >= math.pi - SPREAD_TOLERANCE else spread
+        self.gain = np.ones(3) if self.gain is None else np.asarray(self.gain, dtype=np.float64).reshape(3)
+        if not np.all(np.isfinite(self.gain) & (self.gain >= 0)):
+            raise ValueError(f"lamp {self.name!r}: its gain (what Cycles multiplies colour x Power by) must be finite "
+                             f"and non-negative, got {self.gain.tolist()}")
+        base = np.divide(self.power, self.gain, out=np.zeros(3), where=self.gain > 0)
         if self.energy is None:
-            self.energy = float(self.power.max())
+            self.energy = float(base.max())
         if self.color is None:
-            self.color = self.power / self.energy if self.energy > 0 else np.ones(3)
+            self.color = base / self.energy if self.energy > 0 else np.ones(3)
         self.color = np.asarray(self.color, dtype=np.float64).reshape(3)
 
     @property
@@ -102,6 +143,85 @@ def _spot_attenuation(lamp: Lamp, w_from_lamp):
         return (ca > cos_half).astype(np.float64)
     x = np.clip((ca - cos_half) / ((1.0 - cos_half) * lamp.spot_blend), 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+def spread_normalization(spread) -> tuple:
+    """(tan h, N(h)) of an area lamp's ``spread`` (rad, the full angle; h = spread / 2): Cycles'
+    ``tan_half_spread`` and ``normalize_spread`` (intern/cycles/scene/light.cpp,
+    ``LightManager::device_update_lights``): N = 1 / (tan h - h), 3 / h^3 for h <= 0.05 (its
+    third-order Taylor branch). (inf, 1) at spread pi (Lambertian), (0, inf) at spread 0."""
+    h = 0.5 * float(spread)
+    if h >= 0.5 * math.pi - 0.5 * SPREAD_TOLERANCE:
+        return math.inf, 1.0
+    if h <= 0.0:
+        return 0.0, math.inf
+    t = math.tan(h)
+    return t, (1.0 / (t - h) if h > 0.05 else 3.0 / h ** 3)
+
+
+def spread_attenuation(cos_a, spread) -> np.ndarray:
+    """Cycles' ``area_light_spread_attenuation`` (intern/cycles/kernel/light/area.h): the factor
+    max(tan h - tan a, 0) N(h) of an area lamp's radiance at the angles a from its axis, given
+    their cosines ``cos_a`` (> 0: in front of it); 1 at spread pi. Spread 0 is a delta (not a
+    factor): lamp_irradiance lights it directly."""
+    tan_h, norm = spread_normalization(spread)
+    cos_a = np.asarray(cos_a, dtype=np.float64)
+    if math.isinf(tan_h):
+        return np.ones_like(cos_a)
+    if tan_h == 0.0:
+        raise ValueError("spread 0 is a collimated beam: its radiance is a delta, not a factor")
+    c = np.maximum(cos_a, 1e-300)
+    tan_a = np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c
+    return (tan_h - np.minimum(tan_a, tan_h)) * norm
+
+
+def _area_samples(lamp: Lamp, y, u):
+    """Points q (n, 3) on an area lamp for receiver points y (n, 3) from uniforms u (n, 2), and
+    their weights (n,): 1 / (the sampling density x the lamp's area A), 0 for a point off the
+    lamp. Only the disk of radius r = t tan h about y's projection on the lamp's plane (t: y's
+    distance to it) reaches y (the attenuation is 0 beyond: tan a = rho / t), so of the regions
+    holding that part of the lamp the smallest is sampled, as Cycles' own
+    ``area_light_spread_clamp_light`` does: the lamp whole (an ellipse), the rectangle bounding
+    the disk clipped to the lamp's bounds (uniformly), or the disk itself with the density
+    3 (r - rho) / (pi r^3), proportional to the attenuation (N / t) (r - rho), which it cancels.
+    At spread pi: the whole lamp, uniformly."""
+    a, b = 0.5 * lamp.size_u, 0.5 * lamp.size_v
+    tan_h, _ = spread_normalization(lamp.spread)
+    rel = y - lamp.position
+    t = rel @ lamp.direction
+    r = np.full(len(y), np.inf) if math.isinf(tan_h) else np.where(t > 0, t * tan_h, 0.0)
+    su, sv = rel @ lamp.axis_u, rel @ lamp.axis_v
+    u0, v0 = np.maximum(su - r, -a), np.maximum(sv - r, -b)
+    du, dv = np.maximum(np.minimum(su + r, a) - u0, 0.0), np.maximum(np.minimum(sv + r, b) - v0, 0.0)
+    qu, qv, region = u0 + u[:, 0] * du, v0 + u[:, 1] * dv, du * dv
+    if lamp.ellipse:
+        whole = math.pi * a * b <= region  # the ellipse is smaller: sampled whole (concentric map, stratified)
+        e = _disk_offsets(u, 1.0, np.broadcast_to(lamp.direction, y.shape).copy())
+        qu, qv = np.where(whole, a * (e @ lamp.axis_u), qu), np.where(whole, b * (e @ lamp.axis_v), qv)
+        region = np.where(whole, math.pi * a * b, region)
+    cone = math.pi * r * r < region  # (never at spread pi: r is infinite)
+    if cone.any():
+        x = 0.5 + np.cos((np.arccos(1.0 - 2.0 * u[:, 0]) - 2.0 * math.pi) / 3.0)  # inverts 3 x^2 - 2 x^3 = u
+        rho, phi = x * r, 2.0 * math.pi * u[:, 1]
+        qu, qv = np.where(cone, su + rho * np.cos(phi), qu), np.where(cone, sv + rho * np.sin(phi), qv)
+        region = np.where(cone, math.pi * r ** 3 / (3.0 * np.maximum(r - rho, 1e-12 * r + 1e-300)), region)
+    inside = ((qu / a) ** 2 + (qv / b) ** 2 <= 1.0 + 1e-9) if lamp.ellipse else \
+        (np.abs(qu) <= a * (1 + 1e-9)) & (np.abs(qv) <= b * (1 + 1e-9))
+    weight = np.where(inside, region / lamp.area, 0.0)
+    return lamp.position + qu[:, None] * lamp.axis_u + qv[:, None] * lamp.axis_v, weight
+
+
+def _collimated(lamp: Lamp, y, n):
+    """Spread 0 (Cycles' delta branch): per W, E = cos(theta) / A where y's projection on the
+    lamp's plane lies inside it (in front of it), else 0. Returns (E (n,), the direction to the
+    lamp (n, 3), the distance to it (n,)) for the shadow rays."""
+    rel = y - lamp.position
+    t = rel @ lamp.direction
+    su, sv = rel @ lamp.axis_u / (0.5 * lamp.size_u), rel @ lamp.axis_v / (0.5 * lamp.size_v)
+    inside = (su * su + sv * sv <= 1.0) if lamp.ellipse else (np.abs(su) <= 1.0) & (np.abs(sv) <= 1.0)
+    w = np.broadcast_to(-lamp.direction, y.shape)
+    e = np.where(inside & (t > 0), np.maximum(n @ -lamp.direction, 0.0), 0.0) / lamp.area
+    return e, w, np.maximum(t, 0.0)
 
 
 def _tangents(normal):
@@ -123,7 +243,7 @@ def _disk_offsets(u, radius, normal):
 
 
 def _samples_per_point(lamp: Lamp) -> int:
-    soft = (lamp.kind in ("POINT", "SPOT") and lamp.radius > 0) or lamp.kind == "AREA" or \
+    soft = (lamp.kind in ("POINT", "SPOT") and lamp.radius > 0) or (lamp.kind == "AREA" and lamp.spread > 0) or \
         (lamp.kind == "SUN" and lamp.angle > 0)
     return LAMP_SAMPLES if soft else 1
 
@@ -147,16 +267,11 @@ def _irradiance_at(lamp: Lamp, y, n, u, sampler, far):
         cos_r = np.einsum("ij,ij->i", n, w)
         e = np.maximum(cos_r, 0.0)
         t = np.full(len(y), far)
+    elif lamp.kind == "AREA" and lamp.spread == 0.0:
+        e, w, t = _collimated(lamp, y, n)
     else:
         if lamp.kind == "AREA":
-            if lamp.ellipse:
-                q = _disk_offsets(u, 1.0, np.broadcast_to(lamp.direction, y.shape).copy())
-                qa, qb = q @ lamp.axis_u, q @ lamp.axis_v  # in the unit disk
-                q = (0.5 * lamp.size_u * qa)[:, None] * lamp.axis_u + (0.5 * lamp.size_v * qb)[:, None] * lamp.axis_v
-            else:
-                q = ((u[:, 0] - 0.5) * lamp.size_u)[:, None] * lamp.axis_u + \
-                    ((u[:, 1] - 0.5) * lamp.size_v)[:, None] * lamp.axis_v
-            q = q + lamp.position
+            q, weight = _area_samples(lamp, y, u)
         else:
             toy = y - lamp.position  # from the lamp to the points, and its unit direction
             nd = unit(toy)
@@ -169,8 +284,10 @@ def _irradiance_at(lamp: Lamp, y, n, u, sampler, far):
         cos_r = np.einsum("ij,ij->i", n, w)
         if lamp.kind == "AREA":
             cos_l = -(w @ lamp.direction)
-            # radiance 1 / (pi A) per W, one sample standing for the whole area A
-            e = np.maximum(cos_r, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(math.pi * t * t, 1e-300)
+            # radiance f / (pi A) per W, one sample standing for the sampled region (weight x A)
+            e = weight * np.maximum(cos_r, 0.0) * np.maximum(cos_l, 0.0) / np.maximum(math.pi * t * t, 1e-300)
+            if lamp.spread < math.pi:
+                e = e * spread_attenuation(cos_l, lamp.spread)
         else:
             if lamp.radius > 0:  # radiance I / (pi r^2) over the disk of area pi r^2, facing y
                 cos_l = -np.einsum("ij,ij->i", w, nd)
@@ -205,34 +322,50 @@ def _solid_angles(tv, x):
     return np.where(num < 0, omega, 0.0)  # num = a . (b x c) < 0 <=> x on the normal's side
 
 
+def _cell(idx, n):
+    """(origin (len(idx), 2), size (2,)) of cells ``idx`` of an n-grid of [0, 1)^2: square when n
+    is a square, else strips along the first coordinate."""
+    idx = np.asarray(idx)
+    g = int(math.isqrt(n))
+    if g * g == n:
+        return np.column_stack([idx // g, idx % g]) / g, np.array([1.0 / g, 1.0 / g])
+    return np.column_stack([idx / n, np.zeros(len(idx))]), np.array([1.0 / n, 1.0])
+
+
+def _lamp_uniforms(rng, m, k, j, ns):
+    """The lamp samples' uniforms (m k, 2) of pass j of ns, for m patches of k receiver points:
+    every point's ns samples in distinct cells of an ns-grid (cell j in pass j), and within that
+    cell the patch's k points in distinct sub-cells of a k-grid (a random permutation per patch),
+    jittered: each patch's k ns samples stratify the lamp as a grid of k ns cells."""
+    sub = rng.permuted(np.tile(np.arange(k), (m, 1)), axis=1).reshape(-1)
+    o_sub, c_sub = _cell(sub, k)
+    o, c = _cell([j], ns)
+    return o + (o_sub + rng.random((m * k, 2)) * c_sub) * c
+
+
 def _patch_means(lamp, g, s, k, ns, rng, far, exact):
     """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
     each and ns lamp samples per point; for a point or a spot, ``exact`` (P,) the bare point
-    lamp's exact patch means, times the sampled ratio (shadows, cone, disk)."""
+    lamp's exact patch means, times the sampled ratio (shadows, cone, disk). And (len(s),) whether
+    the patch is partly lit: some of its points got light, some none (an edge crosses it)."""
     sm = g.sampler
     y, ny = _sample_patches(g, s, k, rng)
     y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
     ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
     acc = np.zeros(len(y))
     ref = np.zeros(len(y))
-    for j in range(ns):  # stratified lamp samples: one stratum of a ns-grid per pass
-        u = rng.random((len(y), 2))
-        if ns > 1:
-            gk = int(math.isqrt(ns))
-            if gk * gk == ns:
-                u = (u + np.array([j // gk, j % gk])) / gk
-            else:
-                u[:, 0] = (u[:, 0] + j) / ns
-        e, r = _irradiance_at(lamp, y, ny, u, sm, far)
+    for j in range(ns):
+        e, r = _irradiance_at(lamp, y, ny, _lamp_uniforms(rng, len(s), k, j, ns), sm, far)
         acc += e
         if r is not None:
             ref += r
+    lit = (acc > 0).reshape(len(s), k)
     per_patch = (acc / ns).reshape(len(s), k).mean(axis=1)
     if exact is not None:
         rs = ref.reshape(len(s), k).sum(axis=1) / ns
         ok = rs > 0
         per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
-    return per_patch
+    return per_patch, lit.any(axis=1) & ~lit.all(axis=1)
 
 
 def _cone_edge(lamp: Lamp, g, todo) -> np.ndarray:
@@ -275,12 +408,23 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
             om = np.bincount(sm.tri_patch[tri], weights=_solid_angles(sm.tv[tri].astype(np.float64), lamp.position),
                              minlength=P)
             exact = om / (4.0 * math.pi * np.maximum(sm.area, 1e-300))
-        passes = [(todo, k)]
+
+        def run(patches_of_pass, kp):  # their means from kp points each; returns those partly lit
+            partly = [np.zeros(0, dtype=np.int64)]
+            step = max(1, CHUNK_PATCHES * k // kp)
+            for c0 in range(0, len(patches_of_pass), step):
+                s = patches_of_pass[c0:c0 + step]
+                mean, part = _patch_means(lamp, g, s, kp, ns, rng, far, exact)
+                out[s, li] = mean[:, None] * lamp.power[None, :]
+                partly.append(s[part])
+            return np.concatenate(partly)
+
         if lamp.kind == "SPOT":  # the patches the cone's edge (its blend ring) crosses: EDGE_POINTS x the points
             edge = _cone_edge(lamp, g, todo)
-            passes = [(np.setdiff1d(todo, edge), k), (edge, k * EDGE_POINTS)]
-        for patches_of_pass, kp in passes:
-            for c0 in range(0, len(patches_of_pass), max(1, CHUNK_PATCHES * k // kp)):
-                s = patches_of_pass[c0:c0 + max(1, CHUNK_PATCHES * k // kp)]
-                out[s, li] = _patch_means(lamp, g, s, kp, ns, rng, far, exact)[:, None] * lamp.power[None, :]
+            run(np.setdiff1d(todo, edge), k)
+            run(edge, k * EDGE_POINTS)
+        elif lamp.kind == "AREA" and lamp.spread < math.pi:  # a beam: SPREAD_POINTS x the points, and
+            run(run(todo, k * SPREAD_POINTS), k * EDGE_POINTS)  # EDGE_POINTS x on the patches its edge crosses
+        else:
+            run(todo, k)
     return out

@@ -200,11 +200,13 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
     """Memory and time estimate of a solve (engine.cost), with warnings when they are high; the
     candidate lamps counted at their bound (engine.candidate_lamps.lamp_bound)."""
     passes = options.param("refine_passes", 0)  # 0 unless the chosen patch model declares it
-    lamps = lamp_bound(patches, candidate_mask(patches, mode), options) if mode == "inverse" else 0
+    cand = candidate_mask(patches, mode)
+    lamps, work = (lamp_bound(patches, cand, options), lamp_bound(patches, cand, options, work=True)) \
+        if mode == "inverse" else (0, 0)
     k = min(options.max_lights, lamps) if lamps and options.param("refine_lamps", False) else 0
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
-                                 n_triangles=n_triangles, refine_passes=passes,
-                                 kernel=uses_kernel_pairs(options, mode), threads=options.threads, n_lamps=lamps,
+                                 n_triangles=n_triangles, refine_passes=passes, kernel=uses_kernel_pairs(options, mode),
+                                 threads=options.threads, n_lamps=lamps, lamp_work=work,
                                  lamp_refinements=k * (k + 1) // 2)
 
 

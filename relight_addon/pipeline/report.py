@@ -38,9 +38,13 @@ def json_safe(x):
 def lamp_records(model, strength) -> list:
     """Direct mode: each of the scene's lamps in the reduction at ``strength`` (n_lights, 3), as
     the written copy sets it: name, type (point, spot, area, sun), kind, kept, the unit of its
-    power per channel (W; a sun's W/m^2), power_before / power_after [r, g, b] (colour x Power),
-    and Blender's values before and after: energy (Power, W; a sun's Strength, W/m^2) and colour
-    (engine.lights.lamp.blender_values; a lamp not kept is disabled, its values unchanged)."""
+    power per channel (W; a sun's W/m^2), power_before / power_after [r, g, b] (what Cycles emits:
+    colour x Power x gain), gain [r, g, b] (what Cycles multiplies colour x Power by: the Light's
+    Exposure, Temperature and Normalize, engine.lamps.Lamp.gain), and Blender's values before and
+    after: energy (Power, W; a sun's Strength, W/m^2) and colour (engine.lights.lamp.blender_values;
+    a lamp not kept is disabled, its values unchanged). A kept lamp that no Power and colour can
+    give its power (a channel its Temperature lacks) has energy_after and color_after None and the
+    reason in ``problem``."""
     from ..engine.lights.lamp import blender_values
 
     if model.lamp_lights is None:
@@ -50,12 +54,16 @@ def lamp_records(model, strength) -> list:
         lamp = model.faces.lamps[i]
         s = np.asarray(strength[j], dtype=np.float64)
         kept = bool(np.any(s > 0))
-        energy, color = blender_values(s, lamp.energy, lamp.color) if kept else (lamp.energy, lamp.color)
+        problem = None
+        try:
+            energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain) if kept else (0.0, lamp.color)
+        except ValueError as e:
+            energy, color, problem = None, None, str(e)
         out.append({"name": lamp.name, "type": lamp.kind.lower(), "kind": model.lights.kind_names[j], "kept": kept,
                     "unit": model.lights.kind_of(j).strength_unit,
-                    "power_before": lamp.power, "power_after": s if kept else np.zeros(3),
-                    "energy_before": float(lamp.energy), "energy_after": float(energy) if kept else 0.0,
-                    "color_before": lamp.color, "color_after": color})
+                    "power_before": lamp.power, "power_after": s if kept else np.zeros(3), "gain": lamp.gain,
+                    "energy_before": float(lamp.energy), "energy_after": None if energy is None else float(energy),
+                    "color_before": lamp.color, "color_after": color, **({"problem": problem} if problem else {})})
     return out
 
 
@@ -66,12 +74,12 @@ def placed_record(lamp, kind, strength) -> dict:
     -Z; a point lamp's is only its orientation), power (W, the channels' sum), strength [r, g, b],
     energy (Blender's Power, W) and color (Power x colour = the strength), radius (m), a spot's
     spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
-    shape and size [u, v] (m)."""
+    shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg."""
     from ..engine.lights.area import blender_shape
     from ..engine.lights.lamp import blender_values
 
     s = np.asarray(strength, dtype=np.float64).reshape(3)
-    energy, color = blender_values(s, lamp.energy, lamp.color)
+    energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain)
     rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
            "location": lamp.position, "direction": lamp.direction, "center": lamp.position,
            "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
@@ -83,7 +91,8 @@ def placed_record(lamp, kind, strength) -> dict:
         rec.update(spot_size=float(lamp.spot_size), spot_blend=float(lamp.spot_blend),
                    cone_angle_deg=float(np.degrees(lamp.spot_size)))
     if lamp.kind == "AREA":
-        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)])
+        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)],
+                   spread=float(lamp.spread), spread_deg=float(np.degrees(lamp.spread)))
     return rec
 
 
@@ -139,6 +148,10 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                for name in radiosity}
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    lamps = lamp_records(model, curve.exitance[fi]) if model.mode != "inverse" else None
+    warnings = list(warnings) + [f"lamp {r['name']!r}: {r['problem']}: the written copy cannot show this configuration "
+                                 "(turn its Temperature off, or raise it, and reduce again)"
+                                 for r in lamps or [] if "problem" in r]
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
         "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
@@ -183,7 +196,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": light_records(model, curve, fi)},
         "fixed_light": fixed_light,
-        "lamps": lamp_records(model, curve.exitance[fi]) if model.mode != "inverse" else None,
+        "lamps": lamps,
         "objects": objects,
         "warnings": warnings,
     }

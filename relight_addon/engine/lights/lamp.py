@@ -5,14 +5,16 @@ on the patches per unit of its strength (engine.lamps, shadows included), and it
 A^-1 diag(rho) H (engine.inverse). Two kinds, written alike (writer "lamp": the Blender layer
 sets the Light's Power or Strength and colour, or disables the lamp, restorably):
 
-- ``lamp``: a Point, Spot or Area lamp. Strength: its power per channel in W (Blender's colour x
-  Power: the scene's own configuration is the lamp as the user set it); ``watts`` = 1.
-- ``sun``: a Sun lamp. Strength: colour x Strength in W/m^2 per channel. Its ``area`` is the area
+- ``lamp``: a Point, Spot or Area lamp. Strength: its power per channel in W, what Cycles emits
+  (engine.lamps.Lamp.power: the scene's own configuration is the lamp as the user set it);
+  ``watts`` = 1.
+- ``sun``: a Sun lamp. Strength: what it emits in W/m^2 per channel (Lamp.power). Its ``area`` is the area
   it lights (m^2: the sum over the patches of its irradiance per unit strength x their area), so
   that its power (``watts`` x strength) is the power it puts on the scene's faces.
 
 A Blender Light has one Power and one colour: ``blender_values`` turns a strength per channel
-into them (the user's colour kept when the reduction scaled every channel alike).
+into them (the user's colour kept when the reduction scaled every channel alike), through what
+Cycles multiplies them by (the Light's Exposure, Temperature and Normalize: Lamp.gain).
 """
 from __future__ import annotations
 
@@ -52,18 +54,26 @@ def add_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, irradi
 SAME_FACTOR = 1e-6
 
 
-def blender_values(strength, energy, color) -> tuple:
-    """(Power, colour (3,)) of a Blender Light whose power per channel (colour x Power, W; for a
-    sun colour x Strength, W/m^2) is ``strength`` (3,), from its own ``energy`` and ``color``.
-    When the strength is the lamp's own scaled alike in every channel its colour is kept and
-    its Power scaled; otherwise Power = the largest channel, colour = strength / Power (each
-    channel's power as predicted; the colour changes). A strength of 0 gives (0, colour)."""
+def blender_values(strength, energy, color, gain=None) -> tuple:
+    """(Power, colour (3,)) of a Blender Light that makes Cycles emit ``strength`` (3,) per channel
+    (W; for a sun W/m^2), from its own ``energy`` and ``color`` and what Cycles multiplies colour x
+    Power by, ``gain`` (3,; engine.lamps.Lamp.gain, default 1): colour x Power = strength / gain.
+    When that is the lamp's own colour x Power scaled alike in every channel it emits, its colour is
+    kept and its Power scaled; otherwise Power = the largest channel, colour = (strength / gain) /
+    Power (each channel's power as predicted; the colour changes). A strength of 0 gives (0,
+    colour). ValueError when a channel the lamp cannot emit (gain 0: a low Temperature's blue) must."""
     s = np.maximum(np.asarray(strength, dtype=np.float64).reshape(3), 0.0)
     c = np.asarray(color, dtype=np.float64).reshape(3)
+    g = np.ones(3) if gain is None else np.asarray(gain, dtype=np.float64).reshape(3)
+    if np.any((g <= 0) & (s > 0)):
+        names = [ch for ch, bad in zip(("red", "green", "blue"), (g <= 0) & (s > 0)) if bad]
+        raise ValueError(f"it cannot emit {' or '.join(names)} (its Temperature's colour has none), and this "
+                         f"configuration gives it {', '.join(f'{x:.4g}' for x in s[(g <= 0) & (s > 0)])} there")
+    s = np.divide(s, g, out=np.zeros(3), where=g > 0)
     p0 = c * float(energy)
     if not np.any(s > 0):
         return 0.0, c.copy()
-    on = p0 > 0
+    on = (p0 > 0) & (g > 0)  # the channels it emits as the user set it
     if on.any() and not np.any(s[~on] > 0):
         f = s[on] / p0[on]
         if f.max() - f.min() <= SAME_FACTOR * f.max():
