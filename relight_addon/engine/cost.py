@@ -20,7 +20,7 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
   LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each;
   they add to L; the refinement of the chosen lamps (engine/lamp_refinement.py): at most
   k (k + 1) / 2 lamps for k = Max Lights (the final configuration's and the smaller ones'),
-  ROUNDS x MAX_EVALUATIONS evaluations each at SEARCH_POINTS points on every patch, and the
+  ROUNDS x MAX_EVALUATIONS evaluations each, BUDGET in all, at SEARCH_POINTS points on every patch, and the
   targets' rows of A^-1 diag(rho) (3 x 8 P m bytes);
 - the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
@@ -38,7 +38,8 @@ import os
 import numpy as np
 
 from .candidate_lamps import LAMP_POINTS
-from .lamp_refinement import MAX_EVALUATIONS as REFINE_EVALUATIONS, ROUNDS as REFINE_ROUNDS, SEARCH_POINTS
+from .lamp_refinement import BUDGET as REFINE_BUDGET, MAX_EVALUATIONS as REFINE_EVALUATIONS, ROUNDS as REFINE_ROUNDS
+from .lamp_refinement import SEARCH_POINTS
 from .formfactors import CHUNK_RAYS, DENSE_LIMIT
 from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
@@ -132,7 +133,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
                           points * LAMP_SECONDS_PER_POINT * (passes + 1))
     if refinements:  # each a lamp's Nelder-Mead search, its shadow rays on every patch (at most)
-        points = float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS * P * SEARCH_POINTS
+        points = min(float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS, REFINE_BUDGET) * P * SEARCH_POINTS
         parts["lamp_refinement"] = (3 * 8.0 * P * m, points * LAMP_SECONDS_PER_POINT)
     k = min(m, C)
     if P <= DIRECT_SOLVE_LIMIT:

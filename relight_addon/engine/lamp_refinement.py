@@ -21,7 +21,7 @@ direct irradiance h (engine.lamps, LAMP_POINTS receiver points per patch, shadow
 evaluation costs one lamp's shadow rays on the patches its light can reach, a (P, m) product per
 channel and k-column NNLS fits. The lamps are refined one at a time (the others fixed) by scipy's
 Nelder-Mead on parameters scaled to unit steps, at most MAX_EVALUATIONS evaluations each, for
-ROUNDS rounds; a lamp's refinement is kept only when it lowers the error. Each evaluation draws the
+ROUNDS rounds, and BUDGET evaluations for all the configurations of a solve; a lamp's refinement is kept only when it lowers the error. Each evaluation draws the
 same receiver points (one seed), so the error is a deterministic function of the parameters and a
 result is reproducible.
 """
@@ -46,6 +46,8 @@ LAMP_POINTS = 16
 #: Nelder-Mead evaluations per lamp and round, and rounds over the configuration's lamps
 MAX_EVALUATIONS = 60
 ROUNDS = 2
+#: evaluations of a whole solve at most (its configurations' lamps share them: jobs.refine_stage)
+BUDGET = 8 * MAX_EVALUATIONS
 #: a round that lowers the relative error by less than this stops the refinement
 MIN_GAIN = 1e-4
 #: a size stays within this range of factors of its first size
@@ -183,16 +185,17 @@ def _reach(patches, lamp, radius):
 
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
-                         frame, seed=0, max_evaluations=None, rounds=None, cancel=None) -> tuple:
+                         frame, seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None) -> tuple:
     """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
     channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
     (see the module docstring). ``step_length``: the slide of one unit (m); ``frame``: the lamps'
     frame of a direction (engine.lights.placed.frame). Returns ([RefinedLamp] of the lamps whose
     refinement lowered the error, the columns with theirs replaced, the relative error before and
-    after, evaluations)."""
+    after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET)."""
     patches = mount.patches
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
+    budget = BUDGET if budget is None else int(budget)
     b = problem.b_target
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
@@ -225,7 +228,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     for _ in range(rounds):
         round_start = best
         for j in list(current):
-            if cancel is not None and cancel():
+            if (cancel is not None and cancel()) or evaluations >= budget:
                 break
             params = _LampParameters(current[j], mount, step_length, frame)
             seen = {}
@@ -242,7 +245,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             x0 = np.zeros(len(params.names))
             base = f(x0)  # this lamp as it is, with the search's receiver points
             res = sopt.minimize(f, x0, method="Nelder-Mead",
-                                options={"maxfev": max_evaluations, "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
+                                options={"maxfev": min(max_evaluations, budget - evaluations), "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
                                          "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
             evaluations += len(seen)
             val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))

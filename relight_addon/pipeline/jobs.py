@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from ..engine.best_lights import lower_bounds
 from ..engine.best_lights import _nnls
 from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
-from ..engine.lamp_refinement import Mount, Transport, refine_configuration
+from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, refine_configuration
 from ..engine.lights.placed import WRITER as PLACED, frame
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
@@ -469,15 +469,18 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
 
 
 def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progress=None, cancel=None) -> dict:
-    """Stage 3b: the placed lamps of the final configuration and of the curve's smaller ones refined (engine.lamp_refinement): each refined lamp becomes a new light
-    of the problem (its kind, its column of T), the point's lights and strengths (NNLS per channel)
-    and error follow. Returns what the report says of it (``None`` when nothing was refined)."""
+    """Stage 3b: the placed lamps of the final configuration and of the curve's smaller ones refined
+    (engine.lamp_refinement), the final one first, then from the largest down while its BUDGET
+    lasts: each refined lamp becomes a new light of the problem (its kind, its column of T), the
+    point's lights and strengths (NNLS per channel) and error follow. Returns what the report says of it (``None`` when nothing was refined)."""
     if model.mode != "inverse" or not options.param("refine_lamps", False) or not offered_kinds(options):
         return None
     problem, lights, patches = model.problem, model.lights, model.patches
     todo = [i for i, pt in enumerate(red.curve)
             if (pt.n_lights <= red.final.n_lights or i == red.final_index) and pt.n_negative == 0
             and any(lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED for j in pt.lights)]
+    # the final configuration first, then the smaller ones from the largest, while the budget lasts
+    todo.sort(key=lambda i: (i != red.final_index, -red.curve[i].n_lights))
     if not todo:
         return None
     t0 = time.perf_counter()
@@ -492,12 +495,14 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     for n_done, i in enumerate(todo):
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
+        if evaluations >= REFINE_BUDGET:
+            break
         pt = red.curve[i]
         placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights)
                   if lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED}
         refined, cols, before, after, n_eval = refine_configuration(
             problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step, frame,
-            seed=options.seed, cancel=cancel)
+            seed=options.seed, budget=REFINE_BUDGET - evaluations, cancel=cancel)
         evaluations += n_eval
         rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
                      "lamps_refined": len(refined), "evaluations": n_eval})
