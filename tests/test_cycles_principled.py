@@ -169,11 +169,11 @@ def furnished(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("furnished")
     scene, rep, out = tmp / "room.blend", tmp / "report.json", tmp / "room_lit.blend"
     build_furnished_room(scene)
-    # cells only: what this checks is the cells' first reflection at the albedo of its incidence
-    # (engine/incidence.py); the lamps' is not modelled (with the default spots the answer has one:
-    # 2.10 % mean, signed -1.97 %: docs/validation.md, "Lamps a solve places")
+    # the defaults: cells and spots (the answer has a spot): the first reflection of the cells' and of
+    # the lamps' light at the albedo of its incidence (engine/incidence.py: first_bounce_matrices,
+    # lamp_excess; without the lamps' term it was 2.10 % mean, signed -1.97 %)
     _cli("solve", scene, "--report", rep, "--out", out, "--rays-per-patch", ROOM_RAYS, "--seed", 1,
-         "--patch-model", "polygon", "--no-spot-lamps")
+         "--patch-model", "polygon")
     report = json.loads(rep.read_text())
     faces_of = {name: [i for i, x in enumerate(o.get("radiance_normal") or []) if x is not None]
                 for name, o in report["objects"].items()}
@@ -204,7 +204,8 @@ def test_furnished_room_closed_loop(furnished):
     report, cycles, faces_of, _ = furnished
     out, summary = _compare(report, cycles, faces_of)
     assert len(out["normal"]) == 10 + 9 + 8  # floor, table top (3 x 3), wall
-    _check(out, summary)
+    # per face within 6 % (issue 18's bound): Cycles' own noise reaches 3.1 % on a face here
+    _check(out, summary, max_tol=0.06)
 
 
 @pytest.fixture(scope="module")

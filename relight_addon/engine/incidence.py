@@ -37,7 +37,8 @@ import scipy.sparse as sp
 
 from .principled import _directional, oren_nayar_albedo, principled_albedo
 
-__all__ = ["INCIDENCE_MU", "incidence_tables", "first_bounce_matrices"]
+__all__ = ["INCIDENCE_MU", "incidence_tables", "first_bounce_matrices", "lamp_incidence", "lamp_albedo_excess",
+           "lamp_excess"]
 
 #: incidence cosines of the tables (linear interpolation between them)
 INCIDENCE_MU = np.linspace(0.0, 1.0, 41)
@@ -128,3 +129,52 @@ def first_bounce_matrices(F, center, normal, material, tables, sources):
     data = np.concatenate(data) if data else np.zeros((0, 3), np.float32)
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32 if len(rows) < 2 ** 31 else np.int64)
     return [sp.csc_matrix((np.ascontiguousarray(data[:, c]), rows, indptr), shape=(P, P)) for c in range(3)]
+
+
+def lamp_incidence(lamp, points, normals) -> np.ndarray:
+    """(n,) the cosine at which a lamp's light arrives at ``points`` (n, 3) with unit ``normals``:
+    from its position (a point, a spot, an area lamp: its centre), a sun from its direction."""
+    if lamp.kind == "SUN":
+        w = np.broadcast_to(-np.asarray(lamp.direction, dtype=np.float64), points.shape)
+    else:
+        w = np.asarray(lamp.position, dtype=np.float64)[None, :] - points
+        w = w / np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None]
+    return np.clip(np.einsum("ij,ij->i", w, normals), 0.0, 1.0)
+
+
+def lamp_albedo_excess(lamp, center, normal, material, tables, patches=None) -> np.ndarray:
+    """(len(patches), 3): R_j(mu_j) - rho_j, the albedo of the first reflection of ``lamp``'s light
+    beyond the white-furnace albedo, at the patches ``patches`` (default all; mu_j the cosine at
+    which its light arrives, ``lamp_incidence``); 0 for materials without a direction-dependent
+    albedo."""
+    j = np.arange(len(center)) if patches is None else np.asarray(patches, dtype=np.int64)
+    out = np.zeros((len(j), 3))
+    mat = np.asarray(material, dtype=np.int64)[j]
+    mu = None
+    for m in np.unique(mat):
+        if tables[m] is None:
+            continue
+        mu = lamp_incidence(lamp, center[j], normal[j]) if mu is None else mu
+        s_ = mat == m
+        ex = tables[m] - _mean(tables[m])
+        out[s_] = np.stack([np.interp(mu[s_], INCIDENCE_MU, ex[:, c]) for c in range(3)], axis=1)
+    return out
+
+
+def lamp_excess(lamps, H, center, normal, material, tables):
+    """The first reflection of lamps' direct light with the albedo of its incidence: per channel a
+    sparse (P, n) matrix (R_j(mu_jl) - rho_j) H_jl over the nonzeros of ``H`` (P, n) (each lamp's
+    direct irradiance per unit strength; ``lamps`` its engine.lamps.Lamp per column, None for a
+    column without one; ``lamp_albedo_excess``). None when no material has a direction-dependent
+    albedo. The lamps' analogue of ``first_bounce_matrices``: B = A^-1 (rho H s + X s) for
+    strengths s, X this matrix (InverseProblem's ``lamp_excess``)."""
+    if not any(t is not None for t in tables):
+        return None
+    Hc = sp.csc_matrix(H, dtype=np.float64)
+    data = np.zeros((Hc.nnz, 3))
+    for l in range(Hc.shape[1]):
+        lo, hi = Hc.indptr[l], Hc.indptr[l + 1]
+        if hi > lo and lamps[l] is not None:
+            data[lo:hi] = lamp_albedo_excess(lamps[l], center, normal, material, tables, Hc.indices[lo:hi])
+    data *= Hc.data[:, None]
+    return [sp.csc_matrix((data[:, c], Hc.indices, Hc.indptr), shape=Hc.shape) for c in range(3)]

@@ -200,7 +200,8 @@ class InverseProblem:
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
-                 first_bounce=None, background=None, background_irradiance=None):
+                 first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,
+                 background_excess=None):
         if hasattr(F, "matrix"):  # formfactors.FormFactors
             F = F.matrix
         if sp.issparse(F):
@@ -261,6 +262,11 @@ class InverseProblem:
         #: optional per channel: D (P, P) sparse, the first reflection of the lights' light with
         #: the albedo of its incidence (engine.incidence): B = A^-1 (e + D e); None: B = A^-1 e
         self.first_bounce = first_bounce
+        #: optional per channel: X (P, n_lights) sparse, the first reflection of the lamps' direct light
+        #: beyond rho H, with the albedo of its incidence (engine.incidence.lamp_excess): the lights
+        #: of irradiance kinds' source is rho H s + X s; ``background_excess`` (P, 3) W/m^2 the same
+        #: for the fixed lamps' light
+        self.lamp_excess = lamp_excess
         #: (P, 3) W/m^2: the radiosity of the fixed light (``background``: the scene's own emitters'
         #: exitance; ``background_irradiance``: the lamps' direct irradiance, engine.lamps),
         #: subtracted from the targets; the lights supply what it leaves. target_norm
@@ -268,8 +274,10 @@ class InverseProblem:
         self.background_radiosity = np.zeros((n, 3))
         e_bg = None if background is None else arr(background, (n, 3), "background exitance")
         h_bg = None if background_irradiance is None else arr(background_irradiance, (n, 3), "background irradiance")
+        x_bg = None if background_excess is None else arr(background_excess, (n, 3), "background excess")
         if (e_bg is not None and np.any(e_bg > 0)) or (h_bg is not None and np.any(h_bg > 0)):
-            self.background_radiosity = self.forward_radiosity(np.zeros((n, 3)) if e_bg is None else e_bg, h_bg)
+            self.background_radiosity = self.forward_radiosity(np.zeros((n, 3)) if e_bg is None else e_bg, h_bg,
+                                                               x_bg)
             self.b_target = self.b_target - self.background_radiosity[self.targets]
 
     def _init_lights(self, light_groups, light_basis, lights=None):
@@ -428,11 +436,16 @@ class InverseProblem:
             self._check_reachable()
         return self._transfer
 
-    def add_lights(self, lights, columns):
+    def add_lights(self, lights, columns, excess=None):
         """Extend the problem to ``lights`` (a LightSet: the problem's lights followed by new ones,
         engine.lights.append_lamps) whose new lights' columns of T are ``columns`` (3 arrays (m, n_new),
-        computed by the caller from their sources, e.g. engine.lamp_refinement.Transport)."""
+        computed by the caller from their sources, e.g. engine.lamp_refinement.Transport); ``excess``
+        their columns of ``lamp_excess`` (3 sparse (P, n_new)) when the problem has it."""
         n0 = self.n_lights
+        if self.lamp_excess is not None:
+            n_new = lights.n_lights - n0
+            new = excess if excess is not None else [sp.csc_matrix((self.n_patches, n_new))] * 3
+            self.lamp_excess = [sp.hstack([self.lamp_excess[c], new[c]]).tocsc() for c in range(3)]
         T = self.transfer
         self._init_lights(None, lights.basis, lights)
         if self.n_lights < n0 or any(np.shape(columns[c]) != (self.m, self.n_lights - n0) for c in range(3)):
@@ -447,7 +460,10 @@ class InverseProblem:
         Y = np.zeros((self.n_patches, self.m))
         Y[self.targets, np.arange(self.m)] = 1.0
         Y = fac.solve(Y, trans=True)  # Y^T = rows P of A^-1
-        return np.asarray((H.T @ (self.reflectance[:, c:c + 1] * Y)).T)
+        T = H.T @ (self.reflectance[:, c:c + 1] * Y)
+        if self.lamp_excess is not None:
+            T = T + self.lamp_excess[c].T @ Y
+        return np.asarray(T.T)
 
     def _same_first_bounce(self, c):
         """The first channel whose D equals channel c's (grey materials: one transfer for all)."""
@@ -497,19 +513,30 @@ class InverseProblem:
         out[self.candidates] = self.light_basis @ np.asarray(e_C, dtype=np.float64).reshape(-1, 3)
         return out
 
-    def forward_radiosity(self, e_full, irradiance=None):
-        """Exact forward solution B (P, 3) of A B = e (+ D e, ``first_bounce``) + rho H, H a direct
-        irradiance (P, 3) W/m^2 (lamps), through the LU factors."""
+    def forward_radiosity(self, e_full, irradiance=None, excess=None):
+        """Exact forward solution B (P, 3) of A B = e (+ D e, ``first_bounce``) + rho H (+ X), H a
+        direct irradiance (P, 3) W/m^2 (lamps), X its first reflection beyond rho H (``excess``,
+        (P, 3) W/m^2: engine.incidence.lamp_excess), through the LU factors."""
         s = self.source(e_full)
         if irradiance is not None:
             s = s + self.reflectance * np.asarray(irradiance, dtype=np.float64).reshape(self.n_patches, 3)
+        if excess is not None:
+            s = s + np.asarray(excess, dtype=np.float64).reshape(self.n_patches, 3)
         return np.stack([self.factors()[c].solve(s[:, c]) for c in range(3)], axis=1)
 
     def configuration_radiosity(self, strength):
         """B (P, 3) of the lights at ``strength`` (n_lights, 3): every kind's source, transported."""
         return self.forward_radiosity(self.patch_exitance(strength),
                                       self.lights.patch_irradiance(strength, self.n_patches)
-                                      if self.lights.irradiance is not None else None)
+                                      if self.lights.irradiance is not None else None, self.excess_of(strength))
+
+    def excess_of(self, strength):
+        """(P, 3) W/m^2: the lamps' first reflection beyond rho H at ``strength`` (n_lights, 3)
+        (``lamp_excess``), None without it."""
+        if self.lamp_excess is None:
+            return None
+        s = np.asarray(strength, dtype=np.float64).reshape(-1, 3)
+        return np.stack([np.asarray(self.lamp_excess[c] @ s[:, c]).reshape(-1) for c in range(3)], axis=1)
 
     @classmethod
     def from_patches(cls, patches, F, lights_per_face=True):
@@ -523,14 +550,14 @@ class InverseProblem:
 
 def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=None, light_groups=None,
                             light_basis=None, first_bounce=None, lights=None, strength=None,
-                            background_irradiance=None):
+                            background_irradiance=None, lamp_excess=None):
     """Direct-lighting mode: reduce the scene's own emitters.
 
     The candidates are the current lights (patches with a positive exitance in any
     channel); every other patch is a target at the radiosity the full
     configuration gives it. Returns ``(problem, e_x)`` with e_x the lights'
     strengths (n_lights, 3), the starting configuration of a reduction. ``first_bounce``: the
-    problem's D (InverseProblem.first_bounce).
+    problem's D (InverseProblem.first_bounce); ``lamp_excess``: its X (InverseProblem.lamp_excess).
 
     ``lights`` may end with lights of an irradiance kind (the scene's lamps, engine/lights/lamp.py:
     no candidate patch, a column of ``lights.irradiance``); ``strength`` (their number, 3) is their
@@ -559,14 +586,15 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
         raise InverseError(f"the lamps' strength must be a finite non-negative ({int(own.sum())}, 3) array")
     prob = InverseProblem(F, area, reflectance, ~emitters, np.zeros((n, 3)), emitters, center, normal,
                           light_groups=light_groups, light_basis=light_basis, lights=lights,
-                          first_bounce=first_bounce, background_irradiance=background_irradiance)
+                          first_bounce=first_bounce, background_irradiance=background_irradiance,
+                          lamp_excess=lamp_excess)
     # power-conserving per light (the surface lights of direct-lighting mode partition the emitters)
     e_x = group_mean_basis(prob.light_basis, exitance[prob.candidates], prob.area[prob.candidates])
     H = None
     if own.any():
         e_x[own] = s_own
         H = prob.lights.patch_irradiance(np.where(own[:, None], e_x, 0.0), n)
-    B = prob.forward_radiosity(exitance, H)
+    B = prob.forward_radiosity(exitance, H, None if H is None else prob.excess_of(np.where(own[:, None], e_x, 0.0)))
     prob.b_target = B[prob.targets].copy()
     prob.target_norm = float(np.linalg.norm(B[prob.targets] + prob.background_radiosity[prob.targets]))
     prob.exitance = exitance.copy()

@@ -19,7 +19,8 @@ or past a forbidden face.
 The transfer is linear in the powers: a lamp's column of T is rows P of A^-1 diag(rho) h for its
 direct irradiance h (engine.lamps, LAMP_POINTS receiver points per patch, shadow rays), so one
 evaluation costs one lamp's shadow rays on the patches its light can reach, a (P, m) product per
-channel and k-column NNLS fits. The lamps are refined one at a time (the others fixed) by scipy's
+channel and k-column NNLS fits (the lamp's first reflection at the albedo of its incidence, as
+the solve's: engine.incidence.lamp_albedo_excess). The lamps are refined one at a time (the others fixed) by scipy's
 Nelder-Mead on parameters scaled to unit steps, at most MAX_EVALUATIONS evaluations each, for
 ROUNDS rounds, and BUDGET evaluations for all the configurations of a solve; a lamp's refinement is kept only when it lowers the error. Each evaluation draws the
 same receiver points (one seed), so the error is a deterministic function of the parameters and a
@@ -59,26 +60,34 @@ PARAMETERS = {"SPOT": ("aim_u", "aim_v", "log_size", "blend", "slide_u", "slide_
 
 
 class Transport:
-    """Rows P (the targets) of A^-1 diag(rho) per channel, from an InverseProblem's solvers: the
-    targets' radiosity per unit of direct irradiance on each patch (``column``)."""
+    """Rows P (the targets) of A^-1 per channel, from an InverseProblem's solvers, and the albedo of
+    each patch's first reflection: the targets' radiosity per unit of a lamp's direct irradiance on
+    each patch (``column``). ``albedo_excess(lamp)``: (P, 3) R(mu) - rho of the lamp's first
+    reflection (engine.incidence.lamp_albedo_excess), None for none."""
 
-    def __init__(self, problem):
+    def __init__(self, problem, albedo_excess=None):
         facs = problem.factors()
         m, P = problem.m, problem.n_patches
-        self.Z = []
+        self.rho = problem.reflectance
+        self.albedo_excess = albedo_excess
+        self.Y = []
         done = {}
         for c in range(3):
-            key = (id(facs[c]), problem.reflectance[:, c].tobytes())
-            if key not in done:
+            if id(facs[c]) not in done:
                 Y = np.zeros((P, m))
                 Y[problem.targets, np.arange(m)] = 1.0
-                done[key] = problem.reflectance[:, c:c + 1] * facs[c].solve(Y, trans=True)  # (P, m)
-            self.Z.append(done[key])
+                done[id(facs[c])] = facs[c].solve(Y, trans=True)  # (P, m): Y^T = rows P of A^-1
+            self.Y.append(done[id(facs[c])])
 
-    def column(self, h) -> np.ndarray:
-        """(m, 3): the targets' radiosity per unit strength of a light of direct irradiance ``h`` (P,)."""
+    def column(self, h, lamp=None) -> np.ndarray:
+        """(m, 3): the targets' radiosity per unit strength of ``lamp`` whose direct irradiance is
+        ``h`` (P,): rows P of A^-1 ((rho + x) h), x its first reflection's excess albedo."""
         nz = np.flatnonzero(h)
-        return np.stack([h[nz] @ Z[nz] for Z in self.Z], axis=1)
+        albedo = self.rho[nz]
+        x = None if self.albedo_excess is None or lamp is None else self.albedo_excess(lamp)
+        if x is not None:
+            albedo = albedo + x[nz]
+        return np.stack([(albedo[:, c] * h[nz]) @ self.Y[c][nz] for c in range(3)], axis=1)
 
 
 @dataclass
@@ -215,8 +224,8 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
         return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,
                                only=[_reach(patches, lamp, radius)])[:, 0, 0]
 
-    def with_column(cs, j, h):
-        col = transport.column(h)
+    def with_column(cs, j, h, lamp):
+        col = transport.column(h, lamp)
         out = [c.copy() for c in cs]
         for c in range(3):
             out[c][:, j] = col[:, c]
@@ -238,7 +247,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
                 if key not in seen:
                     cand = params.lamp_at(x)
                     h = None if cand is None else irradiance(cand)
-                    val = error(with_column(cols, j, h)) if h is not None and np.any(h > 0) else math.inf
+                    val = error(with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
                     seen[key] = (val, cand)
                 return seen[key][0]
 
@@ -251,7 +260,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
             if cand is not None and val < base - 1e-12:  # kept if it lowers the error at the full points
                 h = irradiance(cand, LAMP_POINTS)
-                kept = with_column(cols, j, h)
+                kept = with_column(cols, j, h, cand)
                 err = error(kept)
                 if err < best:
                     cols, best, current[j] = kept, err, cand

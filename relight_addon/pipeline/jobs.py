@@ -23,7 +23,7 @@ from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, 
 from ..engine.lights.placed import WRITER as PLACED, frame
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
-from ..engine.incidence import first_bounce_matrices, incidence_tables
+from ..engine.incidence import first_bounce_matrices, incidence_tables, lamp_albedo_excess, lamp_excess
 from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
 from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
@@ -100,7 +100,10 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
             source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
         H = scene_light(faces, patches, F, options.seed)[0] if has_scene_light(faces) else None
-        source = source if H is None else source + patches.reflectance * H.sum(axis=1)
+        if H is not None:  # the lamps' and the World's light; the lamps' first reflection at its incidence
+            source = source + patches.reflectance * H.sum(axis=1)
+            excess = scene_light_excess(faces, patches, H)
+            source = source if excess is None else source + excess
         B, info = solve_radiosity(F, patches.reflectance, source)
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
@@ -362,7 +365,9 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
                                      mask, patches.center, patches.normal, lights=lights,
                                      first_bounce=first_bounce(faces, patches, F, mask | emitting),
-                                     background=background, background_irradiance=lamp_H.sum(axis=1))
+                                     background=background, background_irradiance=lamp_H.sum(axis=1),
+                                     lamp_excess=lights_excess(faces, patches, lights),
+                                     background_excess=scene_light_excess(faces, patches, lamp_H))
         else:
             lights, lamp_lights, lamp_H, lamp_names, notes = direct_lights(faces, patches, F, lights, options.seed)
             warnings.extend(n for n in notes if n not in warnings)
@@ -371,7 +376,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                                                        first_bounce=first_bounce(faces, patches, F, mask),
                                                        strength=np.array([faces.lamps[i].power for i in lamp_lights[1]])
                                                        .reshape(-1, 3),
-                                                       background_irradiance=lamp_H.sum(axis=1) if lamp_names else None)
+                                                       background_irradiance=lamp_H.sum(axis=1) if lamp_names else None,
+                                                       lamp_excess=lights_excess(faces, patches, lights))
         t_problem += time.perf_counter() - t1
         if p == passes:
             break
@@ -489,7 +495,9 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     sampler = getattr(model.form_factors, "sampler", None) or SceneSampler(patches)
     drop = float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches))
     mount = Mount(patches, problem.candidate_mask, drop, sampler)
-    transport = Transport(problem)
+    inc = _incidence(model.faces, patches) if problem.lamp_excess is not None else None
+    transport = Transport(problem, None if inc is None else
+                          (lambda lamp: lamp_albedo_excess(lamp, patches.center, patches.normal, *inc)))
     step = float(patches.light_size or patches.max_patch_size)
     T = problem.transfer
     new_lamps, new_kinds, new_H, new_cols = [], [], [], [[], [], []]
@@ -530,7 +538,9 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         area = np.array([lamp.area if lamp.kind == "AREA" else 0.0 for lamp in new_lamps])
         model.lights = append_lamps(lights, lights.patches, patches.n_patches, new_lamps, new_kinds,
                                     np.stack(new_H, axis=1), area)
-        problem.add_lights(model.lights, [np.stack(new_cols[c], axis=1) for c in range(3)])
+        H_new = np.stack(new_H, axis=1)
+        problem.add_lights(model.lights, [np.stack(new_cols[c], axis=1) for c in range(3)],
+                           lights_excess(model.faces, patches, None, new_lamps, H_new))
     return {"points": rows, "offered": offered, "lamps_refined": len(new_lamps), "evaluations": evaluations,
             "seconds": time.perf_counter() - t0}
 
@@ -590,7 +600,8 @@ def fixed_light(model: Model) -> tuple:
 
     rows = []
     for i, (name, kind, power) in enumerate(model.lamp_names or []):
-        B = problem.forward_radiosity(zero, model.lamp_irradiance[:, i])
+        excess = scene_light_excess(faces, patches, model.lamp_irradiance, i) if model.mode == "inverse" else None
+        B = problem.forward_radiosity(zero, model.lamp_irradiance[:, i], excess)
         rows.append({"name": name, "kind": kind, "power": power, "share": share(B)})
     emitting = np.any(model.background > 0, axis=1)
     for oi in np.unique(patches.object[emitting]):
@@ -633,12 +644,39 @@ def has_scene_light(faces: FaceSet) -> bool:
 def first_bounce(faces: FaceSet, patches: PatchSet, F, sources):
     """engine.incidence's D per channel for the light leaving ``sources`` (a patch mask), from the
     faces' materials; None when the FaceSet has none or none depends on the incidence."""
+    inc = _incidence(faces, patches)
+    return None if inc is None else first_bounce_matrices(F, patches.center, patches.normal, *inc,
+                                                          np.flatnonzero(sources))
+
+
+def _incidence(faces: FaceSet, patches: PatchSet):
+    """(per-patch material, incidence tables) of the faces' materials, None without any."""
     if faces.face_material is None or not faces.material_lobes:
         return None
-    tables = incidence_tables(faces.material_lobes)
-    material = np.asarray(faces.face_material, dtype=np.int64)[patches.face]
-    return first_bounce_matrices(F, patches.center, patches.normal, material, tables,
-                                 np.flatnonzero(sources))
+    return np.asarray(faces.face_material, dtype=np.int64)[patches.face], incidence_tables(faces.material_lobes)
+
+
+def lights_excess(faces: FaceSet, patches: PatchSet, lights, lamps=None, H=None):
+    """engine.incidence.lamp_excess of the lights of irradiance kinds (their Lamp in
+    ``lights.lamps``; or of ``lamps`` with irradiance ``H``): their first reflection with the albedo
+    of its incidence; None without lamps or without a direction-dependent material."""
+    inc = _incidence(faces, patches)
+    if lamps is None:
+        if lights is None or lights.irradiance is None or lights.lamps is None:
+            return None
+        lamps, H = lights.lamps, lights.irradiance
+    return None if inc is None else lamp_excess(lamps, H, patches.center, patches.normal, *inc)
+
+
+def scene_light_excess(faces: FaceSet, patches: PatchSet, H, only=None):
+    """(P, 3) W/m^2: the scene's lamps' first reflection beyond rho H (``H`` jobs.scene_light's, the
+    lamps' columns first; the World's light, from every direction, has none), of lamp ``only``
+    alone when given; None without it."""
+    inc = _incidence(faces, patches)
+    which = range(len(faces.lamps)) if only is None else [only] if only < len(faces.lamps) else []
+    if inc is None or not which:
+        return None
+    return sum(lamp_albedo_excess(faces.lamps[i], patches.center, patches.normal, *inc) * H[:, i] for i in which)
 
 
 def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> Curve:
@@ -665,6 +703,8 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
             src = src + problem.first_bounce[c] @ src
         if H is not None:
             src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
+        if problem.lamp_excess is not None:
+            src = src + np.asarray(problem.lamp_excess[c] @ E[:, :, c].T)
         B[:, :, c] = (facs[c].solve(src) + problem.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")

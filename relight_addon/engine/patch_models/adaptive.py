@@ -15,7 +15,9 @@ emitter status, reflectance, exitance, painted value, size, normal bucket (the n
 directions: a normal cone of about 30 degrees) and voxel of that size -- and are connected
 through shared (welded) vertices form one patch. So a dense prop becomes a handful of patches,
 and a patch never mixes painted with unpainted faces, different painted values, or candidate
-with forbidden faces.
+with forbidden faces. Painted faces keep the resolution they were painted at (issue 18: the
+error, the selection and the layer are the faces' own): they are clustered only below
+TARGET_CLUSTER_BELOW of their size, in voxels of twice that.
 
 Lights (multi-scale candidates, ``scales``): every candidate patch is a light cell; cells of
 one object whose centres fall in one voxel of twice the light size and share a normal bucket
@@ -58,6 +60,10 @@ REFINE_SHARE = 0.5
 #: faces whose longest edge is below this fraction of their size are clustered; faces between
 #: it and their size are patches of their own (as in the polygon model); larger faces are split
 CLUSTER_BELOW = 0.5
+#: painted faces are clustered only below this fraction of the patch size (in voxels of twice it):
+#: the targets' rows are the faces as painted (issue 18), but a densely painted prop does not
+#: make a patch of each of its faces
+TARGET_CLUSTER_BELOW = 1.0 / 16
 #: welding tolerance of vertices, relative to the scene's diagonal
 WELD = 1e-7
 #: the light kinds (engine/lights/) this model makes, finest first
@@ -132,7 +138,10 @@ class AdaptiveModel:
         tf = faces.triangle_face
         # much smaller than its size: clustered (never the scene's emitters: they are lamps the
         # direct-lighting mode reduces one polygon at a time)
-        small = (face_edge <= CLUSTER_BELOW * size) & ~emit
+        # painted faces keep the resolution they were painted at: clustered only when much smaller
+        # still (TARGET_CLUSTER_BELOW), in voxels of that size
+        below = np.where(faces.target, TARGET_CLUSTER_BELOW, CLUSTER_BELOW) * size
+        small = (face_edge <= below) & ~emit
         whole = (face_edge <= size) & ~small  # about its size: a patch of its own
         # per face: area-weighted normal and centroid
         cr = triangle_cross(T)
@@ -141,7 +150,7 @@ class AdaptiveModel:
         normal = unit(group_sum(tf, cr, faces.n_faces))
         centroid = group_sum(tf, T.mean(axis=1), faces.n_faces, ta) / np.where(fa > 0, fa, 1.0)[:, None]
         lo = faces.vertices.min(axis=0)
-        voxel = np.floor((centroid - lo) / size[:, None]).astype(np.int64)
+        voxel = np.floor((centroid - lo) / np.where(faces.target, 2 * below, size)[:, None]).astype(np.int64)
         key = np.column_stack([
             faces.face_object, cand, faces.target, emit, faces.forbidden,
             _ids(faces.reflectance), _ids(faces.exitance), _ids(np.where(faces.target[:, None],
