@@ -502,6 +502,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     T = problem.transfer
     new_lamps, new_kinds, new_H, new_cols = [], [], [], [[], [], []]
     rows, evaluations = [], 0
+    carried = {}  # the final configuration's refined lamps: candidate light -> its refined light
     for n_done, i in enumerate(todo):
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
@@ -520,6 +521,8 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
             ids = np.array(pt.lights, dtype=np.int64)
             for r in refined:
                 ids[r.index] = lights.n_lights + len(new_lamps)
+                if i == red.final_index:
+                    carried[int(pt.lights[r.index])] = int(ids[r.index])
                 new_lamps.append(r.lamp)
                 new_kinds.append(lights.kind_names[int(pt.lights[r.index])])
                 new_H.append(r.irradiance)
@@ -541,8 +544,40 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         H_new = np.stack(new_H, axis=1)
         problem.add_lights(model.lights, [np.stack(new_cols[c], axis=1) for c in range(3)],
                            lights_excess(model.faces, patches, None, new_lamps, H_new))
+        carry_refined(problem, red, carried)
     return {"points": rows, "offered": offered, "lamps_refined": len(new_lamps), "evaluations": evaluations,
             "seconds": time.perf_counter() - t0}
+
+
+def carry_refined(problem, red: ReductionResult, carried: dict) -> None:
+    """The configurations with more lights than the final one hold its lamps as offered (they are
+    not refined): each takes the final one's refined lamps in their place (``carried``: candidate
+    light -> refined light), or else the configuration before it and one of its own lights, its
+    strengths re-fitted (NNLS per channel), when that lowers its error -- so that the curve never
+    rises after a refined configuration (NNLS on more lights is never worse)."""
+    T, b, norm = problem.transfer, problem.b_target, problem.target_norm or 1.0
+
+    def fit(ids):
+        ids = np.unique(np.asarray(ids, dtype=np.int64))
+        e = np.stack([_nnls(T[c][:, ids], b[:, c]) for c in range(3)], axis=1)
+        error = float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - b))
+        on = e.max(axis=1) > 0
+        return error, ids[on], e[on]
+
+    for i, pt in enumerate(red.curve):
+        if i == 0 or pt.n_lights <= red.final.n_lights or pt.n_negative:
+            continue
+        tries = [[carried.get(int(j), int(j)) for j in pt.lights]] if any(int(j) in carried for j in pt.lights) else []
+        prev = red.curve[i - 1]
+        if prev.n_negative == 0 and prev.n_lights == pt.n_lights - 1:
+            tries += [list(prev.lights) + [int(j)] for j in pt.lights if int(j) not in set(prev.lights.tolist())]
+        best = None
+        for ids in tries:
+            error, on, e = fit(ids)
+            if len(on) == pt.n_lights and error < (pt.error if best is None else best[0]):
+                best = (error, on, e)
+        if best is not None:
+            red.curve[i] = replace(pt, lights=best[1], exitance=best[2], error=best[0], relative_error=best[0] / norm)
 
 
 #: the certificate (lower bounds) covers the curve up to this many lights; above, the NNLS bound
