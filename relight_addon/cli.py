@@ -471,7 +471,8 @@ def _summary(args, report):
         inv, fin = report["inverse"], report["final"]
         print(f"{PROG}: {args.command}: {inv['n_targets']} target patches, {inv['n_candidates']} candidates; "
               f"e_x relative error {inv['relative_error']:.3g} with {inv['n_negative']} negative(s); "
-              f"final {fin['n_lights']} light(s), relative error {fin['relative_error']:.3g}, "
+              f"final {fin['n_lights']} light(s), relative error {fin['relative_error']:.3g} over "
+              f"{inv.get('error_over', 'the target patches')}, "
               f"{fin['n_negative']} negative(s) ({kinds_text(report)}); {len(report['curve'])} configurations; "
               f"{report['timings_s']['total']:.2f} s; report {args.report}")
     for w in report["warnings"]:

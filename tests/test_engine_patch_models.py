@@ -126,6 +126,31 @@ def test_painted_faces_keep_their_resolution(model):
             assert set(np.unique(patches.tri_face[patches.tri_patch == k])) == {f}
 
 
+@pytest.mark.parametrize("cell, clustered", [(0.1, False), (0.01, True)])
+def test_small_painted_faces_are_rows_of_their_own_unless_far_below_the_patch_size(cell, clustered):
+    """Issue 18: a painted face a quarter of the patch size (0.1 m at 0.4 m; the staircase's steps)
+    is a target row of its own -- its prediction, the error and the certificate are its own, not a
+    cluster's mean -- while faces of 1/40 of it (a densely painted prop) still form clusters; the
+    report says which (report.target_rows_text)."""
+    from relight_addon.pipeline.report import target_rows_text
+
+    n = 8
+    polys = [np.array([[x, y, 0.0], [x + cell, y, 0.0], [x + cell, y + cell, 0.0], [x, y + cell, 0.0]])
+             for x in cell * np.arange(n) for y in cell * np.arange(n)]
+    faces = polygon_faceset(polys + [p + [0.0, 0.0, 2.0] for p in cf.box_polygons((2.0, 2.0, 0.0))[:1]])
+    faces.target[:n * n] = True
+    faces.target_radiosity[:n * n] = 1.0
+    patches = AdaptiveModel(JobOptions(patch_model="adaptive", max_patch_size=0.4).validate()).mesh(faces)
+    tg = np.flatnonzero(patches.target)
+    text = target_rows_text(patches, tg)
+    if clustered:
+        assert len(tg) < n * n // 4 and "clusters" in text, text
+    else:
+        assert len(tg) == n * n and text == f"the {n * n} painted faces"
+        for k in tg:  # each row one face
+            assert len(np.unique(patches.tri_face[patches.tri_patch == k])) == 1
+
+
 def test_light_cells_multi_scale_and_only_on_candidates(model):
     faces, _, patches, lights = model
     cand = candidate_mask(patches)

@@ -168,6 +168,8 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "inverse": {
             "solver": inv.solver if inv else "direct-lighting",
             "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
+            "error_over": target_rows_text(patches, problem.targets) if model.mode == "inverse" else
+            "every patch that does not emit (the scene's radiosity)",
             "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
             "n_candidate_patches": int(len(problem.candidates)),
             "rank": inv.rank if inv else None,
@@ -200,6 +202,22 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def target_rows_text(patches, targets) -> str:
+    """What the relative error (Eq. 1) and the certificate are computed over: the painted faces
+    themselves, pieces of them, or (painted faces far below the patch size) clusters of them."""
+    tri = np.isin(patches.tri_patch, targets)
+    pairs = np.unique(np.column_stack([patches.tri_patch[tri], patches.tri_face[tri]]), axis=0)
+    faces_per_patch = np.bincount(pairs[:, 0], minlength=patches.n_patches)[targets]
+    patches_per_face = np.bincount(pairs[:, 1])
+    n_faces = int(np.count_nonzero(patches_per_face))
+    clustered = int(np.count_nonzero(faces_per_patch > 1))
+    split = int(np.count_nonzero(patches_per_face > 1))
+    if clustered:
+        return (f"{len(targets)} rows for {n_faces} painted faces ({clustered} rows clusters of painted faces below "
+                "1/16 of the patch size)")
+    return f"the {n_faces} painted faces" + (f" ({split} in pieces: {len(targets)} rows)" if split else "")
 
 
 def kinds_text(report) -> str:

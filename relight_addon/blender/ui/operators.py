@@ -317,8 +317,9 @@ def _summary(outcome):
     neg = f"{f['n_negative']} negative" if f["n_negative"] else "no negatives"
     from ...pipeline.report import kinds_text
 
-    text = (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}, {neg} "
-            f"({len(outcome.curve)} configurations on the curve); {kinds_text(outcome.report)}")
+    over = outcome.report["inverse"].get("error_over")
+    text = (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}{f' over {over}' if over else ''}, "
+            f"{neg} ({len(outcome.curve)} configurations on the curve); {kinds_text(outcome.report)}")
     fixed = [r for r in outcome.report.get("fixed_light") or [] if r.get("share") is not None]
     if fixed:  # the scene's own light the solve kept, and its share of the painted light
         text += "; the scene's own light: " + ", ".join(f"{r['name']} {100 * r['share']:.0f} %" for r in fixed)
