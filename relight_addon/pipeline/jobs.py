@@ -570,7 +570,9 @@ def carry_refined(problem, red: ReductionResult, carried: dict) -> None:
         tries = [[carried.get(int(j), int(j)) for j in pt.lights]] if any(int(j) in carried for j in pt.lights) else []
         prev = red.curve[i - 1]
         if prev.n_negative == 0 and prev.n_lights == pt.n_lights - 1:
-            tries += [list(prev.lights) + [int(j)] for j in pt.lights if int(j) not in set(prev.lights.tolist())]
+            had = set(prev.lights.tolist())  # (a refined lamp's candidate is not added beside it)
+            tries += [list(prev.lights) + [int(j)] for j in pt.lights
+                      if int(j) not in had and carried.get(int(j)) not in had]
         best = None
         for ids in tries:
             error, on, e = fit(ids)
