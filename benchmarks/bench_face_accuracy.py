@@ -69,7 +69,7 @@ def measure(blend, tmp, flags, samples, label):
     names = [n for n, o in report["objects"].items() if any(t is not None for t in o["target"])]
     baked_path = os.path.join(tmp, "baked.json")
     subprocess.run([PY, "-c", BAKE % (ROOT, os.path.join(ROOT, "tests")), out, "|".join(names), str(samples),
-                    baked_path], check=True, capture_output=True)
+                    baked_path], check=True, capture_output=True, text=True)
     baked = json.load(open(baked_path))
     signed, noise, area = [], [], []
     for n in names:
@@ -109,7 +109,13 @@ def main():
         subprocess.run([PY, "-c", BUILD % (ROOT, os.path.join(ROOT, "tests")), living], check=True,
                        capture_output=True)
         cases.append((living, [], "living room (Principled), 3 lights"))
-    rows = [measure(b, tmp, f, args.samples, label) for b, f, label in cases]
+    rows = []
+    for b, f, label in cases:
+        try:
+            rows.append(measure(b, tmp, f, args.samples, label))
+        except subprocess.CalledProcessError as exc:  # e.g. a face too small for the bake's texels
+            print(f"{label}: the bake failed ({exc.stderr.strip().splitlines()[-1] if exc.stderr else exc})")
+            rows.append({"case": label, "error": "bake failed"})
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
     with open(os.path.join(HERE, "results", "bench_face_accuracy.json"), "w") as f:
         json.dump({"command": "benchmarks/bench_face_accuracy.py", "samples": args.samples, "rows": rows}, f, indent=1)
