@@ -327,6 +327,14 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
     return lamps[:options.max_lamps], names[:options.max_lamps]
 
 
+def patch_radius(patches) -> np.ndarray:
+    """(P,) m: each patch's bounding radius about its centre (its farthest triangle vertex)."""
+    radius = np.zeros(patches.n_patches)
+    corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
+    np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
+    return radius
+
+
 def _reach(patches, lamps, radius):
     """Per lamp, the patches its light can reach (a spot: those its cone meets; an area lamp: those
     in front of its plane, and of a beam those whose bounding sphere's projection on the lamp's plane
@@ -361,9 +369,7 @@ def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=
     lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
     if not lamps:
         return lights, 0
-    radius = np.zeros(patches.n_patches)
-    corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
-    np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
+    radius = patch_radius(patches)
     H = np.zeros((patches.n_patches, len(lamps)))
     reach = _reach(patches, lamps, radius)
     step = 16

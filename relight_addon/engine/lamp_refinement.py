@@ -36,7 +36,9 @@ import scipy.optimize as sopt
 
 from .best_lights import _nnls
 from .geometry import unit
+from .candidate_lamps import _reach as lamp_reach, patch_radius
 from .lamps import lamp_irradiance
+from .lights.placed import frame
 
 __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
 
@@ -136,22 +138,19 @@ class RefinedLamp:
     irradiance: np.ndarray
 
 
-def _tangents(n):
-    ref = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = unit((ref - (ref @ n) * n)[None, :])[0]
-    return u, np.cross(n, u)
-
-
 class _LampParameters:
     """A lamp's refined parameters as a vector x scaled to unit steps (x = 0: the lamp as it is);
     it slides along the surface it hangs from (``mount``, Mount.normal_at) if any."""
 
-    def __init__(self, lamp, mount, step_length, frame):
+    def __init__(self, lamp, mount, step_length):
         normal = mount.normal_at(lamp.position)
-        self.lamp, self.mount, self.normal, self.frame = lamp, mount, normal, frame
+        self.lamp, self.mount, self.normal = lamp, mount, normal
         self.names = PARAMETERS[lamp.kind] if normal is not None else \
             tuple(p for p in PARAMETERS[lamp.kind] if not p.startswith("slide"))
-        self.mount_u, self.mount_v = _tangents(normal) if normal is not None else (None, None)
+        self.mount_u = self.mount_v = None
+        if normal is not None:  # tangents u and n x u (frame's second axis is -n x u)
+            _, self.mount_u, v = frame(normal)
+            self.mount_v = -v
         self.step_length = float(step_length)
         half = 0.5 * lamp.spot_size if lamp.kind == "SPOT" else 0.25
         self.step_angle = 0.25 * half  # radians of aim per unit
@@ -172,7 +171,7 @@ class _LampParameters:
                               + math.tan(self.step_angle * values["aim_v"]) * lamp.axis_v)[None, :])[0]
             if self.normal is not None and direction @ self.normal <= 0:
                 return None  # aimed behind its mounting surface
-        d, u, v = self.frame(direction)
+        d, u, v = frame(direction)
         out = replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[])
         if lamp.kind == "SPOT":
             size = lamp.spot_size * math.exp(self.step_log * values["log_size"])
@@ -188,17 +187,11 @@ class _LampParameters:
         return out
 
 
-def _reach(patches, lamp, radius):
-    from .candidate_lamps import _reach as reach
-    return reach(patches, [lamp], radius)[0]
-
-
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
-                         frame, seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None) -> tuple:
+                         seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None) -> tuple:
     """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
     channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
-    (see the module docstring). ``step_length``: the slide of one unit (m); ``frame``: the lamps'
-    frame of a direction (engine.lights.placed.frame). Returns ([RefinedLamp] of the lamps whose
+    (see the module docstring). ``step_length``: the slide of one unit (m). Returns ([RefinedLamp] of the lamps whose
     refinement lowered the error, the columns with theirs replaced, the relative error before and
     after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET)."""
     patches = mount.patches
@@ -208,9 +201,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     b = problem.b_target
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
-    radius = np.zeros(patches.n_patches)
-    corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
-    np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
+    radius = patch_radius(patches)
 
     def error(cs):
         err2 = 0.0
@@ -222,7 +213,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
 
     def irradiance(lamp, points=SEARCH_POINTS):
         return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,
-                               only=[_reach(patches, lamp, radius)])[:, 0, 0]
+                               only=lamp_reach(patches, [lamp], radius))[:, 0, 0]
 
     def with_column(cs, j, h, lamp):
         col = transport.column(h, lamp)
@@ -239,7 +230,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
         for j in list(current):
             if (cancel is not None and cancel()) or evaluations >= budget:
                 break
-            params = _LampParameters(current[j], mount, step_length, frame)
+            params = _LampParameters(current[j], mount, step_length)
             seen = {}
 
             def f(x):

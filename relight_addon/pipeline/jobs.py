@@ -20,7 +20,7 @@ from ..engine.best_lights import lower_bounds
 from ..engine.best_lights import _nnls
 from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
 from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, refine_configuration
-from ..engine.lights.placed import WRITER as PLACED, frame
+from ..engine.lights.placed import WRITER as PLACED
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.incidence import first_bounce_matrices, incidence_tables, lamp_albedo_excess, lamp_excess
@@ -512,7 +512,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights)
                   if lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED}
         refined, cols, before, after, n_eval = refine_configuration(
-            problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step, frame,
+            problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
             seed=options.seed, budget=REFINE_BUDGET - evaluations, cancel=cancel)
         evaluations += n_eval
         rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
