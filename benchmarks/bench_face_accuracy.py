@@ -37,10 +37,11 @@ sys.path[:0] = [%r, %r]
 import bpy
 import numpy as np
 import cycles_reference as cr
-blend, names, samples, out = sys.argv[-4], sys.argv[-3].split("|"), int(sys.argv[-2]), sys.argv[-1]
+blend, faces, samples, out = sys.argv[-4], json.loads(sys.argv[-3]), int(sys.argv[-2]), sys.argv[-1]
 bpy.ops.wm.open_mainfile(filepath=blend)
-baked = cr.cycles_face_radiance(samples=samples, seed=2, objects=[bpy.data.objects[n] for n in names],
-                                keep_world=True, keep_materials=True, keep_light_paths=True, threads=2)
+baked = cr.cycles_face_radiance(samples=samples, seed=2, objects=[bpy.data.objects[n] for n in faces],
+                                keep_world=True, keep_materials=True, keep_light_paths=True, threads=2,
+                                faces=faces)
 json.dump({n: {"radiance": b.radiance.tolist(), "noise": b.rel_noise.tolist()} for n, b in baked.items()},
           open(out, "w"))
 """
@@ -66,9 +67,11 @@ def measure(blend, tmp, flags, samples, label):
     report_path, out = os.path.join(tmp, "r.json"), os.path.join(tmp, "out.blend")
     relight("solve", blend, "--report", report_path, "--out", out, "--seed", "1", *flags)
     report = json.load(open(report_path))
-    names = [n for n, o in report["objects"].items() if any(t is not None for t in o["target"])]
+    faces = {n: [i for i, t in enumerate(o["target"]) if t is not None] for n, o in report["objects"].items()}
+    faces = {n: f for n, f in faces.items() if f}
+    names = list(faces)
     baked_path = os.path.join(tmp, "baked.json")
-    subprocess.run([PY, "-c", BAKE % (ROOT, os.path.join(ROOT, "tests")), out, "|".join(names), str(samples),
+    subprocess.run([PY, "-c", BAKE % (ROOT, os.path.join(ROOT, "tests")), out, json.dumps(faces), str(samples),
                     baked_path], check=True, capture_output=True, text=True)
     baked = json.load(open(baked_path))
     signed, noise, area = [], [], []

@@ -8,7 +8,8 @@ How a per-face mean is measured without edge bias:
 - each mesh gets a new UV map in which every polygon has its own square cell
   of a grid (``cell_px`` texels, one texel of padding on each side). The
   polygon is laid out in its own plane by a *similarity* (rotation + uniform
-  scale), so texel centres inside it sample the face uniformly by area;
+  scale; a face too narrow for it, stretched along its narrow axis: still an
+  affine map), so texel centres inside it sample the face uniformly by area;
 - the bake target is a float image pre-filled with a negative sentinel, baked
   with margin 0 and without clearing: exactly the texels Cycles rasterised
   (their centres lie inside the polygon) hold values, every other texel keeps
@@ -143,16 +144,26 @@ def make_lambertian(materials=None):
                 node.inputs["Roughness"].default_value = 1.0
 
 
-def _face_cells(obj, cell_px: int, pad: int = 1):
-    """Give ``obj`` a UV map with one square cell per polygon (similarity layout).
+#: a face whose narrow side would span fewer texels than this, laid out by a similarity, is
+#: stretched across its cell instead (an affine map: texel centres still sample it uniformly by area)
+MIN_SPAN_PX = 6
 
-    Returns (resolution, grid columns). Cell f occupies texels
-    [col*cell_px, (col+1)*cell_px) x [row*cell_px, (row+1)*cell_px) with
-    col = f % n, row = f // n.
+
+def _face_cells(obj, cell_px: int, pad: int = 1, faces=None):
+    """Give ``obj`` a UV map with one square cell per polygon (or per polygon of ``faces``).
+
+    Returns (resolution, grid columns, cell of each polygon (-1: not baked)). Cell k occupies
+    texels [col*cell_px, (col+1)*cell_px) x [row*cell_px, (row+1)*cell_px) with col = k % n,
+    row = k // n. A polygon is laid out in its own plane by a similarity; one too narrow for
+    that (a bevel's strip, a sliver) is stretched along its narrow axis (MIN_SPAN_PX). Polygons
+    not in ``faces`` are collapsed to a point outside the image: Cycles bakes no texel of them.
     """
     me = obj.data
     F = len(me.polygons)
-    n = max(1, math.ceil(math.sqrt(F)))
+    chosen = np.arange(F) if faces is None else np.unique(np.asarray(faces, dtype=np.int64))
+    cell_of = np.full(F, -1, dtype=np.int64)
+    cell_of[chosen] = np.arange(len(chosen))
+    n = max(1, math.ceil(math.sqrt(max(len(chosen), 1))))
     res = n * cell_px
     uv = me.uv_layers.get(UV_NAME) or me.uv_layers.new(name=UV_NAME)
     me.uv_layers.active = uv
@@ -162,9 +173,10 @@ def _face_cells(obj, cell_px: int, pad: int = 1):
     co = co.reshape(-1, 3) @ mw[:3, :3].T + mw[:3, 3]
     loop_vert = np.empty(len(me.loops), dtype=np.int64)
     me.loops.foreach_get("vertex_index", loop_vert)
-    uvs = np.zeros((len(me.loops), 2))
+    uvs = np.full((len(me.loops), 2), 2.0)  # outside the image
     inner = cell_px - 2 * pad
-    for f, poly in enumerate(me.polygons):
+    for f in chosen:
+        poly = me.polygons[int(f)]
         ls = np.arange(poly.loop_start, poly.loop_start + poly.loop_total)
         p = co[loop_vert[ls]]
         # Newell normal, in-plane orthonormal basis: a similarity onto the plane.
@@ -175,12 +187,20 @@ def _face_cells(obj, cell_px: int, pad: int = 1):
         v = np.cross(nrm, u)
         q = np.stack([(p - p[0]) @ u, (p - p[0]) @ v], axis=1)
         lo, hi = q.min(axis=0), q.max(axis=0)
-        s = inner / max(float((hi - lo).max()), 1e-30)
-        q = (q - lo) * s + (inner - (hi - lo) * s) / 2 + pad  # centred in the cell, texels
-        col, row = f % n, f // n
+        ext = np.maximum(hi - lo, 1e-30)
+        scale = np.full(2, inner / float(ext.max()))
+        if float(ext.min() * scale[0]) < MIN_SPAN_PX:  # too narrow: along its principal axes, stretched
+            _, vec = np.linalg.eigh(np.cov((q - q.mean(axis=0)).T))
+            q = q @ vec
+            lo, hi = q.min(axis=0), q.max(axis=0)
+            ext = np.maximum(hi - lo, 1e-30)
+            scale = inner / ext
+        q = (q - lo) * scale + (inner - ext * scale) / 2 + pad  # centred in the cell, texels
+        k = cell_of[f]
+        col, row = k % n, k // n
         uvs[ls] = (q + np.array([col * cell_px, row * cell_px])) / res
     uv.data.foreach_set("uv", uvs.ravel())
-    return res, n
+    return res, n, cell_of
 
 
 def _bake_object(obj, res: int, pass_filter):
@@ -218,12 +238,14 @@ def _bake_object(obj, res: int, pass_filter):
     return px.reshape(res, res, 4)  # [row (v), col (u), rgba]
 
 
-def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
-    rad = np.zeros((F, 3))
-    se = np.zeros((F, 3))
+def _face_stats(px, F: int, n: int, cell_px: int, cell_of=None) -> FaceRadiance:
+    """Each baked polygon's mean and standard error (NaN for the polygons not baked)."""
+    cell_of = np.arange(F) if cell_of is None else np.asarray(cell_of)
+    rad = np.full((F, 3), np.nan)
+    se = np.full((F, 3), np.nan)
     cnt = np.zeros(F, dtype=np.int64)
-    for f in range(F):
-        col, row = f % n, f // n
+    for f in np.flatnonzero(cell_of >= 0):
+        col, row = cell_of[f] % n, cell_of[f] // n
         cell = px[row * cell_px:(row + 1) * cell_px, col * cell_px:(col + 1) * cell_px]
         written = cell[..., 3] > SENTINEL / 2
         rgb = cell[..., :3].astype(np.float64)
@@ -235,14 +257,15 @@ def _face_stats(px, F: int, n: int, cell_px: int) -> FaceRadiance:
         d = (rgb[:, 1:] - rgb[:, :-1])[pair]
         sigma = np.sqrt(0.5 * (d ** 2).mean(axis=0)) if len(d) else np.abs(rad[f])
         se[f] = sigma / np.sqrt(cnt[f])
-    if not np.all(np.isfinite(rad)):
+    if not np.all(np.isfinite(rad[cell_of >= 0])):
         raise ValueError("Cycles bake produced non-finite values")
     return FaceRadiance(radiance=rad, std_error=se, n_texels=cnt)
 
 
 def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, objects=None,
                          blend_path: str | None = None, threads: int = 0, keep_materials: bool = False,
-                         keep_light_paths: bool = False, keep_world: bool = False, one_sided: bool = False) -> dict:
+                         keep_light_paths: bool = False, keep_world: bool = False, one_sided: bool = False,
+                         faces: dict | None = None) -> dict:
     """Cycles' per-face mean outgoing radiance (W m^-2 sr^-1) of mesh objects.
 
     Works on the current Blender data, or opens ``blend_path`` first. Modifies
@@ -255,6 +278,8 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     (``configure_cycles``). Mesh emission is two-sided, as Cycles renders it and Relight models it
     (export.py: the back side of an open emitter is a face of its own); ``one_sided``: made
     one-sided first (``one_sided_emission``), for a comparison with a one-sided model.
+    ``faces``: {object name: polygon indices}: only those polygons are baked (the others' rows
+    are NaN), so a large object's few target faces bake in a small image.
     """
     if blend_path is not None:
         bpy.ops.wm.open_mainfile(filepath=str(blend_path))
@@ -275,9 +300,9 @@ def cycles_face_radiance(samples: int = 64, seed: int = 0, cell_px: int = 24, ob
     for obj in objects:
         if len(obj.data.polygons) == 0:
             continue
-        res, n = _face_cells(obj, cell_px)
+        res, n, cell_of = _face_cells(obj, cell_px, faces=None if faces is None else faces[obj.name])
         px = _bake_object(obj, res, pass_filter)
-        out[obj.name] = _face_stats(px, len(obj.data.polygons), n, cell_px)
+        out[obj.name] = _face_stats(px, len(obj.data.polygons), n, cell_px, cell_of)
     return out
 
 

@@ -8,6 +8,8 @@ import scipy.sparse as sp
 
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import (
+    BURIED_POINTS,
+    BURIED_RAYS,
     QUALITY,
     FormFactors,
     compute_form_factors,
@@ -213,7 +215,7 @@ def test_bad_input_messages():
         compute_form_factors(ps, "ultra")
     assert compute_form_factors(ps, "draft").rays_per_patch == QUALITY["draft"]
     ff = compute_form_factors(ps, 16)
-    assert isinstance(ff, FormFactors) and ff.n_rays == 16 * ps.n_patches
+    assert isinstance(ff, FormFactors) and ff.n_rays == (16 + BURIED_POINTS * BURIED_RAYS) * ps.n_patches
     with pytest.raises(ValueError, match="area"):
         ff.reciprocity_error(ps.area[:-1])
 
@@ -229,3 +231,40 @@ def test_job_options_default_rays_is_the_form_factor_default():
     assert formfactors.auto_rays_per_patch(1451) == 2048
     # with kernel pairs (the default solve) half the budget: the staircase's 943 adaptive patches
     assert formfactors.auto_rays_per_patch(943) == 4096 and formfactors.auto_rays_per_patch(943, kernel=True) == 2048
+
+
+def _room_with_slab(open_card=False):
+    """A closed 1 m box room (one patch per wall) and, on the floor's half x < 0.5, a closed 0.1 m
+    slab (outward faces, its bottom coincident with the floor, its sides with three walls), or
+    (``open_card``) a one-sided 0.5 m card half-way up, facing up."""
+    room = cf.box_polygons()
+    if open_card:
+        extra = [np.array([[0.25, 0.25, 0.5], [0.75, 0.25, 0.5], [0.75, 0.75, 0.5], [0.25, 0.75, 0.5]],
+                          dtype=np.float64)]
+    else:
+        extra = [p[::-1] for p in cf.box_polygons((0.5, 1.0, 0.1))]  # outward: the inward box reversed
+    return mesh_patches(polygon_faceset(room + extra), max_patch_size=1e3)
+
+
+def test_a_partly_buried_patch_gathers_over_its_visible_part():
+    # the floor's half under the slab is buried: its rays start inside the slab. Cycles lights only
+    # the visible half, so the floor's row (what it gathers) is that half's: in a closed room it
+    # sums to 1 (it was 0.5: the buried half's rays absorbed by the slab's insides)
+    ps = _room_with_slab()
+    ff = compute_form_factors(ps, 8192, seed=1)
+    assert ff.visible[0] == pytest.approx(0.5, abs=0.1)  # 36 points
+    assert ff.visible[1] == ff.visible[3] == 1.0  # the ceiling and the far wall touch nothing
+    assert np.all(ff.visible[[2, 4, 5]] > 0.8)  # the walls behind the slab's sides: 5-10 % buried
+    assert ff.row_sums()[0] == pytest.approx(1.0, abs=0.02)
+    # the visible half sees the ceiling as a 0.5 x 1 floor strip beside a 0.1 m step would: less
+    # than the whole floor does, more than 0 (a closed form's neighbourhood, not an exact one)
+    assert 0.1 < ff.to_dense()[0, 1] < cf.parallel_rectangles(1, 1, 1) + 0.02
+
+
+def test_a_patch_under_an_open_card_is_not_buried():
+    # a one-sided card over the floor's centre: the floor's points under it see past its edges, so
+    # none is buried, and the rays that reach the card's back are absorbed as before (row sum below 1)
+    ps = _room_with_slab(open_card=True)
+    ff = compute_form_factors(ps, 8192, seed=1)
+    assert np.all(ff.visible == 1.0)
+    assert ff.row_sums()[0] < 0.95

@@ -8,7 +8,12 @@ directions cosine-weighted about the triangle's normal, and counting the
 fraction whose first hit is the front side of j. Patches are one-sided: a hit
 on a back side is absorbed and counts for no patch; a ray that leaves the
 scene counts for none either, so row sums are < 1 in open scenes and ~1 in
-closed ones. Every pair is then estimated from the rays of both its patches
+closed ones. A patch partly buried (inside a closed object, or behind a face coincident with it:
+a wall where a slab runs into it, a flight's side against a wall) gathers over its visible part
+only: its row is divided by its visible share (``visible_fraction``: a point is buried when most
+of its test rays reach back sides), as Cycles lights only what can be seen; without it the buried
+part's share of the row was lost, and with it light (the staircase's walls and flights: 1.3 % of
+the rays in all, a patch up to 31 %). Every pair is then estimated from the rays of both its patches
 (``reciprocity="weighted"``, the default; ``weigh_reciprocity``): the exchange
 A_i F_ij = A_j F_ji weighted by the inverse variance of each side's count,
 which favours the smaller patch (a small light cell seen by a large wall).
@@ -65,7 +70,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg.norm)
 from scipy.stats import qmc
 
-from .kernel_transfer import apply_kernel_pairs, kernel_form_factors
+from .kernel_transfer import _Geometry, _sample_patches, apply_kernel_pairs, kernel_form_factors
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
 
@@ -96,6 +101,12 @@ RAY_BUDGET = 1 << 22
 KERNEL_RAY_BUDGET = RAY_BUDGET // 2
 #: dense float32 matrix up to this many patches, scipy.sparse CSR above.
 DENSE_LIMIT = 6000
+#: ``visible_fraction``: stratified test points per patch and cosine-weighted rays per point
+BURIED_POINTS = 36
+BURIED_RAYS = 8
+#: ... a point is buried when at least this share of its rays reach back sides (not all: where the
+#: enclosing object's face is coincident with another one, some rays hit that one's front)
+BURIED_SHARE = 0.75
 SAMPLINGS = ("sobol", "stratified", "random")
 RECIPROCITY = ("weighted", "rays")
 #: target number of rays per chunk (one chunk = a contiguous range of source patches, the unit
@@ -122,6 +133,8 @@ class FormFactors:
     reciprocity: str = "weighted"  # "weighted": weigh_reciprocity; "rays": each row from its own rays
     #: receiver x source pairs replaced by the kernel estimator (kernel_transfer.py), 0 if none
     kernel_pairs: int = 0
+    #: (P,) each patch's visible share (``visible_fraction``; 1: nothing buried), None if not measured
+    visible: object = None
     #: the solve's SceneSampler (its one Embree scene), for the lamps' shadow rays (engine.lamps)
     sampler: object = field(default=None, repr=False, compare=False)
 
@@ -471,6 +484,39 @@ class _Tracer:
         return key
 
 
+def visible_fraction(patches: PatchSet, sampler: SceneSampler, seed: int = 0, points: int = BURIED_POINTS,
+                     rays: int = BURIED_RAYS) -> np.ndarray:
+    """(P,) the share of each patch's area that is not buried: of ``points`` stratified points
+    (kernel_transfer._sample_patches), those from which BURIED_SHARE of ``rays`` cosine-weighted
+    rays reach a back side are buried: they lie inside a closed object, or under a face coincident
+    with the patch. A point under an open face (a card's back over a floor) is not, unless the card
+    covers most of its hemisphere (a card that low is a slab to the light too). Deterministic for
+    a seed."""
+    from .lamps import _tangents
+
+    P = patches.n_patches
+    out = np.ones(P)
+    g = _Geometry(patches, points, sampler=sampler)
+    rng = np.random.default_rng([int(seed), 11])
+    step = max(1, (1 << 18) // (points * rays))
+    for p0 in range(0, P, step):
+        s = np.arange(p0, min(P, p0 + step))
+        y, ny = _sample_patches(g, s, points, rng)
+        y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
+        ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
+        t1, t2 = _tangents(ny)
+        u = rng.random((len(y), rays, 2))
+        loc = _cosine_directions(u[..., 0].ravel(), u[..., 1].ravel()).reshape(len(y), rays, 3).astype(np.float64)
+        d = loc[..., 0:1] * t1[:, None] + loc[..., 1:2] * t2[:, None] + loc[..., 2:3] * ny[:, None]
+        org = np.repeat(y + sampler.offset * ny, rays, axis=0).astype(np.float32)
+        d = d.reshape(-1, 3).astype(np.float32)
+        prim = np.asarray(sampler.first_hit(org, d))
+        back = (prim >= 0) & (np.einsum("ij,ij->i", sampler.tn[np.maximum(prim, 0)], d) >= 0)
+        buried = back.reshape(len(s), points, rays).mean(axis=2) >= BURIED_SHARE
+        out[s] = 1.0 - buried.mean(axis=1)
+    return out
+
+
 def auto_rays_per_patch(n_patches: int, kernel: bool = False) -> int:
     """Rays per patch of the automatic quality (see RAY_BUDGET; KERNEL_RAY_BUDGET with kernel pairs)."""
     want = (KERNEL_RAY_BUDGET if kernel else RAY_BUDGET) / max(int(n_patches), 1)
@@ -558,8 +604,18 @@ def compute_form_factors(
 
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
-    if reciprocity == "weighted":
-        matrix = weigh_reciprocity(matrix, patches.area, N)
+    # a partly buried patch gathers over its visible part (the module docstring)
+    visible = visible_fraction(patches, sampler, seed)
+    part = np.flatnonzero((visible > 0) & (visible < 1))
+    if len(part):
+        scale = np.ones(P)
+        scale[part] = 1.0 / visible[part]
+        if dense:
+            matrix[part] *= scale[part, None].astype(np.float32)
+        else:
+            matrix = (sp.diags(scale.astype(np.float32)) @ matrix).tocsr().astype(np.float32)
+    if reciprocity == "weighted":  # each side's exchange with its visible area
+        matrix = weigh_reciprocity(matrix, patches.area * np.maximum(visible, 0.5 / BURIED_POINTS), N)
     n_kernel = 0
     if kernel_pairs is not None:
         rec, src = kernel_pairs
@@ -574,10 +630,11 @@ def compute_form_factors(
     return FormFactors(
         matrix=matrix,
         rays_per_patch=N,
-        n_rays=N * P,
+        n_rays=N * P + P * BURIED_POINTS * BURIED_RAYS,
         seconds=time.perf_counter() - t0,
         sampling=sampling,
         reciprocity=reciprocity,
         kernel_pairs=int(n_kernel),
+        visible=visible,
         sampler=sampler,
     )
