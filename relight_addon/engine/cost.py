@@ -67,6 +67,9 @@ BASE_BYTES = 60 * 2 ** 20
 #: the kernel estimator per target x candidate pair at its defaults (100 penumbra points x 2 rays;
 #: 4e-5 at 256 x 4)
 KERNEL_SECONDS_PER_PAIR = 2e-5
+#: the curve's surface lights whose direct light on every patch the kernel computes again (at most;
+#: pipeline.jobs.direct_stage)
+DIRECT_LIGHTS = 48
 #: a candidate lamp's irradiance per receiver point (sampling, the lamp's light, its shadow ray; measured)
 LAMP_SECONDS_PER_POINT = 3e-7
 STORED_POINTS = STORE_ALL_UP_TO + STORE_LOG_POINTS  # at most, up to the ~40 log-spaced ones
@@ -133,6 +136,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     if kernel:
         pairs = float(m) * C
         parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
+    if kernel:  # the curve's lights' direct light on every patch (pipeline.jobs.direct_stage), at most
+        pairs = float(P) * min(C, DIRECT_LIGHTS)
+        parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR)
     if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)
         points = float(lamp_work) * P * LAMP_POINTS
         parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,

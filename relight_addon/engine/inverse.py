@@ -267,6 +267,9 @@ class InverseProblem:
         #: of irradiance kinds' source is rho H s + X s; ``background_excess`` (P, 3) W/m^2 the same
         #: for the fixed lamps' light
         self.lamp_excess = lamp_excess
+        #: None, or (P, n_lights) sparse: the surface lights' direct light computed anew (W/m^2 per
+        #: unit exitance: a better gather minus F's, ``correct_direct``), in T and in the forward solves
+        self.direct_correction = None
         #: (P, 3) W/m^2: the radiosity of the fixed light (``background``: the scene's own emitters'
         #: exitance; ``background_irradiance``: the lamps' direct irradiance, engine.lamps),
         #: subtracted from the targets; the lights supply what it leaves. target_norm
@@ -446,6 +449,9 @@ class InverseProblem:
             n_new = lights.n_lights - n0
             new = excess if excess is not None else [sp.csc_matrix((self.n_patches, n_new))] * 3
             self.lamp_excess = [sp.hstack([self.lamp_excess[c], new[c]]).tocsc() for c in range(3)]
+        if self.direct_correction is not None:
+            self.direct_correction = sp.hstack([self.direct_correction,
+                                                sp.csc_matrix((self.n_patches, lights.n_lights - n0))]).tocsc()
         T = self.transfer
         self._init_lights(None, lights.basis, lights)
         if self.n_lights < n0 or any(np.shape(columns[c]) != (self.m, self.n_lights - n0) for c in range(3)):
@@ -454,12 +460,38 @@ class InverseProblem:
         self._transfer = [np.ascontiguousarray(np.hstack([T[c], np.asarray(columns[c], dtype=np.float64)]))
                           for c in range(3)]
 
+    def _target_rows(self, fac):
+        """Y (P, m): Y^T = rows P (the targets) of A^-1, from the factors ``fac`` of one channel."""
+        Y = np.zeros((self.n_patches, self.m))
+        Y[self.targets, np.arange(self.m)] = 1.0
+        return fac.solve(Y, trans=True)
+
+    def correct_direct(self, lights, dH):
+        """The direct light of the surface lights ``lights`` (indices) computed anew, e.g. by the
+        kernel estimator: ``dH`` (P, len(lights)) W/m^2 per unit of their exitance, the new gather
+        minus F's. Their columns of T gain rows P of A^-1 diag(rho) dH, and every forward solve
+        (``configuration_radiosity``) the reflection rho dH s of their light."""
+        lights = np.asarray(lights, dtype=np.int64)
+        dH = np.asarray(dH, dtype=np.float64).reshape(self.n_patches, len(lights))
+        if not np.all(np.isfinite(dH)):
+            raise InverseError("the lights' direct light is not finite")
+        T = self.transfer
+        facs = self.factors()
+        done = set()
+        for c in range(3):  # channels of one reflectance share their factors and their T (``transfer``)
+            if id(T[c]) in done:
+                continue
+            done.add(id(T[c]))
+            Y = self._target_rows(facs[c])
+            T[c][:, lights] += (dH.T @ (self.reflectance[:, c:c + 1] * Y)).T
+        new = sp.csc_matrix((dH.ravel(), (np.repeat(np.arange(self.n_patches), len(lights)),
+                                          np.tile(lights, self.n_patches))), shape=(self.n_patches, self.n_lights))
+        self.direct_correction = new if self.direct_correction is None else (self.direct_correction + new).tocsc()
+
     def _irradiance_transfer(self, fac, c, H):
         """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
         lights whose source is a direct irradiance H (P, n_lights)."""
-        Y = np.zeros((self.n_patches, self.m))
-        Y[self.targets, np.arange(self.m)] = 1.0
-        Y = fac.solve(Y, trans=True)  # Y^T = rows P of A^-1
+        Y = self._target_rows(fac)  # Y^T = rows P of A^-1
         T = H.T @ (self.reflectance[:, c:c + 1] * Y)
         if self.lamp_excess is not None:
             T = T + self.lamp_excess[c].T @ Y
@@ -526,9 +558,11 @@ class InverseProblem:
 
     def configuration_radiosity(self, strength):
         """B (P, 3) of the lights at ``strength`` (n_lights, 3): every kind's source, transported."""
-        return self.forward_radiosity(self.patch_exitance(strength),
-                                      self.lights.patch_irradiance(strength, self.n_patches)
-                                      if self.lights.irradiance is not None else None, self.excess_of(strength))
+        H = self.lights.patch_irradiance(strength, self.n_patches) if self.lights.irradiance is not None else None
+        if self.direct_correction is not None:
+            dH = np.asarray(self.direct_correction @ np.asarray(strength, dtype=np.float64).reshape(-1, 3))
+            H = dH if H is None else H + dH
+        return self.forward_radiosity(self.patch_exitance(strength), H, self.excess_of(strength))
 
     def excess_of(self, strength):
         """(P, 3) W/m^2: the lamps' first reflection beyond rho H at ``strength`` (n_lights, 3)

@@ -809,6 +809,36 @@ def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
 
 
 # --------------------------------------------------------------------------------------
+def lights_direct_correction(patches: PatchSet, F, lights, members, visible=None, skip=None, seed: int = 0,
+                             sampler: SceneSampler | None = None, cancel=None) -> np.ndarray:
+    """(P, len(lights)) W/m^2 per unit exitance: the direct light of surface lights on every patch
+    by the kernel (``kernel_form_factors``) minus what the ray-cast F gathers of it. ``members(j)``:
+    light j's patches (all at its one exitance). ``visible`` (P,): each patch's visible share
+    (formfactors.visible_fraction): a partly buried receiver's kernel gather is over its visible
+    part, as its row of F is. ``skip``: receivers left as they are (0: their F entries are kernel
+    estimates already, e.g. the targets of the estimator's kernel pairs)."""
+    P = patches.n_patches
+    own = [np.asarray(members(j), dtype=np.int64) for j in lights]
+    src = np.unique(np.concatenate(own)) if own else np.zeros(0, dtype=np.int64)
+    out = np.zeros((P, len(lights)))
+    if len(src) == 0:
+        return out
+    K = kernel_form_factors(patches, np.arange(P), src, seed=seed, sampler=sampler, cancel=cancel)
+    if visible is not None:
+        v = np.asarray(visible, dtype=np.float64)
+        part = (v > 0) & (v < 1)
+        K[part] /= v[part, None]
+    cols = F[:, src]
+    cols = cols.toarray() if sp.issparse(cols) else np.asarray(cols, dtype=np.float64)
+    D = K - cols
+    if skip is not None:
+        D[np.asarray(skip)] = 0.0
+    where = {int(p): i for i, p in enumerate(src)}
+    for k, members_k in enumerate(own):
+        out[:, k] = D[:, [where[int(p)] for p in members_k]].sum(axis=1)
+    return out
+
+
 # storing the estimates in a form-factor matrix
 
 def apply_kernel_pairs(F, area, rows, cols, values):
