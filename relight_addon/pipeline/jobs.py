@@ -775,6 +775,8 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
     for k in range(n_pts):  # the lights' exitance on their patches
         E_patch[C, k] = problem.light_basis @ E[k]
     H = problem.lights.irradiance
+    if problem.direct_correction is not None:  # the curve's lights' direct light by the kernel (direct_stage)
+        H = problem.direct_correction if H is None else (sp.csc_matrix(H) + problem.direct_correction).tocsc()
     facs = problem.factors()
     B = np.empty((n_pts, P, 3))
     for c in range(3):  # every light's source (engine.lights), transported
