@@ -13,7 +13,8 @@ a wall where a slab runs into it, a flight's side against a wall) gathers over i
 only: its row is divided by its visible share (``visible_fraction``: a point is buried when most
 of its test rays reach back sides), as Cycles lights only what can be seen; without it the buried
 part's share of the row was lost, and with it light (the staircase's walls and flights: 1.3 % of
-the rays in all, a patch up to 31 %). Every pair is then estimated from the rays of both its patches
+the rays in all, a patch up to 31 %). A painted target keeps its whole area's mean, as a bake of
+the face shows it (the part under a sofa black). Every pair is then estimated from the rays of both its patches
 (``reciprocity="weighted"``, the default; ``weigh_reciprocity``): the exchange
 A_i F_ij = A_j F_ji weighted by the inverse variance of each side's count,
 which favours the smaller patch (a small light cell seen by a large wall).
@@ -604,9 +605,13 @@ def compute_form_factors(
 
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
-    # a partly buried patch gathers over its visible part (the module docstring)
+    # a partly buried patch gathers over its visible part (the module docstring); a painted target
+    # keeps its whole area's mean, as its lamps' and its kernel pairs' light does, and as a bake of
+    # the face shows it (the part under a sofa black)
     visible = visible_fraction(patches, sampler, seed)
-    part = np.flatnonzero((visible > 0) & (visible < 1))
+    target = np.asarray(getattr(patches, "target", None) if getattr(patches, "target", None) is not None
+                        else np.zeros(P, dtype=bool), dtype=bool)
+    part = np.flatnonzero((visible > 0) & (visible < 1) & ~target)
     if len(part):
         scale = np.ones(P)
         scale[part] = 1.0 / visible[part]
