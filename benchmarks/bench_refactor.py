@@ -72,8 +72,11 @@ def warm(tree, scene, repeats):
 def differences(a, b):
     ca = np.array([p["relative_error"] for p in a["curve"]], dtype=float)
     cb = np.array([p["relative_error"] for p in b["curve"]], dtype=float)
-    ea = np.array([li["exitance"] for li in a["final"]["lights"]], dtype=float)
-    eb = np.array([li["exitance"] for li in b["final"]["lights"]], dtype=float)
+    def strengths(r):  # a surface light's exitance, a lamp's power per channel
+        return np.array([li["exitance"] if li.get("exitance") is not None else li["strength"]
+                         for li in r["final"]["lights"]], dtype=float)
+
+    ea, eb = strengths(a), strengths(b)
     same_lights = [(li["object"], li["polygons"], li["kind"]) for li in a["final"]["lights"]] == \
                   [(li["object"], li["polygons"], li["kind"]) for li in b["final"]["lights"]]
     rows = [(np.array(a["objects"][k]["radiosity"], float), np.array(b["objects"][k]["radiosity"], float))
