@@ -9,12 +9,12 @@ fraction whose first hit is the front side of j. Patches are one-sided: a hit
 on a back side is absorbed and counts for no patch; a ray that leaves the
 scene counts for none either, so row sums are < 1 in open scenes and ~1 in
 closed ones. A patch partly buried (inside a closed object, or behind a face coincident with it:
-a wall where a slab runs into it, a flight's side against a wall) gathers over its visible part
-only: its row is divided by its visible share (``visible_fraction``: a point is buried when most
-of its test rays reach back sides), as Cycles lights only what can be seen; without it the buried
-part's share of the row was lost, and with it light (the staircase's walls and flights: 1.3 % of
-the rays in all, a patch up to 31 %). A painted target keeps its whole area's mean, as a bake of
-the face shows it (the part under a sofa black). Every pair is then estimated from the rays of both its patches
+a wall where a slab runs into it, a flight's side against a wall) keeps its radiosity as its whole
+area's mean, as a bake of the face shows it, but sends its light from its visible part only: its
+column is divided by its visible share (``visible_fraction``: a point is buried when most of its
+test rays reach back sides; a patch less visible than MIN_VISIBLE is left as it is). Without it
+that light was lost (the staircase's walls and flights: 1.3 % of the rays in all, a patch up to
+31 %). Every pair is then estimated from the rays of both its patches
 (``reciprocity="weighted"``, the default; ``weigh_reciprocity``): the exchange
 A_i F_ij = A_j F_ji weighted by the inverse variance of each side's count,
 which favours the smaller patch (a small light cell seen by a large wall).
@@ -105,6 +105,8 @@ DENSE_LIMIT = 6000
 #: ``visible_fraction``: stratified test points per patch and cosine-weighted rays per point
 BURIED_POINTS = 36
 BURIED_RAYS = 8
+#: ... a patch less visible than this is left as it is (its visible share too uncertain to divide by)
+MIN_VISIBLE = 0.5
 #: ... a point is buried when at least this share of its rays reach back sides (not all: where the
 #: enclosing object's face is coincident with another one, some rays hit that one's front)
 BURIED_SHARE = 0.75
@@ -605,22 +607,9 @@ def compute_form_factors(
 
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
-    # a partly buried patch gathers over its visible part (the module docstring); a painted target
-    # keeps its whole area's mean, as its lamps' and its kernel pairs' light does, and as a bake of
-    # the face shows it (the part under a sofa black)
     visible = visible_fraction(patches, sampler, seed)
-    target = np.asarray(getattr(patches, "target", None) if getattr(patches, "target", None) is not None
-                        else np.zeros(P, dtype=bool), dtype=bool)
-    part = np.flatnonzero((visible > 0) & (visible < 1) & ~target)
-    if len(part):
-        scale = np.ones(P)
-        scale[part] = 1.0 / visible[part]
-        if dense:
-            matrix[part] *= scale[part, None].astype(np.float32)
-        else:
-            matrix = (sp.diags(scale.astype(np.float32)) @ matrix).tocsr().astype(np.float32)
     if reciprocity == "weighted":  # each side's exchange with its visible area
-        matrix = weigh_reciprocity(matrix, patches.area * np.maximum(visible, 0.5 / BURIED_POINTS), N)
+        matrix = weigh_reciprocity(matrix, patches.area, N)
     n_kernel = 0
     if kernel_pairs is not None:
         rec, src = kernel_pairs
@@ -629,6 +618,15 @@ def compute_form_factors(
                                 **(kernel_options or {}))
         matrix = apply_kernel_pairs(matrix, patches.area, rec, src, K)
         n_kernel = K.size
+    # a partly buried patch sends its light from its visible part (the module docstring)
+    part = np.flatnonzero((visible >= MIN_VISIBLE) & (visible < 1))
+    if len(part):
+        scale = np.ones(P)
+        scale[part] = 1.0 / visible[part]
+        if dense:
+            matrix[:, part] *= scale[part].astype(np.float32)
+        else:
+            matrix = (matrix @ sp.diags(scale.astype(np.float32))).tocsr().astype(np.float32)
     data = matrix if dense else matrix.data
     if not np.all(np.isfinite(data)):
         raise SceneError("form factors contain NaN or infinite values (degenerate geometry?)")

@@ -482,14 +482,17 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     """Stage 3a: the direct light of the curve's surface lights on every patch by the kernel
     (engine.kernel_transfer.lights_direct_correction; the ray-cast F gathers a small bright cell's
     light with a few per cent of noise, which the reflections carry to the targets: on the
-    staircase the 3-light answer's prediction moved by 1.2 % from seed to seed), the smaller
-    configurations first, up to DIRECT_LIGHTS lights. Their columns of T and the forward solves
+    staircase the 3-light answer's prediction moved by 1.2 % from seed to seed): the non-negative
+    configurations of at most ``max_lights`` (or the final one's) lights, the smaller first, up to
+    DIRECT_LIGHTS lights. Their columns of T and the forward solves
     take it (InverseProblem.correct_direct); each configuration's strengths are re-fitted (NNLS per
     channel, the same lights) and its error follows. Returns what the report says (None: nothing)."""
     if model.mode != "inverse" or model.form_factors is None:
         return None
     problem, lights, patches = model.problem, model.lights, model.patches
-    order = sorted(range(len(red.curve)), key=lambda i: (red.curve[i].n_negative > 0, red.curve[i].n_lights))
+    top = max(int(options.max_lights), red.final.n_lights)  # the rows above it are not the answer's
+    order = sorted((i for i, pt in enumerate(red.curve) if pt.n_negative == 0 and pt.n_lights <= top),
+                   key=lambda i: red.curve[i].n_lights)
     todo = []
     for i in order:
         for j in red.curve[i].lights:
@@ -514,6 +517,8 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
                 e = fit
         error = float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - b))
         red.curve[i] = replace(pt, exitance=e, error=error, relative_error=error / norm)
+    carry_refined(problem, red, {}, every=True)  # the curve never rises
+    red.certificate = None  # the certificate is of the T the configurations are now measured on
     return {"lights": len(todo), "seconds": time.perf_counter() - t0,
             "final_relative_error_before": before[red.final_index],
             "final_relative_error_after": float(red.final.relative_error)}
@@ -592,12 +597,13 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
             "seconds": time.perf_counter() - t0}
 
 
-def carry_refined(problem, red: ReductionResult, carried: dict) -> None:
+def carry_refined(problem, red: ReductionResult, carried: dict, every=False) -> None:
     """The configurations with more lights than the final one hold its lamps as offered (they are
     not refined): each takes the final one's refined lamps in their place (``carried``: candidate
     light -> refined light), or else the configuration before it and one of its own lights, its
     strengths re-fitted (NNLS per channel), when that lowers its error -- so that the curve never
-    rises after a refined configuration (NNLS on more lights is never worse)."""
+    rises after a refined configuration (NNLS on more lights is never worse). ``every``: all the
+    configurations, not only those above the final one (after direct_stage re-fitted them all)."""
     T, b, norm = problem.transfer, problem.b_target, problem.target_norm or 1.0
 
     def fit(ids):
@@ -608,10 +614,12 @@ def carry_refined(problem, red: ReductionResult, carried: dict) -> None:
         return error, ids[on], e[on]
 
     for i, pt in enumerate(red.curve):
-        if i == 0 or pt.n_lights <= red.final.n_lights or pt.n_negative:
+        if i == 0 or (pt.n_lights <= red.final.n_lights and not every) or pt.n_negative:
+            continue
+        prev = red.curve[i - 1]
+        if every and not carried and pt.error <= prev.error:
             continue
         tries = [[carried.get(int(j), int(j)) for j in pt.lights]] if any(int(j) in carried for j in pt.lights) else []
-        prev = red.curve[i - 1]
         if prev.n_negative == 0 and prev.n_lights == pt.n_lights - 1:
             had = set(prev.lights.tolist())  # (a refined lamp's candidate is not added beside it)
             tries += [list(prev.lights) + [int(j)] for j in pt.lights
