@@ -258,7 +258,7 @@ def test_a_partly_buried_patch_sends_its_light_from_its_visible_part():
     assert np.all(ff.visible[[2, 4, 5]] > 0.8)  # the walls behind the slab's sides: 5-10 % buried
     F = ff.to_dense()
     assert 0.45 < ff.row_sums()[0] < 0.65  # what the floor gathers: its whole area's mean (half)
-    assert ps.area @ F[:, 0] == pytest.approx(ps.area[0], rel=0.05)
+    assert ps.area @ F[:, 0] == pytest.approx(ps.area[0], rel=0.1)  # the visible share: 36 points
 
 
 def test_a_patch_under_an_open_card_is_not_buried():
