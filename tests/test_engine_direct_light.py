@@ -34,7 +34,7 @@ def _problem(ps, floor, ceiling, rays, seed, corrected):
     prob = InverseProblem(ff, ps.area, ps.reflectance, floor, b, ceiling, ps.center, ps.normal)
     light = 4  # one ceiling cell (a corner one: its light reaches the far floor after reflections)
     if corrected:
-        dH = lights_direct_correction(ps, prob.F, [light], prob.lights.members, ff.visible, np.flatnonzero(floor),
+        dH = lights_direct_correction(ps, prob.F, [light], prob.lights.members, ff.send, np.flatnonzero(floor),
                                       seed=seed, sampler=ff.sampler)
         prob.correct_direct([light], dH)
     return prob, light

@@ -72,6 +72,7 @@ import scipy.sparse.linalg  # noqa: F401  (sp.linalg.norm)
 from scipy.stats import qmc
 
 from .kernel_transfer import _Geometry, _sample_patches, apply_kernel_pairs, kernel_form_factors
+from .lamps import _tangents
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
 
@@ -138,6 +139,8 @@ class FormFactors:
     kernel_pairs: int = 0
     #: (P,) each patch's visible share (``visible_fraction``; 1: nothing buried), None if not measured
     visible: object = None
+    #: (P,) the factor each patch's column of F carries (``sending_scale``), None if not measured
+    send: object = None
     #: the solve's SceneSampler (its one Embree scene), for the lamps' shadow rays (engine.lamps)
     sampler: object = field(default=None, repr=False, compare=False)
 
@@ -495,8 +498,6 @@ def visible_fraction(patches: PatchSet, sampler: SceneSampler, seed: int = 0, po
     with the patch. A point under an open face (a card's back over a floor) is not, unless the card
     covers most of its hemisphere (a card that low is a slab to the light too). Deterministic for
     a seed."""
-    from .lamps import _tangents
-
     P = patches.n_patches
     out = np.ones(P)
     g = _Geometry(patches, points, sampler=sampler)
@@ -518,6 +519,14 @@ def visible_fraction(patches: PatchSet, sampler: SceneSampler, seed: int = 0, po
         buried = back.reshape(len(s), points, rays).mean(axis=2) >= BURIED_SHARE
         out[s] = 1.0 - buried.mean(axis=1)
     return out
+
+
+def sending_scale(visible) -> np.ndarray:
+    """(P,) the factor a patch's column of F carries: 1 / its visible share where it is partly
+    buried (from MIN_VISIBLE up), 1 elsewhere."""
+    v = np.asarray(visible, dtype=np.float64)
+    part = (v >= MIN_VISIBLE) & (v < 1)
+    return np.where(part, 1.0 / np.where(part, v, 1.0), 1.0)
 
 
 def auto_rays_per_patch(n_patches: int, kernel: bool = False) -> int:
@@ -608,7 +617,7 @@ def compute_form_factors(
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
     matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
     visible = visible_fraction(patches, sampler, seed)
-    if reciprocity == "weighted":  # each side's exchange with its visible area
+    if reciprocity == "weighted":
         matrix = weigh_reciprocity(matrix, patches.area, N)
     n_kernel = 0
     if kernel_pairs is not None:
@@ -619,10 +628,10 @@ def compute_form_factors(
         matrix = apply_kernel_pairs(matrix, patches.area, rec, src, K)
         n_kernel = K.size
     # a partly buried patch sends its light from its visible part (the module docstring)
-    part = np.flatnonzero((visible >= MIN_VISIBLE) & (visible < 1))
+    send = sending_scale(visible)
+    part = np.flatnonzero(send != 1.0)
     if len(part):
-        scale = np.ones(P)
-        scale[part] = 1.0 / visible[part]
+        scale = send
         if dense:
             matrix[:, part] *= scale[part].astype(np.float32)
         else:
@@ -639,5 +648,6 @@ def compute_form_factors(
         reciprocity=reciprocity,
         kernel_pairs=int(n_kernel),
         visible=visible,
+        send=send,
         sampler=sampler,
     )

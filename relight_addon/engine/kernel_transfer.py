@@ -809,20 +809,20 @@ def _visibility(g: _Geometry, x, n, s, k, rng, sums=False):
 
 
 # --------------------------------------------------------------------------------------
-#: ``lights_direct_correction``'s receiver points and shadow rays per pair and penumbra points: below
-#: kernel_form_factors' defaults (for the targets' rows), as a reflector's first bounce needs less
-#: (the living room's 18 lights on its 2305 patches: 3.4 s at the defaults)
-DIRECT_POINTS = 4
-DIRECT_SHADOW_RAYS = 2
-DIRECT_PENUMBRA_POINTS = 25
+#: ``lights_direct_correction``'s receiver points and shadow rays per pair and penumbra points
+#: (kernel_form_factors' defaults; the living room's 18 lights on its 2305 patches: 3.4 s)
+DIRECT_POINTS = 16
+DIRECT_SHADOW_RAYS = 4
+DIRECT_PENUMBRA_POINTS = 100
 
 
-def lights_direct_correction(patches: PatchSet, F, lights, members, visible=None, skip=None, seed: int = 0,
+def lights_direct_correction(patches: PatchSet, F, lights, members, send=None, skip=None, seed: int = 0,
                              sampler: SceneSampler | None = None, cancel=None) -> np.ndarray:
     """(P, len(lights)) W/m^2 per unit exitance: the direct light of surface lights on every patch
     by the kernel (``kernel_form_factors``) minus what the ray-cast F gathers of it. ``members(j)``:
-    light j's patches (all at its one exitance). ``visible`` (P,): each patch's visible share
-    (formfactors.visible_fraction): a partly buried source sends from its visible part, as in F.
+    light j's patches (all at its one exitance). ``send`` (P,): the factor F's columns carry
+    (formfactors.sending_scale: a partly buried source sends from its visible part), given to the
+    kernel's too.
     ``skip``: receivers left as they are (0: their F entries are kernel
     estimates already, e.g. the targets of the estimator's kernel pairs)."""
     P = patches.n_patches
@@ -833,12 +833,8 @@ def lights_direct_correction(patches: PatchSet, F, lights, members, visible=None
         return out
     K = kernel_form_factors(patches, np.arange(P), src, DIRECT_POINTS, DIRECT_SHADOW_RAYS, seed=seed,
                             sampler=sampler, cancel=cancel, penumbra_points=DIRECT_PENUMBRA_POINTS)
-    if visible is not None:  # a partly buried source sends its light from its visible part, as in F
-        from .formfactors import MIN_VISIBLE
-
-        v = np.asarray(visible, dtype=np.float64)[src]
-        part = (v >= MIN_VISIBLE) & (v < 1)
-        K[:, part] /= v[part]
+    if send is not None:  # a partly buried source sends its light from its visible part, as in F
+        K *= np.asarray(send, dtype=np.float64)[src][None, :]
     cols = F[:, src]
     cols = cols.toarray() if sp.issparse(cols) else np.asarray(cols, dtype=np.float64)
     D = K - cols

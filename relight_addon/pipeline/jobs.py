@@ -478,6 +478,19 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     return red
 
 
+def _fit(problem, ids):
+    """NNLS strengths (len(ids), 3) per channel of the lights ``ids`` on T, and their error (W/m^2)."""
+    T, b = problem.transfer, problem.b_target
+    e = np.stack([_nnls(T[c][:, ids], b[:, c]) for c in range(3)], axis=1)
+    return e, _error(problem, ids, e)
+
+
+def _error(problem, ids, e):
+    """Eq. 1 of the lights ``ids`` at strengths ``e`` (len(ids), 3), through T (W/m^2)."""
+    T = problem.transfer
+    return float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - problem.b_target))
+
+
 def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel=None) -> dict | None:
     """Stage 3a: the direct light of the curve's surface lights on every patch by the kernel
     (engine.kernel_transfer.lights_direct_correction; the ray-cast F gathers a small bright cell's
@@ -503,19 +516,20 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     t0 = time.perf_counter()
     ff = model.form_factors
     skip = problem.targets if uses_kernel_pairs(options) else None
-    dH = lights_direct_correction(patches, problem.F, todo, lights.members, getattr(ff, "visible", None), skip,
+    dH = lights_direct_correction(patches, problem.F, todo, lights.members, getattr(ff, "send", None), skip,
                                   seed=options.seed, sampler=getattr(ff, "sampler", None), cancel=cancel)
     problem.correct_direct(todo, dH)
-    T, b, norm = problem.transfer, problem.b_target, problem.target_norm or 1.0
+    norm = problem.target_norm or 1.0
     before = [float(pt.relative_error) for pt in red.curve]
     for i, pt in enumerate(red.curve):
         ids = np.asarray(pt.lights, dtype=np.int64)
         e = np.asarray(pt.exitance, dtype=np.float64)
+        error = None
         if pt.n_negative == 0 and len(ids):
-            fit = np.stack([_nnls(T[c][:, ids], b[:, c]) for c in range(3)], axis=1)
+            fit, fit_error = _fit(problem, ids)
             if np.all(fit.max(axis=1) > 0):
-                e = fit
-        error = float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - b))
+                e, error = fit, fit_error
+        error = _error(problem, ids, e) if error is None else error
         red.curve[i] = replace(pt, exitance=e, error=error, relative_error=error / norm)
     carry_refined(problem, red, {}, every=True)  # the curve never rises
     red.certificate = None  # the certificate is of the T the configurations are now measured on
@@ -604,12 +618,11 @@ def carry_refined(problem, red: ReductionResult, carried: dict, every=False) -> 
     strengths re-fitted (NNLS per channel), when that lowers its error -- so that the curve never
     rises after a refined configuration (NNLS on more lights is never worse). ``every``: all the
     configurations, not only those above the final one (after direct_stage re-fitted them all)."""
-    T, b, norm = problem.transfer, problem.b_target, problem.target_norm or 1.0
+    norm = problem.target_norm or 1.0
 
     def fit(ids):
         ids = np.unique(np.asarray(ids, dtype=np.int64))
-        e = np.stack([_nnls(T[c][:, ids], b[:, c]) for c in range(3)], axis=1)
-        error = float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - b))
+        e, error = _fit(problem, ids)
         on = e.max(axis=1) > 0
         return error, ids[on], e[on]
 
