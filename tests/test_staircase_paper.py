@@ -42,8 +42,10 @@ def test_staircase_paper_experiment(run_cli, bpy_clean, tmp_path):
     rel = np.array([p["relative_error"] for p in curve], dtype=float)
     err_abs = np.array([p["error"] for p in curve], dtype=float)
     neg = np.array([p["n_negative"] for p in curve])
-    assert n[0] == 693 and rel[0] == pytest.approx(inv["relative_error"], abs=1e-12)
-    assert neg[0] == inv["n_negative"]
+    # the curve's e_x after the kernel's direct light of the curve's lights (jobs.direct_stage): the
+    # least change of the same strengths that fits again, exact as well
+    assert n[0] == 693 and rel[0] < 1e-8
+    assert abs(neg[0] - inv["n_negative"]) <= 0.01 * inv["n_negative"]  # a light near 0 may change sign
     # ExitanceElimination removes one light per step down to one: every count is on the curve
     assert np.array_equal(n, np.arange(693, 0, -1))
     assert np.all(np.isfinite(rel)) and np.all(np.isfinite(err_abs))

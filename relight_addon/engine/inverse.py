@@ -202,8 +202,9 @@ class InverseProblem:
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
                  first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,
                  background_excess=None):
+        send = None
         if hasattr(F, "matrix"):  # formfactors.FormFactors
-            F = F.matrix
+            F, send = F.matrix, getattr(F, "send", None)
         if sp.issparse(F):
             F = F.tocsr()
             n = F.shape[0]
@@ -218,6 +219,13 @@ class InverseProblem:
             raise InverseError("the form factors contain NaN or infinite values")
         self.F = F
         self.n_patches = n
+        #: (P,) or None: the share of a patch's emission that leaves it into the scene -- its visible
+        #: share where it is partly buried (1 / formfactors.sending_scale): F's columns carry 1 / that
+        #: share for the radiosity, a whole-area mean, while an emitter's exitance is that of its
+        #: visible part already (Cycles emits from the whole face, the buried part into the occluder)
+        self.emission_share = None
+        if send is not None and np.any(np.asarray(send) != 1.0):
+            self.emission_share = 1.0 / np.asarray(send, dtype=np.float64).reshape(n)
 
         def arr(x, shape, name, dtype=np.float64):
             try:
@@ -333,6 +341,14 @@ class InverseProblem:
         self.light_watts = lights.watts
 
     @property
+    def source_basis(self):
+        """(|C|, n_lights) sparse: the exitance each light sends into the scene from its candidate
+        patches per unit strength, ``light_basis`` times their ``emission_share``."""
+        if self.emission_share is None:
+            return self.light_basis
+        return (sp.diags(self.emission_share[self.candidates]) @ self.light_basis).tocsc()
+
+    @property
     def light_of(self):
         """Light of each candidate patch, when the lights partition the candidates (else ValueError)."""
         B = self.light_basis
@@ -426,6 +442,8 @@ class InverseProblem:
                         rhs += D[c][:, C].toarray()
                     X = facs[c].solve(rhs)  # columns C of A^-1 (I + D)
                     T[c] = np.ascontiguousarray(X[P])
+                if self.emission_share is not None:  # what a candidate patch's exitance sends (``source``)
+                    T[c] = T[c] * self.emission_share[C][None, :]
                 if self.grouped:  # one column per light: the sum of its patches' columns
                     T[c] = np.ascontiguousarray(np.asarray(self.light_basis.T @ T[c].T).T)
                 H = self.lights.irradiance
@@ -503,11 +521,16 @@ class InverseProblem:
         return next(k for k in range(c + 1) if k == c or (D[k] != D[c]).nnz == 0)
 
     def source(self, e_full):
-        """e + D e (P, 3): the exitance with the first reflection's correction (``first_bounce``)."""
-        e_full = np.asarray(e_full, dtype=np.float64).reshape(self.n_patches, 3)
-        if self.first_bounce is None:
-            return e_full
-        return e_full + np.stack([self.first_bounce[c] @ e_full[:, c] for c in range(3)], axis=1)
+        """s + D s, s the exitance ``e_full`` (P, 3), or (P, K, 3) for K configurations, that leaves
+        into the scene (``emission_share``): the source with the first reflection's correction
+        (``first_bounce``)."""
+        e_full = np.asarray(e_full, dtype=np.float64)
+        e = e_full.reshape(self.n_patches, -1, 3)
+        if self.emission_share is not None:
+            e = e * self.emission_share[:, None, None]
+        if self.first_bounce is not None:
+            e = e + np.stack([self.first_bounce[c] @ e[:, :, c] for c in range(3)], axis=2)
+        return e.reshape(e_full.shape if e_full.ndim == 3 else (self.n_patches, 3))
 
     def _check_reachable(self):
         T = self._transfer

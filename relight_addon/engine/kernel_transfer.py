@@ -821,8 +821,8 @@ def lights_direct_correction(patches: PatchSet, F, lights, members, send=None, s
     """(P, len(lights)) W/m^2 per unit exitance: the direct light of surface lights on every patch
     by the kernel (``kernel_form_factors``) minus what the ray-cast F gathers of it. ``members(j)``:
     light j's patches (all at its one exitance). ``send`` (P,): the factor F's columns carry
-    (formfactors.sending_scale: a partly buried source sends from its visible part), given to the
-    kernel's too.
+    (formfactors.sending_scale), taken out of them: the kernel gathers an emitter's light from its
+    visible part already, as the problem's source does (InverseProblem.emission_share).
     ``skip``: receivers left as they are (0: their F entries are kernel
     estimates already, e.g. the targets of the estimator's kernel pairs)."""
     P = patches.n_patches
@@ -833,10 +833,10 @@ def lights_direct_correction(patches: PatchSet, F, lights, members, send=None, s
         return out
     K = kernel_form_factors(patches, np.arange(P), src, DIRECT_POINTS, DIRECT_SHADOW_RAYS, seed=seed,
                             sampler=sampler, cancel=cancel, penumbra_points=DIRECT_PENUMBRA_POINTS)
-    if send is not None:  # a partly buried source sends its light from its visible part, as in F
-        K *= np.asarray(send, dtype=np.float64)[src][None, :]
     cols = F[:, src]
     cols = cols.toarray() if sp.issparse(cols) else np.asarray(cols, dtype=np.float64)
+    if send is not None:  # F's gather of the exitance that leaves a partly buried source
+        cols = cols / np.asarray(send, dtype=np.float64)[src][None, :]
     D = K - cols
     if skip is not None:
         D[np.asarray(skip)] = 0.0

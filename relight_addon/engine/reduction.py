@@ -115,6 +115,7 @@ class ReductionResult:
     gs_iterations: list = None  # Gauss-Seidel sweeps per curve point (sum over channels), warm start
     gs_cold_iterations: list = None  # the same from a cold start (when compared)
     warnings: list = field(default_factory=list)
+    notes: list = field(default_factory=list)  # the selection's own messages (also in ``warnings``)
     #: best_lights.LowerBounds, when the selection computed the certificate on the way (greedy-swap)
     certificate: object = None
 
@@ -341,4 +342,4 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
                            distribution=distribution if dist is not None else "none",
                            seconds=time.perf_counter() - t0, cancelled=cancelled,
                            gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns,
-                           certificate=sel.certificate)
+                           notes=list(notes), certificate=sel.certificate)

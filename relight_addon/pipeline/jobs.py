@@ -491,6 +491,15 @@ def _error(problem, ids, e):
     return float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - problem.b_target))
 
 
+def _least_squares_change(problem, ids, e):
+    """(len(ids), 3): the least-norm change of the strengths ``e`` of the lights ``ids`` that
+    minimises Eq. 1 again on T (per channel; a configuration with negatives, e.g. e_x, stays exact
+    where it was)."""
+    T, b = problem.transfer, problem.b_target
+    return np.stack([np.linalg.lstsq(T[c][:, ids], b[:, c] - T[c][:, ids] @ e[:, c], rcond=None)[0]
+                     for c in range(3)], axis=1)
+
+
 def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel=None) -> dict | None:
     """Stage 3a: the direct light of the curve's surface lights on every patch by the kernel
     (engine.kernel_transfer.lights_direct_correction; the ray-cast F gathers a small bright cell's
@@ -521,16 +530,30 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     problem.correct_direct(todo, dH)
     norm = problem.target_norm or 1.0
     before = [float(pt.relative_error) for pt in red.curve]
+    refit = SELECTIONS[options.selection].get("refit")  # a selection's own programme (least-power's LP)
+    corrected, notes = set(todo), []
     for i, pt in enumerate(red.curve):
         ids = np.asarray(pt.lights, dtype=np.int64)
+        if not corrected.intersection(ids.tolist()):
+            continue
         e = np.asarray(pt.exitance, dtype=np.float64)
-        error = None
-        if pt.n_negative == 0 and len(ids):
-            fit, fit_error = _fit(problem, ids)
-            if np.all(fit.max(axis=1) > 0):
-                e, error = fit, fit_error
-        error = _error(problem, ids, e) if error is None else error
-        red.curve[i] = replace(pt, exitance=e, error=error, relative_error=error / norm)
+        if pt.n_negative:  # the inverse solution e_x (all the lights): the least change that fits
+            # again; the selection's other configurations with negatives keep their strengths
+            e = e + _least_squares_change(problem, ids, e) if len(ids) == problem.n_lights else e
+        elif refit is not None:
+            e, note = refit(problem, ids, options.param("tolerance"))
+            notes += [note] if i == red.final_index and note else []
+            on = e.max(axis=1) > 0
+            ids, e = ids[on], e[on]
+        else:
+            fit, _ = _fit(problem, ids)
+            e = fit if np.all(fit.max(axis=1) > 0) else e
+        error = _error(problem, ids, e)
+        red.curve[i] = replace(pt, n_lights=len(ids), lights=ids, exitance=e, error=error,
+                               relative_error=error / norm, n_negative=int((e < 0).any(axis=1).sum()))
+    if notes:  # the selection's message of the final configuration, as it is now
+        red.warnings = notes + [w for w in red.warnings if w not in red.notes]
+        red.notes = notes
     carry_refined(problem, red, {}, every=True)  # the curve never rises
     red.certificate = None  # the certificate is of the T the configurations are now measured on
     return {"lights": len(todo), "seconds": time.perf_counter() - t0,
@@ -800,10 +823,9 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
         H = problem.direct_correction if H is None else (sp.csc_matrix(H) + problem.direct_correction).tocsc()
     facs = problem.factors()
     B = np.empty((n_pts, P, 3))
+    S = problem.source(E_patch)
     for c in range(3):  # every light's source (engine.lights), transported
-        src = E_patch[:, :, c]
-        if problem.first_bounce is not None:
-            src = src + problem.first_bounce[c] @ src
+        src = S[:, :, c]
         if H is not None:
             src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
         if problem.lamp_excess is not None:

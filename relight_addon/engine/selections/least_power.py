@@ -11,10 +11,20 @@ from ..best_lights import least_power_within_tolerance
 from ..registry import SELECTIONS, Param
 
 
+def refit(problem, ids, tolerance):
+    """The programme again on the chosen lights ``ids`` alone, after their columns of T changed
+    (pipeline.jobs.direct_stage: their direct light by the kernel), so that the band holds on the T
+    the configuration is measured on: (exitance (len(ids), 3), the programme's message)."""
+    ids = np.asarray(ids, dtype=np.int64)
+    res = least_power_within_tolerance([t[:, ids] for t in problem.transfer], problem.b_target,
+                                       np.asarray(problem.light_watts)[ids], tolerance)
+    return res.exitance, res.message
+
+
 @SELECTIONS.register("least-power", "Least Power within Tolerance",
                      "The non-negative lights with the least total power that keep every target within "
                      "the tolerance of its painted value (a linear programme)",
-                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True,
+                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True, refit=refit,
                      params=(Param("tolerance", float, 0.1, min=0.0, label="Tolerance", soft_max=1.0,
                                    description="Every target within +-this fraction of its painted value "
                                                "(0.1 = +-10 %); when no non-negative lights can, the reachable "

@@ -39,7 +39,7 @@ class _PaperGram:
         K = sla.blas.dsyrk(1.0, FU, lower=1)
         self.K = K + np.tril(K, -1).T
         n = problem.n_patches
-        S = problem.light_basis
+        S = problem.source_basis
         self.same_light = (S @ S.T).toarray()  # S S^T on C x C
         self.u = np.zeros(n)
         self.u[U] = 1.0
@@ -72,7 +72,7 @@ class _PaperGram:
             return None
         Y = sla.cho_solve((L, lower), R, check_finite=False)
         # e = -S^T y: per light, minus the sum of y over its patches
-        return -np.asarray(p.light_basis.T @ Y[p.candidates])
+        return -np.asarray(p.source_basis.T @ Y[p.candidates])
 
 
 
@@ -101,9 +101,9 @@ def solve_paper(problem, rcond=None, svd_driver="auto"):
             A = A.toarray()
         M = np.zeros((n, len(U) + problem.n_lights), order="F")  # Fortran order for BLAS
         M[:, :len(U)] = A[:, U]
-        M[np.ix_(C, len(U) + np.arange(problem.n_lights))] = -problem.light_basis.toarray()
+        M[np.ix_(C, len(U) + np.arange(problem.n_lights))] = -problem.source_basis.toarray()
         if D is not None:
-            M[:, len(U):] -= (D[g[0]][:, C] @ problem.light_basis).toarray()
+            M[:, len(U):] -= (D[g[0]][:, C] @ problem.source_basis).toarray()
         R = -(A[:, P] @ problem.b_target[:, g])
         used = default_rcond(rcond, M.shape)
         X, rank = lstsq_min_norm(M, R, used, svd_driver)
