@@ -2,7 +2,8 @@
 
 Exit codes: 0 done; 2 any failure (ONE line ``relight: error: ...`` on stderr, never a
 traceback; ``RELIGHT_DEBUG=1`` re-raises instead); 130 cancelled (Ctrl-C at any stage: the
-job runs in a worker thread and SIGINT sets its cancel flag). ``main(argv)`` returns the exit
+job runs in a worker thread and SIGINT sets its cancel flag), 143 for SIGTERM. Every output is
+written whole or not at all (a temporary beside it, then a rename), and a cancel says which were. ``main(argv)`` returns the exit
 code and can be called from any Python that has bpy: the PyPI ``bpy`` module or a Blender
 binary (``blender -b --python-expr``); see README.md.
 
@@ -163,11 +164,16 @@ def script_argv(argv):
 
 
 def _write_json(path, data):
-    d = os.path.dirname(os.path.abspath(path))
+    """Write ``data`` to ``path`` (through a symbolic link, to its target) atomically: a
+    temporary of its own beside it (two runs writing one report never share one), then a rename."""
+    import tempfile
+
+    path = os.path.realpath(path)
+    d = os.path.dirname(path)
     os.makedirs(d, exist_ok=True)
-    tmp = path + ".tmp"
+    fd, tmp = tempfile.mkstemp(dir=d, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
     try:
-        with open(tmp, "w") as fh:
+        with os.fdopen(fd, "w") as fh:
             json.dump(data, fh, indent=1, allow_nan=False)
         os.replace(tmp, path)
     finally:
@@ -184,10 +190,26 @@ def _same_file(a, b):
         return False
 
 
+#: Blender keeps a file path in 1024 bytes (FILE_MAX), its terminating zero included
+BLENDER_PATH_MAX = 1024
+
+
 def _check_writable(option, path):
     """UsageError unless ``path`` can be written: not a directory, its file (if any) writable,
-    its nearest existing folder a writable directory (missing folders are made when writing)."""
+    its nearest existing folder a writable directory (missing folders are made when writing); a
+    symbolic link is written through, to its target; a path Blender writes (--out, --render) must
+    fit in Blender's path length."""
     full = os.path.abspath(path)
+    if os.path.islink(full):
+        target = os.path.realpath(full)
+        if not os.path.isdir(os.path.dirname(target)):
+            raise UsageError(f"cannot write --{option} {path}: it is a symbolic link to {target}, whose folder "
+                             f"{os.path.dirname(target)} does not exist")
+        full = target
+    n = len(os.fsencode(full))
+    if option in ("out", "render") and n >= BLENDER_PATH_MAX:
+        raise UsageError(f"cannot write --{option}: its path is {n} bytes long, and Blender keeps paths of at most "
+                         f"{BLENDER_PATH_MAX - 1} bytes: choose a shorter one")
     if os.path.isdir(full):
         raise UsageError(f"cannot write --{option} {path}: it is a directory")
     if os.path.lexists(full):
@@ -225,6 +247,13 @@ def _check_paths(args):
                 raise UsageError(f"--{a} and --{b} name the same file {pa}: give them different paths")
     for name, path in outputs:
         _check_writable(name, path)
+    if getattr(args, "render", None):
+        from .blender.results import RENDER_FORMATS
+
+        ext = os.path.splitext(args.render)[1].lower()
+        if ext not in RENDER_FORMATS:
+            raise UsageError(f"--render {args.render}: the picture's format is read from its extension, and "
+                             f"{ext or 'no extension'} is not one Relight writes ({', '.join(RENDER_FORMATS)})")
     return scene_path
 
 
@@ -359,21 +388,33 @@ def _save_outputs(args, report, timings, t0, apply):
         raise
     timings["apply"] = time.perf_counter() - t1
     timings["total"] = time.perf_counter() - t0
-    _write_json(args.report, report)
-    if args.out:
-        try:
-            results.save_copy(args.out)
-        except RuntimeError as exc:
-            raise OSError(f"cannot write --out {args.out}: {_blender_message(exc)}") from None
-    if args.render:
-        t2 = time.perf_counter()
-        try:
-            results.render_radiosity(args.render, samples=args.render_samples, view_transform=args.view_transform)
-        except RuntimeError as exc:
-            raise OSError(f"cannot render --render {args.render}: {_blender_message(exc)}") from None
-        timings["render"] = time.perf_counter() - t2
-    timings["total"] = time.perf_counter() - t0
-    _write_json(args.report, report)
+    written = []  # each output is whole or absent: a cancel says which are which
+    try:
+        _write_json(args.report, report)
+        written.append("the report")
+        if args.out:
+            try:
+                results.save_copy(args.out)
+            except RuntimeError as exc:
+                raise OSError(f"cannot write --out {args.out}: {_blender_message(exc)}") from None
+            written.append("--out")
+        if args.render:
+            t2 = time.perf_counter()
+            try:
+                results.render_radiosity(args.render, samples=args.render_samples, view_transform=args.view_transform)
+            except RuntimeError as exc:
+                raise OSError(f"cannot render --render {args.render}: {_blender_message(exc)}") from None
+            timings["render"] = time.perf_counter() - t2
+            written.append("--render")
+        timings["total"] = time.perf_counter() - t0
+        _write_json(args.report, report)
+    except KeyboardInterrupt as exc:
+        missing = [name for name, on in (("--out", args.out), ("--render", args.render))
+                   if on and name not in written]
+        exc.outputs = (f"{' and '.join(written)} {'was' if len(written) == 1 else 'were'} written"
+                       if written else "nothing was written") + \
+            "".join(f"; {name} was not written" for name in missing)
+        raise
     return report
 
 
@@ -479,8 +520,12 @@ def _summary(args, report):
         print(f"{PROG}: warning: {w}")
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM: cancelled as Ctrl-C is, with the shell's exit code for it (128 + 15)."""
+
+
 def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+    raise Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
 
 
 def main(argv=None) -> int:
@@ -488,15 +533,16 @@ def main(argv=None) -> int:
     from .engine.sampling import Cancelled
 
     argv = sys.argv[1:] if argv is None else list(argv)
-    restore = None
+    restore = {}
     if threading.current_thread() is threading.main_thread():
-        try:  # Ctrl-C raises KeyboardInterrupt here (unless the shell made SIGINT ignored)
-            previous = signal.getsignal(signal.SIGINT)
-            if previous is not signal.SIG_IGN:
-                signal.signal(signal.SIGINT, _interrupt)
-                restore = previous
-        except (ValueError, OSError):
-            pass
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:  # Ctrl-C (or SIGTERM) raises KeyboardInterrupt here (unless the shell made it ignored)
+                previous = signal.getsignal(sig)
+                if previous is not signal.SIG_IGN:
+                    signal.signal(sig, _interrupt)
+                    restore[sig] = previous
+            except (ValueError, OSError):
+                pass
     try:
         args = build_parser().parse_args(argv)
         if args.command == "radiosity":
@@ -505,17 +551,19 @@ def main(argv=None) -> int:
             report = run_solve_command(args)
         _summary(args, report)
         return 0
-    except (KeyboardInterrupt, Cancelled):
-        print(f"\n{PROG}: cancelled" if sys.stderr.isatty() else f"{PROG}: cancelled", file=sys.stderr)
-        return 130
+    except (KeyboardInterrupt, Cancelled) as exc:
+        outputs = getattr(exc, "outputs", None)
+        line = f"{PROG}: cancelled" + (f": {outputs}" if outputs else "")
+        print(f"\n{line}" if sys.stderr.isatty() else line, file=sys.stderr)
+        return 143 if isinstance(exc, Terminated) else 130
     except BaseException as exc:  # every failure: one line, exit 2
         if isinstance(exc, SystemExit) or os.environ.get("RELIGHT_DEBUG"):
             raise
         print(f"{PROG}: error: {error_line(exc)}", file=sys.stderr)
         return 2
     finally:
-        if restore is not None:
-            signal.signal(signal.SIGINT, restore)
+        for sig, previous in restore.items():
+            signal.signal(sig, previous)
 
 
 def error_line(exc) -> str:

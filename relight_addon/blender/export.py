@@ -1,9 +1,11 @@
 """Blender -> engine: export the scene as an engine FaceSet (bpy). The way back is results.py.
 
 What is exported
-- Every object of type MESH that is visible in the view layer (``visible_get()``) and not
-  hidden from render (its ``hide_render``, or ``hide_render`` on every collection chain it
-  is linked through), evaluated with its modifiers (depsgraph ``evaluated_get`` /
+- Every object of type MESH that a render of the view layer shows: not hidden from render (its
+  ``hide_render``, or ``hide_render`` on every collection chain it is linked through) and in a
+  collection the view layer does not exclude. Hidden in the viewport (H, the eye, the monitor
+  icon) it is still modelled, as Cycles still renders it, and named in a warning
+  (docs/reliability.md); one disabled in the viewports is enabled while it is evaluated. Evaluated with its modifiers (depsgraph ``evaluated_get`` /
   ``to_mesh``), in world space (``matrix_world``, parent chain included). A negative-determinant transform
   (negative scale) reverses the winding so normals keep pointing the same way as in
   Blender's viewport.
@@ -67,8 +69,9 @@ surfaces).
 
 Relight attributes (read from the base mesh)
 - ``relight_target``: a Face Corner colour attribute, FLOAT_COLOR or BYTE_COLOR (read as linear
-  RGB); a polygon is a target when the mean alpha of its corners is >= 0.5, its target
-  radiosity = pi x mean RGB x target scale (scene custom property ``relight_target_scale``,
+  RGB); a polygon is a target when the mean alpha of its corners (clipped to [0, 1]) is >= 0.5,
+  its target radiosity = pi x the alpha-weighted mean RGB of its corners (a corner left unpainted,
+  alpha 0, at the edge of a stroke does not darken it) x target scale (scene custom property ``relight_target_scale``,
   default 1; the add-on's Target Scale reads and writes that same property). A
   ``relight_target`` of another domain or type is not used, with a warning naming it; NaN or
   infinite colours are refused; negative ones are set to 0 with a warning.
@@ -96,7 +99,7 @@ from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
 from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
 from ..engine.world import sees_sky
-from .lamps import export_lamps
+from .lamps import export_lamps, hidden_warning
 from .world import world_light
 
 DEFAULT_REFLECTANCE = 0.8
@@ -107,7 +110,9 @@ NO_LIGHTS_PROP = "relight_no_lights"
 TARGET_SCALE_PROP = "relight_target_scale"
 MAX_PATCH_SIZE_PROP = "relight_max_patch_size"
 _FACE_INDEX_ATTRIBUTE = "_relight_face_index"
-RELIGHT_OWNER_PROP = "relight_owner"  # on everything Relight creates (results.py)
+RELIGHT_OWNER_PROP = "relight_owner"  # on everything Relight creates (results.py): its result id
+#: and the name it was made with: a copy (Shift-D, another data-block of a new name) is the user's
+RELIGHT_NAME_PROP = "relight_owner_name"
 #: the attribute types Relight reads and writes its layers as
 TARGET_TYPES = ("FLOAT_COLOR", "BYTE_COLOR")
 TARGET_DOMAIN = "CORNER"
@@ -212,18 +217,28 @@ def _vertex_weights(n):
 
 
 def mesh_fingerprint(ob) -> dict:
-    """What a stored result must still match: the base mesh's topology (exact: a hash of its
-    polygons' vertex loops) and its world-space vertex positions (two weighted sums per axis and
-    the bounding box, compared within a tolerance)."""
+    """What a stored result must still match: the base mesh's topology and the evaluated one's
+    (exact: a hash of their polygons' vertex loops; a modifier that adds faces changes it) and
+    the evaluated mesh's world-space vertex positions (two weighted sums per axis and the
+    bounding box, compared within a tolerance: a shape key or a modifier that moves vertices
+    changes them)."""
     import hashlib
 
-    me = ob.data
-    nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
-    lv = foreach_array(me.loops, "vertex_index", nl, np.int64)
-    lt = foreach_array(me.polygons, "loop_total", npoly, np.int64)
-    topo = hashlib.blake2b(np.concatenate([[nv, nl, npoly], lt, lv]).astype(np.int64).tobytes(), digest_size=16)
-    co = foreach_array(me.vertices, "co", nv, np.float64, 3).reshape(nv, 3)
-    M = np.array(ob.matrix_world, dtype=np.float64)
+    def loops(me):
+        nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+        return [[nv, nl, npoly], foreach_array(me.polygons, "loop_total", npoly, np.int64),
+                foreach_array(me.loops, "vertex_index", nl, np.int64)]
+
+    ob_eval = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    me = ob_eval.to_mesh()
+    try:
+        parts = loops(ob.data) + loops(me)
+        nv = len(me.vertices)
+        co = foreach_array(me.vertices, "co", nv, np.float64, 3).reshape(nv, 3)
+    finally:
+        ob_eval.to_mesh_clear()
+    topo = hashlib.blake2b(np.concatenate(parts).astype(np.int64).tobytes(), digest_size=16)
+    M = np.array(ob_eval.matrix_world, dtype=np.float64)
     W = co @ M[:3, :3].T + M[:3, 3]
     sig = (_vertex_weights(nv).T @ W).ravel() if nv else np.zeros(6)
     box = np.concatenate([W.min(axis=0), W.max(axis=0)]) if nv else np.zeros(6)
@@ -241,37 +256,92 @@ def fingerprint_change(ob, fp) -> str | None:
     d = max(np.max(np.abs(np.asarray(now["signature"]) - np.asarray(fp["signature"])), initial=0.0),
             np.max(np.abs(np.asarray(now["box"]) - box), initial=0.0))
     if d > tol:
-        return "it moved or its vertices moved"
+        return "it moved or its vertices moved (in its mesh, by a shape key or a modifier)"
     return None
 
 
-def render_visible_objects(scene):
-    """Names of the objects that a render would see through the collection tree: every object
-    linked to at least one collection whose chain from the scene collection has no
-    ``hide_render`` (the object's own ``hide_render`` is checked separately)."""
+def tag_owned(idb, rid) -> None:
+    """Mark ``idb`` (an object, mesh, material, light or collection) as made by result ``rid``."""
+    idb[RELIGHT_OWNER_PROP] = rid
+    idb[RELIGHT_NAME_PROP] = idb.name
+
+
+def owner_of(idb):
+    """The result id that made ``idb``, or None when the user made it: never tagged, or a copy of
+    something Relight made (its custom properties came along, its name did not: Blender names are
+    unique, so a copy has another). Only what Relight made is ever removed or left out as ours."""
+    rid = idb.get(RELIGHT_OWNER_PROP)
+    made = idb.get(RELIGHT_NAME_PROP)
+    return None if rid is None or (made is not None and made != idb.name) else rid
+
+
+def render_visible_objects(context):
+    """Names of the objects that a render of the view layer would see through the collection
+    tree: every object linked to at least one collection of the layer that is not excluded from it
+    and whose chain from the scene collection has no ``hide_render`` (the object's own
+    ``hide_render`` is checked separately). Hiding in the viewport (H, the eye, the monitor icon)
+    does not keep an object out of a render, so it does not keep it out of the model."""
     seen = set()
 
-    def walk(coll, hidden):
-        hidden = hidden or bool(getattr(coll, "hide_render", False))
+    def walk(lc, hidden):
+        if lc.exclude:
+            return
+        hidden = hidden or bool(getattr(lc.collection, "hide_render", False))
         if not hidden:
-            seen.update(ob.name for ob in coll.objects)
-        for child in coll.children:
+            seen.update(ob.name for ob in lc.collection.objects)
+        for child in lc.children:
             walk(child, hidden)
 
-    walk(scene.collection, False)
+    walk(context.view_layer.layer_collection, False)
     return seen
 
 
+def rendered(ob, renderable) -> bool:
+    """Whether a render shows ``ob`` (``renderable``: render_visible_objects)."""
+    return not ob.hide_render and ob.name in renderable
+
+
 def exported_objects(context=None):
-    """The scene's mesh objects that are exported: visible in the view layer, not hidden from
-    render (``hide_render`` of the object or of every collection it is in), and not made by
-    Relight (its emitters object shows a result: a new solve does not count it as scene light)."""
+    """The scene's mesh objects that are exported: those a render shows (``rendered``), whether or
+    not they are hidden in the viewport, and not made by Relight (its emitters object shows a
+    result: a new solve does not count it as scene light)."""
     context = context or bpy.context
-    view_layer = context.view_layer
-    renderable = render_visible_objects(context.scene)
+    renderable = render_visible_objects(context)
     return [ob for ob in context.scene.objects
-            if ob.type == "MESH" and not ob.hide_render and ob.name in renderable
-            and ob.visible_get(view_layer=view_layer) and ob.get(RELIGHT_OWNER_PROP) is None]
+            if ob.type == "MESH" and rendered(ob, renderable) and owner_of(ob) is None]
+
+
+def hidden_in_viewport(context, objs) -> list:
+    """The names of ``objs`` hidden in the viewport (H, the eye or the monitor icon) that renders
+    show, and so Relight models."""
+    return [ob.name for ob in objs if not ob.visible_get(view_layer=context.view_layer)]
+
+
+class _Evaluable:
+    """While open, the objects ``objs`` and their collections are enabled in the viewports, so that
+    the depsgraph evaluates their modifiers as a render would (an object disabled in the viewports,
+    the monitor icon, is not evaluated); everything is set back as it was on close."""
+
+    def __init__(self, context, objs):
+        self.context, self.changed = context, []
+        colls = {c for ob in objs for c in ob.users_collection}
+        for idb in list(objs) + sorted(colls, key=lambda c: c.name):
+            if getattr(idb, "hide_viewport", False) and getattr(idb, "library", None) is None:
+                self.changed.append(idb)
+
+    def __enter__(self):
+        for idb in self.changed:
+            idb.hide_viewport = False
+        if self.changed:
+            self.context.view_layer.update()
+        return self
+
+    def __exit__(self, *exc):
+        for idb in self.changed:
+            idb.hide_viewport = True
+        if self.changed:
+            self.context.view_layer.update()
+        return False
 
 
 def _number_property(holder, prop, what):
@@ -382,12 +452,16 @@ def _base_attributes(ob, target_scale, notes=None):
             notes.append(str(exc))
     if attr is not None and len(me.loops):
         col = foreach_array(attr.data, "color", len(me.loops), np.float64, 4)
-        mean = np.stack([np.bincount(loop_poly, weights=col[:, k], minlength=n) for k in range(4)], axis=1)
-        mean /= np.maximum(totals, 1)[:, None]
-        if not np.all(np.isfinite(mean)):
+        if not np.all(np.isfinite(col)):
             raise SceneError(f"{ob.name}: its {TARGET_ATTRIBUTE} holds NaN or infinite colours; paint it again")
-        target = mean[:, 3] >= 0.5
-        rgb = mean[target, :3]
+        # a face is a target when its corners' mean alpha is >= 1/2; its colour is the mean over its
+        # painted corners, weighted by their alpha (the edge of a stroke: the unpainted corners' colour,
+        # black, is not averaged in)
+        alpha = np.clip(col[:, 3], 0.0, 1.0)
+        weight = np.bincount(loop_poly, weights=alpha, minlength=n)
+        target = weight >= 0.5 * np.maximum(totals, 1)
+        rgb = np.stack([np.bincount(loop_poly, weights=alpha * col[:, k], minlength=n) for k in range(3)],
+                       axis=1)[target] / weight[target][:, None]
         if np.any(rgb < 0):
             if notes is not None:
                 notes.append(f"{ob.name}: {int(np.sum(np.any(rgb < 0, axis=1)))} target(s) with a negative colour "
@@ -640,6 +714,29 @@ BACK_GAP = 0.1
 LEAK_RAYS = 1 << 16
 
 
+def _painted_not_rendered(context, renderable) -> str | None:
+    """What explains a missing target: painted meshes a render does not show (hidden from render,
+    in a collection hidden from render or excluded from the view layer), or that exist only as the
+    source of instances (their instances are geometry only)."""
+    def painted(ob):
+        return ob.type == "MESH" and ob.data is not None and TARGET_ATTRIBUTE in ob.data.attributes
+
+    off = [ob.name for ob in context.scene.objects if painted(ob) and not rendered(ob, renderable)]
+    in_scene = set(context.scene.objects)
+    instanced = sorted({ob.name for ob in context.scene.objects if ob.instance_type == "COLLECTION"
+                        and ob.instance_collection is not None
+                        for ob in ob.instance_collection.all_objects if painted(ob) and ob not in in_scene})
+    parts = []
+    if off:
+        parts.append(f"painted object(s) {', '.join(map(repr, off[:10]))} are not rendered (hidden from render, "
+                     "the camera icon, or in a collection hidden from render or excluded from the view layer)")
+    if instanced:
+        parts.append(f"painted object(s) {', '.join(map(repr, instanced[:10]))} are only in an instanced collection: "
+                     "instances are geometry only (paint a real object, or make the instance real: "
+                     "Object > Apply > Make Instances Real)")
+    return "; ".join(parts) or None
+
+
 def _instances(context, renderable):
     """(name, evaluated object, world matrix) of every mesh instance of the depsgraph
     (collection instances, particle and geometry-nodes instances) whose instancer and
@@ -675,13 +772,18 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     settings = scene_settings(context.scene)
     if target_scale is not None:
         settings["target_scale"] = float(target_scale)
-    renderable = render_visible_objects(context.scene)
+    renderable = render_visible_objects(context)
     objs = exported_objects(context)
     notes = {"target": [], "candidates": []}
     warnings = []
+    hidden = hidden_in_viewport(context, objs)
+    if hidden:
+        warnings.append(hidden_warning(hidden))
+    unpainted = _painted_not_rendered(context, renderable)
+    if unpainted:
+        notes["target"].append(unpainted)
     skipped = [f"{ob.name!r} ({ob.type})" for ob in context.scene.objects
-               if ob.type in NON_MESH_GEOMETRY and not ob.hide_render and ob.name in renderable
-               and ob.visible_get(view_layer=context.view_layer)]
+               if ob.type in NON_MESH_GEOMETRY and rendered(ob, renderable)]
     if skipped:
         text = (f"{len(skipped)} visible object(s) are not meshes: {', '.join(skipped[:10])}"
                 f"{' ...' if len(skipped) > 10 else ''}; whatever geometry they evaluate to takes part as occluders "
@@ -693,47 +795,48 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     counts = {}
     names = []
     unmapped = 0
-    for oi, ob in enumerate(objs):
-        counts[ob.name] = len(ob.data.polygons)
-        names.append(ob.name)
-        target, target_b, forbidden = _base_attributes(ob, settings["target_scale"], notes["target"])
-        ob_eval, me, mapping = _evaluated_mesh(ob, context)
-        try:
-            geo = _mesh_geometry(ob_eval, me, ob.name)
-            M = np.array(ob_eval.matrix_world, dtype=np.float64)
-        finally:
-            ob_eval.to_mesh_clear()
-        if len(geo["lt"]) and _no_area(geo, M):
-            text = (f"object {ob.name!r} has no area in world space (scaled to zero?): its faces can be neither "
-                    "targets nor lights")
-            warnings.append(text)
-            notes["candidates"].append(text)
-        npoly = len(geo["loop_start"])
-        idx = np.arange(npoly) if mapping is None else mapping
-        unmapped += int(np.sum(idx < 0))
-        ok = idx >= 0
-        safe = np.where(ok, idx, 0)
-        b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
-              np.where(ok, forbidden[safe], no_lights(ob)))
-    # instances: geometry only (occluders, reflectors and emitters), never targets or lights
-    geo_cache, group = {}, {}
-    n_inst = 0
-    for name, ob, M in _instances(context, renderable):
-        key = ob.data.as_pointer()
-        if key not in geo_cache:
-            me = ob.to_mesh()
+    with _Evaluable(context, objs):  # (disabled in the viewports: evaluated as a render would)
+        for oi, ob in enumerate(objs):
+            counts[ob.name] = len(ob.data.polygons)
+            names.append(ob.name)
+            target, target_b, forbidden = _base_attributes(ob, settings["target_scale"], notes["target"])
+            ob_eval, me, mapping = _evaluated_mesh(ob, context)
             try:
-                geo_cache[key] = _mesh_geometry(ob, me, name)
+                geo = _mesh_geometry(ob_eval, me, ob.name)
+                M = np.array(ob_eval.matrix_world, dtype=np.float64)
             finally:
-                ob.to_mesh_clear()
-        geo = geo_cache[key]
-        if name not in group:  # keyed by index everywhere: a real object may have this name too
-            group[name] = len(names)
-            names.append(name)
-        npoly = len(geo["loop_start"])
-        b.add(geo, M, name, group[name], np.full(npoly, -1), np.zeros(npoly, dtype=bool),
-              np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
-        n_inst += 1
+                ob_eval.to_mesh_clear()
+            if len(geo["lt"]) and _no_area(geo, M):
+                text = (f"object {ob.name!r} has no area in world space (scaled to zero?): its faces can be neither "
+                        "targets nor lights")
+                warnings.append(text)
+                notes["candidates"].append(text)
+            npoly = len(geo["loop_start"])
+            idx = np.arange(npoly) if mapping is None else mapping
+            unmapped += int(np.sum(idx < 0))
+            ok = idx >= 0
+            safe = np.where(ok, idx, 0)
+            b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
+                  np.where(ok, forbidden[safe], no_lights(ob)))
+        # instances: geometry only (occluders, reflectors and emitters), never targets or lights
+        geo_cache, group = {}, {}
+        n_inst = 0
+        for name, ob, M in _instances(context, renderable):
+            key = ob.data.as_pointer()
+            if key not in geo_cache:
+                me = ob.to_mesh()
+                try:
+                    geo_cache[key] = _mesh_geometry(ob, me, name)
+                finally:
+                    ob.to_mesh_clear()
+            geo = geo_cache[key]
+            if name not in group:  # keyed by index everywhere: a real object may have this name too
+                group[name] = len(names)
+                names.append(name)
+            npoly = len(geo["loop_start"])
+            b.add(geo, M, name, group[name], np.full(npoly, -1), np.zeros(npoly, dtype=bool),
+                  np.zeros((npoly, 3)), np.ones(npoly, dtype=bool))
+            n_inst += 1
     if not names:
         raise SceneError("the scene has no visible mesh objects"
                          + (f" ({notes['candidates'][0]})" if notes["candidates"] else ""))
@@ -764,7 +867,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     if np.any(e < 0):
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
-    lamps, lamp_warnings = export_lamps(context, renderable, RELIGHT_OWNER_PROP)
+    lamps, lamp_warnings = export_lamps(context, renderable, owner_of)
     warnings.extend(w for w in lamp_warnings if w not in warnings)
     faces = FaceSet(
         vertices=np.concatenate(b.verts),
@@ -971,9 +1074,7 @@ def _not_modelled(context, objs, b, renderable) -> list:
         out.append(f"material(s) {', '.join(map(repr, vol))}: a volume shader is linked to the Volume output; volumes "
                    "(absorption, scattering, emission) are not modelled: Relight treats the light as passing through "
                    "and reads only the surface")
-    view_layer = context.view_layer
-    volumes = [ob.name for ob in context.scene.objects if ob.type == "VOLUME" and not ob.hide_render
-               and ob.name in renderable and ob.visible_get(view_layer=view_layer)]
+    volumes = [ob.name for ob in context.scene.objects if ob.type == "VOLUME" and rendered(ob, renderable)]
     if volumes:
         out.append(f"volume object(s) {', '.join(map(repr, volumes[:10]))}{' ...' if len(volumes) > 10 else ''}: "
                    "volumes are not modelled (Relight treats light as passing through them)")

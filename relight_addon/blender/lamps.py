@@ -108,12 +108,12 @@ def _light_linking(ob) -> bool:
                                or getattr(ll, "blocker_collection", None) is not None)
 
 
-def export_lamps(context, renderable, owner_prop) -> tuple:
+def export_lamps(context, renderable, owner_of) -> tuple:
     """(lamps, warnings): the scene's lamps as engine.lamps.Lamp, and what is not modelled.
     ``renderable``: the names of the objects that render (export.render_visible_objects);
-    ``owner_prop``: the custom property of what Relight made (its lamps are not scene light)."""
+    ``owner_of(ob)``: the result that made ``ob`` (export.owner_of: its lamps are not scene light)."""
     scene, view_layer = context.scene, context.view_layer
-    lamps, warnings = [], []
+    lamps, warnings, hidden = [], [], []
     for ob in scene.objects:
         if ob.type != "LIGHT":
             continue
@@ -121,10 +121,11 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
         was = lamp_state.before(ob)
         if (ob.hide_render if was is None else was["hide_render"]) or ob.name not in renderable:
             continue
-        visible = (ob.visible_get(view_layer=view_layer) if was is None
-                   else lamp_state.visible_before(ob, view_layer, was))
-        if not visible or ob.get(owner_prop) is not None:
+        if owner_of(ob) is not None:
             continue
+        if not (ob.visible_get(view_layer=view_layer) if was is None
+                else lamp_state.visible_before(ob, view_layer, was)):
+            hidden.append(ob.name)  # hidden in the viewport only: Cycles renders it
         ld = ob.data if was is None else was["data"]
         name = ob.name
         if not getattr(ob, "visible_diffuse", True):
@@ -177,4 +178,13 @@ def export_lamps(context, renderable, owner_prop) -> tuple:
     if n_inst:
         warnings.append(f"{n_inst} instanced lamp(s) (in collection instances or particle systems) are not "
                         "modelled: Cycles renders their light, the prediction leaves it out")
+    if hidden:
+        warnings.append(hidden_warning(hidden, "lamp"))
     return lamps, warnings
+
+
+def hidden_warning(names, what="object") -> str:
+    """The warning naming what is hidden in the viewport and modelled (docs/reliability.md)."""
+    return (f"{len(names)} {what}(s) hidden in the viewport are modelled, because Cycles renders them: "
+            f"{', '.join(map(repr, names[:10]))}{' ...' if len(names) > 10 else ''}; to leave one out, hide it "
+            "from render too (the camera icon in the Outliner)")

@@ -50,7 +50,8 @@ from ..engine.units import radiance_from_exitance
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
-from .export import RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons
+from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
+                     RELIGHT_NAME_PROP, owner_of, tag_owned)
 
 EMISSION_ATTRIBUTE = "relight_emission"
 REFLECTANCE_ATTRIBUTE = "relight_reflectance"
@@ -64,10 +65,13 @@ RESULT_PROP = "relight_result"
 RESULT_ID_PROP = "relight_result_id"
 EMITTERS_NAME = "Relight Emitters"
 EMITTER_MATERIAL = "Relight Emitter"
-#: the emitters object is set off the surface by this fraction of the scene's size (at least 1 mm):
-#: far enough for the viewport's depth buffer, negligible for the light transport
+#: the emitters object is set off the surface by this fraction of the scene's size (``overlay_offset``):
+#: far enough for the viewport's depth buffer, negligible for the light transport, at any scale
 OVERLAY_OFFSET = 2e-4
 CHART_IMAGE = ".relight_error_curve"
+#: the pictures --render writes, by the extension of its path (Blender's image formats)
+RENDER_FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG", ".exr": "OPEN_EXR", ".tif": "TIFF",
+                  ".tiff": "TIFF", ".bmp": "BMP"}
 
 
 class StaleResult(SceneError):
@@ -81,7 +85,7 @@ def _use_nodes(mat):
 
 
 def _owned(idblock, rid) -> bool:
-    return idblock.get(OWNER_PROP) == rid
+    return rid is not None and owner_of(idblock) == rid
 
 
 # --- the stored curve ----------------------------------------------------------------------
@@ -180,7 +184,7 @@ def check_stored(scene, data):
 
 def _emitter_material(rid):
     mat = bpy.data.materials.new(EMITTER_MATERIAL)
-    mat[OWNER_PROP] = rid
+    tag_owned(mat, rid)
     _use_nodes(mat)
     nt = mat.node_tree
     nt.nodes.clear()
@@ -216,6 +220,13 @@ def _emitter_material(rid):
     return mat
 
 
+def overlay_offset(scale, points) -> float:
+    """How far (m) in front of its surface an emitter is set: OVERLAY_OFFSET of the scene's size
+    ``scale`` (m), and never below what float32 coordinates of ``points`` can resolve."""
+    far = float(np.abs(np.asarray(points, dtype=np.float64)).max()) if np.size(points) else 0.0
+    return max(OVERLAY_OFFSET * float(scale), 64 * float(np.finfo(np.float32).eps) * far, 1e-12)
+
+
 def _emitter_mesh_data(data, exitance, scale):
     """Triangles (n, 3, 3), per-triangle radiance, reflectance and cell of the cells that emit
     in configuration ``exitance`` (n_lights, 3); cells with a negative net exitance are not shown."""
@@ -225,7 +236,7 @@ def _emitter_mesh_data(data, exitance, scale):
     sel = lit[tc]
     tri = data.cell_triangles[sel].astype(np.float64)
     cell = tc[sel]
-    offset = max(1e-3, OVERLAY_OFFSET * scale)
+    offset = overlay_offset(scale, data.cell_triangles)
     tri = tri + offset * data.cell_normal[cell][:, None, :]
     return tri, radiance_from_exitance(cell_e[cell]), data.cell_reflectance[cell], cell, int(np.sum(np.any(cell_e < 0, axis=1)))
 
@@ -237,7 +248,7 @@ def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
         return None
     n = len(tri)
     me = bpy.data.meshes.new(EMITTERS_NAME)
-    me[OWNER_PROP] = rid
+    tag_owned(me, rid)
     me.vertices.add(3 * n)
     me.vertices.foreach_set("co", tri.reshape(-1).astype(np.float32))
     me.loops.add(3 * n)
@@ -261,14 +272,14 @@ def _build_emitters(scene, rid, tri, radiance, reflectance, radiosity, cell):
     me.materials.append(_emitter_material(rid))
     me.update()
     ob = bpy.data.objects.new(EMITTERS_NAME, me)
-    ob[OWNER_PROP] = rid
+    tag_owned(ob, rid)
     ob.hide_select = False
     scene.collection.objects.link(ob)
     return ob
 
 
 def _remove_emitters(rid):
-    for ob in [o for o in bpy.data.objects if o.get(OWNER_PROP) == rid and o.type == "MESH"]:
+    for ob in [o for o in bpy.data.objects if o.type == "MESH" and _owned(o, rid)]:
         me = ob.data
         mats = [m for m in me.materials if m is not None and _owned(m, rid)]
         bpy.data.objects.remove(ob)
@@ -285,7 +296,7 @@ def emitters_object(scene):
     rid = result_id(scene)
     if rid is None:
         return None
-    return next((o for o in scene.objects if o.get(OWNER_PROP) == rid and o.type == "MESH"), None)
+    return next((o for o in scene.objects if o.type == "MESH" and _owned(o, rid)), None)
 
 
 # --- direct-lighting mode: the scene's own emitters switched off --------------------------------
@@ -296,7 +307,7 @@ def _dark_variant(source, rid):
     mat = source.copy()
     mat.name = f"{source.name} (Relight, off)"
     mat[GENERATED_PROP] = True
-    mat[OWNER_PROP] = rid
+    tag_owned(mat, rid)
     mat["relight_source"] = source.name
     _use_nodes(mat)
     nt = mat.node_tree
@@ -451,8 +462,8 @@ def new_lamp(rec, energy, color, owner=None):
     M[:3, 2], M[:3, 3] = -np.asarray(rec["direction"]), rec["position"]
     ob.matrix_world = Matrix(M.tolist())
     if owner is not None:
-        ld[OWNER_PROP] = owner
-        ob[OWNER_PROP] = owner
+        tag_owned(ld, owner)
+        tag_owned(ob, owner)
     return ob
 
 
@@ -461,7 +472,7 @@ def write_placed(scene, rid, plan) -> None:
     if not plan:
         return
     coll = bpy.data.collections.new(PLACED_COLLECTION)
-    coll[OWNER_PROP] = rid
+    tag_owned(coll, rid)
     scene.collection.children.link(coll)
     for rec, energy, color in plan:
         coll.objects.link(new_lamp(rec, energy, color, owner=rid))
@@ -469,7 +480,7 @@ def write_placed(scene, rid, plan) -> None:
 
 def _remove_placed(rid) -> int:
     """Remove the lamps (objects, their Light data) and the collection that result ``rid`` placed."""
-    obs = [o for o in bpy.data.objects if o.type == "LIGHT" and o.get(OWNER_PROP) == rid]
+    obs = [o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)]
     for ob in obs:
         ld = ob.data
         bpy.data.objects.remove(ob)
@@ -710,7 +721,7 @@ def make_area_lights(scene, index) -> int:
     tc = data.cell_triangle_cell
     tri_all = data.cell_triangles.astype(np.float64)
     scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
-    offset = max(1e-3, OVERLAY_OFFSET * scale)
+    offset = overlay_offset(scale, tri_all)
     plan = []
     for c in cells:  # everything computed first
         tri = tri_all[tc == c]
@@ -742,16 +753,22 @@ def make_area_lights(scene, index) -> int:
     placed = plan_placed(data, exitance)  # the placed lamps: copies of their own type, the artist's
     # write: replace this result's own earlier lights (by identity), then add the new ones
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
-    for coll in old:  # Make Area Lights again replaces its own lights of this result
-        for o in list(coll.objects):
-            d = o.data
-            bpy.data.objects.remove(o)
-            if d is not None and d.users == 0:
-                bpy.data.lights.remove(d)
-        bpy.data.collections.remove(coll)
-    coll = bpy.data.collections.new("Relight Lights")
-    coll[AREA_LIGHTS_PROP] = rid or ""
-    scene.collection.children.link(coll)
+    coll = None
+    for c in old:  # Make Area Lights again replaces its own lights of this result, and only those
+        for o in list(c.objects):
+            if _made_area_light(o, rid):
+                d = o.data
+                bpy.data.objects.remove(o)
+                if d is not None and d.users == 0:
+                    bpy.data.lights.remove(d)
+        if len(c.objects) or len(c.children):  # what the user put there stays, and so does the collection
+            coll = coll or c
+        else:
+            bpy.data.collections.remove(c)
+    if coll is None:
+        coll = bpy.data.collections.new("Relight Lights")
+        coll[AREA_LIGHTS_PROP] = rid or ""
+        scene.collection.children.link(coll)
     for c, shape, size, energy, color, location, rot in plan:
         light = bpy.data.lights.new(f"Relight light {c}", "AREA")
         make_plain(light)  # Cycles emits colour x Power
@@ -764,9 +781,24 @@ def make_area_lights(scene, index) -> int:
         obj = bpy.data.objects.new(light.name, light)
         obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
         coll.objects.link(obj)
+        _mark_area_light(obj, rid)
     for rec, energy, color in placed:
-        coll.objects.link(new_lamp(rec, energy, color))
+        obj = new_lamp(rec, energy, color)
+        coll.objects.link(obj)
+        _mark_area_light(obj, rid)
     return len(plan) + len(placed)
+
+
+def _mark_area_light(ob, rid) -> None:
+    """Make Area Lights' lights are the user's lights (a solve counts them), marked only so that the
+    next Make Area Lights of the same result replaces them and nothing else (export.owner_of's
+    rule: a copy, of another name, is not replaced)."""
+    ob[AREA_LIGHTS_PROP] = rid or ""
+    ob[RELIGHT_NAME_PROP] = ob.name
+
+
+def _made_area_light(ob, rid) -> bool:
+    return ob.get(AREA_LIGHTS_PROP) == (rid or "") and ob.get(RELIGHT_NAME_PROP) == ob.name
 
 
 # --- the chart ---------------------------------------------------------------------------------
@@ -811,11 +843,34 @@ def chart_data(scene) -> dict | None:
 
 # --- the radiosity colour layer, saving and rendering ----------------------------------
 
-def save_copy(path: str):
-    """Save the current state to ``path`` as a copy (the open file keeps its own path)."""
-    d = os.path.dirname(os.path.abspath(path))
+def _save_mainfile(**kw):
+    return bpy.ops.wm.save_as_mainfile(**kw)
+
+
+def _atomic_output(path: str, write) -> None:
+    """``write(tmp)`` to a temporary of its own beside ``path`` (through a symbolic link, its
+    target), then rename it to ``path``: the file is whole or absent, whatever stops the write
+    (an error, Ctrl-C, SIGTERM); the temporary, and Blender's own ``tmp@``, never stay behind."""
+    dest = os.path.realpath(path)
+    d = os.path.dirname(dest)
     os.makedirs(d, exist_ok=True)
-    bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path), copy=True, compress=True)
+    base, ext = os.path.splitext(os.path.basename(dest))
+    tmp = os.path.join(d, f".{base}.relight-{uuid.uuid4().hex[:12]}{ext}")
+    try:
+        write(tmp)
+        if not os.path.isfile(tmp):
+            raise RuntimeError(f"Error: nothing was written to {tmp}")
+        os.replace(tmp, dest)
+    finally:
+        for leftover in (tmp, tmp + "@"):
+            if os.path.exists(leftover):
+                os.remove(leftover)
+
+
+def save_copy(path: str):
+    """Save the current state to ``path`` as a copy (the open file keeps its own path), whole or
+    not at all (``_atomic_output``)."""
+    _atomic_output(path, lambda tmp: _save_mainfile(filepath=tmp, copy=True, compress=True))
 
 
 
@@ -922,7 +977,8 @@ def write_radiosity(objects, radiosity, areas, skipped=None):
 
 def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE,
                      view_transform="Standard"):
-    """Render the ``relight_radiosity`` colours with Cycles (CPU) to a PNG at ``path``.
+    """Render the ``relight_radiosity`` colours with Cycles (CPU) to ``path``, in the format its
+    extension names (RENDER_FORMATS), whole or not at all.
 
     Every surface is shown as an emitter of its baked radiance B/pi (a view-layer material
     override: Attribute ``relight_radiosity`` -> Emission, strength 1), on a black world,
@@ -934,6 +990,10 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
     scene = context.scene
     if scene.camera is None:
         raise SceneError("the scene has no camera to render from")
+    fmt = RENDER_FORMATS.get(os.path.splitext(path)[1].lower())
+    if fmt is None:
+        raise SceneError(f"{path}: the picture's format is read from its extension, one of "
+                         f"{', '.join(RENDER_FORMATS)}")
     mat = bpy.data.materials.new("relight_radiosity_view")
     with _warnings.catch_warnings():
         _warnings.simplefilter("ignore", DeprecationWarning)
@@ -952,7 +1012,8 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
     world.color = (0.0, 0.0, 0.0)
     r = scene.render
     saved = (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
-             scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure)
+             scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure,
+             r.use_file_extension)
     try:
         context.view_layer.material_override = mat
         scene.world = world
@@ -966,12 +1027,17 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
         scene.view_settings.view_transform = view_transform
         scene.view_settings.look = "None"
         scene.view_settings.exposure = 0.0
-        r.image_settings.file_format = "PNG"
-        os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-        r.filepath = os.path.abspath(path)
-        bpy.ops.render.render(write_still=True)
+        r.image_settings.file_format = fmt
+        r.use_file_extension = False  # exactly the path asked for (Blender would rename shot.jpg to shot.png)
+
+        def write(tmp):
+            r.filepath = tmp
+            bpy.ops.render.render(write_still=True)
+
+        _atomic_output(path, write)
     finally:
         (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
-         scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure) = saved
+         scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure,
+         r.use_file_extension) = saved
         bpy.data.materials.remove(mat)
         bpy.data.worlds.remove(world)

@@ -39,7 +39,7 @@ def _bmesh_counts(obj):
     if tl is not None:
         for f in bm.faces:
             loops = f.loops
-            if sum(loop[tl][3] for loop in loops) >= 0.5 * len(loops):
+            if sum(min(max(loop[tl][3], 0.0), 1.0) for loop in loops) >= 0.5 * len(loops):
                 targets += 1
     if export.no_lights(obj):
         return targets, 0, faces

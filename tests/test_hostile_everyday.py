@@ -1,0 +1,291 @@
+"""The hostile-input catalogue, part 2 (issue 19; docs/reliability.md): what an artist does every
+day, tried as a new user would. The harness is tests/test_hostile.py's (its scenes' helpers, its
+checks: exit code or operator result, the one-line message, the input's bytes unchanged, no NaN
+or inf in the report or the scene, the scene unchanged on refusal); the cases are new.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+
+from conftest import file_digest
+from test_hostile import (RAYS, _grid, _mesh, _paint, _reset, _room, _save, addon, assert_scene_finite,  # noqa: F401
+                          snapshot, strict_json)
+
+bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
+
+
+# ============================================================================ scenes
+
+def _slab(name="slab", size=0.5):
+    """A horizontal card halfway up the room, over a corner of the floor (it shades 1/4 of it)."""
+    v, f = _grid(1, size=size, z=0.5)
+    return _mesh(name, v, f)
+
+
+def build(name, d):
+    path = os.path.join(d, f"{name}.blend")
+    _reset()
+    if name == "hidden_slab":  # hidden with H: Cycles still renders it
+        _room()
+        _slab().hide_set(True)
+    elif name == "shown_slab":
+        _room()
+        _slab()
+    elif name == "disabled_slab":  # disabled in the viewports (the monitor icon): renders too
+        _room()
+        _slab().hide_viewport = True
+    elif name == "hidden_ceiling":  # the only candidate, hidden with H
+        _, ceiling = _room()
+        ceiling.hide_set(True)
+    elif name == "disabled_subsurf_ceiling":  # a modifier on an object disabled in the viewports
+        _, ceiling = _room()
+        ceiling.modifiers.new("sub", "SUBSURF").levels = 1
+        ceiling.hide_viewport = True
+    elif name == "half_painted":  # polygon 0: two corners painted at 0.5, two never painted
+        floor, _ = _room(paint=False)
+        a = floor.data.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+        col = np.zeros((len(floor.data.loops), 4), dtype=np.float32)
+        col[4:] = (0.2, 0.2, 0.2, 1.0)  # polygons 1..3 painted whole
+        col[0:2] = (0.5, 0.5, 0.5, 1.0)
+        a.data.foreach_set("color", col.ravel())
+    elif name == "painted_hidden_from_render":
+        floor, _ = _room()
+        floor.hide_render = True
+    elif name == "painted_only_instanced":
+        coll = bpy.data.collections.new("props")  # not in the scene: only instanced
+        fv, ff = _grid(2)
+        floor = _mesh("floor", fv, ff, collection=coll)
+        _paint(floor)
+        inst = bpy.data.objects.new("Props", None)
+        inst.instance_type = "COLLECTION"
+        inst.instance_collection = coll
+        bpy.context.scene.collection.objects.link(inst)
+        cv, cf = _grid(2, z=1.0, flip=True)
+        _mesh("ceiling", cv, cf)
+    elif name == "tiny_room":  # 0.1 mm across
+        floor, ceiling = _room()
+        for ob in (floor, ceiling):
+            ob.scale = (1e-4, 1e-4, 1e-4)
+        bpy.context.scene["relight_max_patch_size"] = 1e-3
+        _save(path, patch_size=None)
+        _reset()
+        return path
+    elif name == "room_camera":
+        _room()
+        cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+        cam.location = (0.5, 0.5, 0.9)
+        bpy.context.scene.collection.objects.link(cam)
+        bpy.context.scene.camera = cam
+        bpy.context.scene.render.resolution_x = bpy.context.scene.render.resolution_y = 32
+    else:
+        raise KeyError(name)
+    _save(path)
+    _reset()
+    return path
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    d = str(tmp_path_factory.mktemp("everyday"))
+    built = {}
+
+    def get(name):
+        if name not in built:
+            built[name] = build(name, d)
+        return built[name]
+
+    return get
+
+
+def _solve(run_cli, scene, tmp_path, *extra, out=False):
+    before = file_digest(scene)
+    argv = ["solve", scene, "--report", tmp_path / "r.json", *RAYS, *extra]
+    if out:
+        argv += ["--out", tmp_path / "out.blend"]
+    code, report, err = run_cli(argv)
+    assert "Traceback" not in err, err
+    assert file_digest(scene) == before, "the input file changed"
+    if code == 0:
+        report = strict_json(tmp_path / "r.json")
+    return code, report, err
+
+
+def _error_line(err):
+    lines = [ln for ln in err.strip().splitlines() if ln.startswith("relight: error:")]
+    assert len(lines) == 1 and err.strip().splitlines()[-1] == lines[0], err
+    return lines[0]
+
+
+# ============================================================================ wrong answers with no warning
+
+def test_hidden_in_viewport_is_modelled_as_cycles_renders_it(run_cli, scenes, tmp_path):
+    """Case 1. Hidden with H or disabled in the viewports, an object still renders: it is modelled
+    (the answer is the shown scene's) and named in a warning."""
+    code, shown, err = _solve(run_cli, scenes("shown_slab"), tmp_path / "a")
+    assert code == 0, err
+    for scene in ("hidden_slab", "disabled_slab"):
+        code, report, err = _solve(run_cli, scenes(scene), tmp_path / scene)
+        assert code == 0, err
+        assert "slab" in report["objects"]
+        assert any("hidden in the viewport are modelled" in w and "'slab'" in w for w in report["warnings"])
+        assert report["final"]["relative_error"] == pytest.approx(shown["final"]["relative_error"], rel=1e-9)
+        assert np.allclose(report["objects"]["floor"]["radiosity"], shown["objects"]["floor"]["radiosity"], rtol=1e-9)
+
+
+def test_hidden_only_candidate_is_a_candidate(run_cli, scenes, tmp_path):
+    code, report, err = _solve(run_cli, scenes("hidden_ceiling"), tmp_path)
+    assert code == 0, err
+    assert any(light["object"] == "ceiling" for light in report["final"]["lights"] if light["polygons"]) or \
+        report["final"]["lights"]
+    assert any("'ceiling'" in w and "hidden in the viewport" in w for w in report["warnings"])
+
+
+def test_disabled_object_is_evaluated_with_its_modifiers(bpy_clean, scenes):
+    """An object disabled in the viewports is evaluated as a render would (its Subdivision Surface
+    applied), and left disabled afterwards."""
+    from relight_addon.blender import export
+
+    bpy.ops.wm.open_mainfile(filepath=scenes("disabled_subsurf_ceiling"))
+    exp = export.export_scene()
+    oi = exp.faces.object_names.index("ceiling")
+    assert int(np.sum(exp.faces.face_object == oi)) == 16  # 4 quads, each subdivided into 4
+    assert bpy.data.objects["ceiling"].hide_viewport
+
+
+def test_half_painted_face_asks_for_its_painted_corners(run_cli, scenes, tmp_path):
+    """Case 2. Two corners painted at 0.5, two never painted (alpha 0): the face is a target at
+    0.5 (x pi, W/m^2), not at the mean with the unpainted corners' black, 0.25."""
+    code, report, err = _solve(run_cli, scenes("half_painted"), tmp_path)
+    assert code == 0, err
+    t = report["objects"]["floor"]["target"]
+    assert t[0] == pytest.approx([math.pi * 0.5] * 3, rel=1e-6)
+    assert t[1] == pytest.approx([math.pi * 0.2] * 3, rel=1e-6)
+
+
+def test_tiny_scene_emitters_follow_its_scale(run_cli, scenes, tmp_path):
+    """Case 4. A 0.1 mm room: the emitters sit in front of the ceiling by a fraction of the room,
+    inside it (not 1 mm away, below the floor)."""
+    code, report, err = _solve(run_cli, scenes("tiny_room"), tmp_path, out=True)
+    assert code == 0, err
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "out.blend"))
+    from relight_scene import emitted
+
+    shown = emitted(bpy.context.scene)
+    assert shown is not None and len(shown["triangles"])
+    z = np.asarray(shown["triangles"])[..., 2]
+    assert np.all(z < 1e-4) and np.all(z > 0.99e-4), z  # below the ceiling (z = 0.1 mm), within 1 %
+    assert_scene_finite()
+
+
+# ============================================================================ messages that name the cause
+
+@pytest.mark.parametrize("scene,message", [
+    ("painted_hidden_from_render", "painted object(s) 'floor' are not rendered"),
+    ("painted_only_instanced", "painted object(s) 'floor' are only in an instanced collection"),
+])
+def test_no_target_names_the_painted_object(run_cli, scenes, tmp_path, scene, message):
+    """Case 21."""
+    code, _, err = _solve(run_cli, scenes(scene), tmp_path)
+    assert code == 2
+    line = _error_line(err)
+    assert "no target" in line and message in line, line
+    assert not (tmp_path / "r.json").exists()
+
+
+# ============================================================================ outputs
+
+def test_render_writes_the_format_its_name_asks_for(run_cli, scenes, tmp_path):
+    """Case 9. --render shot.jpg writes a JPEG named shot.jpg, and a shot.png beside it is untouched."""
+    png = tmp_path / "shot.png"
+    png.write_bytes(b"the user's own picture")
+    code, _, err = _solve(run_cli, scenes("room_camera"), tmp_path, "--render", tmp_path / "shot.jpg")
+    assert code == 0, err
+    assert (tmp_path / "shot.jpg").read_bytes()[:3] == b"\xff\xd8\xff"  # a JPEG
+    assert png.read_bytes() == b"the user's own picture"
+    assert not [p for p in os.listdir(tmp_path) if p.startswith(".")]  # no temporary left
+
+
+def test_render_unknown_format_refused_before_work(run_cli, scenes, tmp_path):
+    code, _, err = _solve(run_cli, scenes("room_camera"), tmp_path, "--render", tmp_path / "shot.xyz")
+    assert code == 2
+    assert "--render" in _error_line(err) and ".xyz" in _error_line(err)
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_out_path_too_long_for_blender(run_cli, scenes, tmp_path):
+    """Case 10. Blender keeps paths of at most 1023 bytes: a longer --out is refused, not cut."""
+    deep = tmp_path / ("d" * 200) / ("e" * 200) / ("f" * 200) / ("g" * 200) / ("h" * 200) / "o.blend"
+    code, _, err = _solve(run_cli, _room_scene(scenes), tmp_path, "--out", deep)
+    assert code == 2
+    line = _error_line(err)
+    assert "--out" in line and "1023" in line, line
+
+
+def _room_scene(scenes):
+    return scenes("room_camera")
+
+
+def test_out_symlink_to_missing_folder(run_cli, scenes, tmp_path):
+    """Case 24: the message says where the link points, not "permission denied"."""
+    link = tmp_path / "o.blend"
+    os.symlink(tmp_path / "nowhere" / "o.blend", link)
+    code, _, err = _solve(run_cli, _room_scene(scenes), tmp_path, "--out", link)
+    assert code == 2
+    line = _error_line(err)
+    assert "symbolic link" in line and "nowhere" in line and "permission denied" not in line, line
+
+
+def test_reports_written_at_once_do_not_collide(tmp_path):
+    """Case 11: two writers of one report path use their own temporary names."""
+    from relight_addon import cli
+
+    path = str(tmp_path / "r.json")
+    errors = []
+
+    def write(k):
+        try:
+            for i in range(30):
+                cli._write_json(path, {"writer": k, "i": i, "pad": "x" * 20000})
+        except Exception as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    threads = [threading.Thread(target=write, args=(k,)) for k in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not errors, errors
+    with open(path) as fh:
+        assert json.load(fh)["i"] == 29
+    assert os.listdir(tmp_path) == ["r.json"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_cancel_during_the_save_tells_the_truth(run_cli, scenes, tmp_path, monkeypatch, sig):
+    """Case 12. A signal that arrives while --out is being saved: no partial file is left (neither
+    o.blend nor Blender's o.blend@ nor a temporary), the report is complete, and the message says
+    what was written and what was not."""
+    from relight_addon.blender import results
+
+    real = bpy.ops.wm.save_as_mainfile
+
+    def save_and_signal(**kw):
+        out = real(**kw)
+        os.kill(os.getpid(), sig)  # delivered to this (the main) thread once the save returns
+        return out
+
+    monkeypatch.setattr(results, "_save_mainfile", save_and_signal)
+    code, _, err = _solve(run_cli, _room_scene(scenes), tmp_path, out=True)
+    assert code == (130 if sig == signal.SIGINT else 143), err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("relight: cancelled") and "--out was not written" in last, last
+    assert "the report was written" in last, last
+    assert sorted(os.listdir(tmp_path)) == ["r.json"]
+    strict_json(tmp_path / "r.json")
