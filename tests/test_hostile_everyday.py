@@ -10,6 +10,7 @@ import math
 import os
 import signal
 import threading
+import warnings
 
 import numpy as np
 import pytest
@@ -84,11 +85,76 @@ def build(name, d):
         bpy.context.scene.collection.objects.link(cam)
         bpy.context.scene.camera = cam
         bpy.context.scene.render.resolution_x = bpy.context.scene.render.resolution_y = 32
+    elif name in MESSAGE_SCENES:
+        MESSAGE_SCENES[name]()
     else:
         raise KeyError(name)
     _save(path)
     _reset()
     return path
+
+
+def _principled(name, **inputs):
+    m = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    p = next(n for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    for k, v in inputs.items():
+        p.inputs[k].default_value = v
+    return m, p
+
+
+def _inf_on_floor():  # a painted face's vertex set to infinity: Blender keeps 3.4e38
+    floor, _ = _room()
+    floor.data.vertices[0].co = (float("inf"), 0.0, 0.0)
+
+
+def _nan_scale():
+    _, ceiling = _room()
+    ceiling.scale = (float("nan"), 1.0, 1.0)
+
+
+def _nan_material():
+    _, ceiling = _room()
+    ceiling.data.materials.append(_principled("Broken", **{"Base Color": (float("nan"), 0.5, 0.5, 1.0)})[0])
+
+
+def _inf_emission():
+    _room()
+    m, _ = _principled("Glare", **{"Emission Color": (1, 1, 1, 1), "Emission Strength": float("inf")})
+    _mesh("led", [(0.4, 0.4, 0.9), (0.6, 0.4, 0.9), (0.6, 0.6, 0.9), (0.4, 0.6, 0.9)], [(3, 2, 1, 0)], material=m)
+
+
+def _inf_lamp():
+    _room()
+    lamp = bpy.data.objects.new("Key", bpy.data.lights.new("Key", "POINT"))
+    lamp.data.energy = float("inf")
+    lamp.location = (0.5, 0.5, 0.8)
+    bpy.context.scene.collection.objects.link(lamp)
+
+
+def _flipped_ceiling():
+    fv, ff = _grid(2)
+    floor = _mesh("floor", fv, ff)
+    floor["relight_no_lights"] = True
+    _paint(floor)
+    cv, cf = _grid(2, z=1.0)  # facing up, away from the floor
+    _mesh("ceiling", cv, cf)
+
+
+def _texture_emission():  # reduce: the ceiling's emission colour from a texture (baked per face)
+    fv, ff = _grid(2)
+    _mesh("floor", fv, ff)
+    cv, cf = _grid(2, z=1.0, flip=True)
+    m, p = _principled("Screen", **{"Emission Strength": 2.0})
+    tex = m.node_tree.nodes.new("ShaderNodeTexChecker")
+    m.node_tree.links.new(tex.outputs["Color"], p.inputs["Emission Color"])
+    _mesh("ceiling", cv, cf, material=m)
+
+
+MESSAGE_SCENES = {"inf_on_floor": _inf_on_floor, "nan_scale": _nan_scale, "nan_material": _nan_material,
+                  "inf_emission": _inf_emission, "inf_lamp": _inf_lamp, "flipped_ceiling": _flipped_ceiling,
+                  "texture_emission": _texture_emission}
 
 
 @pytest.fixture(scope="module")
@@ -185,6 +251,55 @@ def test_tiny_scene_emitters_follow_its_scale(run_cli, scenes, tmp_path):
 
 
 # ============================================================================ messages that name the cause
+
+@pytest.mark.parametrize("scene,extra,message", [
+    ("inf_on_floor", [], "object 'floor' has a vertex 3.4e+38 m from its origin: an infinite coordinate?"),  # 16
+    ("nan_scale", [], "object 'ceiling' has a NaN or infinite transform"),  # 17
+    ("nan_material", [], "material 'Broken' has a NaN or infinite colour"),  # 18
+    ("inf_emission", [], "material 'Glare' emits a radiance of 3.4e+38 W/m^2/sr: an infinite Emission Strength?"),
+    ("inf_emission", ["--out", "{tmp}/o.blend"], "material 'Glare' emits a radiance of 3.4e+38"),  # 19
+    ("inf_lamp", [], "lamp 'Key' has a NaN or infinite Power"),
+    ("flipped_ceiling", [], "every candidate face turns its back to the targets: are their normals flipped?"),  # 20
+    ("room_camera", ["--threads", "100000"], "--threads: must be a whole number from 1 to"),  # 25
+    ("room_camera", ["--tolerance", "0.1"], "--tolerance is used only by the least-power selection"),  # 26
+])
+def test_message_names_the_cause(run_cli, scenes, tmp_path, scene, extra, message):
+    """Cases 16-20, 25, 26: exit 2, one line that names the object, material, lamp or option, no
+    numpy warning on the way, and nothing written."""
+    extra = [str(a).replace("{tmp}", str(tmp_path)) for a in extra]
+    path = scenes(scene)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        code, _, err = _solve(run_cli, path, tmp_path, *extra)
+    assert code == 2, err
+    line = _error_line(err)
+    assert message in line, line
+    assert not [w for w in caught if issubclass(w.category, RuntimeWarning)], [str(w.message) for w in caught]
+    assert sorted(os.listdir(tmp_path)) == []
+
+
+def test_texture_driven_emission_is_reduced(run_cli, scenes, tmp_path):
+    """Case 22: an emission colour from a texture is baked per face, and reduce finds its emitters."""
+    scene = scenes("texture_emission")
+    code, report, err = run_cli(["reduce", scene, "--report", tmp_path / "r.json", *RAYS])
+    assert code == 0, err
+    assert report["inverse"]["n_candidates"] > 0 and report["final"]["lights"]
+
+
+def test_newer_blender_file_is_said(run_cli, scenes, tmp_path):
+    """Case 23: a file saved by a newer Blender (its header's version raised) is solved with a
+    warning that says what that means for the answer and for --out."""
+    bpy.ops.wm.open_mainfile(filepath=scenes("room_camera"))
+    plain = tmp_path / "plain.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(plain), compress=False)
+    data = plain.read_bytes()
+    i = data.index(b"v0", 0, 32)  # BLENDER17-01v0500: the file's Blender version
+    newer = tmp_path / "newer.blend"
+    newer.write_bytes(data[:i] + b"v0900" + data[i + 5:])
+    code, report, err = run_cli(["solve", newer, "--report", tmp_path / "r.json", *RAYS])
+    assert code == 0, err
+    assert any("saved by Blender 9.0, newer than this one" in w and "--out" in w for w in report["warnings"])
+
 
 @pytest.mark.parametrize("scene,message", [
     ("painted_hidden_from_render", "painted object(s) 'floor' are not rendered"),

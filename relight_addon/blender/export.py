@@ -113,6 +113,10 @@ _FACE_INDEX_ATTRIBUTE = "_relight_face_index"
 RELIGHT_OWNER_PROP = "relight_owner"  # on everything Relight creates (results.py): its result id
 #: and the name it was made with: a copy (Shift-D, another data-block of a new name) is the user's
 RELIGHT_NAME_PROP = "relight_owner_name"
+#: metres: a vertex farther from the origin is refused (an infinite coordinate, stored as 3.4e38)
+MAX_COORDINATE = 1e12
+#: W/m^2/sr: a material emitting more is refused (the Sun's surface is about 2e7)
+MAX_RADIANCE = 1e12
 #: the attribute types Relight reads and writes its layers as
 TARGET_TYPES = ("FLOAT_COLOR", "BYTE_COLOR")
 TARGET_DOMAIN = "CORNER"
@@ -182,6 +186,13 @@ def material_closure(mat):
         grey = np.full(3, DEFAULT_REFLECTANCE)
         return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))], []
     c = surface_closure(mat)
+    for part, v in (("colour (its reflectance)", c.reflectance), ("emission (colour x strength)", c.radiance)):
+        if not np.all(np.isfinite(v)):
+            raise SceneError(f"material {mat.name!r} has a NaN or infinite {part}: give it finite values")
+    if float(np.max(c.radiance, initial=0.0)) > MAX_RADIANCE:
+        raise SceneError(f"material {mat.name!r} emits a radiance of {float(np.max(c.radiance)):.3g} W/m^2/sr: an "
+                         "infinite Emission Strength? (Blender stores infinity as its largest number, 3.4e+38); "
+                         "give it a finite strength")
     note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
     return c.reflectance, c.radiance, note, c.lobes, c.linked_emission
 
@@ -258,6 +269,17 @@ def fingerprint_change(ob, fp) -> str | None:
     if d > tol:
         return "it moved or its vertices moved (in its mesh, by a shape key or a modifier)"
     return None
+
+
+def newer_file_warning() -> str | None:
+    """The warning for a file saved by a newer Blender than this one (what this one does not know
+    was dropped when it read the file, and a copy it saves will not have it), or None."""
+    saved, this = tuple(bpy.data.version[:2]), tuple(bpy.app.version[:2])
+    if not bpy.data.filepath or saved <= this:
+        return None
+    return (f"the file was saved by Blender {saved[0]}.{saved[1]}, newer than this one ({this[0]}.{this[1]}): what "
+            f"{this[0]}.{this[1]} does not know was lost when it read the file, Relight solved what was left, and "
+            f"a copy written by --out or a save here will not have it either")
 
 
 def tag_owned(idb, rid) -> None:
@@ -529,6 +551,10 @@ def _mesh_geometry(ob_eval, me, name):
     V = foreach_array(me.vertices, "co", len(me.vertices), np.float64, 3)
     if not np.all(np.isfinite(V)):
         raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
+    if len(V) and float(np.abs(V).max()) > MAX_COORDINATE:
+        raise SceneError(f"object {name!r} has a vertex {float(np.abs(V).max()):.3g} m from its origin: an infinite "
+                         "coordinate? (Blender stores infinity as its largest number, 3.4e+38); Relight models scenes "
+                         f"within {MAX_COORDINATE:.0e} m")
     me.calc_loop_triangles()
     nt = len(me.loop_triangles)
     lt = foreach_array(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
@@ -587,9 +613,17 @@ class _Builder:
 
     def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
         M = np.asarray(matrix, dtype=np.float64)
+        if not np.all(np.isfinite(M)):
+            raise SceneError(f"object {name!r} has a NaN or infinite transform (its location, rotation or scale, "
+                             "or a parent's or a constraint's)")
         W = geo["V"] @ M[:3, :3].T + M[:3, 3]
         if not np.all(np.isfinite(W)):
             raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
+        far = float(np.abs(W).max()) if W.size else 0.0
+        if far > MAX_COORDINATE:
+            raise SceneError(f"object {name!r} has a vertex {far:.3g} m from the origin: an infinite coordinate? "
+                             f"(Blender stores infinity as its largest number, 3.4e+38); Relight models scenes within "
+                             f"{MAX_COORDINATE:.0e} m")
         flip = np.linalg.det(M[:3, :3]) < 0
         lt = geo["lt"][:, ::-1] if flip else geo["lt"]
         nv, nf = self.nv, self.nf
@@ -776,6 +810,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     objs = exported_objects(context)
     notes = {"target": [], "candidates": []}
     warnings = []
+    newer = newer_file_warning()
+    if newer:
+        warnings.append(newer)
     hidden = hidden_in_viewport(context, objs)
     if hidden:
         warnings.append(hidden_warning(hidden))

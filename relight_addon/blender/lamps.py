@@ -26,7 +26,11 @@ import bpy
 import numpy as np
 
 from ..engine.lamps import Lamp
+from ..engine.scene import SceneError
 from . import lamp_state
+
+#: W: a lamp of more power is refused (an infinite Power, stored as 3.4e38)
+MAX_LAMP_POWER = 1e15
 
 __all__ = ["export_lamps", "cycles_gain", "make_plain"]
 
@@ -134,6 +138,8 @@ def export_lamps(context, renderable, owner_of) -> tuple:
             continue
         color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
         energy = float(ld.energy if was is None else was["energy"])
+        if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
+            raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
         if not np.any(color * energy > 0):
             continue
         M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
@@ -144,6 +150,10 @@ def export_lamps(context, renderable, owner_of) -> tuple:
             continue
         gain = cycles_gain(ld, M)
         power = color * energy * gain  # what Cycles emits
+        if not np.all(np.isfinite(power)) or float(np.max(power)) > MAX_LAMP_POWER:
+            raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
+                             "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
+                             "finite values")
         if not np.any(power > 0):
             continue
         kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,

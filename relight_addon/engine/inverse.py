@@ -542,12 +542,28 @@ class InverseProblem:
         bad = self.targets[(~reach) & (self.b_target.max(axis=1) > 0)]
         if len(bad) == len(self.targets):
             raise InverseError(
-                "no candidate light reaches any target (occluded or every reaching face forbidden); "
+                "no candidate light reaches any target (" + self._why_unreached() + "); "
                 f"target patches {bad[:20].tolist()}")
         if len(bad):
             self.warnings.append(
                 f"{len(bad)} target(s) cannot be met, no candidate light reaches them: patches "
                 f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
+
+    def _why_unreached(self) -> str:
+        """Why no light reaches a target, as far as the geometry tells: the candidates' or the
+        targets' fronts turned away from each other (flipped normals), else occlusion."""
+        def facing(a, na, b):  # per patch of a: some patch of b in front of it
+            return np.array([np.any((b - x) @ n > 1e-9) for x, n in zip(a, na)], dtype=bool)
+
+        C, P = self.candidates, self.targets
+        if np.any(self.normal) and len(C) * len(P) <= 4e7:
+            if not facing(self.center[C], self.normal[C], self.center[P]).any():
+                return ("every candidate face turns its back to the targets: are their normals flipped? "
+                        "(Edit Mode: Mesh > Normals > Recalculate Outside, or Flip)")
+            if not facing(self.center[P], self.normal[P], self.center[C]).any():
+                return ("every target turns its back to the candidate faces: are the painted faces' normals flipped? "
+                        "(Edit Mode: Mesh > Normals > Recalculate Outside, or Flip)")
+        return "occluded, or every face that reaches them is forbidden"
 
     # -- evaluation -----------------------------------------------------
     def target_radiosity_of(self, e_C):

@@ -15,6 +15,7 @@ adaptive patch model's ``light_size``, ``refine_passes``, ``refine_tolerance``).
 from __future__ import annotations
 
 import dataclasses
+import os
 
 from . import distributions, estimators, patch_models, selections, solvers  # noqa: F401  (register the methods)
 from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
@@ -26,6 +27,9 @@ DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
 DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
 DEFAULT_ESTIMATOR = "kernel"
+
+#: threads at most: more than the machine's CPU threads only costs memory (the ray buffers)
+MAX_THREADS = 4 * (os.cpu_count() or 1)
 
 #: configurations kept re-appliable in the .blend: every one up to this many lights, and
 #: about STORE_LOG_POINTS log-spaced ones above (plus e_x and the final one); the chart and
@@ -90,7 +94,9 @@ JOB_PARAMS = (
           description="Largest patch edge in metres: larger faces are split into patches"),
     Param("seed", int, 0, min=0, max=2 ** 63 - 1, label="Seed", error="must be a non-negative integer "
           "(0 to 2^63 - 1), got {}", description="Random seed: results are reproducible"),
-    Param("threads", int, None, min=1, label="Threads", ui="hidden", none="every core",
+    Param("threads", int, None, min=1, max=MAX_THREADS, label="Threads", ui="hidden", none="every core",
+          error=f"must be a whole number from 1 to {MAX_THREADS} (4 x this machine's {os.cpu_count() or 1} CPU "
+                "threads: more only costs memory), got {}",
           description="Worker threads"),
     Param("solver", str, DEFAULT_SOLVER, registry=SOLVERS, label="Solver", inverse_only=True,
           description="Inverse solver"),
