@@ -404,3 +404,137 @@ def test_cancel_during_the_save_tells_the_truth(run_cli, scenes, tmp_path, monke
     assert "the report was written" in last, last
     assert sorted(os.listdir(tmp_path)) == ["r.json"]
     strict_json(tmp_path / "r.json")
+
+
+# ============================================================================ work lost, or the wrong thing shown
+
+def _open_solved(scenes, name="room_camera", rays=256):
+    bpy.ops.wm.open_mainfile(filepath=scenes(name))
+    bpy.context.scene.relight.rays_per_patch = rays
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    return bpy.context.scene
+
+
+def _refused(run, message):
+    """The operator refuses with one line naming ``message``, and the scene is as it was."""
+    before = snapshot()
+    with pytest.raises(RuntimeError) as info:
+        run()
+    text = str(info.value)
+    assert text.startswith("Error: ") and len(text.strip().splitlines()) == 1 and message in text, text
+    assert snapshot() == before, "a refused operation changed the scene"
+    assert_scene_finite()
+
+
+def test_apply_after_a_shape_key_moved_the_mesh(addon, scenes):
+    """Case 3: a shape key lowers the ceiling after the solve: Apply refuses (the evaluated mesh
+    is what was solved), and says why."""
+    _open_solved(scenes)
+    ceiling = bpy.data.objects["ceiling"]
+    ceiling.shape_key_add(name="Basis")
+    key = ceiling.shape_key_add(name="lower")
+    for v in key.data:
+        v.co.z -= 0.5
+    key.value = 1.0
+    bpy.context.view_layer.update()
+    _refused(lambda: bpy.ops.relight.apply_configuration(index=0),
+             "ceiling has changed since the solve (it moved or its vertices moved")
+
+
+def test_apply_after_a_modifier_changed_the_mesh(addon, scenes):
+    """Case 3: an Array's count goes from 1 to 3 after the solve: Apply refuses."""
+    bpy.ops.wm.open_mainfile(filepath=scenes("room_camera"))
+    arr = bpy.data.objects["ceiling"].modifiers.new("arr", "ARRAY")
+    arr.count = 1
+    bpy.context.scene.relight.rays_per_patch = 256
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    arr.count = 3
+    bpy.context.view_layer.update()
+    _refused(lambda: bpy.ops.relight.apply_configuration(index=0),
+             "ceiling has changed since the solve (its polygons or their vertex order changed")
+
+
+def test_a_copy_of_the_emitters_is_the_users(addon, scenes):
+    """Case 7: a Shift-D copy of Relight Emitters carries its custom properties, but it is the
+    user's object now: Apply and Clear leave it, and a solve counts it as the scene's light."""
+    from relight_addon.blender import export, results
+
+    scene = _open_solved(scenes)
+    ours = results.emitters_object(scene)
+    assert ours is not None
+    copy = ours.copy()
+    copy.data = ours.data.copy()
+    scene.collection.objects.link(copy)
+    assert copy.get("relight_owner") is not None  # it looks like ours
+    assert export.owner_of(copy) is None and export.owner_of(ours) is not None
+    assert bpy.ops.relight.apply_configuration(index=0) == {"FINISHED"}
+    assert copy.name in bpy.data.objects
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    assert copy.name in bpy.data.objects and results.emitters_object(scene) is None
+    assert copy in export.exported_objects()
+
+
+def test_make_area_lights_keeps_the_users_light_in_its_collection(addon, scenes):
+    """Case 8: a light the user adds to Relight's lights collection survives Make Area Lights."""
+    _open_solved(scenes)
+    assert bpy.ops.relight.make_area_lights() == {"FINISHED"}
+    coll = next(c for c in bpy.data.collections if c.get("relight_area_lights") is not None)
+    n_ours = len(coll.objects)
+    mine = bpy.data.objects.new("my_fill", bpy.data.lights.new("my_fill", "POINT"))
+    coll.objects.link(mine)
+    copy = coll.objects[0].copy()  # and a Shift-D copy of one of Relight's
+    coll.objects.link(copy)
+    assert bpy.ops.relight.make_area_lights() == {"FINISHED"}
+    names = {o.name for c in bpy.data.collections if c.get("relight_area_lights") is not None for o in c.objects}
+    assert "my_fill" in names and copy.name in names
+    assert len(names) == n_ours + 2
+
+
+def test_row_click_after_a_scene_change(addon, scenes):
+    """Case 13: a row clicked after the scene changed is not applied: the list goes back to the
+    row the scene shows, and the panel's line says why."""
+    scene = _open_solved(scenes)
+    settings = scene.relight
+    shown = settings.curve_index
+    other = 0 if shown != 0 else 1
+    assert len(settings.curve) > 1
+    bpy.data.objects["ceiling"].location.z += 0.1
+    bpy.context.view_layer.update()
+    settings.curve_index = other  # a click on the list
+    assert settings.curve_index == shown
+    assert "not applied" in settings.apply_error and "ceiling has changed since the solve" in settings.apply_error
+    assert int(scene["relight_shown"]) == shown
+
+
+def test_cli_re_solve_shows_its_own_list(addon, scenes, tmp_path, run_cli):
+    """Case 14: solved in the add-on and saved, then re-solved by the CLI: opened again, the add-on
+    lists the CLI's configurations, with its summary and warnings."""
+    scene = _open_solved(scenes)
+    first = len(scene.relight.curve)
+    path = tmp_path / "mine.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    out = tmp_path / "out.blend"
+    code, report, err = run_cli(["solve", path, "--report", tmp_path / "r.json", "--out", out, *RAYS,
+                                 "--max-lights", "1"])
+    assert code == 0, err
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    from relight_addon.blender import results
+
+    data = results.load_result(bpy.context.scene)
+    s = bpy.context.scene.relight
+    assert len(s.curve) == len(data.n_lights) and s.curve_result == results.result_id(bpy.context.scene)
+    assert [p.n_lights for p in s.curve] == [int(n) for n in data.n_lights]
+    assert s.curve[s.curve_index].n_lights == report["final"]["n_lights"] == 1
+    assert s.last_summary.startswith("1 lights") and first >= 1
+
+
+def test_refused_solve_in_edit_mode_stays_in_edit_mode(addon, scenes):
+    """Case 15."""
+    bpy.ops.wm.open_mainfile(filepath=scenes("painted_hidden_from_render"))  # no target: refused
+    bpy.context.view_layer.objects.active = bpy.data.objects["ceiling"]
+    bpy.ops.object.mode_set(mode="EDIT")
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.relight.solve()
+    assert "no target" in str(info.value)
+    assert bpy.context.mode == "EDIT_MESH"
+    bpy.ops.object.mode_set(mode="OBJECT")

@@ -114,7 +114,16 @@ def load_result(scene) -> StoredResult:
 
 
 def _stored_data(outcome, fingerprints=None) -> StoredResult:
-    return outcome.stored.with_fingerprints(fingerprints)
+    """The outcome's stored curve, with the meshes' fingerprints and what the Results panel shows
+    of the solve (its summary, warnings and the scene light kept: a file solved by the CLI shows
+    them too)."""
+    from ..pipeline.report import fixed_light_rows, summary_line
+
+    data = outcome.stored.with_fingerprints(fingerprints)
+    data.meta.update(summary=summary_line(outcome.report, len(outcome.curve)),
+                     warnings=list(outcome.report.get("warnings") or []),
+                     fixed_light=fixed_light_rows(outcome.report))
+    return data
 
 
 def store_result(scene, outcome, fingerprints=None, text=None) -> str:

@@ -221,6 +221,28 @@ def target_rows_text(patches, targets) -> str:
     return f"the {n_faces} painted faces" + (f" ({split} in pieces: {len(targets)} rows)" if split else "")
 
 
+def summary_line(report, n_rows=None) -> str:
+    """The Results panel's summary of a solve: the final configuration, what its error is over,
+    the kinds of light, the scene's own light kept (``n_rows``: the configurations listed)."""
+    f = report["final"]
+    neg = f"{f['n_negative']} negative" if f["n_negative"] else "no negatives"
+    over = report["inverse"].get("error_over")
+    n = len(report["curve"]) if n_rows is None else n_rows
+    text = (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}{f' over {over}' if over else ''}, "
+            f"{neg} ({n} configurations on the curve); {kinds_text(report)}")
+    fixed = [r for r in report.get("fixed_light") or [] if r.get("share") is not None]
+    if fixed:  # the scene's own light the solve kept, and its share of the painted light
+        text += "; the scene's own light: " + ", ".join(f"{r['name']} {100 * r['share']:.0f} %" for r in fixed)
+    return text
+
+
+def fixed_light_rows(report) -> str:
+    """The Results panel's list of the scene's own light: one line per lamp, World and emissive
+    object the solve kept, "kind<TAB>name<TAB>share" (share of the targets' painted light)."""
+    return "\n".join(f"{r['kind']}\t{r['name']}\t{r['share']:.6g}" for r in report.get("fixed_light") or []
+                     if r.get("share") is not None)
+
+
 def kinds_text(report) -> str:
     """What kinds of light the solve offered and chose, in words: "offered 180 cell, 42 group, 1
     polygon, 72 spot; chose 1 cell, 2 spot" (the report's model.lights_by_kind and final.lights)."""

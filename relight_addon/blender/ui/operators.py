@@ -12,6 +12,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from .. import ADDON_PACKAGE, export, results
 from ...pipeline import jobs
+from ...pipeline.report import fixed_light_rows, summary_line
 from ..preparation import SolveJob
 from . import viewport
 from .properties import set_curve_index, ui_value
@@ -281,15 +282,26 @@ def _fill_curve_list(settings, rows, current):
 
 
 def sync_curve_list(scene):
-    """Fill the UI list from the stored result when it is missing (files written by the CLI)."""
-    if results.RESULT_PROP not in scene.keys() or len(scene.relight.curve):
+    """Fill the UI list, the summary and the warnings from the stored result when they are not
+    that result's: a file written by the CLI, or re-solved by it after the add-on showed another
+    result (the list remembers the id of the result it shows, ``curve_result``)."""
+    settings = scene.relight
+    rid = results.result_id(scene)
+    if results.RESULT_PROP not in scene.keys():
+        return
+    if len(settings.curve) and settings.curve_result == (rid or ""):
         return
     data = results.load_result(scene)
     rows = [{"n_lights": data.n_lights[k], "error": data.error[k],
              "relative_error": data.relative_error[k], "n_negative": data.n_negative[k],
              "curve_index": data.point_index[k]} for k in range(len(data.n_lights))]
+    shown = scene.get("relight_shown")
     final = int(np.searchsorted(data.point_index, int(data.final)))
-    _fill_curve_list(scene.relight, rows, final)
+    _fill_curve_list(settings, rows, int(shown) if shown is not None and 0 <= int(shown) < len(rows) else final)
+    settings.last_summary = data.meta.get("summary", "")
+    settings.last_warnings = "\n".join(data.meta.get("warnings", []))
+    settings.last_fixed_light = data.meta.get("fixed_light", "")
+    settings.curve_result = rid or ""
     results.update_chart(scene)
 
 
@@ -298,6 +310,8 @@ def store_outcome(context, outcome, fingerprints=None):
     messages about objects that could not show everything."""
     shown = results.show_outcome(context.scene, outcome, fingerprints)
     _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
+    context.scene.relight.curve_result = results.result_id(context.scene) or ""
+    context.scene.relight.apply_error = ""
     results.update_chart(context.scene)
     return shown["skipped"]
 
@@ -312,25 +326,17 @@ def solve_state(scene):
     return _SOLVING if _SOLVING.get("scene") == scene.name else None
 
 
-def _summary(outcome):
-    f = outcome.curve[outcome.final_index]
-    neg = f"{f['n_negative']} negative" if f["n_negative"] else "no negatives"
-    from ...pipeline.report import kinds_text
-
-    over = outcome.report["inverse"].get("error_over")
-    text = (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}{f' over {over}' if over else ''}, "
-            f"{neg} ({len(outcome.curve)} configurations on the curve); {kinds_text(outcome.report)}")
-    fixed = [r for r in outcome.report.get("fixed_light") or [] if r.get("share") is not None]
-    if fixed:  # the scene's own light the solve kept, and its share of the painted light
-        text += "; the scene's own light: " + ", ".join(f"{r['name']} {100 * r['share']:.0f} %" for r in fixed)
-    return text
+def _object_mode(context):
+    """Leave Edit (or another) Mode for Object Mode; returns the mode to give back (None: none)."""
+    mode = context.object.mode if context.object is not None and context.mode != "OBJECT" else None
+    if mode is not None:
+        bpy.ops.object.mode_set(mode="OBJECT")
+    return mode
 
 
-def _fixed_light_rows(outcome) -> str:
-    """The Results panel's list of the scene's own light: one line per lamp, World and emissive
-    object the solve kept, "kind<TAB>name<TAB>share" (share of the targets' painted light)."""
-    return "\n".join(f"{r['kind']}\t{r['name']}\t{r['share']:.6g}" for r in outcome.report.get("fixed_light") or []
-                     if r.get("share") is not None)
+def _restore_mode(context, mode):
+    if mode is not None and context.object is not None:
+        bpy.ops.object.mode_set(mode=mode)
 
 
 class RELIGHT_OT_solve(bpy.types.Operator):
@@ -347,12 +353,16 @@ class RELIGHT_OT_solve(bpy.types.Operator):
     _timer = None
 
     def _prepare(self, context):
-        """The shared preparation step (preparation.SolveJob): export, check, mesh, estimate."""
-        if context.mode != "OBJECT":
-            bpy.ops.object.mode_set(mode="OBJECT")
-        # the target scale: the scene's relight_target_scale (= the settings')
-        job = SolveJob.export(context, job_options(context.scene.relight))
-        job.mesh()
+        """The shared preparation step (preparation.SolveJob): export, check, mesh, estimate.
+        The solve reads the meshes in Object Mode; refused, it gives the user's mode back."""
+        self._mode = _object_mode(context)
+        try:
+            # the target scale: the scene's relight_target_scale (= the settings')
+            job = SolveJob.export(context, job_options(context.scene.relight))
+            job.mesh()
+        except BaseException:
+            _restore_mode(context, self._mode)
+            raise
         return job
 
     def execute(self, context):
@@ -360,6 +370,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             job = self._prepare(context)
             outcome = job.run()
         except (SceneError, ValueError) as exc:
+            _restore_mode(context, getattr(self, "_mode", None))
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         return self._finish(context, job, outcome)
@@ -369,12 +380,13 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
             skipped = store_outcome(context, outcome, job.exp.fingerprints)
         except (SceneError, ValueError) as exc:
+            _restore_mode(context, getattr(self, "_mode", None))
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
         warnings = list(outcome.warnings) + list(skipped or [])
         settings = context.scene.relight
-        settings.last_summary = _summary(outcome)
-        settings.last_fixed_light = _fixed_light_rows(outcome)
+        settings.last_summary = summary_line(outcome.report, len(outcome.curve))
+        settings.last_fixed_light = fixed_light_rows(outcome.report)
         settings.last_warnings = "\n".join(warnings)
         if not bpy.app.background:
             viewport.show_radiosity(context)  # the lights and the predicted radiosity
@@ -474,6 +486,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         self._end_ui(context)
         if "error" in self._result or self._cancel.is_set():
             exc = self._result.get("error")
+            _restore_mode(context, self._mode)  # unchanged: the user's mode too
             if exc is None or isinstance(exc, jobs.Cancelled):
                 self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
             else:
@@ -521,6 +534,7 @@ class RELIGHT_OT_apply_configuration(bpy.types.Operator):
         except (ValueError, KeyError) as exc:
             return _refuse(self, exc)
         set_curve_index(settings, k)
+        settings.apply_error = ""
         results.update_chart(context.scene)
         for w in shown["skipped"]:  # e.g. linked meshes: the lights show, the radiosity layer cannot
             self.report({"WARNING"}, w)

@@ -431,6 +431,8 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         if icon:
             ui = context.preferences.system.ui_scale
             layout.template_icon(icon_value=icon, scale=(context.region.width - 55 * ui) / (20 * ui))
+        if s.apply_error:  # the row last clicked could not be shown: the list went back to the one shown
+            _wrap(layout, s.apply_error, context, icon="ERROR")
         if 0 <= s.curve_index < len(s.curve):
             p = s.curve[s.curve_index]
             neg = f", {p.n_negative} negative" if p.n_negative else ""

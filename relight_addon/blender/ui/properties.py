@@ -87,13 +87,26 @@ def set_curve_index(settings, index):
 
 
 def apply_curve_point(context, index):
+    """A click on a row of the list: show that configuration. When it cannot be shown (the scene
+    changed since the solve, ...), the list goes back to the row the scene shows, and the panel
+    (and, in a window, a popup) says why: the list never claims what the scene does not show."""
     if _QUIET["on"]:
         return
+    settings = context.scene.relight
     try:
         results.apply_stored_point(context.scene, index)
+        settings.apply_error = ""
         results.update_chart(context.scene)
     except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale
-        print(f"Relight: cannot apply configuration {index}: {exc}")
+        text = str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)
+        settings.apply_error = f"Configuration {index} not applied: {text}"
+        shown = context.scene.get("relight_shown")
+        set_curve_index(settings, int(shown) if shown is not None and 0 <= int(shown) < len(settings.curve) else -1)
+        wm = getattr(context, "window_manager", None)
+        if not bpy.app.background and wm is not None:
+            wm.popup_menu(lambda menu, _c: menu.layout.label(text=settings.apply_error),
+                          title="Relight", icon="ERROR")
+        print(f"Relight: {settings.apply_error}")
 
 
 def _apply_curve_point(self, context):
@@ -144,6 +157,10 @@ _SETTINGS = {
     "curve_index": IntProperty(name="Configuration", default=0, update=_apply_curve_point,
                                description="The configuration shown in the scene"),
     "status": StringProperty(name="Status", default=""),
+    "curve_result": StringProperty(name="Listed Result", default="",
+                                   description="The id of the stored result the list of configurations shows"),
+    "apply_error": StringProperty(name="Not Applied", default="",
+                                  description="Why the configuration last clicked in the list was not applied"),
     # display: what the panel shows about the last solve, and the viewport shading to give back
     "last_summary": StringProperty(name="Last Solve", default="",
                                    description="Summary of the last Solve & Reduce (shown in the Results panel)"),
