@@ -109,15 +109,24 @@ def fresnel_dielectric(cos_i, eta):
     return np.where(g2 > 0, np.nan_to_num(F, nan=1.0), 1.0)
 
 
-def _gauss_mu(n=MU_NODES):
+@lru_cache(maxsize=8)
+def _gauss_nodes(n):
     x, w = np.polynomial.legendre.leggauss(n)
-    return 0.5 * (x + 1.0), 0.5 * w
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    x.flags.writeable = w.flags.writeable = False  # shared by every caller
+    return x, w
 
 
+def _gauss_mu(n=MU_NODES):
+    """Gauss-Legendre nodes and weights on [0, 1] (computed once per n)."""
+    return _gauss_nodes(int(n))
+
+
+@lru_cache(maxsize=1024)
 def hemispherical_fresnel(eta) -> float:
     """2 int_0^1 F(mu, eta) mu dmu: the dielectric's reflectance under uniform light."""
     mu, w = _gauss_mu(200)
-    return float(np.sum(2.0 * mu * w * fresnel_dielectric(mu, eta)))
+    return float(np.sum(2.0 * mu * w * fresnel_dielectric(mu, float(eta))))
 
 
 # ------------------------------------------------------------------ GGX integrals
