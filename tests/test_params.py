@@ -184,8 +184,17 @@ def test_panel_rows_follow_the_chosen_methods(addon):
     s = bpy.context.scene.relight
     s.selection = "greedy-swap"
     assert "tolerance" not in drawn(panels.RELIGHT_PT_solve)
+    # the artist's choices in view; quality, seed and the paper's internals under Advanced (issue 19),
+    # the Distribution only for a selection that distributes power
+    assert {"selection", "max_lights", "require_positive"} <= set(drawn(panels.RELIGHT_PT_solve))
+    assert not {"solver", "distribution", "rays_per_patch", "seed"} & set(drawn(panels.RELIGHT_PT_solve))
+    assert {"rays_per_patch", "seed", "solver"} <= set(drawn(panels.RELIGHT_PT_solve_advanced))
+    assert "distribution" not in drawn(panels.RELIGHT_PT_solve_advanced)
+    s.selection = "exitance-elimination"
+    assert "distribution" in drawn(panels.RELIGHT_PT_solve_advanced)
     s.selection = "least-power"
     assert "tolerance" in drawn(panels.RELIGHT_PT_solve)
+    assert "max_lights" not in drawn(panels.RELIGHT_PT_solve)  # its tolerance decides
     s.patch_model = "adaptive"
     assert {"patch_model", "estimator", "light_size", "refine_passes", "refine_tolerance"} <= set(
         drawn(panels.RELIGHT_PT_model))
@@ -194,6 +203,46 @@ def test_panel_rows_follow_the_chosen_methods(addon):
     # the kinds of candidate lights (issue 17), under Light Candidates
     assert {"surface_lights", "spot_lamps", "area_lamps", "point_lamps", "lamp_drop", "max_lamps"} <= set(
         drawn(panels.RELIGHT_PT_candidates))
+
+
+def test_sidebar_warnings_are_short_lines_with_their_fix(addon):
+    """Issue 19: a warning in the sidebar is one short line (the whole text its tooltip), without
+    command-line flags, with the button that fixes it where there is one."""
+    bpy = addon
+    from relight_addon.blender.ui import panels
+
+    long_ = ("indirect clamping at 10: the lights' radiance reaches 613 W/m^2/sr, so Cycles may render darker "
+             "than predicted (clamping effects are not estimated); use Match Cycles Light Paths (--out turns "
+             "clamping off)")
+    assert panels.short_warning(long_) == "Indirect clamping at 10"
+    assert panels.short_warning("3 light(s): relative error 0.0685; no 3 non-negative lights can go below "
+                                "0.0264") == "3 light(s): relative error 0.0685"
+    for w in (long_, "with the scene's light paths (Diffuse bounces 4, Total 12) Cycles would render the targets "
+              "about 1.4 % darker than predicted; use Match Cycles Light Paths (--out writes them)"):
+        short = panels.short_warning(w)
+        assert len(short) <= panels.SHORT_WARNING and "--" not in short
+
+    drawn = []
+
+    class Row:
+        def operator(self, name, **kw):
+            drawn.append((name, kw.get("text")))
+            return type("Op", (), {})()
+
+        def prop(self, data, name, **kw):
+            drawn.append(("prop", name))
+
+    class Layout:
+        def row(self, **kw):
+            return Row()
+
+    s = bpy.context.scene.relight
+    panels.draw_warning(Layout(), s, 0, long_)
+    assert drawn == [("relight.warning_details", "Indirect clamping at 10"), ("relight.match_light_paths", "Match")]
+    s.last_warnings = "first\n" + long_
+    from relight_addon.blender.ui.operators import RELIGHT_OT_warning_details
+
+    assert RELIGHT_OT_warning_details.description(bpy.context, type("P", (), {"index": 1})()) == long_
 
 
 def test_operator_options_pass_only_the_chosen_methods_parameters(addon):

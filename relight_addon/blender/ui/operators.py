@@ -598,7 +598,33 @@ class RELIGHT_OT_show_radiosity(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class RELIGHT_OT_warning_details(bpy.types.Operator):
+    """A warning of the last solve, in full"""
+    bl_idname = "relight.warning_details"
+    bl_label = "Warning"
+    bl_options = {"INTERNAL"}
+
+    index: IntProperty(name="Warning", default=0, min=0)
+
+    @classmethod
+    def description(cls, context, properties):
+        return _warning(context, properties.index) or "A warning of the last solve"
+
+    def execute(self, context):
+        text = _warning(context, self.index)
+        if not text:
+            return {"CANCELLED"}
+        self.report({"WARNING"}, text)  # the status bar and the Info editor keep it whole
+        return {"FINISHED"}
+
+
+def _warning(context, index) -> str:
+    lines = [w for w in context.scene.relight.last_warnings.split("\n") if w]
+    return lines[index] if 0 <= index < len(lines) else ""
+
+
 CLASSES = (
+    RELIGHT_OT_warning_details,
     RELIGHT_OT_paint_targets,
     RELIGHT_OT_fill_targets,
     RELIGHT_OT_clear_targets,

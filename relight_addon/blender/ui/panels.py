@@ -7,6 +7,7 @@ from the edit BMesh). The error chart is rasterised by ``relight_addon.pipeline.
 width into a preview icon (never a data-block) and drawn with ``template_icon``.
 """
 import math
+import re
 import textwrap
 
 import bmesh
@@ -133,6 +134,44 @@ def _wrap(layout, text, context, icon="NONE", width_px=None):
     for k, line in enumerate(textwrap.wrap(text, chars) or [""]):
         col.label(text=line, icon=icon if k == 0 else "BLANK1" if icon != "NONE" else "NONE")
     return col
+
+
+#: the warnings a button in the sidebar fixes: (words in the warning, what to draw beside it)
+WARNING_FIXES = (
+    ("Match Cycles Light Paths", ("operator", "relight.match_light_paths", "Match", "LIGHT")),
+    ("allow more lights", ("prop", "max_lights", "", None)),
+)
+SHORT_WARNING = 56  # characters
+
+
+def short_warning(text) -> str:
+    """The sidebar's line of a warning: its first clause (two when the first is only a count),
+    without asides in parentheses or command-line flags, cut at a word to at most SHORT_WARNING
+    characters (the whole text is the line's tooltip, and in the report)."""
+    plain = re.sub(r"\s+\([^()]*\)", "", text)
+    plain = re.sub(r"\s*--[a-z-]+(\s+[^\s;:,]+)?", "", plain)
+    parts = re.split(r": |; ", plain)
+    head = parts[0] if len(parts[0]) >= 16 or len(parts) == 1 else f"{parts[0]}: {parts[1]}"
+    head = head.strip().rstrip(",.")
+    head = head[:1].upper() + head[1:]
+    if len(head) <= SHORT_WARNING:
+        return head
+    cut = head[:SHORT_WARNING].rsplit(" ", 1)[0].rstrip(",.;:")
+    return cut + "\u2026"
+
+
+def draw_warning(layout, settings, index, text):
+    """One warning: a short line (its tooltip the whole text; a click puts it in the status bar)
+    and, where a button fixes it, that button."""
+    row = layout.row(align=True)
+    row.operator("relight.warning_details", text=short_warning(text), icon="ERROR", emboss=False).index = index
+    for words, (kind, name, label, icon) in WARNING_FIXES:
+        if words in text:
+            if kind == "operator":
+                row.operator(name, text=label, icon=icon)
+            else:
+                row.prop(settings, name, text=label)
+            break
 
 
 class RELIGHT_PT_base:
@@ -286,8 +325,42 @@ class RELIGHT_PT_model(RELIGHT_PT_base, bpy.types.Panel):
 
 
 class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
+    """The artist's choices: how the lights are chosen, when to stop, and Solve & Reduce; the
+    rest (quality, seed, the paper's solver and distribution) is under Advanced."""
     bl_label = "Solve"
     bl_parent_id = "RELIGHT_PT_main"
+
+    def draw(self, context):
+        from . import operators
+        from ...engine.options import PARAMS
+
+        layout = self.layout
+        s = context.scene.relight
+        options = operators.job_options(s, validate=False)
+        draw_method(layout, s, "selection", options)
+        box = layout.box()
+        stops = options.uses("max_lights")
+        if stops:  # (least-power: its tolerance decides)
+            box.label(text="Stop when")
+            draw_option(box.column(), s, PARAMS["max_lights"])
+            draw_option(box.column(), s, PARAMS["error_threshold"])
+        box.prop(s, "require_positive")
+        state = operators.solve_state(context.scene)
+        if state is not None:
+            layout.progress(factor=state["fraction"], type="BAR",
+                            text=f"{state['stage']} {100 * state['fraction']:.0f} %")
+            layout.label(text="Cancelling..." if state["cancelling"] else "ESC cancels", icon="CANCEL")
+        else:
+            row = layout.row()
+            row.scale_y = 1.4
+            row.operator("relight.solve", icon="LIGHT_SUN")
+
+
+class RELIGHT_PT_solve_advanced(RELIGHT_PT_base, bpy.types.Panel):
+    """Quality, seed and the paper's internals; only what the chosen selection uses."""
+    bl_label = "Advanced"
+    bl_parent_id = "RELIGHT_PT_solve"
+    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context):
         from . import operators
@@ -306,29 +379,10 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         else:
             col.prop(s, "max_patch_size")
         col.prop(s, "seed")
-        from ...engine.options import PARAMS
-
         options = operators.job_options(s, validate=False)
-        draw_method(layout, s, "solver", options)
-        draw_method(layout, s, "selection", options)
-        draw_method(layout, s, "distribution", options, note="Distribution (not used)")
-        box = layout.box()
-        stops = options.uses("max_lights")
-        box.label(text="Stop when" if stops else "Stop when (the tolerance decides)")
-        col = box.column()
-        col.active = stops
-        draw_option(col, s, PARAMS["max_lights"])
-        draw_option(col, s, PARAMS["error_threshold"])
-        box.prop(s, "require_positive")
-        state = operators.solve_state(context.scene)
-        if state is not None:
-            layout.progress(factor=state["fraction"], type="BAR",
-                            text=f"{state['stage']} {100 * state['fraction']:.0f} %")
-            layout.label(text="Cancelling..." if state["cancelling"] else "ESC cancels", icon="CANCEL")
-        else:
-            row = layout.row()
-            row.scale_y = 1.4
-            row.operator("relight.solve", icon="LIGHT_SUN")
+        for kind in ("solver", "distribution"):
+            if options.uses(kind):  # the Distribution only for a selection that distributes
+                draw_method(layout, s, kind, options)
 
 
 class RELIGHT_UL_curve(bpy.types.UIList):
@@ -419,8 +473,8 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             p = s.curve[s.curve_index]
             summary = f"{p.n_lights} lights, relative error {p.relative_error:.3g}"
         _wrap(box, summary, context, icon="CHECKMARK", width_px=context.region.width - 70)
-        for w in filter(None, s.last_warnings.split("\n")):
-            _wrap(box, w, context, icon="ERROR", width_px=context.region.width - 70)
+        for k, w in enumerate(filter(None, s.last_warnings.split("\n"))):
+            draw_warning(box, s, k, w)
         rows = [line.split("\t") for line in s.last_fixed_light.split("\n") if line.count("\t") == 2]
         if rows:  # the scene's own light the solve kept: each lamp, the World, each emissive object
             col = layout.box().column(align=True)
@@ -455,7 +509,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
 
 
 CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_model, RELIGHT_PT_solve,
-           RELIGHT_UL_curve, RELIGHT_PT_results)
+           RELIGHT_PT_solve_advanced, RELIGHT_UL_curve, RELIGHT_PT_results)
 PANELS = [c for c in CLASSES if issubclass(c, bpy.types.Panel)]
 
 
