@@ -20,6 +20,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "results", "bench_cost.json")
 
 CASES = [  # name, scene, job options
+    ("single room (a painted floor quad, a ceiling quad)", "single", {}),
+    ("32 x 32-quad ceiling over a painted floor", "ceiling32", {}),
     ("staircase, polygon", "staircase", {"patch_model": "polygon"}),
     ("staircase, adaptive", "staircase", {"patch_model": "adaptive"}),
     ("living room 22k tris, adaptive", "room2", {"patch_model": "adaptive"}),
@@ -42,8 +44,25 @@ def rss(field):
             if line.startswith(field):
                 return int(line.split()[1]) * 1024
 scene, opts = sys.argv[1], json.loads(sys.argv[2])
+def grid(name, n, z, flip, paint=False):  # an n x n grid of quads, 1 m across, at height z
+    verts = [(i / n, j / n, z) for j in range(n + 1) for i in range(n + 1)]
+    faces = [(j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i)
+             for j in range(n) for i in range(n)]
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], [f[::-1] for f in faces] if flip else faces)
+    ob = bpy.data.objects.new(name, me)
+    bpy.context.scene.collection.objects.link(ob)
+    if paint:
+        ob["relight_no_lights"] = True
+        a = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+        a.data.foreach_set("color", [0.2, 0.2, 0.2, 1.0] * len(me.loops))
+
 if scene == "staircase":
     export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
+elif scene in ("single", "ceiling32"):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    grid("floor", 1 if scene == "single" else 4, 0.0, False, paint=True)
+    grid("ceiling", 1 if scene == "single" else 32, 1.0, True)
 else:
     import artist_scenes
     bpy.ops.wm.read_factory_settings(use_empty=True)

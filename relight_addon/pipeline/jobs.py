@@ -96,7 +96,9 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         if cancel is not None and cancel():
             raise Cancelled("radiosity cancelled")
         t1 = time.perf_counter()
-        source = patches.exitance
+        # a partly buried emitter sends the exitance of its visible part (InverseProblem.emission_share)
+        share = None if getattr(F, "send", None) is None else 1.0 / np.asarray(F.send, dtype=np.float64)
+        source = patches.exitance if share is None else patches.exitance * share[:, None]
         D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
             source = source + np.stack([D[c] @ source[:, c] for c in range(3)], axis=1)
@@ -106,6 +108,8 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
             excess = scene_light_excess(faces, patches, H)
             source = source if excess is None else source + excess
         B, info = solve_radiosity(F, patches.reflectance, source)
+        if share is not None:  # an emitter's face shows its exitance over its whole area, as a bake does
+            B = B + (1.0 - share)[:, None] * patches.exitance
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
         if not info.get("converged", True):
