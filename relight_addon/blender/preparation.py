@@ -70,4 +70,5 @@ class SolveJob:
             e = e + outcome.patches.exitance  # the scene's own emitters (fixed background)
         return viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, self.exp.face_material,
                                        self.exp.material_lobes, self.inputs["polygon_counts"], mask, exitance=e,
-                                       scene_light=outcome.scene_light, placed=outcome.placed_light)
+                                       scene_light=outcome.scene_light, placed=outcome.placed_light,
+                                       emission_share=prob.emission_share)

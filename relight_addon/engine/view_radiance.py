@@ -54,7 +54,8 @@ def _frame(n):
 
 
 def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
-                  source_glossy=True, max_pairs=MAX_PAIRS, exitance=None, lamp_light=None) -> np.ndarray:
+                  source_glossy=True, max_pairs=MAX_PAIRS, exitance=None, lamp_light=None,
+                  emission_share=None) -> np.ndarray:
     """(len(patches), 3) radiance (W m^-2 sr^-1) seen along ``view`` (world unit vectors
     (len(patches), 3); default: each patch's normal, what a bake shows) on ``patches``.
 
@@ -68,7 +69,10 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     first-reflection term, which B - rho F B would count as emission). ``lamp_light``: [(towards
     (P, 3) unit world directions from each patch to a lamp, or None for light from every
     direction (the World), H (P, 3) its direct irradiance W/m^2)]: each lamp's light reflected
-    through the patch's BSDF at its direction, f(l, v) H (the World's: rho H / pi)."""
+    through the patch's BSDF at its direction, f(l, v) H (the World's: rho H / pi).
+    ``emission_share`` (P,): the share of an emitter's exitance that leaves it into the scene (its
+    visible part where it is partly buried: InverseProblem.emission_share; F's columns carry the
+    inverse), applied where it sends; a patch's own emission is seen whole."""
     M = getattr(F, "matrix", F)
     B = np.asarray(B, dtype=np.float64)
     rho = np.asarray(reflectance, dtype=np.float64)
@@ -76,6 +80,9 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     patches = np.asarray(patches, dtype=np.int64)
     FB = np.asarray(M @ B, dtype=np.float64)
     e = B - rho * FB if exitance is None else np.asarray(exitance, dtype=np.float64)
+    e_own = e  # what a patch shows of its own emission
+    if emission_share is not None and exitance is not None:
+        e = e * np.asarray(emission_share, dtype=np.float64).reshape(-1, 1)  # what it sends
     tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
     frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
     E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), 1e-300), axis=1))
@@ -116,7 +123,7 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
                 src[sel] += np.einsum("jkc,jk,kc->jc", g, FE[js[sel]], e[E])
         else:
             src = B[js] / np.pi
-        out[k] = e[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
+        out[k] = e_own[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
         for towards, H in lamp_light or ():
             if towards is None:
                 out[k] += rho[i] * H[i] / np.pi

@@ -108,8 +108,6 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
             excess = scene_light_excess(faces, patches, H)
             source = source if excess is None else source + excess
         B, info = solve_radiosity(F, patches.reflectance, source)
-        if share is not None:  # an emitter's face shows its exitance over its whole area, as a bake does
-            B = B + (1.0 - share)[:, None] * patches.exitance
         t_solve = time.perf_counter() - t1
         warnings.extend(w for w in info.get("warnings", []) if w not in warnings)
         if not info.get("converged", True):
@@ -118,9 +116,12 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         raise SceneError("the radiosity solve produced NaN or infinite values")
     if progress is not None:
         progress("solve", 1.0)
-    B_face = face_mean(patches, B)
+    shown = B  # an emitter's face shows its exitance over its whole area, as a bake does
+    if F is not None and getattr(F, "send", None) is not None:
+        shown = B + (1.0 - 1.0 / np.asarray(F.send, dtype=np.float64))[:, None] * patches.exitance
+    B_face = face_mean(patches, shown)
     pmap = PolygonMap(faces, patches, polygon_counts)
-    poly, areas = pmap.split(pmap.mean(B)), pmap.split(pmap.area)
+    poly, areas = pmap.split(pmap.mean(shown)), pmap.split(pmap.area)
     timings = {"export": 0.0, "meshing": t_mesh, "form_factors": t_ff, "solve": t_solve, "apply": 0.0,
                "total": time.perf_counter() - t0}
     report = radiosity_report(faces, patches, options, F, info, poly, cost, warnings, timings)

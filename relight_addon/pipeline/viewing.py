@@ -19,14 +19,15 @@ MAX_PATCHES = 20000
 
 
 def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None,
-                    exitance=None, scene_light=None, placed=None) -> dict:
+                    exitance=None, scene_light=None, placed=None, emission_share=None) -> dict:
     """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
     a patch in ``mask`` (default: all), its patches' area-weighted mean. ``exitance`` (P, 3):
     the emitters' (view_radiance's). ``scene_light``: (H (P, n, 3) W/m^2, the direct light of
     ``faces.lamps`` and then of the World: jobs.scene_light), reflected through each patch's BSDF
     at the lamp's direction (from the patch's centre; the World's as the radiosity model does).
     ``placed``: [(engine.lamps.Lamp, H (P, 3) W/m^2)], the direct light of the lamps the solve placed
-    (jobs.placed_light_at), reflected the same way."""
+    (jobs.placed_light_at), reflected the same way. ``emission_share``: view_radiance's (default:
+    from ``F``'s column factor, formfactors.FormFactors.send)."""
     from .polygons import PolygonMap
 
     P = patches.n_patches
@@ -51,8 +52,10 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
         d = lamp.position[None, :] - patches.center
         lamp_light.append((d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300),
                            np.asarray(H, dtype=np.float64)))
+    if emission_share is None and getattr(F, "send", None) is not None:
+        emission_share = 1.0 / np.asarray(F.send, dtype=np.float64)
     L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
-                           exitance=exitance, lamp_light=lamp_light)
+                           exitance=exitance, lamp_light=lamp_light, emission_share=emission_share)
     pmap = PolygonMap(faces, patches, polygon_counts)
     W = pmap.weights
     covered = np.asarray(W @ mask.astype(np.float64)).reshape(-1)
