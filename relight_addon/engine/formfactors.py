@@ -71,7 +71,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg  # noqa: F401  (sp.linalg.norm)
 from scipy.stats import qmc
 
-from .kernel_transfer import _Geometry, _sample_patches, apply_kernel_pairs, kernel_form_factors
+from .kernel_transfer import _sample_patches, apply_kernel_pairs, kernel_form_factors, kernel_geometry
 from .lamps import _tangents
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
@@ -500,7 +500,7 @@ def visible_fraction(patches: PatchSet, sampler: SceneSampler, seed: int = 0, po
     a seed."""
     P = patches.n_patches
     out = np.ones(P)
-    g = _Geometry(patches, points, sampler=sampler)
+    g = kernel_geometry(patches, points, sampler)
     rng = np.random.default_rng([int(seed), 11])
     step = max(1, (1 << 18) // (points * rays))
     for p0 in range(0, P, step):

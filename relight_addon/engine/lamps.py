@@ -52,7 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .geometry import unit
-from .kernel_transfer import _Geometry, _sample_patches
+from .kernel_transfer import _sample_patches, kernel_geometry
 from .sampling import SceneSampler
 
 __all__ = ["Lamp", "KINDS", "lamp_irradiance", "spread_normalization", "spread_attenuation"]
@@ -391,7 +391,7 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
     out = np.zeros((P, len(lamps), 3))
     if not lamps:
         return out
-    g = _Geometry(patches, points_per_patch, sampler=sampler)
+    g = kernel_geometry(patches, points_per_patch, sampler)
     sm = g.sampler
     far = 4.0 * float(np.linalg.norm(np.ptp(sm.tv.reshape(-1, 3), axis=0))) + 1.0
     per_lamp = only is not None and not isinstance(only, np.ndarray) and len(only) == len(lamps) and \

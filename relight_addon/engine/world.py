@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .formfactors import _cosine_directions
-from .kernel_transfer import _Geometry, _sample_patches
+from .kernel_transfer import _sample_patches, kernel_geometry
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
 from .sampling import SceneSampler
 
@@ -236,7 +236,7 @@ def world_irradiance(patches, world, sampler: SceneSampler | None = None, seed: 
     P = patches.n_patches
     env = _as_map(world)
     suns, rest = env.split_suns()
-    g = _Geometry(patches, rays_per_patch, sampler=sampler)
+    g = kernel_geometry(patches, rays_per_patch, sampler)
     sm = g.sampler
     rng = np.random.default_rng([int(seed), 11])
     out = np.zeros((P, 3))
