@@ -292,18 +292,23 @@ def build(name, d):
     return path
 
 
-@pytest.fixture(scope="module")
-def scenes(tmp_path_factory):
-    """scenes(name) -> path of the scene, built once per module (lazily)."""
-    d = str(tmp_path_factory.mktemp("hostile"))
+def scene_cache(tmp_path_factory, prefix, builder):
+    """get(name) -> path of scene ``name`` made by ``builder(name, directory)``, built once (lazily)."""
+    d = str(tmp_path_factory.mktemp(prefix))
     built = {}
 
     def get(name):
         if name not in built:
-            built[name] = build(name, d)
+            built[name] = builder(name, d)
         return built[name]
 
     return get
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    """scenes(name) -> path of the scene, built once per module (lazily)."""
+    return scene_cache(tmp_path_factory, "hostile", build)
 
 
 # ============================================================================ checks

@@ -17,7 +17,7 @@ import pytest
 
 from conftest import file_digest
 from test_hostile import (RAYS, _grid, _mesh, _paint, _reset, _room, _save, addon, assert_scene_finite,  # noqa: F401
-                          snapshot, strict_json)
+                          scene_cache, snapshot, strict_json)
 
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 
@@ -159,15 +159,7 @@ MESSAGE_SCENES = {"inf_on_floor": _inf_on_floor, "nan_scale": _nan_scale, "nan_m
 
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
-    d = str(tmp_path_factory.mktemp("everyday"))
-    built = {}
-
-    def get(name):
-        if name not in built:
-            built[name] = build(name, d)
-        return built[name]
-
-    return get
+    return scene_cache(tmp_path_factory, "everyday", build)
 
 
 def _solve(run_cli, scene, tmp_path, *extra, out=False):
