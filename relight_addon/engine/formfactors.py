@@ -149,6 +149,15 @@ class FormFactors:
         return self.matrix.shape[0]
 
     @property
+    def emission_share(self):
+        """(P,) the share of a patch's exitance that leaves it into the scene: its visible part
+        where it is partly buried (1 / ``send``: F's columns carry the inverse, for the radiosity, a
+        whole-area mean), None where nothing is buried or it was not measured."""
+        if self.send is None or not np.any(np.asarray(self.send) != 1.0):
+            return None
+        return 1.0 / np.asarray(self.send, dtype=np.float64)
+
+    @property
     def is_sparse(self) -> bool:
         return sp.issparse(self.matrix)
 

@@ -202,9 +202,9 @@ class InverseProblem:
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
                  first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,
                  background_excess=None):
-        send = None
+        share = None
         if hasattr(F, "matrix"):  # formfactors.FormFactors
-            F, send = F.matrix, getattr(F, "send", None)
+            F, share = F.matrix, getattr(F, "emission_share", None)
         if sp.issparse(F):
             F = F.tocsr()
             n = F.shape[0]
@@ -219,13 +219,11 @@ class InverseProblem:
             raise InverseError("the form factors contain NaN or infinite values")
         self.F = F
         self.n_patches = n
-        #: (P,) or None: the share of a patch's emission that leaves it into the scene -- its visible
-        #: share where it is partly buried (1 / formfactors.sending_scale): F's columns carry 1 / that
-        #: share for the radiosity, a whole-area mean, while an emitter's exitance is that of its
-        #: visible part already (Cycles emits from the whole face, the buried part into the occluder)
-        self.emission_share = None
-        if send is not None and np.any(np.asarray(send) != 1.0):
-            self.emission_share = 1.0 / np.asarray(send, dtype=np.float64).reshape(n)
+        #: (P,) or None: the share of a patch's emission that leaves it into the scene
+        #: (formfactors.FormFactors.emission_share): F's columns carry its inverse for the radiosity,
+        #: a whole-area mean, while an emitter sends the exitance of its visible part (Cycles emits
+        #: from the whole face, the buried part into the occluder)
+        self.emission_share = None if share is None else np.asarray(share, dtype=np.float64).reshape(n)
 
         def arr(x, shape, name, dtype=np.float64):
             try:

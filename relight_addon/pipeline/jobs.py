@@ -97,7 +97,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
             raise Cancelled("radiosity cancelled")
         t1 = time.perf_counter()
         # a partly buried emitter sends the exitance of its visible part (InverseProblem.emission_share)
-        share = None if getattr(F, "send", None) is None else 1.0 / np.asarray(F.send, dtype=np.float64)
+        share = getattr(F, "emission_share", None)
         source = patches.exitance if share is None else patches.exitance * share[:, None]
         D = first_bounce(faces, patches, F, np.any(source > 0, axis=1))
         if D is not None:  # the emitters' first reflection with the albedo of its incidence
@@ -117,8 +117,8 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
     if progress is not None:
         progress("solve", 1.0)
     shown = B  # an emitter's face shows its exitance over its whole area, as a bake does
-    if F is not None and getattr(F, "send", None) is not None:
-        shown = B + (1.0 - 1.0 / np.asarray(F.send, dtype=np.float64))[:, None] * patches.exitance
+    if getattr(F, "emission_share", None) is not None:
+        shown = B + (1.0 - F.emission_share)[:, None] * patches.exitance
     B_face = face_mean(patches, shown)
     pmap = PolygonMap(faces, patches, polygon_counts)
     poly, areas = pmap.split(pmap.mean(shown)), pmap.split(pmap.area)

@@ -27,7 +27,7 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
     at the lamp's direction (from the patch's centre; the World's as the radiosity model does).
     ``placed``: [(engine.lamps.Lamp, H (P, 3) W/m^2)], the direct light of the lamps the solve placed
     (jobs.placed_light_at), reflected the same way. ``emission_share``: view_radiance's (default:
-    from ``F``'s column factor, formfactors.FormFactors.send)."""
+    formfactors.FormFactors.emission_share)."""
     from .polygons import PolygonMap
 
     P = patches.n_patches
@@ -52,8 +52,8 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
         d = lamp.position[None, :] - patches.center
         lamp_light.append((d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300),
                            np.asarray(H, dtype=np.float64)))
-    if emission_share is None and getattr(F, "send", None) is not None:
-        emission_share = 1.0 / np.asarray(F.send, dtype=np.float64)
+    if emission_share is None:
+        emission_share = getattr(F, "emission_share", None)
     L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
                            exitance=exitance, lamp_light=lamp_light, emission_share=emission_share)
     pmap = PolygonMap(faces, patches, polygon_counts)
