@@ -164,21 +164,14 @@ def script_argv(argv):
 
 
 def _write_json(path, data):
-    """Write ``data`` to ``path`` (through a symbolic link, to its target) atomically: a
-    temporary of its own beside it (two runs writing one report never share one), then a rename."""
-    import tempfile
+    """Write the report ``data`` to ``path`` whole or not at all (pipeline.files.atomic_output)."""
+    from .pipeline.files import atomic_output
 
-    path = os.path.realpath(path)
-    d = os.path.dirname(path)
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=f".{os.path.basename(path)}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
+    def write(tmp):
+        with open(tmp, "w") as fh:
             json.dump(data, fh, indent=1, allow_nan=False)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
+
+    atomic_output(path, write)
 
 
 def _same_file(a, b):

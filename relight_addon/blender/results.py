@@ -47,6 +47,7 @@ from ..engine.scene import SceneError
 from ..engine import lights  # noqa: F401  (registers the light kinds)
 from ..engine.registry import LIGHT_KINDS
 from ..engine.units import radiance_from_exitance
+from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
@@ -856,30 +857,10 @@ def _save_mainfile(**kw):
     return bpy.ops.wm.save_as_mainfile(**kw)
 
 
-def _atomic_output(path: str, write) -> None:
-    """``write(tmp)`` to a temporary of its own beside ``path`` (through a symbolic link, its
-    target), then rename it to ``path``: the file is whole or absent, whatever stops the write
-    (an error, Ctrl-C, SIGTERM); the temporary, and Blender's own ``tmp@``, never stay behind."""
-    dest = os.path.realpath(path)
-    d = os.path.dirname(dest)
-    os.makedirs(d, exist_ok=True)
-    base, ext = os.path.splitext(os.path.basename(dest))
-    tmp = os.path.join(d, f".{base}.relight-{uuid.uuid4().hex[:12]}{ext}")
-    try:
-        write(tmp)
-        if not os.path.isfile(tmp):
-            raise RuntimeError(f"Error: nothing was written to {tmp}")
-        os.replace(tmp, dest)
-    finally:
-        for leftover in (tmp, tmp + "@"):
-            if os.path.exists(leftover):
-                os.remove(leftover)
-
-
 def save_copy(path: str):
     """Save the current state to ``path`` as a copy (the open file keeps its own path), whole or
-    not at all (``_atomic_output``)."""
-    _atomic_output(path, lambda tmp: _save_mainfile(filepath=tmp, copy=True, compress=True))
+    not at all (``pipeline.files.atomic_output``)."""
+    atomic_output(path, lambda tmp: _save_mainfile(filepath=tmp, copy=True, compress=True))
 
 
 
@@ -1043,7 +1024,7 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
             r.filepath = tmp
             bpy.ops.render.render(write_still=True)
 
-        _atomic_output(path, write)
+        atomic_output(path, write)
     finally:
         (context.view_layer.material_override, scene.world, r.engine, r.filepath, r.image_settings.file_format,
          scene.view_settings.view_transform, scene.view_settings.look, scene.view_settings.exposure,
