@@ -51,8 +51,8 @@ from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
-from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
-                     RELIGHT_NAME_PROP, owner_of, tag_owned)
+from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, fingerprint_change, foreach_array, loop_polygons,
+                     owner_of, tag_owned)
 
 EMISSION_ATTRIBUTE = "relight_emission"
 REFLECTANCE_ATTRIBUTE = "relight_reflectance"
@@ -60,7 +60,6 @@ ORIGINAL_INDEX_ATTRIBUTE = "relight_original_material"
 ORIGINAL_SLOTS_PROP = "relight_original_slots"
 HAD_INDEX_PROP = "relight_had_material_index"
 GENERATED_PROP = "relight_generated"
-OWNER_PROP = RELIGHT_OWNER_PROP
 AREA_LIGHTS_PROP = "relight_area_lights"
 RESULT_PROP = "relight_result"
 RESULT_ID_PROP = "relight_result_id"

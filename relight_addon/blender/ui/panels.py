@@ -72,13 +72,12 @@ def object_counts(obj):
 
 
 def _counts(context):
-    """(target faces, candidate faces, faces, notes) over the scene's rendered mesh objects;
-    a count is None when some object's share is unknown (see object_counts)."""
+    """(target faces, candidate faces, faces, notes) over the mesh objects a solve exports
+    (export.exported_objects); a count is None when some object's share is unknown (see
+    object_counts)."""
     targets = candidates = faces = 0
     notes = []
-    for obj in context.scene.objects:
-        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
-            continue
+    for obj in export.exported_objects(context):
         t, c, f, note = object_counts(obj)
         faces += f
         targets = None if targets is None or t is None else targets + t
@@ -97,7 +96,7 @@ def effective_max_patch_size(scene):
     lo = [math.inf] * 3
     hi = [-math.inf] * 3
     for obj in scene.objects:
-        if obj.type != "MESH" or obj.hide_render or obj.get(export.RELIGHT_OWNER_PROP):
+        if obj.type != "MESH" or obj.hide_render or export.owner_of(obj) is not None:
             continue
         for corner in obj.bound_box:
             p = obj.matrix_world @ Vector(corner)
