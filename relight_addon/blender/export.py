@@ -545,16 +545,22 @@ def _evaluated_mesh(ob, context):
     return ob_eval, me, mapping
 
 
+def _check_near(V, name, origin):
+    """SceneError when a vertex of ``V`` (n, 3) lies beyond MAX_COORDINATE from ``origin``."""
+    far = float(np.abs(V).max()) if np.size(V) else 0.0
+    if far > MAX_COORDINATE:
+        raise SceneError(f"object {name!r} has a vertex {far:.3g} m from {origin}: an infinite coordinate? (Blender "
+                         f"stores infinity as its largest number, 3.4e+38); Relight models scenes within "
+                         f"{MAX_COORDINATE:.0e} m")
+
+
 def _mesh_geometry(ob_eval, me, name):
     """Local-space arrays of an evaluated mesh: vertices, loop triangles, their polygons,
     polygon loops (vertex indices) and material indices."""
     V = foreach_array(me.vertices, "co", len(me.vertices), np.float64, 3)
     if not np.all(np.isfinite(V)):
         raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
-    if len(V) and float(np.abs(V).max()) > MAX_COORDINATE:
-        raise SceneError(f"object {name!r} has a vertex {float(np.abs(V).max()):.3g} m from its origin: an infinite "
-                         "coordinate? (Blender stores infinity as its largest number, 3.4e+38); Relight models scenes "
-                         f"within {MAX_COORDINATE:.0e} m")
+    _check_near(V, name, "its origin")
     me.calc_loop_triangles()
     nt = len(me.loop_triangles)
     lt = foreach_array(me.loop_triangles, "vertices", nt, np.int64, 3).reshape(nt, 3)
@@ -619,11 +625,7 @@ class _Builder:
         W = geo["V"] @ M[:3, :3].T + M[:3, 3]
         if not np.all(np.isfinite(W)):
             raise SceneError(f"object {name!r} has NaN or infinite vertex coordinates")
-        far = float(np.abs(W).max()) if W.size else 0.0
-        if far > MAX_COORDINATE:
-            raise SceneError(f"object {name!r} has a vertex {far:.3g} m from the origin: an infinite coordinate? "
-                             f"(Blender stores infinity as its largest number, 3.4e+38); Relight models scenes within "
-                             f"{MAX_COORDINATE:.0e} m")
+        _check_near(W, name, "the origin")
         flip = np.linalg.det(M[:3, :3]) < 0
         lt = geo["lt"][:, ::-1] if flip else geo["lt"]
         nv, nf = self.nv, self.nf
