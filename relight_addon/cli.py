@@ -556,7 +556,9 @@ def main(argv=None) -> int:
         return 2
     finally:
         for sig, previous in restore.items():
-            signal.signal(sig, previous)
+            # None: the handler was set outside Python (blender -b's own SIGINT handler), which
+            # Python cannot put back; the default is the nearest (blender -b quits after the script)
+            signal.signal(sig, signal.SIG_DFL if previous is None else previous)
 
 
 def error_line(exc) -> str:

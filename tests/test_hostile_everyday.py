@@ -377,6 +377,23 @@ def test_reports_written_at_once_do_not_collide(tmp_path):
     assert os.listdir(tmp_path) == ["r.json"]
 
 
+def test_a_signal_handler_set_outside_python(run_cli, scenes, tmp_path, monkeypatch):
+    """blender -b installs its own SIGINT handler in C, which Python reports as None. The CLI
+    still takes Ctrl-C while it runs and ends without a traceback when it puts the handlers back
+    (``signal.signal(sig, None)`` raised TypeError there, after a successful solve)."""
+    real_getsignal, pytest_handler = signal.getsignal, signal.getsignal(signal.SIGINT)
+    monkeypatch.setattr(signal, "getsignal",
+                        lambda sig: None if sig == signal.SIGINT else real_getsignal(sig))
+    try:
+        code, report, err = _solve(run_cli, _room_scene(scenes), tmp_path)
+        after = real_getsignal(signal.SIGINT)
+    finally:
+        signal.signal(signal.SIGINT, pytest_handler)
+    assert code == 0, err
+    assert report["final"]["n_lights"] >= 1
+    assert after is signal.SIG_DFL  # the nearest to Blender's handler that Python can set
+
+
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_cancel_during_the_save_tells_the_truth(run_cli, scenes, tmp_path, monkeypatch, sig):
     """Case 12. A signal that arrives while --out is being saved: no partial file is left (neither
