@@ -71,4 +71,6 @@ class SolveJob:
         return viewing.normal_radiance(outcome.faces, outcome.patches, prob.F, B, self.exp.face_material,
                                        self.exp.material_lobes, self.inputs["polygon_counts"], mask, exitance=e,
                                        scene_light=outcome.scene_light, placed=outcome.placed_light,
-                                       emission_share=prob.emission_share)
+                                       emission_share=prob.emission_share,
+                                       direct_correction=prob.emitter_direct_correction(
+                                           stored.exitance[outcome.final_index]))

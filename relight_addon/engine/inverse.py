@@ -504,6 +504,28 @@ class InverseProblem:
                                           np.tile(lights, self.n_patches))), shape=(self.n_patches, self.n_lights))
         self.direct_correction = new if self.direct_correction is None else (self.direct_correction + new).tocsc()
 
+    def emitter_direct_correction(self, strength):
+        """(P, P) CSC or None: ``direct_correction`` per emitting patch, column k the direct
+        irradiance (W/m^2) the kernel finds on every patch beyond F's gather, per unit of patch k's
+        exitance, at the configuration ``strength`` (n_lights, 3). A light's correction is shared
+        among its patches by the power they send (exact where a patch belongs to one light of the
+        configuration; where lights overlap, a mix weighted by their strengths)."""
+        if self.direct_correction is None:
+            return None
+        DC = self.direct_correction.tocsc()
+        s = np.abs(np.asarray(strength, dtype=np.float64).reshape(-1, 3)).sum(axis=1)
+        cols = np.flatnonzero((np.diff(DC.indptr) > 0) & (s > 0))
+        if len(cols) == 0:
+            return None
+        basis = sp.csc_matrix(self.light_basis)
+        power = basis[:, cols].multiply(self.area[self.candidates][:, None]).tocsc()  # per unit strength
+        total = np.asarray(power.sum(axis=0)).reshape(-1)
+        share = power @ sp.diags(s[cols] / np.where(total > 0, total, 1.0))  # (|C|, cols): p_lm s_l
+        exitance = np.asarray(basis @ s).reshape(-1)  # each candidate's exitance (channel sum)
+        per_unit = share.T @ sp.diags(np.where(exitance > 0, 1.0 / np.where(exitance > 0, exitance, 1.0), 0.0))
+        X = (DC[:, cols] @ per_unit).tocoo()  # (P, |C|)
+        return sp.csc_matrix((X.data, (X.row, self.candidates[X.col])), shape=(self.n_patches, self.n_patches))
+
     def _irradiance_transfer(self, fac, c, H):
         """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
         lights whose source is a direct irradiance H (P, n_lights)."""

@@ -55,7 +55,7 @@ def _frame(n):
 
 def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
                   source_glossy=True, max_pairs=MAX_PAIRS, exitance=None, lamp_light=None,
-                  emission_share=None) -> np.ndarray:
+                  emission_share=None, direct_correction=None) -> np.ndarray:
     """(len(patches), 3) radiance (W m^-2 sr^-1) seen along ``view`` (world unit vectors
     (len(patches), 3); default: each patch's normal, what a bake shows) on ``patches``.
 
@@ -72,7 +72,11 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     through the patch's BSDF at its direction, f(l, v) H (the World's: rho H / pi).
     ``emission_share`` (P,): the share of an emitter's exitance that leaves it into the scene (its
     visible part where it is partly buried: InverseProblem.emission_share; F's columns carry the
-    inverse), applied where it sends; a patch's own emission is seen whole."""
+    inverse), applied where it sends; a patch's own emission is seen whole. ``direct_correction``
+    (P, P) sparse: per unit of emitter k's exitance, the direct irradiance the kernel estimator
+    finds beyond F's gather (InverseProblem.emitter_direct_correction); the sources' glossy
+    reflection of the emitters takes it (a ray-cast F entry between a source and a small bright
+    cell near its horizon is noisy, and a grazing glossy lobe magnifies it)."""
     M = getattr(F, "matrix", F)
     B = np.asarray(B, dtype=np.float64)
     rho = np.asarray(reflectance, dtype=np.float64)
@@ -96,7 +100,11 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         dE = center[None, E, :] - center[:, None, :]
         dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), 1e-300)
         lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
-        H_direct = FE @ e[E]
+        H_direct = FE @ e[E]  # F's gather, what the Lambertian rest below takes out of F B
+        XE = None
+        if direct_correction is not None:
+            XE = direct_correction[:, E]
+            XE = (XE.toarray() if sp.issparse(XE) else np.asarray(XE)).astype(np.float64)
         # the rest of the light, sent Lambertian: what the emitters' light leaves of F B, and the
         # lamps' and the World's direct light (in B, not in F B)
         H_lamps = sum((np.asarray(H, dtype=np.float64) for _, H in lamp_light or ()), np.zeros_like(B))
@@ -121,6 +129,8 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
                 n, nE = len(sel), len(E)
                 g = tables[int(m)](np.repeat(vj[sel], nE, axis=0), lE[js[sel]].reshape(-1, 3)).reshape(n, nE, 3)
                 src[sel] += np.einsum("jkc,jk,kc->jc", g, FE[js[sel]], e[E])
+                if XE is not None:
+                    src[sel] += np.einsum("jkc,jk,kc->jc", g, XE[js[sel]], e_own[E])
         else:
             src = B[js] / np.pi
         out[k] = e_own[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)

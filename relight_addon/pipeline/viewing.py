@@ -19,7 +19,8 @@ MAX_PATCHES = 20000
 
 
 def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon_counts, mask=None,
-                    exitance=None, scene_light=None, placed=None, emission_share=None) -> dict:
+                    exitance=None, scene_light=None, placed=None, emission_share=None,
+                    direct_correction=None) -> dict:
     """{object name: [rgb or None per polygon]}: the normal-view radiance of every polygon with
     a patch in ``mask`` (default: all), its patches' area-weighted mean. ``exitance`` (P, 3):
     the emitters' (view_radiance's). ``scene_light``: (H (P, n, 3) W/m^2, the direct light of
@@ -27,7 +28,8 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
     at the lamp's direction (from the patch's centre; the World's as the radiosity model does).
     ``placed``: [(engine.lamps.Lamp, H (P, 3) W/m^2)], the direct light of the lamps the solve placed
     (jobs.placed_light_at), reflected the same way. ``emission_share``: view_radiance's (default:
-    formfactors.FormFactors.emission_share)."""
+    formfactors.FormFactors.emission_share). ``direct_correction``: view_radiance's (the kernel's
+    direct light of the configuration's emitters beyond F's gather)."""
     from .polygons import PolygonMap
 
     P = patches.n_patches
@@ -55,7 +57,8 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
     if emission_share is None:
         emission_share = getattr(F, "emission_share", None)
     L[sel] = view_radiance(F, B, patches.reflectance, patches.center, patches.normal, sel, material, material_lobes,
-                           exitance=exitance, lamp_light=lamp_light, emission_share=emission_share)
+                           exitance=exitance, lamp_light=lamp_light, emission_share=emission_share,
+                           direct_correction=direct_correction)
     pmap = PolygonMap(faces, patches, polygon_counts)
     W = pmap.weights
     covered = np.asarray(W @ mask.astype(np.float64)).reshape(-1)
