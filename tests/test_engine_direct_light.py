@@ -65,3 +65,22 @@ def test_the_first_bounce_by_the_kernel_removes_the_ray_noise():
     print("256 rays, the floor's total against 65536 rays: plain", plain.round(4), "kernel", kernel.round(4))
     assert kernel.std() < 0.5 * plain.std()
     assert abs(kernel.mean()) < 0.01
+
+
+def test_the_correction_per_emitting_patch_adds_up_to_the_lights():
+    """InverseProblem.emitter_direct_correction shares each light's kernel correction among its
+    patches: weighted by the configuration's patch exitance it gives back the lights' correction
+    (DC @ strength), and a one-cell light's column is its own."""
+    ps, floor, ceiling = _room()
+    prob, j = _problem(ps, floor, ceiling, 1024, 1, corrected=True)
+    k = 7
+    dH = lights_direct_correction(ps, prob.F, [k], prob.lights.members, None, np.flatnonzero(floor), seed=1)
+    prob.correct_direct([k], dH)
+    s = np.zeros((prob.n_lights, 3))
+    s[j], s[k] = [1.0, 2.0, 3.0], [0.5, 0.5, 0.5]
+    X = prob.emitter_direct_correction(s)
+    e = prob.patch_exitance(s)
+    np.testing.assert_allclose(X @ e, prob.direct_correction @ s, rtol=1e-9, atol=1e-12)
+    (m,) = prob.lights.members(j)
+    np.testing.assert_allclose(X[:, m].toarray().ravel(), prob.direct_correction[:, j].toarray().ravel())
+    assert prob.emitter_direct_correction(np.zeros_like(s)) is None

@@ -71,3 +71,28 @@ def test_lamp_lit_lambertian_view_radiance_is_b_over_pi():
         L = view_radiance(F, B, rho, center, normal, np.arange(P), np.zeros(P, dtype=int), lobes, exitance=e,
                           source_glossy=glossy, lamp_light=[(towards, H1), (None, H2)])
         np.testing.assert_allclose(L, B / np.pi, rtol=1e-9)
+
+
+def test_the_kernel_correction_reaches_the_sources_glossy_reflection():
+    """``direct_correction`` X (the kernel's direct light beyond F's gather) counts in the sources'
+    glossy reflection of the emitters exactly as if F's emitter columns were F + X (for viewed
+    patches whose own rows X leaves alone), and it changes what a glossy scene shows."""
+    import scipy.sparse as sp
+
+    center, normal, F = _closed_scene()
+    P = len(F)
+    rho = np.full((P, 3), 0.5)
+    rho[:5] = 0.0  # black emitters: F + X then gathers e from them, as the correction does
+    e = np.zeros((P, 3))
+    e[:5] = 3.0
+    B = np.stack([np.linalg.solve(np.eye(P) - rho[:, c:c + 1] * F, e[:, c]) for c in range(3)], axis=1)
+    lobes = [[(1.0, "principled", PrincipledParams(base_color=(0.6, 0.6, 0.6), roughness=0.3))]]
+    X = np.zeros((P, P))
+    X[20:, :5] = np.random.default_rng(3).random((P - 20, 5)) * 0.02
+    viewed = np.arange(5, 20)
+    args = (rho, center, normal, viewed, np.zeros(P, dtype=int), lobes)
+    L0 = view_radiance(F, B, *args, exitance=e)
+    L1 = view_radiance(F, B, *args, exitance=e, direct_correction=sp.csc_matrix(X))
+    L2 = view_radiance(F + X, B, *args, exitance=e)
+    np.testing.assert_allclose(L1, L2, rtol=1e-9)
+    assert np.max(np.abs(L1 / L0 - 1)) > 1e-3
