@@ -518,11 +518,10 @@ class InverseProblem:
         if len(cols) == 0:
             return None
         basis = sp.csc_matrix(self.light_basis)
-        power = basis[:, cols].multiply(self.area[self.candidates][:, None]).tocsc()  # per unit strength
-        total = np.asarray(power.sum(axis=0)).reshape(-1)
-        share = power @ sp.diags(s[cols] / np.where(total > 0, total, 1.0))  # (|C|, cols): p_lm s_l
+        power = basis[:, cols].multiply(self.area[self.candidates][:, None])  # per unit strength
+        share = power @ sp.diags(s[cols] / self.light_area[cols])  # (|C|, cols): p_lm s_l
         exitance = np.asarray(basis @ s).reshape(-1)  # each candidate's exitance (channel sum)
-        per_unit = share.T @ sp.diags(np.where(exitance > 0, 1.0 / np.where(exitance > 0, exitance, 1.0), 0.0))
+        per_unit = share.T @ sp.diags(np.divide(1.0, exitance, out=np.zeros_like(exitance), where=exitance > 0))
         X = (DC[:, cols] @ per_unit).tocoo()  # (P, |C|)
         return sp.csc_matrix((X.data, (X.row, self.candidates[X.col])), shape=(self.n_patches, self.n_patches))
 
