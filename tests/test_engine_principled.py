@@ -73,3 +73,63 @@ def test_oren_nayar():
     assert np.all(np.abs(white - 1) < 0.02), white
     dark = P.oren_nayar_albedo((0.5, 0.5, 0.5), 1.0)
     assert np.all(dark < 0.5)  # multiple scattering does not give back what a grey surface absorbs
+
+
+def _direct_terms(rough, mus, eta=None, exponents=()):
+    """The VNDF averages by the quadrature at this roughness itself (no roughness nodes, no c
+    nodes): sums over the samples."""
+    c, gw, vw = P._vndf_samples(rough, mus)
+    out = {"E": gw.sum(1), "EB5": (gw * (1 - c) ** 5).sum(1), "EB6": (gw * c * (1 - c) ** 6).sum(1)}
+    if eta is not None:
+        F = P.fresnel_dielectric(c, eta)
+        F0 = float(P.F0_from_ior(eta))
+        sh = np.clip((F - F0) / (1 - F0), 0, 1)
+        out.update(EF=(gw * F).sum(1), ES=(gw * sh).sum(1), S=(vw * sh).sum(1))
+    for p in exponents:
+        out[f"S{p}"] = (vw * (1 - c) ** p).sum(1)
+    return out
+
+
+def _clear_caches():
+    for f in (P._vndf_node, P._node_terms, P._fresnel_on_nodes, P._vndf_terms, P._albedo_cached):
+        f.cache_clear()
+
+
+def test_many_roughnesses_share_the_tabulated_nodes(monkeypatch):
+    """Issue 19, case 6: the quadrature runs once per roughness node, not per material: 300
+    materials of distinct roughness and IOR cost at most ROUGH_NODES quadratures per set of view
+    cosines; and what the nodes give is the quadrature at the material's own roughness, within
+    about that quadrature's own error (~1e-3 at a grazing view, a few 1e-4 on an albedo)."""
+    _clear_caches()
+    calls = []
+    samples = P._vndf_samples
+    monkeypatch.setattr(P, "_vndf_samples", lambda rough, mus: calls.append(mus) or samples(rough, mus))
+    rng = np.random.default_rng(3)
+    params = [P.PrincipledParams(base_color=tuple(rng.random(3)), roughness=float(rng.random()),
+                                 metallic=float(k % 4 == 0), ior=float(1.3 + 0.4 * rng.random()))
+              for k in range(300)]
+    got = [P.principled_albedo(p) for p in params]
+    per_set = {mus: calls.count(mus) for mus in set(calls)}
+    assert max(per_set.values()) <= P.ROUGH_NODES, {len(m): n for m, n in per_set.items()}
+    assert len(calls) < 4 * P.ROUGH_NODES  # the Gauss nodes, mu = 1, and Cycles' two table grids
+
+    monkeypatch.setattr(P, "_vndf_terms", _direct_terms)
+    P._albedo_cached.cache_clear()
+    ref = [P.principled_albedo(p) for p in params[:60]]
+    d_rho = max(np.abs(a.albedo - b.albedo).max() for a, b in zip(got, ref))
+    d_r1 = max(np.abs(a.normal - b.normal).max() for a, b in zip(got, ref))
+    monkeypatch.undo()
+    _clear_caches()  # nothing computed with the direct quadrature stays cached
+    assert 0 < d_rho < 1e-3 and d_r1 < 2e-3, (d_rho, d_r1)
+
+
+@pytest.mark.parametrize("rough", [0.0, 0.02, 0.137, 0.5, 0.93, 1.0])
+def test_node_interpolation_against_the_direct_quadrature(rough):
+    """Every VNDF average, read from the roughness nodes, against the quadrature at that
+    roughness: pointwise over the view cosines, including grazing ones."""
+    mus = tuple(P._gauss_mu()[0])
+    got = P._vndf_terms(rough, mus, 1.45, (4.0,))
+    ref = _direct_terms(rough, mus, 1.45, (4.0,))
+    assert got.keys() == ref.keys()
+    for k in got:
+        np.testing.assert_allclose(got[k], ref[k], atol=2e-3, err_msg=k)

@@ -115,3 +115,21 @@ def test_approximations_are_named(bpy_clean):
     rho = export.material_properties(m)[0]
     assert np.all(rho < 0.1) and np.all(rho > 0.03)
     assert materials.surface_node(m) == p
+
+
+def test_a_note_many_materials_share_is_one_warning(bpy_clean):
+    """Issue 19, case 6: 1,000 metallic materials give one warning, not 1,000: it names three of
+    them and counts the rest; a material with a note of its own keeps its own warning."""
+    bpy = bpy_clean
+    bpy.ops.mesh.primitive_grid_add(x_subdivisions=4, y_subdivisions=3, size=2)
+    me = bpy.context.object.data
+    for k in range(6):
+        m = new_material(bpy, f"metal{k}")
+        nodes(m)[2].inputs["Metallic"].default_value = 1.0 if k < 5 else 0.5
+        me.materials.append(m)
+    me.polygons.foreach_set("material_index", np.arange(len(me.polygons), dtype=np.int32) % 6)
+    warnings = export.export_scene().faces.warnings
+    shared = [w for w in warnings if "metallic 1:" in w]
+    assert shared == [w for w in shared if w.startswith("5 materials ('metal0', 'metal1', 'metal2' and 2 more): "
+                                                        "metallic 1: ")] and len(shared) == 1, warnings
+    assert [w for w in warnings if w.startswith("material 'metal5': metallic 0.5: ")], warnings

@@ -163,7 +163,8 @@ def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo
     and emitted radiance as Cycles renders it (materials.py; see the module docstring). A linked
     emission is not in ``radiance``: export_scene bakes it per face."""
-    return material_closure(mat)[:3]
+    reflectance, radiance, notes = material_closure(mat)[:3]
+    return reflectance, radiance, (f"material {mat.name!r}: " + "; ".join(notes) if notes else None)
 
 
 def scene_material(mat):
@@ -178,13 +179,13 @@ def scene_material(mat):
 def material_closure(mat):
     """``material_properties`` and the material's BSDFs (materials.Closure.lobes, for
     view-dependent radiance) and linked emission (materials.Closure.linked_emission, baked by
-    export_scene): (reflectance, radiance, note, lobes, linked_emission)."""
+    export_scene): (reflectance, radiance, notes (list), lobes, linked_emission)."""
     from .materials import surface_closure
 
     mat = scene_material(mat)
     if mat is None:
         grey = np.full(3, DEFAULT_REFLECTANCE)
-        return grey, np.zeros(3), None, [(1.0, "diffuse", (grey, 0.0))], []
+        return grey, np.zeros(3), [], [(1.0, "diffuse", (grey, 0.0))], []
     c = surface_closure(mat)
     for part, v in (("colour (its reflectance)", c.reflectance), ("emission (colour x strength)", c.radiance)):
         if not np.all(np.isfinite(v)):
@@ -193,8 +194,29 @@ def material_closure(mat):
         raise SceneError(f"material {mat.name!r} emits a radiance of {float(np.max(c.radiance)):.3g} W/m^2/sr: an "
                          "infinite Emission Strength? (Blender stores infinity as its largest number, 3.4e+38); "
                          "give it a finite strength")
-    note = f"material {mat.name!r}: " + "; ".join(c.notes) if c.notes else None
-    return c.reflectance, c.radiance, note, c.lobes, c.linked_emission
+    return c.reflectance, c.radiance, list(c.notes), c.lobes, c.linked_emission
+
+
+#: a note shared by many materials names this many of them
+NAMED_MATERIALS = 3
+
+
+def material_warnings(noted: dict) -> list:
+    """One warning per note (what a material's model leaves out), naming the materials that
+    have it: ``noted`` maps material name -> its notes."""
+    by_note = {}
+    for name, notes in noted.items():
+        for note in notes:
+            by_note.setdefault(note, []).append(name)
+    out = []
+    for note, names in by_note.items():
+        shown = ", ".join(repr(n) for n in names[:NAMED_MATERIALS])
+        if len(names) == 1:
+            out.append(f"material {shown}: {note}")
+        else:
+            more = f" and {len(names) - NAMED_MATERIALS} more" if len(names) > NAMED_MATERIALS else ""
+            out.append(f"{len(names)} materials ({shown}{more}): {note}")
+    return out
 
 
 # ------------------------------------------------------------------ export
@@ -587,6 +609,7 @@ class _Builder:
         self.mat_cache = {}
         self.mat_ids = {}  # material name (None: no material) -> index into self.lobes
         self.materials_used = {}  # material name -> the material (the exported ones)
+        self.material_notes = {}  # material name -> what its model leaves out (material_warnings)
         self.lobes = []
         self.f_mat = []
         #: per chunk (one add()): its faces whose material has a linked emission (bool), its geometry
@@ -608,7 +631,7 @@ class _Builder:
                 if mat is not None:
                     self.materials_used[key] = mat
                 if self.mat_cache[key][2]:
-                    self.warnings.append(self.mat_cache[key][2])
+                    self.material_notes[scene_material(mat).name] = self.mat_cache[key][2]
             props.append(self.mat_cache[key])
             ids.append(self.mat_ids[key])
         mi = np.clip(mat_index, 0, len(props) - 1)
@@ -879,6 +902,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     if not names:
         raise SceneError("the scene has no visible mesh objects"
                          + (f" ({notes['candidates'][0]})" if notes["candidates"] else ""))
+    b.warnings.extend(material_warnings(b.material_notes))
     b.warnings.extend(_bake_linked_emission(b, objs, context))
     b.names = names
     back_warnings, backs = _emitting_backs(b)
