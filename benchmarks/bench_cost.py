@@ -82,7 +82,7 @@ r = out.report
 print("RESULT " + json.dumps({"seconds": seconds, "peak_bytes": peak, "est_seconds": est["seconds"],
       "est_bytes": est["memory_bytes"], "patches": r["scene"]["patches"], "triangles": r["scene"]["triangles"],
       "lights": r["inverse"]["n_candidates"], "targets": r["inverse"]["n_targets"],
-      "relative_error": r["final"]["relative_error"],
+      "relative_error": r["final"]["relative_error"], "timings": r["timings_s"],
       "parts": {k: [v[0], v[1]] for k, v in est["parts"].items()}}))
 '''
 

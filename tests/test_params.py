@@ -217,8 +217,10 @@ def test_sidebar_warnings_are_short_lines_with_their_fix(addon):
     assert panels.short_warning(long_) == "Indirect clamping at 10"
     assert panels.short_warning("3 light(s): relative error 0.0685; no 3 non-negative lights can go below "
                                 "0.0264") == "3 light(s): relative error 0.0685"
-    for w in (long_, "with the scene's light paths (Diffuse bounces 4, Total 12) Cycles would render the targets "
-              "about 1.4 % darker than predicted; use Match Cycles Light Paths (--out writes them)"):
+    paths = ("Cycles would render the targets about 1.4 % darker than predicted with the scene's light paths "
+             "(Diffuse bounces 4, Total 12; up to 3.1 % on a patch); use Match Cycles Light Paths (--out writes them)")
+    assert panels.short_warning(paths) == "Cycles would render the targets about 1.4 % darker than\u2026"
+    for w in (long_, paths):
         short = panels.short_warning(w)
         assert len(short) <= panels.SHORT_WARNING and "--" not in short
 
@@ -234,6 +236,10 @@ def test_sidebar_warnings_are_short_lines_with_their_fix(addon):
 
     class Layout:
         def row(self, **kw):
+            return Row()
+
+        def split(self, **kw):  # a line with its fix: most of the width for the line
+            assert 0.5 < kw["factor"] < 1
             return Row()
 
     s = bpy.context.scene.relight

@@ -151,9 +151,9 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                                                    "bounce limit keeps (Neumann series) against the converged one"}
         if d["mean"] < -NOTICEABLE:
             warnings.append(
-                f"with the scene's light paths (Diffuse bounces {cur['diffuse_bounces']}, Total "
-                f"{cur['max_bounces']}) Cycles would render the {what} about {-100 * d['mean']:.1f} % darker than "
-                f"predicted (up to {-100 * d['min']:.1f} % on a patch; estimated from the engine's radiosity "
+                f"Cycles would render the {what} about {-100 * d['mean']:.1f} % darker than predicted with the "
+                f"scene's light paths (Diffuse bounces {cur['diffuse_bounces']}, Total {cur['max_bounces']}; "
+                f"up to {-100 * d['min']:.1f} % on a patch; estimated from the engine's radiosity "
                 f"truncated after {kept_terms(n_eff)} reflections); {n_req} bounces are needed for reflectance "
                 f"{rho_max:.2f}: "
                 "use Match Cycles Light Paths (--out writes them)")

@@ -199,6 +199,9 @@ def probe_page(hits):
                 break
 
 
+#: every place where the last probe_sidebar found each button: {command: {(view x, view y)}}
+LAST_HITS = {}
+
 #: a page of the probe overlaps the previous one: it scrolls at most this fraction of the region
 PAGE_OVERLAP = 0.8
 
@@ -220,6 +223,8 @@ def probe_sidebar(max_pages=6):
         limit = PAGE_OVERLAP * ui_region().height
         if moved > limit:  # 30 notches scrolled past rows never probed: scroll back over them
             yield from scroll_sidebar(-int(math.ceil(30 * (moved - limit) / moved)))
+    LAST_HITS.clear()
+    LAST_HITS.update(hits)
     found = {}
     for k, pts in hits.items():
         x = min(p[0] for p in pts)  # the first column that answered
@@ -589,6 +594,87 @@ def scenario():
             log("row click", j, before, "->", settings.curve_index)
         check("clicking rows picks different configurations", len(picked) >= 3, sorted(picked))
         shot("11_results")
+
+        # 8b. a row clicked after the scene changed (issue 19, case 13): not applied; the list
+        # goes back to the row the scene shows, and the panel says why
+        shown = settings.curve_index
+        mover = scene.objects["floor_0"]
+        z0 = mover.location.z
+        mover.location.z = z0 + 0.05  # as G Z would
+        yield 1.0
+        sx, sy = to_screen(r, r.width * 0.35, ay + (30 + 20.8 * 2) * ui / 1.0417)
+        yield from click(sx, sy, settle=2.0)
+        path = shot("11b_row_after_change")
+        check("a row clicked after a scene change is not applied: the list shows the scene's row",
+              settings.curve_index == shown and int(scene.get("relight_shown", -1)) == shown
+              and "not applied" in settings.apply_error and "floor_0" in settings.apply_error,
+              f"index {settings.curve_index} (shown {shown}), {settings.apply_error!r}")
+        xdo("key", "Escape")  # the popup that says it
+        mover.location.z = z0
+        yield 1.0
+        # the scene is as solved again: a row applies, and the panel's line goes
+        settings.curve_index = (shown + 1) % len(settings.curve)
+        yield 1.0
+        settings.curve_index = shown
+        yield 1.0
+        check("once the scene is back, the row applies and the panel's line goes",
+              settings.apply_error == "" and settings.curve_index == shown, repr(settings.apply_error))
+
+    # 8c. the warnings: one short line each (the whole text in its tooltip and, clicked, in the
+    # status bar), and the button that fixes it on the same line
+    warnings = [w for w in settings.last_warnings.split("\n") if w]
+    found = yield from probe_sidebar()
+    lines = [f"bpy.ops.relight.warning_details(index={k})" for k in range(len(warnings))]
+    check("every warning is a line of the sidebar", warnings and all(c in found for c in lines),
+          f"{len(warnings)} warnings, lines found: {[c for c in lines if c in found]}")
+    long = [panels.short_warning(w) for w in warnings if len(panels.short_warning(w)) > panels.SHORT_WARNING + 1]
+    check("the lines are short, without command-line flags",
+          not long and not [w for w in warnings if "--" in panels.short_warning(w)], long)
+    fixable = [k for k, w in enumerate(warnings) if any(words in w for words, _ in panels.WARNING_FIXES)]
+    for k in fixable:
+        ys = {round(y) for _, y in LAST_HITS.get(lines[k], ())}
+        kind, name = next(fix for words, fix in panels.WARNING_FIXES if words in warnings[k])[:2]
+        cmd = f"bpy.ops.{name}()" if kind == "operator" else None
+        beside = [p for p in LAST_HITS.get(cmd, ()) if any(abs(p[1] - y) <= 8 for y in ys)] if cmd else [1]
+        check(f"warning {k} has its fix on its line", beside, f"{panels.short_warning(warnings[k])!r}: {cmd} "
+              f"at {sorted(LAST_HITS.get(cmd, ()))}, line at {sorted(ys)}")
+    if warnings:
+        yield from press(found, lines[-1], settle=1.5)
+        text = yield from reports()
+        check("a click on a warning's line gives its whole text in the status bar",
+              text and warnings[-1][:80] in text[-1], (text[-1][:200] if text else None))
+        shot("11c_warnings")
+    fix = next((k for k in fixable if "Match Cycles Light Paths" in warnings[k]), None)
+    if fix is not None:
+        before = (scene.cycles.diffuse_bounces, scene.cycles.max_bounces)
+        ys = [y for _, y in LAST_HITS[lines[fix]]]
+        x = max(p[0] for p in LAST_HITS["bpy.ops.relight.match_light_paths()"] if any(abs(p[1] - y) <= 8 for y in ys))
+        # press() hovers there first: Ctrl+C must copy the Match command at the warning's line
+        yield from press({"bpy.ops.relight.match_light_paths()": (x, ys[0])}, "bpy.ops.relight.match_light_paths()",
+                         settle=1.5, retries=0)
+        after = (scene.cycles.diffuse_bounces, scene.cycles.max_bounces)
+        check("the warning's Match button sets Cycles' light paths", after != before and after[0] > before[0],
+              f"{before} -> {after}")
+
+    # 8d. a refused Solve started in Edit Mode (issue 19, case 15): the message, the scene and
+    # the user's mode as they were
+    scale_before = settings.target_scale
+    settings.target_scale = 0.0  # every target asks for no light: refused
+    set_active(floor)
+    yield from key_in_viewport("Tab")
+    in_edit = bpy.context.mode == "EDIT_MESH"
+    result_before = scene.get("relight_result")
+    found = yield from probe_sidebar()
+    yield from press(found, "bpy.ops.relight.solve()", settle=2.5)
+    text = yield from reports()
+    check("a refused Solve in Edit Mode says why and leaves the user in Edit Mode",
+          in_edit and bpy.context.mode == "EDIT_MESH" and operators.solve_state(scene) is None
+          and scene.get("relight_result") == result_before and text and "nothing to light" in text[-1],
+          f"mode {bpy.context.mode}, last report {(text[-1][:160] if text else None)!r}")
+    shot("11d_refused_in_edit_mode")
+    yield from key_in_viewport("Tab")
+    settings.target_scale = scale_before
+    yield 1.0
 
     # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
     settings.rays_per_patch = 262144

@@ -162,15 +162,16 @@ def short_warning(text) -> str:
 def draw_warning(layout, settings, index, text):
     """One warning: a short line (its tooltip the whole text; a click puts it in the status bar)
     and, where a button fixes it, that button."""
-    row = layout.row(align=True)
+    fix = next((f for words, f in WARNING_FIXES if words in text), None)
+    # with a fix, the line keeps most of the width (a row would halve it)
+    row = layout.split(factor=0.7, align=True) if fix else layout.row(align=True)
     row.operator("relight.warning_details", text=short_warning(text), icon="ERROR", emboss=False).index = index
-    for words, (kind, name, label, icon) in WARNING_FIXES:
-        if words in text:
-            if kind == "operator":
-                row.operator(name, text=label, icon=icon)
-            else:
-                row.prop(settings, name, text=label)
-            break
+    if fix is not None:
+        kind, name, label, icon = fix
+        if kind == "operator":
+            row.operator(name, text=label, icon=icon)
+        else:
+            row.prop(settings, name, text=label)
 
 
 class RELIGHT_PT_base:
