@@ -6,7 +6,7 @@ measures the job's wall time and its peak memory (peak RSS during the job minus 
 the export, from /proc/self/status VmHWM after resetting it) and compares them with
 jobs.solve_cost (the estimate the CLI prints and the add-on's confirmation uses).
 
-    .venv/bin/python benchmarks/bench_cost.py [--quick]
+    .venv/bin/python benchmarks/bench_cost.py [--quick] [--only=NAME_PART ...]
 
 Writes benchmarks/results/bench_cost.json and prints a table (docs/benchmarks.md, "Cost estimate").
 """
@@ -83,14 +83,16 @@ print("RESULT " + json.dumps({"seconds": seconds, "peak_bytes": peak, "est_secon
       "est_bytes": est["memory_bytes"], "patches": r["scene"]["patches"], "triangles": r["scene"]["triangles"],
       "lights": r["inverse"]["n_candidates"], "targets": r["inverse"]["n_targets"],
       "relative_error": r["final"]["relative_error"], "timings": r["timings_s"],
+      "direct_lights": (r["model"].get("direct_light") or {}).get("lights", 0),
+      "refine_evaluations": (r["model"].get("lamp_refinement") or {}).get("evaluations", 0),
       "parts": {k: [v[0], v[1]] for k, v in est["parts"].items()}}))
 '''
 
 
-def main(quick=False):
+def main(quick=False, only=None):
     rows = []
     for name, scene, opts in CASES:
-        if quick and scene == "room5":
+        if (quick and scene == "room5") or (only and not any(o in name for o in only)):
             continue
         code = f"ROOT = {ROOT!r}\n" + CHILD
         p = subprocess.run([sys.executable, "-c", code, scene, json.dumps(opts)], capture_output=True, text=True,
@@ -108,9 +110,13 @@ def main(quick=False):
               f"(est {r['est_seconds']:7.2f}, x{r['time_ratio']:.2f})  memory {r['peak_bytes'] / 2**20:7.0f} MB "
               f"(est {r['est_bytes'] / 2**20:7.0f}, x{r['memory_ratio']:.2f})", flush=True)
     os.makedirs(os.path.dirname(OUT), exist_ok=True)
+    if only and os.path.exists(OUT):  # the other cases' rows stay as they were
+        with open(OUT) as fh:
+            done = {r["case"] for r in rows}
+            rows = [r for r in json.load(fh)["rows"] if r["case"] not in done] + rows
     with open(OUT, "w") as fh:
         json.dump({"command": "benchmarks/bench_cost.py", "load": os.getloadavg(), "rows": rows}, fh, indent=1)
 
 
 if __name__ == "__main__":
-    main("--quick" in sys.argv)
+    main("--quick" in sys.argv, [a[7:] for a in sys.argv[1:] if a.startswith("--only=")])

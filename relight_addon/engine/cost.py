@@ -15,22 +15,26 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
 - the transfer matrix T: min(m, C) right-hand sides through A (2 P^2 flops each dense), T itself
   3 x 8 m L bytes; the solver: reduced/nnls m^2 L + m^3/3 flops per channel; the paper's
   formulation a P x P Gram matrix (8 P (P - m + L) + 8 P^2 bytes, P^2 (P - m + L) + P^3 / 3 flops);
-- the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR;
+- the kernel estimator: m x C (target x candidate patch) pairs at KERNEL_SECONDS_PER_PAIR; the
+  curve's lights' direct light again (pipeline.jobs.direct_stage): Max Lights + 1 lights, each P x
+  its patches pairs, a fixed DIRECT_SECONDS_PER_LIGHT and DIRECT_SECONDS_PER_TRIANGLE per triangle;
 - the candidate lamps (engine/candidate_lamps.py, at most their bound): each lamp's irradiance at
   LAMP_POINTS points on every patch it may reach (bounded by all), LAMP_SECONDS_PER_POINT each
   for a spot's (one shadow ray a point), ``lamp_work`` spots' worth in all (an area lamp takes 4
   rays a point, a beam 4 times the points: candidate_lamps.lamp_bound(work=True)); they add to L;
-  the refinement of the chosen lamps (engine/lamp_refinement.py): at most k (k + 1) / 2 lamps for
-  k = Max Lights (the final configuration's and the smaller ones'), ROUNDS x MAX_EVALUATIONS
-  evaluations each, BUDGET in all, at SEARCH_POINTS points on every patch, and the targets' rows
-  of A^-1 (3 x 8 P m bytes);
-- the reduction: about L^2 m flops; the curve: STORED_POINTS forward solves (2 P^2 each);
+  offering them costs LAMP_SECONDS_PER_TRIANGLE per triangle; the refinement of the chosen lamps
+  (engine/lamp_refinement.py): REFINE_EVALUATIONS_EXPECTED evaluations (fewer when at most k (k + 1)
+  / 2 lamps for k = Max Lights would make fewer), each REFINE_SECONDS_PER_PATCH per patch and
+  REFINE_SECONDS_PER_TRIANGLE per triangle, and the targets' rows of A^-1 (3 x 8 P m bytes);
+- the reduction: about L^2 m flops, REDUCTION_SECONDS and REDUCTION_SECONDS_PER_LIGHT per candidate
+  light; the curve: STORED_POINTS forward solves (2 P^2 each);
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
 
 Rates measured on the 2-core test machine (docs/benchmarks.md, "Cost estimate": the estimate
 against measured runs): RAYS_PER_SECOND, FLOPS (numpy/LAPACK, dense), and the per-triangle
-costs. The estimate is meant to be right within a factor of 2.
+costs. The estimate is meant to be right within a factor of 2 (measured 0.5-1.1 x on
+benchmarks/bench_cost.py's scenes, issue 19; within 3 is the acceptance).
 ``check_memory`` refuses a solve whose estimate exceeds the machine's available memory.
 """
 from __future__ import annotations
@@ -65,13 +69,28 @@ NNZ_PER_RAY = 0.25
 #: the job's fixed memory (the engine's modules, Embree's device) over the scene
 BASE_BYTES = 60 * 2 ** 20
 #: the kernel estimator per target x candidate pair at its defaults (100 penumbra points x 2 rays;
-#: 4e-5 at 256 x 4)
-KERNEL_SECONDS_PER_PAIR = 2e-5
+#: measured 1-2e-5 on the 2-core machine, issue 19; 4e-5 at 256 x 4)
+KERNEL_SECONDS_PER_PAIR = 1.5e-5
 #: the curve's surface lights whose direct light on every patch the kernel computes again (at most;
-#: pipeline.jobs.direct_stage)
+#: pipeline.jobs.direct_stage); measured: Max Lights + 1 at most on the bench_cost scenes (2-5)
 DIRECT_LIGHTS = 48
+#: per such light: a fixed part (the kernel's set-up) and a part per triangle of the scene (the
+#: receivers' quadrature, triangle by triangle) (s; measured, issue 19)
+DIRECT_SECONDS_PER_LIGHT = 0.05
+DIRECT_SECONDS_PER_TRIANGLE = 2e-6
 #: a candidate lamp's irradiance per receiver point (sampling, the lamp's light, its shadow ray; measured)
 LAMP_SECONDS_PER_POINT = 3e-7
+#: offering the candidate lamps, per triangle of the scene (their reach and mounting; measured)
+LAMP_SECONDS_PER_TRIANGLE = 7e-6
+#: the lamp refinement: the evaluations a solve makes (measured 120 for one refined lamp, 359 for
+#: three; BUDGET at most) and each one's cost per patch (its receiver points, the (P, m) products) and
+#: per triangle (a lamp's solid angle over every triangle it reaches) (measured, issue 19)
+REFINE_EVALUATIONS_EXPECTED = 180
+REFINE_SECONDS_PER_PATCH = 4.6e-6
+REFINE_SECONDS_PER_TRIANGLE = 4.2e-7
+#: the reduction (Best k Lights' search and its certificate): a fixed part and per candidate light (s)
+REDUCTION_SECONDS = 0.2
+REDUCTION_SECONDS_PER_LIGHT = 5e-4
 STORED_POINTS = STORE_ALL_UP_TO + STORE_LOG_POINTS  # at most, up to the ~40 log-spaced ones
 #: working memory per ray in flight (origins, directions, hits, the Sobol pool), bytes
 RAY_BYTES = 96
@@ -105,10 +124,12 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
                   threads: int | None = None, n_lamps: int = 0, lamp_work: int | None = None,
-                  lamp_refinements: int = 0) -> dict:
+                  lamp_refinements: int = 0, max_lights: int = 3, patches_per_light: float = 1.0) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
     ``lamp_work``: the candidate lamps' receiver-point work in spots' (default ``n_lamps``).
+    ``max_lights``: Max Lights (the curve's lights whose direct light is computed again);
+    ``patches_per_light``: the mean patches of a surface light (1: cells; a polygon's otherwise).
     Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
     ``warnings`` is empty unless memory > ``memory_limit`` or time > ``seconds_limit``.
     """
@@ -136,16 +157,20 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     if kernel:
         pairs = float(m) * C
         parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
-    if kernel:  # the curve's lights' direct light on every patch (pipeline.jobs.direct_stage), at most
-        pairs = float(P) * min(C, DIRECT_LIGHTS)
-        parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR)
+    if kernel:  # the curve's lights' direct light on every patch (pipeline.jobs.direct_stage)
+        n_direct = min(C, DIRECT_LIGHTS, max(int(max_lights), 1) + 1)
+        pairs = float(P) * min(C, n_direct * max(float(patches_per_light), 1.0))
+        parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR
+                                 + n_direct * (DIRECT_SECONDS_PER_LIGHT + DIRECT_SECONDS_PER_TRIANGLE * tris))
     if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)
         points = float(lamp_work) * P * LAMP_POINTS
         parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
-                          points * LAMP_SECONDS_PER_POINT * (passes + 1))
-    if refinements:  # each a lamp's Nelder-Mead search, its shadow rays on every patch (at most)
-        points = min(float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS, REFINE_BUDGET) * P * SEARCH_POINTS
-        parts["lamp_refinement"] = (3 * 8.0 * P * m, points * LAMP_SECONDS_PER_POINT)
+                          (points * LAMP_SECONDS_PER_POINT + LAMP_SECONDS_PER_TRIANGLE * tris) * (passes + 1))
+    if refinements:  # each evaluation a lamp's shadow rays on every patch and its light over the triangles
+        evaluations = min(float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS, REFINE_BUDGET,
+                          REFINE_EVALUATIONS_EXPECTED)
+        parts["lamp_refinement"] = (3 * 8.0 * P * m, evaluations * (REFINE_SECONDS_PER_PATCH * P
+                                                                    + REFINE_SECONDS_PER_TRIANGLE * tris))
     k = min(m, C)
     if P <= DIRECT_SOLVE_LIMIT:
         parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)
@@ -159,7 +184,8 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     else:
         parts["inverse"] = (3 * 8.0 * m * L + 3 * 8.0 * P * k + 8.0 * m * m,
                             (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
-    parts["reduction"] = (8.0 * L * L, float(L) * L * max(m, 1) * 8.0 / flops)
+    parts["reduction"] = (8.0 * L * L, float(L) * L * max(m, 1) * 8.0 / flops
+                          + REDUCTION_SECONDS + REDUCTION_SECONDS_PER_LIGHT * L)
     parts["curve"] = (8.0 * 3 * STORED_POINTS * (P + L), g * STORED_POINTS * t_rhs / flops)
     parts["rays"] = (RAY_BYTES * float(max(N, CHUNK_RAYS)) * (threads or os.cpu_count() or 1), 0.0)
     memory = sum(b for b, _ in parts.values())

@@ -213,10 +213,13 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
     lamps, work = (lamp_bound(patches, cand, options), lamp_bound(patches, cand, options, work=True)) \
         if mode == "inverse" else (0, 0)
     k = min(options.max_lights, lamps) if lamps and options.param("refine_lamps", False) else 0
+    pm = patch_model(options)
+    per_light = pm.patches_per_light(patches, cand) if hasattr(pm, "patches_per_light") and cand.any() else 1.0
     return estimate_patches_cost(patches, rays_per_patch(options, patches.n_patches, mode), options.solver,
                                  n_triangles=n_triangles, refine_passes=passes, kernel=uses_kernel_pairs(options, mode),
                                  threads=options.threads, n_lamps=lamps, lamp_work=work,
-                                 lamp_refinements=k * (k + 1) // 2)
+                                 lamp_refinements=k * (k + 1) // 2, max_lights=options.max_lights,
+                                 patches_per_light=per_light)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:

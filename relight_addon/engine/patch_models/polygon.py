@@ -3,6 +3,8 @@ quads into grids, other polygons' triangles into sub-triangles), and a light is 
 polygon (all its patches share one exitance, as one material would make them)."""
 from __future__ import annotations
 
+import numpy as np
+
 from ..lights import lights_from_groups
 from ..registry import PATCH_MODELS
 from ..scene import mesh_patches
@@ -19,3 +21,9 @@ class PolygonModel:
 
     def lights(self, patches, mask):
         return lights_from_groups(patches, mask, patches.face, kind="polygon")
+
+    @staticmethod
+    def patches_per_light(patches, mask) -> float:
+        """The mean number of patches a light holds (engine.cost: a light's direct light is
+        computed patch by patch)."""
+        return float(mask.sum()) / max(len(np.unique(patches.face[mask])), 1)

@@ -1,0 +1,45 @@
+"""engine/cost.py's model (no bpy): each stage is counted when it runs and grows with what it
+works on. Its constants against measured solves: benchmarks/bench_cost.py (docs/benchmarks.md)."""
+import numpy as np
+
+from relight_addon.engine import cost
+from relight_addon.engine.patch_models.polygon import PolygonModel
+
+
+def _parts(**kw):
+    args = dict(n_patches=2000, rays_per_patch=256, n_candidates=800, n_targets=60)
+    args.update(kw)
+    return cost.estimate_cost(**args)["parts"]
+
+
+def test_the_stages_of_a_solve_are_counted_when_they_run():
+    assert "direct_light" not in _parts() and "lamp_refinement" not in _parts(n_lamps=10)
+    assert "direct_light" in _parts(kernel=True) and "lamp_refinement" in _parts(n_lamps=10, lamp_refinements=3)
+
+
+def test_the_direct_light_grows_with_the_lights_size_and_the_triangles():
+    base = _parts(kernel=True)["direct_light"][1]
+    polygons = _parts(kernel=True, patches_per_light=40)["direct_light"][1]
+    dense = _parts(kernel=True, n_triangles=1_000_000)["direct_light"][1]
+    more = _parts(kernel=True, max_lights=8)["direct_light"][1]
+    assert base < polygons and base < dense and base < more
+    # Max Lights + 1 lights of 40 patches, each gathered on all 2000 patches, plus the fixed parts
+    want = 2000 * 4 * 40 * cost.KERNEL_SECONDS_PER_PAIR + 4 * cost.DIRECT_SECONDS_PER_LIGHT
+    assert np.isclose(polygons, want)
+
+
+def test_the_lamp_refinement_counts_triangles_and_at_most_its_expected_evaluations():
+    one = _parts(n_lamps=10, lamp_refinements=1)["lamp_refinement"][1]
+    six = _parts(n_lamps=10, lamp_refinements=6)["lamp_refinement"][1]
+    dense = _parts(n_lamps=10, lamp_refinements=6, n_triangles=260_000)["lamp_refinement"][1]
+    assert one < six <= cost.REFINE_EVALUATIONS_EXPECTED * cost.REFINE_SECONDS_PER_PATCH * 2000 * (1 + 1e-12)
+    assert np.isclose(dense - six, cost.REFINE_EVALUATIONS_EXPECTED * cost.REFINE_SECONDS_PER_TRIANGLE * 260_000)
+
+
+class _Patches:
+    face = np.array([0, 0, 0, 0, 1, 2, 2, 3])
+
+
+def test_a_polygon_light_holds_its_polygons_patches():
+    mask = np.array([1, 1, 1, 1, 1, 1, 1, 0], dtype=bool)  # polygons 0 (4 patches), 1 (1), 2 (2)
+    assert PolygonModel.patches_per_light(_Patches, mask) == 7 / 3
