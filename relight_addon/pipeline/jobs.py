@@ -306,10 +306,12 @@ class SolveOutcome:
 
 
 def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
-                progress=None, cancel=None, patches: PatchSet | None = None) -> Model:
+                progress=None, cancel=None, patches: PatchSet | None = None, estimate=None) -> Model:
     """Stage 1: mesh the faces (the patch model), choose the candidate lights, estimate the form
     factors and set up the inverse problem (inverse: the painted targets, with the scene's own
-    emitters as fixed background; direct: the paper's direct-lighting mode)."""
+    emitters as fixed background; direct: the paper's direct-lighting mode). ``estimate``: the
+    form-factor estimator to call instead of ``options.estimator``'s, with its signature (a
+    prepared scene's: pipeline.prepared)."""
     t0 = time.perf_counter()
     pm = patch_model(options, default_max_patch_size)
     refines = mode == "inverse" and hasattr(pm, "refine") and options.refine_passes > 0
@@ -344,8 +346,8 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         # a model that will be refined only ranks patches by importance: a quarter of the rays
         rays = rays_per_patch(options, patches.n_patches, mode)
         opts = options if p == passes else replace(options, rays_per_patch=max(64, rays // REFINE_RAY_FRACTION))
-        F = ESTIMATORS[options.estimator](patches, opts, progress=_stage(progress, "form factors", lo, hi),
-                                          cancel=cancel, pairs=pairs)
+        F = (estimate or ESTIMATORS[options.estimator])(patches, opts, progress=_stage(progress, "form factors", lo, hi),
+                                                        cancel=cancel, pairs=pairs)
         t_ff += F.seconds
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
@@ -851,7 +853,7 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
 
 def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
               default_max_patch_size: float | None = None, progress=None, cancel=None, mode="inverse",
-              patches: PatchSet | None = None, notes: dict | None = None):
+              patches: PatchSet | None = None, notes: dict | None = None, estimate=None):
     """Inverse lighting ("solve") or direct-lighting reduction ("reduce") of ``faces``:
     build_model -> solve_stage -> reduce_stage -> certificate -> assemble_curve -> report.solve_report.
 
@@ -864,12 +866,13 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
     ``progress(stage, fraction)`` with fraction in [0, 1] over the whole job; ``cancel()``
     returning True raises Cancelled. ``patches``: the meshed faces when the caller already
     has them (the operator meshes first to estimate the cost). ``notes``: export's notes, repeated
-    in the errors they explain (check_solvable). Returns a SolveOutcome.
+    in the errors they explain (check_solvable). ``estimate``: build_model's. Returns a SolveOutcome.
     """
     options = (options or JobOptions()).validate()
     check_solvable(faces, mode, notes)
     try:
-        return _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches)
+        return _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches,
+                          estimate)
     except InverseError as exc:
         rays = options.rays_per_patch
         if "reaches any target" in str(exc) and rays is not None and rays < FEW_RAYS:
@@ -883,9 +886,9 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
 FEW_RAYS = 256
 
 
-def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches):
+def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches, estimate):
     t0 = time.perf_counter()
-    model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches)
+    model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches, estimate)
     t1 = time.perf_counter()
     e_x, inv = solve_stage(model, options)
     t_inverse = time.perf_counter() - t1 + model.seconds["problem"]

@@ -11,7 +11,8 @@ from ..scene import mesh_patches
 
 
 @PATCH_MODELS.register("polygon", "Polygons",
-                       "A patch per polygon (large ones split), a light per polygon: the artist's mesh as it is")
+                       "A patch per polygon (large ones split), a light per polygon: the artist's mesh as it is",
+                       paint_independent=True)  # its patches do not depend on the paint (pipeline.prepared)
 class PolygonModel:
     def __init__(self, options, default_max_patch_size=None):
         self.size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
