@@ -103,3 +103,40 @@ def test_what_the_prepared_state_cannot_follow_is_named():
     # the adaptive model meshes the painted faces apart: nothing is prepared, and it says why
     with pytest.raises(ValueError, match="follows the paint"):
         prepared.PreparedScene.prepare(faces, JobOptions(patch_model="adaptive").validate(), size)
+
+
+@pytest.fixture
+def addon():
+    import relight_addon
+
+    relight_addon.register()
+    yield
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    relight_addon.unregister()
+
+
+def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
+    """Solve & Reduce, a stroke, Solve & Reduce: the second solve starts from the scene's prepared
+    state (no hemisphere ray again); after an object moved, it is solved from scratch, and the
+    panel's warnings say why."""
+    from relight_addon.blender import preparation
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    scene.relight.patch_model = "polygon"
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    state = preparation.PREPARED[scene.name]
+    assert state.solves == 1
+    _stroke()
+    monkeypatch.setattr(prepared, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
+    monkeypatch.setattr(kernel_estimator, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    monkeypatch.undo()
+    assert preparation.PREPARED[scene.name] is state and state.solves == 2
+    assert "solved from scratch" not in scene.relight.last_warnings
+    bpy.data.objects["ceiling"].location.z += 0.05
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    assert preparation.PREPARED[scene.name] is not state
+    assert "solved from scratch: the geometry changed since it was prepared" in scene.relight.last_warnings
+    preparation.PREPARED.clear()

@@ -7,17 +7,26 @@
 
 then ``results.show_outcome`` writes it into the scene. The operator asks before a costly job
 (``job.cost["warnings"]``); the CLI prints the estimate.
+
+In a session (the add-on: ``SolveJob.export(..., session=True)``), a solve keeps its scene's
+paint-independent part (pipeline.prepared.PreparedScene, one per scene) when its patch model
+allows it, and the next solve starts from it while only the paint changed; when the scene changed,
+it is prepared again and the solve's warnings say why.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import bpy
 import numpy as np
 
 from . import export, light_paths
-from ..pipeline import jobs, report, viewing
+from ..pipeline import jobs, prepared, report, viewing
 
-__all__ = ["SolveJob"]
+__all__ = ["SolveJob", "PREPARED"]
+
+#: the session's prepared scenes: scene name -> pipeline.prepared.PreparedScene
+PREPARED = {}
 
 
 @dataclass
@@ -28,13 +37,16 @@ class SolveJob:
     inputs: dict  # export.job_inputs
     patches: object = None
     cost: dict = None
+    session: str = None  # the scene's name when the job keeps a prepared scene (the add-on)
 
     @classmethod
-    def export(cls, context, options, mode="inverse", target_scale=None) -> "SolveJob":
-        """Export the scene and check, from the faces alone, that the job can be solved."""
+    def export(cls, context, options, mode="inverse", target_scale=None, session=False) -> "SolveJob":
+        """Export the scene and check, from the faces alone, that the job can be solved.
+        ``session``: keep and re-use the scene's prepared state (see the module docstring)."""
         exp = export.export_scene(context, target_scale=target_scale)
         jobs.check_solvable(exp.faces, mode, exp.notes)
-        return cls(exp, options, mode, export.job_inputs(exp))
+        name = (context or bpy.context).scene.name if session else None
+        return cls(exp, options, mode, export.job_inputs(exp), session=name)
 
     def mesh(self, progress=None, cancel=None):
         """Mesh the faces (refused first when they cannot fit in memory) and estimate the solve."""
@@ -45,8 +57,20 @@ class SolveJob:
 
     def run(self, progress=None, cancel=None):
         """The solve (no bpy; any thread): a jobs.SolveOutcome."""
-        return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
-                              patches=self.patches, **self.inputs)
+        if self.session is None or self.mode != "inverse" or not prepared.paint_independent(self.options):
+            return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
+                                  patches=self.patches, **self.inputs)
+        faces, size = self.exp.faces, self.inputs["default_max_patch_size"]
+        state = PREPARED.get(self.session)
+        why = None if state is None else state.stale_reason(faces, self.options, size)
+        if state is None or why is not None:
+            PREPARED.pop(self.session, None)
+            state = prepared.PreparedScene.prepare(faces, self.options, size, cancel=cancel)
+            PREPARED[self.session] = state
+        outcome = state.solve(faces, self.inputs["polygon_counts"], progress, cancel, self.inputs["notes"])
+        if why is not None:
+            outcome.warnings.append(f"solved from scratch: {why}")
+        return outcome
 
     def finish(self, scene, outcome, view_radiance=True, input_path=None):
         """The report finished with what only Blender can tell: the render settings of the scene's

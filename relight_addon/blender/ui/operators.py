@@ -358,7 +358,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         self._mode = _object_mode(context)
         try:
             # the target scale: the scene's relight_target_scale (= the settings')
-            job = SolveJob.export(context, job_options(context.scene.relight))
+            job = SolveJob.export(context, job_options(context.scene.relight), session=True)
             job.mesh()
         except BaseException:
             _restore_mode(context, self._mode)
