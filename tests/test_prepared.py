@@ -25,10 +25,12 @@ def _final(outcome):
     return f["n_lights"], f["relative_error"]
 
 
-def _stroke(n=12):
-    """Paint ``n`` more polygons of the first painted object, those nearest its painted ones,
-    at the colour they already ask for (as a brush stroke would), in the bpy session."""
-    ob = next(o for o in bpy.context.scene.objects if o.type == "MESH" and "relight_target" in o.data.color_attributes)
+def _stroke(n=12, name=None, avoid=()):
+    """Paint ``n`` more polygons of object ``name`` (default: the first painted one), those
+    nearest its painted ones and not in ``avoid``, at the colour they already ask for (as a brush
+    stroke would), in the bpy session."""
+    ob = bpy.data.objects[name] if name else next(
+        o for o in bpy.context.scene.objects if o.type == "MESH" and "relight_target" in o.data.color_attributes)
     me = ob.data
     col = np.zeros((len(me.loops), 4), dtype=np.float32)
     me.color_attributes["relight_target"].data.foreach_get("color", col.ravel())
@@ -36,51 +38,65 @@ def _stroke(n=12):
     painted = col[starts, 3] >= 0.5
     centres = np.array([p.center for p in me.polygons])
     first = np.flatnonzero(painted)[0]
-    free = np.flatnonzero(~painted)
+    free = np.array([k for k in np.flatnonzero(~painted) if k not in set(avoid)])
     near = free[np.argsort(np.linalg.norm(centres[free] - centres[first], axis=1))[:n]]
     paint(ob, near.tolist(), tuple(col[starts[first], :3]))
     return ob.name, near
 
 
-def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeypatch):
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**OPTIONS).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
-    assert state.stale_reason(exp.faces, options, size) is None
-    cold = jobs.run_solve(exp.faces, options, default_max_patch_size=size)
-    warm = state.solve(exp.faces)
-    # the same paint: the same answer (the same rays, the same kernel rows)
-    assert _final(warm)[0] == _final(cold)[0]
-    assert _final(warm)[1] == pytest.approx(_final(cold)[1], rel=1e-4)
-    n_before = len(state.kernel_rows)
-
-    name, near = _stroke()
-    exp2 = export.export_scene()
-    assert exp2.faces.target.sum() == exp.faces.target.sum() + len(near)
-    assert state.stale_reason(exp2.faces, options, size) is None  # only the paint changed
-
-    # from the prepared state no hemisphere ray is cast again, and the kernel computes only the
-    # new targets' rows
+def _counting(monkeypatch):
+    """Record the kernel's rows computed and refuse any hemisphere ray cast."""
     rows = []
     kernel = kernel_transfer.kernel_form_factors
     monkeypatch.setattr(prepared, "kernel_form_factors", lambda p, rec, src, **kw: rows.append(len(rec))
                         or kernel(p, rec, src, **kw))
     monkeypatch.setattr(prepared, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
     monkeypatch.setattr(kernel_estimator, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
-    warm2 = state.solve(exp2.faces)
+    return rows
+
+
+@pytest.mark.parametrize("model", ["polygon", "adaptive"])
+def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeypatch, model):
+    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(**{**OPTIONS, "patch_model": model}).validate()
+    size = exp.settings.get("max_patch_size")
+    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    assert state.stale_reason(exp.faces, options, size) is None
+    first = state.solve(exp.faces)  # nothing kept yet: from scratch, through the state
+    assert state.reason == "nothing is kept yet" and state.patches is first.patches
+    cold = jobs.run_solve(exp.faces, options, default_max_patch_size=size)
+    assert _final(first)[0] == _final(cold)[0]
+    assert _final(first)[1] == pytest.approx(_final(cold)[1], rel=1e-4)
+    n_before = len(state.kernel_rows)
+
+    # the stroke: on the polygon model anywhere; on the adaptive one, where it keeps faces whole (it
+    # clusters the floor's unpainted faces: a stroke there solves from scratch, tested below)
+    on = "flight_1"
+    o = exp.faces.object_names.index(on)
+    clustered = prepared.clustered_faces(state.patches) & (exp.faces.face_object == o)
+    name, near = _stroke(12, on, exp.faces.face_index[clustered].tolist())
+    exp2 = export.export_scene()
+    assert exp2.faces.target.sum() == exp.faces.target.sum() + len(near)
+    assert state.stale_reason(exp2.faces, options, size) is None  # only the paint changed
+    assert state.unmappable(exp2.faces) is None  # the stroke's faces are not clustered
+
+    # from the kept state no hemisphere ray is cast again (the adaptive model's refinement passes
+    # included), and the kernel computes only the new targets' rows
+    rows = _counting(monkeypatch)
+    warm = state.solve(exp2.faces)
     monkeypatch.undo()
-    new_targets = int(warm2.patches.target.sum()) - n_before
+    assert state.reason is None and state.warm == 1
+    new_targets = int(warm.patches.target.sum()) - n_before
     assert rows == [new_targets] and new_targets >= len(near)
-    assert warm2.report["timings_s"]["form_factors"] == pytest.approx(state.seconds["kernel rows"])
+    assert warm.report["timings_s"]["form_factors"] == pytest.approx(state.seconds["kernel rows"])
 
     cold2 = jobs.run_solve(exp2.faces, options, default_max_patch_size=size)
-    assert _final(warm2)[0] == _final(cold2)[0]
-    # the issue's measure: the same error as a cold solve of the painted file, within 10 %
-    # (the kernel's rows drawn for 12 patches, not for all the targets at once)
-    assert abs(_final(warm2)[1] - _final(cold2)[1]) <= 0.1 * _final(cold2)[1], (_final(warm2), _final(cold2))
-    assert np.all(np.isfinite(warm2.stored.exitance))
+    # the issue's measure: the same error as a cold solve of the painted file, within 10 % (the
+    # kernel's rows drawn for 12 patches, not for all the targets at once; the adaptive model's
+    # patches refined for the first paint, not for this one)
+    assert abs(_final(warm)[1] - _final(cold2)[1]) <= 0.1 * _final(cold2)[1], (_final(warm), _final(cold2))
+    assert np.all(np.isfinite(warm.stored.exitance))
 
 
 def test_what_the_prepared_state_cannot_follow_is_named():
@@ -100,9 +116,29 @@ def test_what_the_prepared_state_cannot_follow_is_named():
     assert "options" in state.stale_reason(faces, replace(options, seed=4), size)
     with pytest.raises(ValueError, match="the prepared scene is stale: the geometry changed"):
         state.solve(moved)
-    # the adaptive model meshes the painted faces apart: nothing is prepared, and it says why
-    with pytest.raises(ValueError, match="follows the paint"):
-        prepared.PreparedScene.prepare(faces, JobOptions(patch_model="adaptive").validate(), size)
+
+
+def test_paint_on_clustered_faces_is_solved_from_scratch_and_named():
+    """The adaptive model clusters the staircase floor's unpainted faces; paint that lands on one
+    of them cannot be mapped onto the kept patches (a cluster never mixes painted and unpainted
+    faces): that solve starts from scratch, says why, and meshes for the new paint."""
+    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(seed=3).validate()  # the default patch model: adaptive
+    size = exp.settings.get("max_patch_size")
+    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    state.solve(exp.faces)
+    face = np.flatnonzero(prepared.clustered_faces(state.patches) & ~exp.faces.target)[0]
+    target, radiosity = exp.faces.target.copy(), exp.faces.target_radiosity.copy()
+    target[face], radiosity[face] = True, 0.3
+    painted = replace(exp.faces, target=target, target_radiosity=radiosity)
+    obj = exp.faces.object_names[exp.faces.face_object[face]]
+    assert state.unmappable(painted) == (f"the paint changed on 1 face(s) the patch model had clustered with "
+                                         f"others (objects: {obj})")
+    outcome = state.solve(painted)
+    assert state.reason.startswith("the paint changed on 1 face(s)") and state.warm == 0
+    assert outcome.patches.target[outcome.patches.face == face].all()  # meshed for the new paint
+    assert state.patches is outcome.patches and state.unmappable(painted) is None
 
 
 @pytest.fixture
@@ -115,6 +151,13 @@ def addon():
     relight_addon.unregister()
 
 
+def _clustered_polygons(state, name):
+    """The polygons of object ``name`` that the state's patches cluster with others."""
+    exp = export.export_scene()
+    o = exp.faces.object_names.index(name)
+    return exp.faces.face_index[prepared.clustered_faces(state.patches) & (exp.faces.face_object == o)].tolist()
+
+
 def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     """Solve & Reduce, a stroke, Solve & Reduce: the second solve starts from the scene's prepared
     state (no hemisphere ray again); after an object moved, it is solved from scratch, and the
@@ -124,16 +167,16 @@ def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     preparation.PREPARED.clear()
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
     scene = bpy.context.scene
-    scene.relight.patch_model = "polygon"
+    assert scene.relight.patch_model == "adaptive"  # the default, as an artist has it
     assert bpy.ops.relight.solve() == {"FINISHED"}
     state = preparation.PREPARED[scene.name]
     assert state.solves == 1
-    _stroke()
+    _stroke(12, "flight_1", _clustered_polygons(state, "flight_1"))  # where the adaptive model keeps faces whole
     monkeypatch.setattr(prepared, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
     monkeypatch.setattr(kernel_estimator, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
     assert bpy.ops.relight.solve() == {"FINISHED"}
     monkeypatch.undo()
-    assert preparation.PREPARED[scene.name] is state and state.solves == 2
+    assert preparation.PREPARED[scene.name] is state and state.solves == 2 and state.warm == 1
     assert "solved from scratch" not in scene.relight.last_warnings
     bpy.data.objects["ceiling"].location.z += 0.05
     assert bpy.ops.relight.solve() == {"FINISHED"}

@@ -9,9 +9,9 @@ then ``results.show_outcome`` writes it into the scene. The operator asks before
 (``job.cost["warnings"]``); the CLI prints the estimate.
 
 In a session (the add-on: ``SolveJob.export(..., session=True)``), a solve keeps its scene's
-paint-independent part (pipeline.prepared.PreparedScene, one per scene) when its patch model
-allows it, and the next solve starts from it while only the paint changed; when the scene changed,
-it is prepared again and the solve's warnings say why.
+paint-independent part (pipeline.prepared.PreparedScene, one per scene), and the next solve starts
+from it while only the paint changed (and maps onto the kept patches); otherwise it starts from
+scratch and the solve's warnings say why.
 """
 from __future__ import annotations
 
@@ -57,17 +57,17 @@ class SolveJob:
 
     def run(self, progress=None, cancel=None):
         """The solve (no bpy; any thread): a jobs.SolveOutcome."""
-        if self.session is None or self.mode != "inverse" or not prepared.paint_independent(self.options):
+        if self.session is None or self.mode != "inverse":
             return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
                                   patches=self.patches, **self.inputs)
         faces, size = self.exp.faces, self.inputs["default_max_patch_size"]
         state = PREPARED.get(self.session)
         why = None if state is None else state.stale_reason(faces, self.options, size)
         if state is None or why is not None:
-            PREPARED.pop(self.session, None)
-            state = prepared.PreparedScene.prepare(faces, self.options, size, cancel=cancel)
-            PREPARED[self.session] = state
-        outcome = state.solve(faces, self.inputs["polygon_counts"], progress, cancel, self.inputs["notes"])
+            state = PREPARED[self.session] = prepared.PreparedScene.prepare(faces, self.options, size)
+        outcome = state.solve(faces, self.inputs["polygon_counts"], progress, cancel, self.inputs["notes"],
+                              meshed=self.patches)
+        why = why or (state.reason if state.solves > 1 else None)
         if why is not None:
             outcome.warnings.append(f"solved from scratch: {why}")
         return outcome

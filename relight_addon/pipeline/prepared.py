@@ -1,25 +1,36 @@
 """Prepare once, re-solve per stroke (issue 20, item 1; no bpy).
 
 A solve's answer depends on the scene (geometry, materials, forbidden faces, lamps, World, the
-options) and on the paint. ``PreparedScene`` keeps what depends only on the scene, keyed by a
-fingerprint of it (``scene_key``), and re-solves when only the paint changed:
+options) and on the paint. ``PreparedScene`` keeps, from a solve, what depends only on the scene,
+keyed by a fingerprint of it (``scene_key``), and the next solve starts from it when only the
+paint changed:
 
-- the patches, when the patch model meshes without looking at the paint (a model registered with
-  ``paint_independent=True``: the polygon model); the paint is mapped onto them (a patch asks for
-  the target of the face it lies on, as engine.scene.build_patches does);
-- the ray-cast form factors (every patch's hemisphere rays: the bulk of the rays a solve casts);
-- the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a
-  target patch), per patch, for every patch painted so far: a stroke computes only its new rows.
+- the patches. The polygon model meshes without looking at the paint (registered
+  ``paint_independent=True``). The adaptive model's do depend on it: a painted face is meshed at
+  the patch size, clusters never mix painted and unpainted faces, and the refinement follows the
+  targets. Its patches are kept as the solve made them and the new paint is *mapped* onto them:
+  a patch asks for the target of the face it lies on (as engine.scene.build_patches does), which
+  is exact for every face that is a patch of its own or split into several (no patch spans it and
+  another face). A stroke that changes the paint of a face clustered with others cannot be
+  mapped: that solve starts from scratch, and says so (``unmappable``). The kept patches are not
+  refined again for the new targets (refinement passes 0 from the prepared state);
+- the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
+  the refinement passes' ones);
+- the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
+  patch), per patch, for every patch painted so far: a stroke computes only its new rows.
 
-The rest (the lights offered for the targets, the inverse problem, the selection, the
-certificate and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the
-prepared patches and form factors. A change the fingerprint sees (an object moved, a material, a
-forbidden face, an option) rebuilds it, and ``stale_reason`` says why.
+The rest (the lights offered for the targets, the inverse problem, the selection, the certificate
+and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the kept patches and
+form factors. A change the fingerprint sees (an object moved, a material, a forbidden face, an
+option) is not followed: ``stale_reason`` names it, and the caller prepares again.
 
-Not yet kept (issue 20 stays open on them): the adaptive model's patches follow the paint (its
-clusters never mix painted and unpainted faces, and its refinement follows the targets), so it
-is prepared from scratch each time and says so; the factorisation of the radiosity system and
-the transfer to every paintable patch (each re-solve factorises again).
+Not yet kept (issue 20 stays open on them): the factorisation of the radiosity system and the
+transfer to every paintable patch (each solve factorises again), the lights offered for the targets.
+Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
+stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
+977 patches to 1,451 and moved the predicted error from 0.063 / 0.051 (seeds 3 / 4) to 0.073 / 0.074,
+so it is not done until Cycles says which prediction is right: a stroke on clustered faces solves
+from scratch and says so.
 """
 from __future__ import annotations
 
@@ -70,38 +81,38 @@ def paint_independent(options: JobOptions) -> bool:
     return bool(PATCH_MODELS[options.patch_model].get("paint_independent", False))
 
 
+def clustered_faces(patches: PatchSet) -> np.ndarray:
+    """(n_faces,) bool: the faces that share a patch with another face (clusters)."""
+    pairs = np.unique(np.stack([patches.tri_patch, patches.tri_face], axis=1), axis=0)
+    per_patch = np.bincount(pairs[:, 0], minlength=patches.n_patches)
+    out = np.zeros(patches.n_faces, dtype=bool)
+    out[pairs[per_patch[pairs[:, 0]] > 1, 1]] = True
+    return out
+
+
 @dataclass
 class PreparedScene:
-    """The paint-independent part of a solve (see the module docstring)."""
+    """The paint-independent part of a scene's last solve (see the module docstring)."""
 
     key: dict
     options: JobOptions
     default_max_patch_size: float | None
-    patches: PatchSet  # as meshed (their targets are replaced per solve)
-    form_factors: object  # formfactors.FormFactors, ray-cast only (no kernel pairs)
+    patches: PatchSet = None  # the last solve's patches (None: no solve yet)
+    paint: tuple = None  # (target, target_radiosity) of the faces at the last solve
+    form_factors: object = None  # formfactors.FormFactors of ``_cast_for``, ray-cast only (no kernel pairs)
+    _cast_for: object = None  # the PatchSet the form factors were cast for
     kernel_sources: np.ndarray = None  # the candidate patches the kernel rows are for
     kernel_rows: dict = field(default_factory=dict)  # target patch -> (n_sources,) kernel form factors
-    seconds: dict = field(default_factory=dict)  # "prepare": s, "kernel rows": s of the last solve
-    solves: int = 0  # solves made from this state
+    seconds: dict = field(default_factory=dict)  # "rays": s of the last cast, "kernel rows": of the last solve
+    solves: int = 0  # solves made
+    warm: int = 0  # ... of which from the kept state
+    reason: str = None  # why the last solve started from scratch (None: from the kept state)
 
     @classmethod
-    def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None, progress=None, cancel=None):
-        """Mesh the faces and cast the form factors' rays once. Raises ValueError when the
-        options' patch model follows the paint (nothing could be kept)."""
+    def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
+        """An empty state for this scene and options: the first solve fills it."""
         options = options.validate()
-        if not paint_independent(options):
-            raise ValueError(f"the {PATCH_MODELS[options.patch_model].label} patch model follows the paint "
-                             "(a stroke changes its patches): nothing can be prepared once for it; use Polygons")
-        t0 = time.perf_counter()
-        jobs.check_before_meshing(faces, options, default_max_patch_size)
-        patches = jobs.patch_model(options, default_max_patch_size).mesh(faces)
-        kernel = jobs.uses_kernel_pairs(options)
-        rays = (int(options.rays_per_patch) if options.rays_per_patch is not None
-                else auto_rays_per_patch(patches.n_patches, kernel=kernel))
-        F = compute_form_factors(patches, rays_per_patch=rays, seed=options.seed, threads=options.threads,
-                                 progress=progress, cancel=cancel)
-        return cls(scene_key(faces, options, default_max_patch_size), options, default_max_patch_size, patches, F,
-                   seconds={"prepare": time.perf_counter() - t0})
+        return cls(scene_key(faces, options, default_max_patch_size), options, default_max_patch_size)
 
     def stale_reason(self, faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> str | None:
         """None when this state serves ``faces`` and ``options``; else what changed."""
@@ -109,8 +120,23 @@ class PreparedScene:
         changed = [part for part in key if key[part] != self.key.get(part)]
         return f"the {', '.join(changed)} changed since it was prepared" if changed else None
 
+    def unmappable(self, faces: FaceSet) -> str | None:
+        """None when the paint of ``faces`` maps onto the kept patches; else why not."""
+        if self.patches is None:
+            return "nothing is kept yet"
+        if paint_independent(self.options):
+            return None
+        target, radiosity = self.paint
+        changed = (faces.target != target) | np.any(faces.target_radiosity != radiosity, axis=1)
+        hit = changed & clustered_faces(self.patches)
+        if hit.any():
+            names = sorted({faces.object_names[o] for o in faces.face_object[hit]})
+            return (f"the paint changed on {int(hit.sum())} face(s) the patch model had clustered with others "
+                    f"(objects: {', '.join(names[:5])}{' ...' if len(names) > 5 else ''})")
+        return None
+
     def painted(self, faces: FaceSet) -> PatchSet:
-        """The prepared patches with the paint of ``faces`` (each patch its face's target)."""
+        """The kept patches with the paint of ``faces`` (each patch its face's target)."""
         return replace(self.patches, target=faces.target[self.patches.face].copy(),
                        target_radiosity=faces.target_radiosity[self.patches.face].copy())
 
@@ -118,9 +144,18 @@ class PreparedScene:
         """build_model's estimator: the prepared ray-cast form factors and, for the estimators
         with kernel pairs, the kernel's rows of the targets (the new ones computed, the others
         kept), applied as compute_form_factors applies them."""
+        cast = 0.0
+        if patches is not self._cast_for:  # a new mesh (a first solve, a refinement pass): cast its rays
+            rays = (int(options.rays_per_patch) if options.rays_per_patch is not None
+                    else auto_rays_per_patch(patches.n_patches, kernel=pairs is not None))
+            t0 = time.perf_counter()
+            self.form_factors = compute_form_factors(patches, rays_per_patch=rays, seed=options.seed,
+                                                     threads=options.threads, progress=progress, cancel=cancel)
+            self._cast_for, self.kernel_sources, self.kernel_rows = patches, None, {}
+            self.seconds["rays"] = cast = time.perf_counter() - t0
         F = self.form_factors
         if pairs is None or not ESTIMATORS[options.estimator].get("kernel_pairs", False):
-            return replace(F, matrix=F.matrix.copy())
+            return replace(F, matrix=F.matrix.copy(), seconds=cast)
         t0 = time.perf_counter()
         rec, src = (np.asarray(p, dtype=np.int64) for p in pairs)
         if self.kernel_sources is None or not np.array_equal(src, self.kernel_sources):
@@ -141,14 +176,34 @@ class PreparedScene:
         M = (M * scale[None, :]).astype(np.float32) if isinstance(M, np.ndarray) \
             else M.multiply(scale[None, :]).tocsr().astype(np.float32)
         self.seconds["kernel rows"] = time.perf_counter() - t0
-        return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=self.seconds["kernel rows"])
+        return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
 
-    def solve(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None):
-        """The inverse solve of ``faces`` (this scene with its current paint) from the prepared
-        state: pipeline.jobs.run_solve with the prepared patches and form factors."""
-        reason = self.stale_reason(faces, self.options, self.default_max_patch_size)
-        if reason is not None:
-            raise ValueError(f"the prepared scene is stale: {reason}")
+    def solve(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, meshed=None):
+        """The inverse solve of ``faces`` (this scene with its current paint): from the kept state
+        when the paint maps onto it, else from scratch (``meshed``: its patches when the caller
+        has them; the reason in ``self.reason``), keeping what this solve makes.
+        pipeline.jobs.run_solve either way."""
+        stale = self.stale_reason(faces, self.options, self.default_max_patch_size)
+        if stale is not None:
+            raise ValueError(f"the prepared scene is stale: {stale}")
+        self.reason = self.unmappable(faces)
+        options, patches = self.options, meshed
+        if self.reason is None:  # the kept patches, their rays, with the new paint
+            patches = self.painted(faces)
+            self._cast_for = patches  # the same mesh: its rays and kernel rows serve
+            if options.param("refine_passes", 0):
+                options = replace(options, refine_passes=0)
+            self.warm += 1
         self.solves += 1
-        return jobs.run_solve(faces, self.options, polygon_counts, self.default_max_patch_size, progress, cancel,
-                              patches=self.painted(faces), notes=notes, estimate=self.estimate)
+        try:
+            outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
+                                     patches=patches, notes=notes, estimate=self.estimate)
+        except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
+            self.patches = self._cast_for = self.form_factors = None
+            raise
+        if self._cast_for is not outcome.patches:  # not the mesh the rays were cast for: keep nothing
+            self.patches = self._cast_for = self.form_factors = None
+        else:
+            self.patches = outcome.patches
+            self.paint = (faces.target.copy(), faces.target_radiosity.copy())
+        return outcome
