@@ -57,10 +57,28 @@ _SCENE_ARRAYS = ("vertices", "triangles", "triangle_face", "loop_vertices", "loo
 def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> dict:
     """What the prepared state depends on, part by part: {part: digest}. Two keys differ in the
     parts that changed (``stale_reason`` names them)."""
+    def feed(h, x):  # every value whole (a repr would cut a large array short)
+        if isinstance(x, np.ndarray):
+            h.update(f"{x.dtype}{x.shape}".encode())
+            h.update(np.ascontiguousarray(x).tobytes())
+        elif isinstance(x, (list, tuple)):
+            h.update(f"{type(x).__name__}{len(x)}".encode())
+            for v in x:
+                feed(h, v)
+        elif isinstance(x, dict):
+            for k in sorted(x, key=repr):
+                feed(h, k)
+                feed(h, x[k])
+        elif hasattr(x, "__dict__") and not isinstance(x, type):
+            h.update(type(x).__name__.encode())
+            feed(h, vars(x))
+        else:
+            h.update(repr(x).encode())
+
     def digest(*items):
         h = hashlib.sha1()
         for x in items:
-            h.update(np.ascontiguousarray(x).tobytes() if isinstance(x, np.ndarray) else repr(x).encode())
+            feed(h, x)
         return h.hexdigest()
 
     arrays = {a: getattr(faces, a) for a in _SCENE_ARRAYS if getattr(faces, a) is not None}
@@ -69,9 +87,9 @@ def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) 
                                                  "loop_start", "loop_total", "face_object", "face_index")
                              if a in arrays), list(faces.object_names)),
         "materials": digest(arrays["reflectance"], arrays["exitance"], arrays.get("face_material", 0),
-                            repr(faces.material_lobes)),
+                            faces.material_lobes),
         "forbidden faces": digest(arrays.get("forbidden", 0)),
-        "lamps and World": digest(repr(faces.lamps), repr(faces.world_radiance)),
+        "lamps and World": digest(faces.lamps, faces.world_radiance),
         "options": digest(sorted(options.to_dict().items()), default_max_patch_size),
     }
 
