@@ -182,4 +182,5 @@ def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     assert bpy.ops.relight.solve() == {"FINISHED"}
     assert preparation.PREPARED[scene.name] is not state
     assert "solved from scratch: the geometry changed since it was prepared" in scene.relight.last_warnings
-    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    assert not preparation.PREPARED  # another file: the session lets the state go

@@ -78,8 +78,12 @@ def unregister():
 
 @bpy.app.handlers.persistent
 def _sync_curve_on_load(*_args):
-    """A file saved by the CLI carries the curve but not the UI list: fill it in."""
+    """A file saved by the CLI carries the curve but not the UI list: fill it in. The prepared
+    scenes of the file before are let go (preparation.PREPARED: another file's scenes)."""
     from . import operators
+    from ..preparation import PREPARED
+
+    PREPARED.clear()
 
     for scene in bpy.data.scenes:
         try:
