@@ -61,12 +61,13 @@ class SolveJob:
             return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
                                   patches=self.patches, **self.inputs)
         faces, size = self.exp.faces, self.inputs["default_max_patch_size"]
+        key = prepared.scene_key(faces, self.options, size)  # hashed once for the check and the solve
         state = PREPARED.get(self.session)
-        why = None if state is None else state.stale_reason(faces, self.options, size)
+        why = None if state is None else state.stale_reason(faces, self.options, size, key)
         if state is None or why is not None:
-            state = PREPARED[self.session] = prepared.PreparedScene.prepare(faces, self.options, size)
+            state = PREPARED[self.session] = prepared.PreparedScene(key, self.options, size)
         outcome = state.solve(faces, self.inputs["polygon_counts"], progress, cancel, self.inputs["notes"],
-                              meshed=self.patches)
+                              meshed=self.patches, key=key)
         why = why or (state.reason if state.solves > 1 else None)
         if why is not None:
             outcome.warnings.append(f"solved from scratch: {why}")

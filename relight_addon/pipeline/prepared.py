@@ -132,9 +132,11 @@ class PreparedScene:
         options = options.validate()
         return cls(scene_key(faces, options, default_max_patch_size), options, default_max_patch_size)
 
-    def stale_reason(self, faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> str | None:
-        """None when this state serves ``faces`` and ``options``; else what changed."""
-        key = scene_key(faces, options.validate(), default_max_patch_size)
+    def stale_reason(self, faces: FaceSet, options: JobOptions, default_max_patch_size=None,
+                     key: dict | None = None) -> str | None:
+        """None when this state serves ``faces`` and ``options``; else what changed. ``key``: their
+        scene_key, when the caller has it (it hashes every array of the scene)."""
+        key = key or scene_key(faces, options.validate(), default_max_patch_size)
         changed = [part for part in key if key[part] != self.key.get(part)]
         return f"the {', '.join(changed)} changed since it was prepared" if changed else None
 
@@ -196,12 +198,13 @@ class PreparedScene:
         self.seconds["kernel rows"] = time.perf_counter() - t0
         return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
 
-    def solve(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, meshed=None):
+    def solve(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, meshed=None,
+              key=None):
         """The inverse solve of ``faces`` (this scene with its current paint): from the kept state
         when the paint maps onto it, else from scratch (``meshed``: its patches when the caller
         has them; the reason in ``self.reason``), keeping what this solve makes.
-        pipeline.jobs.run_solve either way."""
-        stale = self.stale_reason(faces, self.options, self.default_max_patch_size)
+        pipeline.jobs.run_solve either way. ``key``: stale_reason's."""
+        stale = self.stale_reason(faces, self.options, self.default_max_patch_size, key)
         if stale is not None:
             raise ValueError(f"the prepared scene is stale: {stale}")
         self.reason = self.unmappable(faces)

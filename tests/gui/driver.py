@@ -604,7 +604,7 @@ def scenario():
         yield 1.0
         sx, sy = to_screen(r, r.width * 0.35, ay + (30 + 20.8 * 2) * ui / 1.0417)
         yield from click(sx, sy, settle=2.0)
-        path = shot("11b_row_after_change")
+        shot("11b_row_after_change")
         check("a row clicked after a scene change is not applied: the list shows the scene's row",
               settings.curve_index == shown and int(scene.get("relight_shown", -1)) == shown
               and "not applied" in settings.apply_error and "floor_0" in settings.apply_error,
