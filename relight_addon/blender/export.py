@@ -164,7 +164,7 @@ def material_properties(mat):
     and emitted radiance as Cycles renders it (materials.py; see the module docstring). A linked
     emission is not in ``radiance``: export_scene bakes it per face."""
     reflectance, radiance, notes = material_closure(mat)[:3]
-    return reflectance, radiance, (f"material {mat.name!r}: " + "; ".join(notes) if notes else None)
+    return reflectance, radiance, (f"material {scene_material(mat).name!r}: " + "; ".join(notes) if notes else None)
 
 
 def scene_material(mat):
