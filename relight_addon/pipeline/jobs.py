@@ -303,6 +303,7 @@ class SolveOutcome:
     reduction: object
     scene_light: np.ndarray = None  # (P, n, 3) W/m^2: each lamp's and the World's direct light (fixed)
     placed_light: list = None  # [(Lamp, (P, 3) W/m^2)]: the final configuration's placed lamps' direct light
+    model: Model = None  # the solve's model (a prepared scene re-solves from it: pipeline.prepared)
 
 
 def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max_patch_size=None,
@@ -889,6 +890,15 @@ FEW_RAYS = 256
 def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches, estimate):
     t0 = time.perf_counter()
     model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches, estimate)
+    return solve_model(model, options, polygon_counts, progress, cancel, t0)
+
+
+def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None):
+    """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct
+    light, the certificate, the lamp refinement, the curve and the report; a SolveOutcome.
+    ``t0``: when the job started (perf_counter), for the report's total."""
+    mode = model.mode
+    t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
     e_x, inv = solve_stage(model, options)
     t_inverse = time.perf_counter() - t1 + model.seconds["problem"]
@@ -932,8 +942,9 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
              "curve_index": int(i)} for i in curve.keep]
     stored = StoredResult.from_solve(model, red, curve, report)
     final = curve.exitance[curve.final_row]
-    return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, faces, model.patches,
-                        model.problem, inv, red, scene_light_at(model, final), placed_light_at(model, final))
+    return SolveOutcome(json_safe(report), rows, curve.final_row, warnings, stored, model.faces, model.patches,
+                        model.problem, inv, red, scene_light_at(model, final), placed_light_at(model, final),
+                        model)
 
 
 def placed_light_at(model: Model, strength) -> list:
