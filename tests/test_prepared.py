@@ -99,6 +99,52 @@ def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeyp
     assert np.all(np.isfinite(warm.stored.exitance))
 
 
+def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
+    """Live mode's re-solve (PreparedScene.live): the last solve's model retargeted on its transfer
+    to every patch, without a ray, a kernel row or a factorisation, gives a cold solve's error
+    within 10 %, and changes nothing kept."""
+    from relight_addon.engine import inverse
+
+    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(**OPTIONS).validate()
+    size = exp.settings.get("max_patch_size")
+    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    assert state.live(exp.faces) is None and state.reason == "nothing is solved yet"
+    first = state.solve(exp.faces)
+    problem = first.model.problem  # with the kernel's direct light and the refined lamps added
+    assert problem.direct_correction is not None and first.model.lamp_refinement["lamps_refined"] > 0
+    T_all = problem.all_rows_transfer()  # columns of A^-1 (every patch), against rows of it (the targets)
+    for c in range(3):
+        assert np.allclose(T_all[c][problem.targets], problem.transfer[c], rtol=1e-9,
+                           atol=1e-12 * np.abs(problem.transfer[c]).max())
+    kept = (state.model, state.patches, state.paint[0].copy())
+
+    _stroke(12, "flight_1")
+    exp2 = export.export_scene()
+    rows = _counting(monkeypatch)
+    monkeypatch.setattr(inverse, "_Factor", lambda *a: pytest.fail("factorised again"))
+    live = state.live(exp2.faces)
+    monkeypatch.undo()
+    assert state.reason is None and rows == [] and state.live_solves == 1
+    assert state.model is kept[0] and state.patches is kept[1] and np.array_equal(state.paint[0], kept[2])
+    assert live.problem.m == int(live.patches.target.sum()) > problem.m
+    final = live.reduction.final
+    assert final.n_negative == 0 and final.n_lights <= options.max_lights
+    assert final.error == pytest.approx(live.problem.error(_full(live.problem, final)), rel=1e-9)
+    assert np.all(np.isfinite(live.stored.radiosity)) and any("live answer" in w for w in live.warnings)
+    cold = jobs.run_solve(exp2.faces, options, default_max_patch_size=size)
+    assert abs(_final(live)[1] - _final(cold)[1]) <= 0.1 * _final(cold)[1], (_final(live), _final(cold))
+    moved = replace(exp2.faces, vertices=exp2.faces.vertices * 1.01)
+    assert state.live(moved) is None and state.reason == "the geometry changed since it was prepared"
+
+
+def _full(problem, point):
+    e = np.zeros((problem.n_lights, 3))
+    e[point.lights] = point.exitance
+    return e
+
+
 def test_what_the_prepared_state_cannot_follow_is_named():
     export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()

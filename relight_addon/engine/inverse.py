@@ -32,6 +32,7 @@ The error of any configuration is Eq. 1 through T:
 """
 from __future__ import annotations
 
+import copy
 import time
 import warnings as _warnings
 from dataclasses import dataclass, field
@@ -263,6 +264,8 @@ class InverseProblem:
         self._init_lights(light_groups, light_basis, lights)
         self._factors = None
         self._transfer = None
+        self._all_rows = None  # all_rows_transfer's
+        self.condition_warnings = []  # what factors() found (a retargeted problem keeps them)
         self.transfer_seconds = None
         self.warnings = []
         #: optional per channel: D (P, P) sparse, the first reflection of the lights' light with
@@ -397,9 +400,10 @@ class InverseProblem:
             self._factors = factors  # only once every channel is factorised
             cond = max(f.cond for f in self._factors)
             if np.isfinite(cond) and cond > ILL_CONDITIONED or np.isinf(cond):
-                self.warnings.append(
+                self.condition_warnings.append(
                     f"the radiosity system is ill-conditioned (condition estimate {cond:.3g}); "
                     "reflectances close to 1 in a closed scene amplify every error")
+                self.warnings.extend(self.condition_warnings)
         return self._factors
 
     @property
@@ -455,12 +459,73 @@ class InverseProblem:
             self._check_reachable()
         return self._transfer
 
+    def all_rows_transfer(self):
+        """T with every patch as a target: 3 arrays (P, n_lights), each patch's radiosity per unit
+        strength of each light (channels that share their solver and D share one array): columns of
+        A^-1 applied to every light's source -- its exitance on its patches through (I + D) and
+        ``emission_share``, rho H (+ its first reflection's excess, ``lamp_excess``) for the lights
+        of irradiance kinds, rho times the kernel's ``direct_correction`` -- one solve with
+        n_lights right-hand sides per channel. Its rows of the targets are ``transfer`` (the
+        other route: rows of A^-1, for few targets). Computed once; ``retarget`` reads it."""
+        if self._all_rows is None:
+            facs = self.factors()
+            n, C, D = self.n_patches, self.candidates, self.first_bounce
+            H = self.lights.irradiance
+            if self.direct_correction is not None:
+                H = self.direct_correction if H is None else sp.csc_matrix(H) + self.direct_correction
+            H = None if H is None else sp.csc_matrix(H)
+            basis = sp.csc_matrix(self.source_basis)
+            out, done = [None] * 3, {}
+            for c in range(3):
+                key = (id(facs[c]), None if D is None else self._same_first_bounce(c))
+                if key not in done:
+                    rhs = np.zeros((n, self.n_lights))
+                    rhs[C] = basis.toarray()  # each light's exitance per unit strength, on its patches
+                    if D is not None:
+                        rhs += np.asarray(D[c][:, C] @ basis.toarray())
+                    if H is not None:
+                        rhs += self.reflectance[:, c:c + 1] * H.toarray()
+                    if self.lamp_excess is not None:
+                        rhs += self.lamp_excess[c].toarray()
+                    X = np.ascontiguousarray(facs[c].solve(rhs))
+                    if not np.all(np.isfinite(X)):
+                        raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
+                    done[key] = X
+                out[c] = done[key]
+            self._all_rows = out
+        return self._all_rows
+
+    def retarget(self, target_mask, target_radiosity) -> "InverseProblem":
+        """This problem with other targets (the same scene, lights, solvers and fixed light): its
+        T is rows of ``all_rows_transfer`` (no factorisation, no solve), its b_P the new targets'
+        radiosity less the fixed light's. A stroke's re-solve (pipeline.prepared)."""
+        n = self.n_patches
+        mask = np.asarray(target_mask, dtype=bool).reshape(n)
+        tr = np.asarray(target_radiosity, dtype=np.float64).reshape(n, 3)
+        targets = np.flatnonzero(mask)
+        if len(targets) == 0:
+            raise InverseError("no target: paint a radiosity on at least one face")
+        if not np.all(np.isfinite(tr[targets])) or np.any(tr[targets] < 0):
+            raise InverseError("target radiosities must be finite and non-negative")
+        T_all = self.all_rows_transfer()
+        new = copy.copy(self)
+        new.target_mask, new.targets = mask, targets
+        new.target_norm = float(np.linalg.norm(tr[targets]))
+        new.b_target = tr[targets] - self.background_radiosity[targets]
+        rows = {}
+        new._transfer = [rows.setdefault(id(t), np.ascontiguousarray(t[targets])) for t in T_all]
+        new.transfer_seconds = 0.0
+        new.warnings = list(self.condition_warnings)
+        new._check_reachable()
+        return new
+
     def add_lights(self, lights, columns, excess=None):
         """Extend the problem to ``lights`` (a LightSet: the problem's lights followed by new ones,
         engine.lights.append_lamps) whose new lights' columns of T are ``columns`` (3 arrays (m, n_new),
         computed by the caller from their sources, e.g. engine.lamp_refinement.Transport); ``excess``
         their columns of ``lamp_excess`` (3 sparse (P, n_new)) when the problem has it."""
         n0 = self.n_lights
+        self._all_rows = None
         if self.lamp_excess is not None:
             n_new = lights.n_lights - n0
             new = excess if excess is not None else [sp.csc_matrix((self.n_patches, n_new))] * 3
@@ -488,6 +553,7 @@ class InverseProblem:
         minus F's. Their columns of T gain rows P of A^-1 diag(rho) dH, and every forward solve
         (``configuration_radiosity``) the reflection rho dH s of their light."""
         lights = np.asarray(lights, dtype=np.int64)
+        self._all_rows = None
         dH = np.asarray(dH, dtype=np.float64).reshape(self.n_patches, len(lights))
         if not np.all(np.isfinite(dH)):
             raise InverseError("the lights' direct light is not finite")

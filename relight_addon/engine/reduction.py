@@ -183,6 +183,7 @@ class Selection:
     max_lights: int | None = None  # the stop criterion (selections that build a curve per k use it)
     tolerance: float | None = None  # the least-power selection's band (relative)
     certificate: object = None  # set by the selection: best_lights.LowerBounds, or left None
+    curve_lights: int | None = None  # how far a per-k curve goes (greedy-swap; None: the selection's own)
 
 
 class _ErrorEval:
@@ -275,7 +276,7 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
 def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination", distribution="distance",
                   max_lights=None, error_threshold=None, relative_error_threshold=None,
                   require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
-                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None):
+                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
     The whole curve is computed (eliminations down to one light, constructions
@@ -284,7 +285,9 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     T) or 'gauss-seidel' (the paper's ComputeError: forward re-solve warm-started
     from the previous radiosity; exitance-* selections only). ``progress(done,
     total)`` is called every step; ``cancel()`` returning True stops the curve
-    where it is (``result.cancelled``). Deterministic: ties go to the lower index.
+    where it is (``result.cancelled``). ``curve_lights``: the selections that build a curve per
+    number of lights (greedy-swap) stop there (None: their own length). Deterministic: ties go
+    to the lower index.
     """
     method = SELECTIONS[selection]
     if error_route not in ERROR_ROUTES:
@@ -329,7 +332,8 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         return cancelled
 
     dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
-    sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance)
+    sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
+                    curve_lights=curve_lights)
     notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")

@@ -474,14 +474,16 @@ def solve_stage(model: Model, options: JobOptions) -> tuple:
     return inv.exitance, inv
 
 
-def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None) -> ReductionResult:
-    """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the final point."""
+def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None,
+                 curve_lights=None) -> ReductionResult:
+    """Stage 3: the selection x distribution over the whole curve (a per-k curve to
+    ``curve_lights`` when given); the stop criteria pick the final point."""
     by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
     red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
                         max_lights=None if by_lp else options.max_lights,
                         relative_error_threshold=None if by_lp else options.error_threshold,
                         require_positive=options.require_positive, tolerance=options.param("tolerance"),
-                        coplanar_tol=options.param("coplanar_tolerance", 1e-3),
+                        coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
@@ -893,10 +895,31 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
     return solve_model(model, options, polygon_counts, progress, cancel, t0)
 
 
-def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None):
+#: a live re-solve's curve covers the Max Lights and this many more (the chart's neighbourhood)
+LIVE_CURVE_EXTRA = 4
+LIVE_NOTE = ("live answer from the prepared transport ({why}): Solve & Reduce gives the full solve")
+
+
+def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
+    """A solved model (inverse mode) with the paint of ``faces`` on its own patches (``patches``:
+    the model's mesh, each patch its face's target): the same lights (the lamps offered and
+    refined for the earlier targets among them), form factors, solvers and fixed light; the
+    problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
+    t0 = time.perf_counter()
+    problem = model.problem.retarget(patches.target, patches.target_radiosity)
+    return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
+                   seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
+                   refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)
+
+
+def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None,
+                live=False):
     """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct
     light, the certificate, the lamp refinement, the curve and the report; a SolveOutcome.
-    ``t0``: when the job started (perf_counter), for the report's total."""
+    ``t0``: when the job started (perf_counter), for the report's total. ``live``: a stroke's
+    re-solve on a retargeted model (retarget_model): the curve to Max Lights + LIVE_CURVE_EXTRA,
+    without the kernel's direct light of lights the model has not corrected yet and without the
+    lamp refinement (the model's lamps, refined for the earlier targets, are candidates)."""
     mode = model.mode
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
@@ -907,16 +930,17 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     if cancel is not None and cancel():
         raise Cancelled("solve cancelled")
     t2 = time.perf_counter()
-    red = reduce_stage(model, e_x, options, progress, cancel)
+    red = reduce_stage(model, e_x, options, progress, cancel,
+                       curve_lights=int(options.max_lights) + LIVE_CURVE_EXTRA if live else None)
     t_direct = time.perf_counter()
-    model.direct = direct_stage(model, red, options, cancel)
+    model.direct = None if live else direct_stage(model, red, options, cancel)
     t_direct = time.perf_counter() - t_direct
     bounds = point_bounds = positive = None
     if mode == "inverse":  # of the candidate lights (the refined lamps are found after, outside them)
         bounds = certificate(model.problem, red)
         positive = positive_bound(model.problem, inv, red.final)
     t_refine = time.perf_counter()
-    model.lamp_refinement = refine_stage(model, red, options, progress, cancel)
+    model.lamp_refinement = None if live else refine_stage(model, red, options, progress, cancel)
     t_refine = time.perf_counter() - t_refine
     t_reduce = time.perf_counter() - t2 - t_refine - t_direct
     warnings = list(model.warnings)

@@ -125,6 +125,8 @@ class PreparedScene:
     solves: int = 0  # solves made
     warm: int = 0  # ... of which from the kept state
     reason: str = None  # why the last solve started from scratch (None: from the kept state)
+    model: object = None  # jobs.Model of the last solve (``live`` retargets it)
+    live_solves: int = 0  # live re-solves made
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -220,11 +222,31 @@ class PreparedScene:
             outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
                                      patches=patches, notes=notes, estimate=self.estimate)
         except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
-            self.patches = self._cast_for = self.form_factors = None
+            self.patches = self._cast_for = self.form_factors = self.model = None
             raise
         if self._cast_for is not outcome.patches:  # not the mesh the rays were cast for: keep nothing
-            self.patches = self._cast_for = self.form_factors = None
+            self.patches = self._cast_for = self.form_factors = self.model = None
         else:
-            self.patches = outcome.patches
+            self.patches, self.model = outcome.patches, outcome.model
             self.paint = (faces.target.copy(), faces.target_radiosity.copy())
+        return outcome
+
+    def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
+        """A stroke's live re-solve (Live mode) from the last solve's model: its patches with the
+        paint of ``faces`` (mapped as ``solve`` maps it), its lights, form factors and solvers,
+        the problem retargeted on the transfer to every patch (jobs.retarget_model,
+        jobs.solve_model(live=True)). Changes nothing kept: each stroke starts from the last
+        solve. None when it cannot follow (``self.reason`` says why): the caller solves in full."""
+        self.reason = (self.stale_reason(faces, self.options, self.default_max_patch_size, key)
+                       or ("nothing is solved yet" if self.model is None else self.unmappable(faces)))
+        if self.reason is not None:
+            return None
+        jobs.check_solvable(faces, "inverse", notes)
+        t0 = time.perf_counter()
+        model = jobs.retarget_model(self.model, faces, self.painted(faces))
+        outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True)
+        self.live_solves += 1
+        outcome.warnings.append(jobs.LIVE_NOTE.format(
+            why=f"the lights offered and refined for the last solve's targets, {self.model.problem.m} target "
+                "patches; the new targets' direct light by the ray-cast form factors"))
         return outcome

@@ -24,6 +24,8 @@ def json_safe(x):
     if isinstance(x, (list, tuple)):
         return [json_safe(v) for v in x]
     if isinstance(x, np.ndarray):
+        if x.dtype.kind == "f":  # in C: the non-finite values become None
+            return np.where(np.isfinite(x), x, None).tolist() if not np.all(np.isfinite(x)) else x.tolist()
         return json_safe(x.tolist())
     if isinstance(x, (np.bool_, bool)):
         return bool(x)

@@ -34,7 +34,7 @@ CURVE_LIGHTS = 32
                      distributes=False, multiscale=True, nonnegative=True)
 def greedy_swap(s):
     p = s.problem
-    k_max = min(p.n_lights, max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
+    k_max = min(p.n_lights, s.curve_lights or max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
     stop = {"cancel": False}
     surface = surface_lights(p)
     both = 0 < len(surface) < p.n_lights  # cells and lamps: the cells' own curve too
