@@ -90,7 +90,7 @@ from __future__ import annotations
 import math
 import os
 import warnings as _warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import bpy
 import numpy as np
@@ -960,6 +960,26 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
                          np.concatenate(b.f_mat), b.lobes, notes=notes, backs=backs)
+
+
+def repaint(exp: ExportedScene) -> FaceSet:
+    """The exported faces with the paint their objects hold now (Live mode, after a stroke): the
+    targets and their radiosity read again from each object's base mesh (an object in Edit Mode
+    from its edit mesh), mapped onto the exported faces as export_scene maps them; everything else
+    as exported. The caller checks that nothing else changed (pipeline.prepared's stale check)."""
+    faces = exp.faces
+    target, radiosity = faces.target.copy(), faces.target_radiosity.copy()
+    scale = exp.settings["target_scale"]
+    for oi, ob in enumerate(exp.objects):
+        if ob.mode == "EDIT":
+            ob.update_from_editmode()
+        t, b, _ = _base_attributes(ob, scale)
+        rows = np.flatnonzero(faces.face_object == oi)
+        idx = faces.face_index[rows]
+        ok = (idx >= 0) & (idx < len(t))
+        target[rows] = np.where(ok, t[np.where(ok, idx, 0)], False)
+        radiosity[rows] = np.where(ok[:, None], b[np.where(ok, idx, 0)], 0.0)
+    return replace(faces, target=target, target_radiosity=radiosity)
 
 
 def _linked_text(b, names) -> str:

@@ -23,10 +23,12 @@ import numpy as np
 from . import export, light_paths
 from ..pipeline import jobs, prepared, report, viewing
 
-__all__ = ["SolveJob", "PREPARED"]
+__all__ = ["SolveJob", "PREPARED", "PREPARED_JOBS"]
 
 #: the session's prepared scenes: scene name -> pipeline.prepared.PreparedScene
 PREPARED = {}
+#: the job whose solve last filled PREPARED[scene name] (Live mode re-reads its objects' paint)
+PREPARED_JOBS = {}
 
 
 @dataclass
@@ -68,6 +70,7 @@ class SolveJob:
             state = PREPARED[self.session] = prepared.PreparedScene(key, self.options, size)
         outcome = state.solve(faces, self.inputs["polygon_counts"], progress, cancel, self.inputs["notes"],
                               meshed=self.patches, key=key)
+        PREPARED_JOBS[self.session] = self
         why = why or (state.reason if state.solves > 1 else None)
         if why is not None:
             outcome.warnings.append(f"solved from scratch: {why}")

@@ -65,6 +65,9 @@ def register():
 
 def unregister():
     from . import operators, panels, properties, render_settings
+    from .. import live
+
+    live.stop()
 
     if _sync_curve_on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(_sync_curve_on_load)
@@ -81,9 +84,13 @@ def _sync_curve_on_load(*_args):
     """A file saved by the CLI carries the curve but not the UI list: fill it in. The prepared
     scenes of the file before are let go (preparation.PREPARED: another file's scenes)."""
     from . import operators
-    from ..preparation import PREPARED
+    from ..preparation import PREPARED, PREPARED_JOBS
 
     PREPARED.clear()
+    PREPARED_JOBS.clear()
+    from .. import live
+
+    live.stop()  # Live follows the file it was turned on in
 
     for scene in bpy.data.scenes:
         try:

@@ -10,7 +10,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import ADDON_PACKAGE, export, results
+from .. import ADDON_PACKAGE, export, live, results
 from ...pipeline import jobs
 from ...pipeline.report import fixed_light_rows, summary_line
 from ..preparation import SolveJob
@@ -316,6 +316,22 @@ def store_outcome(context, outcome, fingerprints=None):
     return shown["skipped"]
 
 
+def show_solve(context, job, outcome) -> list:
+    """A solve's outcome into the scene (main thread, Object Mode): the report finished (light
+    paths), the curve stored and its final configuration shown, the sidebar's summary and
+    warnings; returns the warnings. Raises SceneError / ValueError, the scene unchanged."""
+    job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
+    skipped = store_outcome(context, outcome, job.exp.fingerprints)
+    warnings = list(outcome.warnings) + list(skipped or [])
+    settings = context.scene.relight
+    settings.last_summary = summary_line(outcome.report, len(outcome.curve))
+    settings.last_fixed_light = fixed_light_rows(outcome.report)
+    settings.last_warnings = "\n".join(warnings)
+    if not bpy.app.background:
+        viewport.show_radiosity(context)  # the lights and the predicted radiosity
+    return warnings
+
+
 #: the interactive solve in progress (at most one): scene name, stage, fraction, cancelling.
 #: Plain Python values, written by the modal handler on the main thread, read by the panels.
 _SOLVING = {}
@@ -377,21 +393,13 @@ class RELIGHT_OT_solve(bpy.types.Operator):
 
     def _finish(self, context, job, outcome):
         try:
-            job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
-            skipped = store_outcome(context, outcome, job.exp.fingerprints)
+            warnings = show_solve(context, job, outcome)
         except (SceneError, ValueError) as exc:
             _restore_mode(context, getattr(self, "_mode", None))
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
-        warnings = list(outcome.warnings) + list(skipped or [])
-        settings = context.scene.relight
-        settings.last_summary = summary_line(outcome.report, len(outcome.curve))
-        settings.last_fixed_light = fixed_light_rows(outcome.report)
-        settings.last_warnings = "\n".join(warnings)
-        if not bpy.app.background:
-            viewport.show_radiosity(context)  # the lights and the predicted radiosity
         # the status bar shows the last report: the summary first, then the warnings
-        self.report({"INFO"}, "Relight: " + settings.last_summary)
+        self.report({"INFO"}, "Relight: " + context.scene.relight.last_summary)
         for w in warnings:
             self.report({"WARNING"}, "Relight: " + w)
         return {"FINISHED"}
@@ -493,6 +501,61 @@ class RELIGHT_OT_solve(bpy.types.Operator):
                 self.report({"ERROR"}, f"Relight: {exc}")
             return {"CANCELLED"}
         return self._finish(context, self._job, self._result["outcome"])
+
+
+class RELIGHT_OT_live(bpy.types.Operator):
+    """Live mode: while it is on, every stroke, Fill and Unpaint updates the lights, the radiosity
+    layer and the chart, re-solved off the main thread from the prepared scene. Click again or
+    press ESC to turn it off: the scene keeps the last answer"""
+    bl_idname = "relight.live"
+    bl_label = "Live"
+    bl_options = {"REGISTER"}
+
+    _timer = None
+
+    def invoke(self, context, event):
+        if live.session(context.scene) is not None:  # the toggle: off
+            live.stop(context.scene.name)
+            results.redraw_sidebars()
+            return {"FINISHED"}
+        if bpy.app.background or context.window is None:
+            self.report({"ERROR"}, "Live mode follows the brush in a window; headless, use Solve & Reduce")
+            return {"CANCELLED"}
+        self._session = live.start(context, job_options)
+        self._timer = context.window_manager.event_timer_add(live.TICK, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        results.redraw_sidebars()
+        return {"RUNNING_MODAL"}
+
+    def _end(self, context):
+        if self._timer is not None:
+            context.window_manager.event_timer_remove(self._timer)
+            self._timer = None
+        results.redraw_sidebars()
+
+    def cancel(self, context):
+        live.stop(self._session.scene)
+        self._end(context)
+
+    def modal(self, context, event):
+        s = self._session
+        if live.SESSIONS.get(s.scene) is not s:  # turned off (the toggle, another file)
+            self._end(context)
+            return {"FINISHED"}
+        if event.type == "ESC" and event.value == "PRESS":
+            live.stop(s.scene)
+            self._end(context)
+            self.report({"INFO"}, "Relight: Live off; the scene keeps the last answer")
+            return {"FINISHED"}
+        if event.type == "TIMER" and context.scene.name == s.scene and not _SOLVING:
+            before = (s.status, s.updates, s.paused)
+            try:
+                s.tick(context)
+            except (SceneError, ValueError) as exc:  # e.g. a target layer made unreadable: said, Live waits
+                s.paused, s.status = _message(exc), "paused"
+            if (s.status, s.updates, s.paused) != before:
+                results.redraw_sidebars()
+        return {"PASS_THROUGH"}
 
 
 def _ask_to_confirm(context, warnings):
@@ -631,6 +694,7 @@ CLASSES = (
     RELIGHT_OT_select_faces,
     RELIGHT_OT_forbid_faces,
     RELIGHT_OT_solve,
+    RELIGHT_OT_live,
     RELIGHT_OT_apply_configuration,
     RELIGHT_OT_clear_results,
     RELIGHT_OT_make_area_lights,

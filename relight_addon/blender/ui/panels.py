@@ -354,6 +354,21 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
             row = layout.row()
             row.scale_y = 1.4
             row.operator("relight.solve", icon="LIGHT_SUN")
+        draw_live(layout, context)
+
+
+def draw_live(layout, context):
+    """The Live toggle and, while it is on, what it is doing (blender/live.py)."""
+    from .. import live
+
+    s = live.session(context.scene)
+    row = layout.row()
+    row.operator("relight.live", text="Live: On (ESC: off)" if s else "Live", icon="PAUSE" if s else "PLAY",
+                 depress=s is not None)
+    if s is not None:
+        col = layout.column(align=True)
+        for line in textwrap.wrap(live.status_text(s), 44)[:4]:
+            col.label(text=line)
 
 
 class RELIGHT_PT_solve_advanced(RELIGHT_PT_base, bpy.types.Panel):

@@ -1,0 +1,277 @@
+"""Live mode (issue 20, item 2): while it is on, every stroke, Fill and Unpaint updates the lights,
+the radiosity layer and the chart. bpy on the main thread; the re-solves in a worker thread
+(pipeline.prepared.PreparedScene.live, no bpy).
+
+A ``LiveSession`` per scene, driven by ``tick()`` on the main thread (the ``relight.live`` modal
+operator's timer):
+
+- it starts with a full solve (preparation.SolveJob, in the worker) when the scene has no
+  prepared model yet; later Solve & Reduce solves replace the model it re-solves from;
+- when Blender reported a change (``depsgraph_update_post``: ``dirty``), the paint is read again
+  (export.repaint: the target layers only, no export); paint that is new and has not changed
+  for one tick (the stroke ended) is re-solved in the worker. While a re-solve runs, newer paint
+  waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
+- an answer for the newest paint is written into the scene (operators.show_solve), and the
+  time of the update and its cost are shown;
+- paint on faces the patch model clustered with others is solved in full (in the worker); a
+  change the prepared state cannot follow (geometry, materials, forbidden faces, lamps and
+  World, options) pauses Live with the reason, the scene as last written, until Solve & Reduce
+  prepares again;
+- ``stop()`` (the toggle, ESC, another file): a re-solve running is asked to stop and its answer
+  dropped; the scene keeps the last answer written, whole.
+"""
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from dataclasses import replace
+
+import bpy
+import numpy as np
+
+from . import export, preparation
+from ..pipeline import jobs
+
+__all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "status_text"]
+
+#: scene name -> LiveSession (at most one per scene)
+SESSIONS = {}
+#: seconds between two ticks (the modal operator's timer)
+TICK = 0.1
+
+
+class LiveSession:
+    def __init__(self, context, options_fn):
+        self.scene = context.scene.name
+        self.options_fn = options_fn  # settings (scene.relight) -> JobOptions: the sidebar's
+        self.dirty = True
+        self.paint = None  # (target, radiosity) last read
+        self.stable = 0  # ticks the paint read has not changed
+        self.shown = None  # the paint of the answer in the scene
+        self.worker = None
+        self.result = {}
+        self.cancel = threading.Event()
+        self.solving = None  # the paint the worker solves
+        self.updates = 0
+        self.superseded = 0
+        self.last_update = None  # time.strftime of the last answer written
+        self.last_seconds = None  # its solve (worker) and write (main thread) seconds
+        self.status = "starting"
+        self.paused = None  # why Live waits for Solve & Reduce
+        self.error = None
+        self.base = None  # the preparation.PREPARED_JOBS job re-solved from
+        self.geometry = None  # _geometry_digest of its objects
+        self.changed = set()  # what changed that the prepared state cannot follow (the depsgraph's)
+        self._faces = None
+
+    # -- main thread ---------------------------------------------------------------------
+    def tick(self, context) -> None:
+        """Collect a finished answer, read the paint when Blender reported a change, start the
+        next re-solve (main thread)."""
+        if self.worker is not None and not self.worker.is_alive():
+            self._collect(context)
+        job = preparation.PREPARED_JOBS.get(self.scene)
+        state = preparation.PREPARED.get(self.scene)
+        if job is None or state is None or state.model is None:
+            if self.worker is None and (self.dirty or not self.paused):  # (paused: retried on a change)
+                self.dirty = False
+                self._start_full(context)
+            return
+        if job is not self.base:  # a new preparation: Live's first solve, or Solve & Reduce
+            self.base, self.changed, self.paused, self.dirty = job, set(), None, True
+            self.geometry = _geometry_digest(job.exp.objects)
+        if not self.changed and self.options_fn(context.scene.relight).to_dict() != state.options.to_dict():
+            self.changed.add("the options")
+        if self.changed:
+            self.paused = f"{', '.join(sorted(self.changed))} changed: Solve & Reduce prepares again"
+            self.status = "paused"
+            return
+        if self.dirty:
+            self.dirty = False
+            faces = export.repaint(job.exp)  # (an object in Edit Mode: its edit mesh first)
+            if _geometry_digest(job.exp.objects) != self.geometry:
+                self.changed.add("the geometry")
+                return
+            paint = (faces.target, faces.target_radiosity)
+            if self.paint is not None and _same(paint, self.paint):
+                self.stable += 1
+            else:
+                self.paint, self.stable, self._faces = paint, 0, faces
+                self.dirty = True  # read again next tick: re-solve once the stroke has ended
+                return
+        if self.worker is not None or self.paused or self.stable < 1:
+            return
+        if self.shown is not None and _same(self.paint, self.shown):
+            self.status = "up to date"
+            return
+        self._start_live(job, state, self._faces)
+
+    def _start_live(self, job, state, faces):
+        self.solving = self.paint
+        self.status = "solving"
+
+        def work():
+            t0 = time.perf_counter()
+            # only the paint differs from the export the state was prepared from (export.repaint;
+            # the rest is watched on the main thread): its key is the state's
+            out = state.live(faces, job.inputs["polygon_counts"], cancel=self.cancel.is_set,
+                             notes=job.inputs["notes"], key=state.key)
+            if out is None:  # paint on clustered faces: the full solve, from the state (meshed for the paint)
+                full = preparation.SolveJob(replace(job.exp, faces=faces), job.options, job.mode, job.inputs,
+                                            session=job.session)
+                out = full.run(cancel=self.cancel.is_set)
+                self.result["job"] = full
+            self.result["seconds"] = time.perf_counter() - t0
+            return out
+
+        self._run(work, job)
+
+    def _start_full(self, context):
+        """The first solve of the session (no prepared model): export and solve in full."""
+        try:
+            job = preparation.SolveJob.export(context, self.options_fn(context.scene.relight), session=True)
+        except Exception as exc:  # noqa: BLE001  (SceneError, ValueError: the user's message)
+            self.paused = f"{exc}"
+            self.status = "paused"
+            return
+        self.paint = (job.exp.faces.target, job.exp.faces.target_radiosity)
+        self.solving = self.paint
+        self.status = "preparing (a full solve)"
+        self._run(lambda: job.run(cancel=self.cancel.is_set), job)
+
+    def _run(self, fn, job):
+        self.result = {"job": job}
+        self.cancel = threading.Event()
+
+        def work():
+            try:
+                self.result["outcome"] = fn()
+            except BaseException as exc:  # noqa: BLE001  (reported on the main thread)
+                self.result["error"] = exc
+
+        self.worker = threading.Thread(target=work, daemon=True)
+        self.worker.start()
+
+    def _collect(self, context):
+        """The worker's answer into the scene, when its paint is still the newest (main thread)."""
+        self.worker, result, solving = None, self.result, self.solving
+        if "error" in result:
+            exc = result["error"]
+            self.status = "paused"
+            self.paused = None if isinstance(exc, jobs.Cancelled) else f"{exc}"
+            self.error = self.paused
+            return
+        outcome = result.get("outcome")
+        if outcome is None:  # the state could not follow: say why, wait for Solve & Reduce
+            state = preparation.PREPARED.get(self.scene)
+            self.paused = f"{state.reason if state else 'nothing prepared'}: Solve & Reduce prepares again"
+            self.status = "paused"
+            return
+        if self.paint is not None and not _same(solving, self.paint):
+            self.superseded += 1  # a newer stroke: its re-solve comes next
+            return
+        t0 = time.perf_counter()
+        mode = None
+        if context.mode == "EDIT_MESH":  # the meshes are written in Object Mode (Fill Selected)
+            mode = context.object.mode
+            bpy.ops.object.mode_set(mode="OBJECT")
+        try:
+            from .ui import operators
+
+            operators.show_solve(context, result["job"], outcome)
+        except Exception as exc:  # noqa: BLE001  (SceneError, ValueError: the scene is unchanged)
+            self.paused, self.status = f"{exc}", "paused"
+            return
+        finally:
+            if mode is not None:
+                bpy.ops.object.mode_set(mode=mode)
+        self.shown = solving
+        self.updates += 1
+        self.last_update = time.strftime("%H:%M:%S")
+        self.last_seconds = (result.get("seconds", outcome.report["timings_s"]["total"]), time.perf_counter() - t0)
+        self.status = "up to date"
+
+    def resume(self):
+        """After Solve & Reduce: re-solve from its model."""
+        self.paused, self.error, self.dirty = None, None, True
+
+    def stop(self):
+        """Ask a running re-solve to stop; its answer is never written (the scene keeps the last)."""
+        self.cancel.set()
+        self.status = "off"
+
+
+def _geometry_digest(objects) -> str:
+    """A digest of the exported objects' base meshes (vertex positions, polygon loops) and
+    placement: what a stroke never changes."""
+    h = hashlib.blake2b(digest_size=16)
+    for ob in objects:
+        me = ob.data
+        co = export.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
+        loops = export.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
+        h.update(co.tobytes())
+        h.update(loops.tobytes())
+        h.update(np.array(ob.matrix_world, dtype=np.float32).tobytes())
+    return h.hexdigest()
+
+
+def _same(a, b) -> bool:
+    return a is not None and b is not None and np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def session(scene) -> LiveSession | None:
+    return SESSIONS.get(scene.name)
+
+
+def start(context, options_fn) -> LiveSession:
+    s = SESSIONS.get(context.scene.name)
+    if s is None:
+        s = SESSIONS[context.scene.name] = LiveSession(context, options_fn)
+    if _on_depsgraph not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph)
+    return s
+
+
+def stop(scene_name=None) -> None:
+    """Live off for a scene (every scene: None)."""
+    for name in [scene_name] if scene_name else list(SESSIONS):
+        s = SESSIONS.pop(name, None)
+        if s is not None:
+            s.stop()
+    if not SESSIONS and _on_depsgraph in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph)
+
+
+#: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
+_WATCHED = {"Material": "material", "World": "the World", "Light": "lamp", "Object": "object"}
+
+
+def _on_depsgraph(scene, depsgraph=None):
+    """Blender changed something: read the paint again at the next tick; a material, the World, a
+    lamp or an object's placement the user changed (not Relight's own results) is named."""
+    s = SESSIONS.get(scene.name)
+    if s is None:
+        return
+    s.dirty = True
+    for u in getattr(depsgraph, "updates", ()):
+        idb = getattr(u.id, "original", u.id)
+        kind = _WATCHED.get(type(idb).__name__) if not isinstance(idb, bpy.types.Object) else "object"
+        if kind is None or export.owner_of(idb) is not None:
+            continue
+        if kind == "object" and not (u.is_updated_transform and idb.type in {"MESH", "LIGHT"}):
+            continue
+        if kind == "material" and not u.is_updated_shading:
+            continue
+        s.changed.add(f"{kind} {idb.name!r}" if kind != "the World" else kind)
+
+
+def status_text(s: LiveSession) -> str:
+    """The sidebar's line: what Live is doing, and the time and cost of the last update."""
+    if s.paused:
+        return f"Live paused: {s.paused}"
+    last = ""
+    if s.last_update:
+        solve, write = s.last_seconds
+        last = f"; updated {s.last_update} ({solve:.2f} s solve, {write:.2f} s write, {s.updates} update(s))"
+    return f"Live: {s.status}{last}"

@@ -1,0 +1,116 @@
+"""Live mode (issue 20, item 2; blender/live.py) driven tick by tick in a bpy session, as the modal
+operator's timer drives it in a window: strokes re-solved off the main thread from the prepared
+model, a newer stroke superseding an older re-solve, and the changes it cannot follow pausing it."""
+import os
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
+import bpy  # noqa: E402
+
+from test_prepared import _clustered_polygons, _stroke  # noqa: E402
+from relight_addon.pipeline import jobs  # noqa: E402
+
+SAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_blends")
+
+
+@pytest.fixture
+def addon():
+    import relight_addon
+
+    relight_addon.register()
+    yield
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    relight_addon.unregister()
+
+
+def _run(s, until, timeout=300, pause=False):
+    """Tick (as the modal operator's timer does, with Blender's depsgraph updates in between)
+    until ``until()``; a pause fails unless ``pause``."""
+    t0 = time.monotonic()
+    while not until():
+        assert time.monotonic() - t0 < timeout, (s.status, s.paused, s.updates)
+        assert pause or not s.paused, s.paused
+        bpy.context.view_layer.update()  # Blender evaluates the depsgraph: the update handler runs
+        s.tick(bpy.context)
+        time.sleep(0.02)
+
+
+def _shown(scene):
+    """The final configuration in the scene: the stored result's exitance of its final row."""
+    from relight_addon.blender import results
+
+    data = results.load_result(scene)
+    return np.asarray(data.exitance[int(np.flatnonzero(data.point_index == int(data.final))[0])])
+
+
+def test_live_mode_follows_strokes_from_the_prepared_model(addon):
+    from relight_addon.blender import live, preparation, results
+    from relight_addon.blender.ui import operators
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    s = live.start(bpy.context, operators.job_options)
+    _run(s, lambda: s.updates == 1)  # no prepared model: Live's first answer is a full solve
+    state = preparation.PREPARED[scene.name]
+    assert state.solves == 1 and state.live_solves == 0 and len(scene.relight.curve)
+    first = _shown(scene)
+    avoid = _clustered_polygons(state, "flight_1")
+
+    _stroke(12, "flight_1", avoid)  # a stroke: re-solved live, without a full solve
+    _run(s, lambda: s.updates == 2)
+    assert state.solves == 1 and state.live_solves == 1 and s.status == "up to date"
+    second = _shown(scene)
+    assert first.shape != second.shape or not np.allclose(first, second), "the lights did not change"
+    assert "live answer from the prepared transport" in scene.relight.last_warnings
+    # the answer shown is the prepared state's live re-solve of the scene's paint
+    again = state.live(s._faces, preparation.PREPARED_JOBS[scene.name].inputs["polygon_counts"], key=state.key)
+    np.testing.assert_allclose(again.stored.exitance[again.final_index], second, rtol=1e-6, atol=1e-9)
+    assert "live" in live.status_text(s).lower() and "updated" in live.status_text(s)
+
+    # a newer stroke while a re-solve runs supersedes it: only the newest answer is written
+    _stroke(6, "flight_1", avoid)
+    _run(s, lambda: s.worker is not None)
+    painted = s.solving
+    _stroke(6, "flight_1", avoid)
+    _run(s, lambda: s.updates == 3)
+    assert s.superseded == 1 and not np.array_equal(painted[0], s.shown[0])
+    assert np.array_equal(s.shown[0], s.paint[0])
+    written = results.result_id(scene)
+
+    # an object moved: Live cannot follow it; it pauses, says why, and leaves the scene as it was
+    bpy.data.objects["ceiling"].location.z += 0.05
+    _run(s, lambda: s.paused is not None, timeout=10, pause=True)
+    assert "object 'ceiling'" in s.paused and "Solve & Reduce" in s.paused
+    _stroke(4, "flight_1", avoid)
+    for _ in range(10):
+        bpy.context.view_layer.update()
+        s.tick(bpy.context)
+    assert s.worker is None and results.result_id(scene) == written and s.updates == 3
+    # Solve & Reduce prepares again: Live follows the new model
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    _run(s, lambda: s.paused is None and s.status == "up to date", timeout=30, pause=True)
+    live.stop(scene.name)
+    assert live.session(scene) is None and s.status == "off"
+
+
+def test_stopping_live_drops_a_running_re_solve(addon):
+    """ESC or the toggle while a re-solve runs: its answer is never written."""
+    from relight_addon.blender import live, preparation, results
+    from relight_addon.blender.ui import operators
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    s = live.start(bpy.context, operators.job_options)
+    _run(s, lambda: s.updates == 1)
+    written = results.result_id(scene)
+    _stroke(12, "flight_1", _clustered_polygons(preparation.PREPARED[scene.name], "flight_1"))
+    _run(s, lambda: s.worker is not None)
+    live.stop(scene.name)
+    s.worker.join()
+    s.tick(bpy.context)  # a stopped session writes nothing, even if ticked
+    assert results.result_id(scene) == written and s.updates == 1
