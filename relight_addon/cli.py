@@ -131,6 +131,9 @@ def build_parser():
         if name == "solve":
             s.add_argument("--target-scale", type=_target_scale, default=None,
                            help="multiplies the painted target colours, > 0 (default: the scene's)")
+            s.add_argument("--keep", metavar="REPORT",
+                           help="keep the lamps of an earlier report's final configuration at their place and "
+                                "power (written as the scene's lamps) and find Max Lights more around them")
         s.add_argument("--render", help="render the result with Cycles (CPU) to this PNG")
         s.add_argument("--render-samples", type=_positive_int, default=16)
         s.add_argument("--view-transform", choices=("AgX", "Standard", "Filmic"), default="AgX",
@@ -474,10 +477,19 @@ def run_solve_command(args, progress=None, cancel=None):
     from .blender import export, results
     from .blender.preparation import SolveJob
 
+    from .pipeline import kept
+
     t0 = time.perf_counter()
     _check_paths(args)
     options = _options(args)  # before any work: an unusable option exits 2 at once
+    keep = None
+    if getattr(args, "keep", None):
+        try:
+            keep = kept.read_kept(args.keep)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     export.open_blend(args.scene)
+    names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
                           target_scale=getattr(args, "target_scale", None))
     patches, cost = _job(args, job.mesh)
@@ -485,6 +497,11 @@ def run_solve_command(args, progress=None, cancel=None):
     outcome = _job(args, job.run)
     job.finish(bpy.context.scene, outcome, input_path=os.path.abspath(args.scene))
     report = outcome.report
+    if keep:
+        report["kept"] = {"from": os.path.abspath(args.keep), "lamps": [
+            {"object": n, "type": r["type"].lower(), "location": r["position"], "energy": r["energy"],
+             "color": r["color"], "power": r["power"]} for n, r in zip(names, keep[0])]}
+        report["warnings"].extend(keep[1])
 
     def apply():
         shown = results.show_outcome(bpy.context.scene, outcome, job.exp.fingerprints)

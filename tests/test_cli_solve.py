@@ -243,3 +243,37 @@ def test_the_certificate_is_relative_to_the_painted_targets_with_scene_light(run
     assert r["final"]["bound_relative_error"] <= r["final"]["relative_error"] * (1 + 1e-9)
     assert not any(f"below {cert['nnls_relative_error']:.3g}" in w and cert["nnls_relative_error"] >
                    r["final"]["relative_error"] for w in r["warnings"])
+
+
+def test_solve_keeps_the_lamps_of_an_earlier_report_and_finds_the_rest(run_cli, tmp_path):
+    """--keep (issue 20, items 3-4): the earlier answer's lamps held at their place and power (the
+    scene's lamps in the copy and in the solve's fixed light), Max Lights more found around them,
+    their error never below what the certificate allows for the rest."""
+    import bpy
+
+    scene = os.path.join(SAMPLES, "staircase_targets.blend")
+    code, first, err = run_cli(["solve", scene, "--report", tmp_path / "r1.json", "-q"])
+    assert code == 0, err
+    lamps = [li for li in first["final"]["lights"] if li.get("type") in ("spot", "point", "area")]
+    assert lamps, "the first answer has no lamp to keep"
+    code, again, err = run_cli(["solve", scene, "--report", tmp_path / "r2.json", "--keep", tmp_path / "r1.json",
+                                "--max-lights", "2", "--out", tmp_path / "o2.blend", "-q"])
+    assert code == 0, err
+    fixed = {row["name"]: row for row in again["fixed_light"]}
+    for li in lamps:
+        name = f"{li['object']} (kept)"
+        assert np.allclose(fixed[name]["power"], li["strength"], rtol=1e-6), (fixed[name], li["strength"])
+    assert again["final"]["n_lights"] <= 2 and len(again["kept"]["lamps"]) == len(lamps)
+    surface = len(first["final"]["lights"]) - len(lamps)
+    assert (surface == 0) or any("surface light(s)" in w and "not kept" in w for w in again["warnings"])
+    for pt in again["curve"]:  # the certificate is of the rest, with the kept lamps on
+        if pt["n_negative"] == 0 and pt["bound_relative_error"] is not None:
+            assert pt["relative_error"] >= pt["bound_relative_error"] * (1 - 1e-9), pt
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "o2.blend"))
+    for li in lamps:
+        ob = bpy.data.objects[f"{li['object']} (kept)"]
+        assert np.allclose(ob.matrix_world.translation, li["location"], atol=1e-6)
+        assert ob.data.energy == pytest.approx(li["energy"], rel=1e-6)
+        assert "relight_owner" not in ob and "relight_owner" not in ob.data  # the scene's own: no result removes it
+    code, _, err = run_cli(["solve", scene, "--report", tmp_path / "r3.json", "--keep", tmp_path / "o2.blend"])
+    assert code == 2 and err.count("\n") == 1 and "--keep" in err and "not JSON" in err, err

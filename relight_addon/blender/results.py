@@ -476,6 +476,17 @@ def new_lamp(rec, energy, color, owner=None):
     return ob
 
 
+def add_kept_lamps(scene, records) -> list:
+    """Kept lamps (pipeline.kept's records) made the scene's own lamps, in its collection: the
+    solve counts their light as the scene's, and no result removes them. Returns their names."""
+    names = []
+    for rec in records:
+        ob = new_lamp(rec, rec["energy"], rec["color"])
+        scene.collection.objects.link(ob)
+        names.append(ob.name)
+    return names
+
+
 def write_placed(scene, rid, plan) -> None:
     """Write ``plan_placed``'s plan: the lamps, owned by the result ``rid``, in a collection of their own."""
     if not plan:

@@ -83,7 +83,7 @@ def placed_record(lamp, kind, strength) -> dict:
     s = np.asarray(strength, dtype=np.float64).reshape(3)
     energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain)
     rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
-           "location": lamp.position, "direction": lamp.direction, "center": lamp.position,
+           "location": lamp.position, "direction": lamp.direction, "axis_u": lamp.axis_u, "center": lamp.position,
            "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
            "area": float(lamp.area) if lamp.kind == "AREA" else 0.0, "exitance": None, "strength": s,
            "power": float(s.sum()), "energy": float(energy), "color": color}

@@ -409,6 +409,112 @@ def check_marker(name, path):
 
 # --- the scenario ---------------------------------------------------------------------------
 
+def floor_strokes(floor, n_strokes=3, per_stroke=4):
+    """Screen paths over unpainted floor faces next to the painted ones (as an artist extends the
+    paint), one list of points per stroke."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+
+    a = area3d()
+    r = region("WINDOW", a)
+    rv3d = a.spaces.active.region_3d
+    painted = mods()["blender.export"].face_flags(floor, "target")
+    M = floor.matrix_world
+    centres = [M @ p.center for p in floor.data.polygons]
+    hub = sum((centres[k] for k in np.flatnonzero(painted)), centres[0] * 0) / max(int(painted.sum()), 1)
+    free = sorted(np.flatnonzero(~painted), key=lambda k: (centres[k] - hub).length)
+    paths = []
+    for i in range(n_strokes):
+        pts = []
+        for k in free[i * per_stroke:(i + 1) * per_stroke]:
+            p = location_3d_to_region_2d(r, rv3d, centres[k])
+            if p is not None and 5 < p.x < r.width - 5 and 5 < p.y < r.height - 5:
+                pts.append(to_screen(r, p.x, p.y))
+        paths.append(pts)
+    return paths
+
+
+def drag(points):
+    """A brush stroke through ``points`` (screen), the left button held."""
+    move(*points[0])
+    yield 0.3
+    xdo("mousedown", "1")
+    for a, b in zip(points, points[1:] + points[-1:]):
+        for t in np.linspace(0.0, 1.0, 6):
+            move(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
+            yield 0.03
+    xdo("mouseup", "1")
+    yield 0.3
+
+
+def live_mode(scene, settings, floor):
+    live = mods()["blender.live"]
+    results = mods()["blender.results"]
+    set_active(floor)
+    with override():
+        if bpy.context.mode != "OBJECT":
+            bpy.ops.object.mode_set(mode="OBJECT")
+    yield 1.0
+    found = yield from probe_sidebar()
+    if not check("the Live toggle is in the sidebar", "bpy.ops.relight.live()" in found, sorted(found)):
+        return
+    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
+    s = live.session(scene)
+    t0 = time.monotonic()
+    while s is not None and s.updates < 1 and time.monotonic() - t0 < 300:
+        yield 0.2
+    check("Live turns on and answers from the prepared scene", s is not None and s.updates >= 1,
+          None if s is None else live.status_text(s))
+    if s is None:
+        return
+    shot("11e_live_on")
+    found = yield from probe_sidebar()
+    yield from press(found, "bpy.ops.relight.paint_targets()", settle=1.5)
+    changed, waits, pauses = [], [], []
+    for i, path in enumerate(floor_strokes(floor)):
+        if len(path) < 2:
+            continue
+        n0, rid0, targets0 = s.updates, results.result_id(scene), counts()[0]
+        t_stroke = time.monotonic()
+        yield from drag(path)
+        t_up = time.monotonic()
+        while s.updates == n0 and not s.paused and time.monotonic() - t_up < 120:
+            yield 0.1
+        t_done = time.monotonic()
+        waits.append(round(t_done - t_up, 2))
+        pauses.append(round(max_gap(t_stroke, t_done), 2))
+        changed.append(s.updates > n0 and results.result_id(scene) != rid0 and counts()[0] > targets0)
+        log("live stroke", i, live.status_text(s), "targets", targets0, "->", counts()[0])
+        shot(f"11f_live_stroke_{i}")
+    RESULT["timings"]["live"] = {"answer_after_stroke_s": waits, "longest_pause_s": pauses,
+                                 "last": live.status_text(s)}
+    check("the lights change after each stroke in Live mode", changed and all(changed),
+          f"{changed}; {live.status_text(s)}")
+    check("the brush stays responsive in Live mode", pauses and max(pauses) < PAUSE_LIMIT,
+          f"longest main-thread pauses per stroke {pauses} s; answers {waits} s after the stroke")
+    # ESC right after a stroke: the re-solve running (if any) is dropped; the scene keeps the last answer
+    path = floor_strokes(floor, 4)[3]
+    if len(path) >= 2:
+        yield from drag(path)
+    move(*viewport_center())
+    n_esc, rid_esc, solving = s.updates, results.result_id(scene), s.worker is not None
+    xdo("key", "Escape")
+    yield 3.0
+    data_ok = True
+    try:
+        results.check_stored(scene, results.load_result(scene))
+    except Exception as exc:  # noqa: BLE001
+        data_ok = f"{exc}"
+    check("ESC turns Live off and leaves the scene consistent (nothing written after it)",
+          live.session(scene) is None and (s.worker is None or not s.worker.is_alive()) and s.updates == n_esc
+          and results.result_id(scene) == rid_esc and data_ok is True,
+          f"session {live.session(scene)}, status {s.status!r}, re-solve running at ESC: {solving}, "
+          f"updates {n_esc} -> {s.updates}, stored result {data_ok}")
+    shot("11g_live_off")
+    with override():
+        bpy.ops.object.mode_set(mode="OBJECT")
+    yield 1.0
+
+
 def scenario():
     yield 3.0
     prefs = bpy.context.preferences
@@ -675,6 +781,11 @@ def scenario():
     yield from key_in_viewport("Tab")
     settings.target_scale = scale_before
     yield 1.0
+
+    # 8e. Live mode (issue 20): strokes in Vertex Paint re-solved off the main thread; the lights
+    # change after each; the brush never waits (the main thread's pauses recorded); ESC turns it
+    # off with the scene as last written
+    yield from live_mode(scene, settings, floor)
 
     # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
     settings.rays_per_patch = 262144

@@ -1,0 +1,99 @@
+"""Kept lights (issue 20, items 3 and 4; no bpy): the lamps of an earlier answer held at their
+place and power while a solve finds the rest.
+
+A kept lamp becomes a lamp of the scene: the solve counts its light as the scene's own (fixed
+light, subtracted from the targets, as the lamps the user hung), so the selection, the
+certificate and the curve are of the *rest*: Max Lights new lights beside the kept ones, and the
+certificate's bound is the best any that many more candidate lights can do with the kept ones on.
+The kept lamps are written as the scene's lamps (the CLI's --out copy, the add-on's Keep Lamps),
+never removed as Relight's.
+
+``kept_lamps(report)`` reads the final configuration of a report (the CLI's JSON) into lamp
+records that blender/results.new_lamp makes; surface lights (emissive cells and polygons) are not
+kept, and named.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+__all__ = ["KEPT_SUFFIX", "kept_lamps", "read_kept"]
+
+#: the kept lamps' names: the answer's name and this
+KEPT_SUFFIX = " (kept)"
+_TYPES = {"point": "POINT", "spot": "SPOT", "area": "AREA"}
+
+
+def _frame(direction, axis_u=None):
+    """Unit (axis_u, axis_v) of a lamp pointing along ``direction`` (its -Z): ``axis_u`` as
+    recorded, else any axis perpendicular to the direction."""
+    d = np.asarray(direction, dtype=np.float64)
+    d = d / (np.linalg.norm(d) or 1.0)
+    if axis_u is None:
+        a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis_u = np.cross(a, d)
+    u = np.asarray(axis_u, dtype=np.float64)
+    u = u - d * float(u @ d)
+    u = u / (np.linalg.norm(u) or 1.0)
+    v = np.cross(-d, u)  # X, Y, Z = -direction right-handed: Y = Z x X
+    return u, v
+
+
+def kept_lamps(report: dict, source: str = "the report") -> tuple:
+    """(records, notes): the lamps of ``report``'s final configuration as results.new_lamp makes
+    them (name, type, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
+    size_v, ellipse, spread, energy, color), and what is not kept. Raises ValueError on a report
+    that is not a solve's."""
+    if not isinstance(report, dict) or report.get("command") not in ("solve", "reduce") \
+            or not isinstance(report.get("final"), dict) or "lights" not in report["final"]:
+        raise ValueError(f"{source} is not a Relight solve report (no final configuration)")
+    records, surface, notes = [], [], []
+    for i, li in enumerate(report["final"]["lights"]):
+        kind = _TYPES.get(str(li.get("type", "")).lower())
+        if kind is None or li.get("location") is None:
+            surface.append(f"{li.get('object')} ({li.get('kind')}, polygons {li.get('polygons', [])[:4]})")
+            continue
+        try:
+            u, v = _frame(li["direction"] if li.get("direction") is not None else (0.0, 0.0, -1.0), li.get("axis_u"))
+            size = li.get("size") or [0.0, 0.0]
+            rec = {"name": f"{li['object']}{KEPT_SUFFIX}", "type": kind,
+                   "position": [float(x) for x in li["location"]],
+                   "direction": [float(x) for x in (li.get("direction") or (0.0, 0.0, -1.0))],
+                   "axis_u": u.tolist(), "axis_v": v.tolist(), "radius": float(li.get("radius", 0.0)),
+                   "spot_size": float(li.get("spot_size", np.pi)), "spot_blend": float(li.get("spot_blend", 0.0)),
+                   "size_u": float(size[0]), "size_v": float(size[1]),
+                   "ellipse": str(li.get("shape", "")).upper() in ("DISK", "ELLIPSE"),
+                   "spread": float(li.get("spread", np.pi)),
+                   "energy": float(li["energy"]), "color": [float(x) for x in li["color"]],
+                   "power": float(li["power"])}
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: light {i} ({li.get('object')}) lacks what a lamp needs ({exc})") from None
+        if not all(np.all(np.isfinite(rec[k])) for k in ("position", "direction", "energy", "color")) \
+                or rec["energy"] < 0:
+            raise ValueError(f"{source}: light {i} ({li.get('object')}) has a non-finite or negative value")
+        if kind == "AREA" and li.get("axis_u") is None and abs(rec["size_u"] - rec["size_v"]) > 1e-9:
+            notes.append(f"{rec['name']}: the report does not give the rectangle's orientation; kept turned "
+                         "about its axis as Relight chose")
+        records.append(rec)
+    if surface:
+        notes.append(f"{len(surface)} surface light(s) of {source} are not kept (only lamps are): "
+                     f"{'; '.join(surface[:4])}{' ...' if len(surface) > 4 else ''}")
+    if not records:
+        raise ValueError(f"{source} has no lamp to keep in its final configuration"
+                         + (f" ({notes[-1]})" if surface else ""))
+    return records, notes
+
+
+def read_kept(path: str) -> tuple:
+    """kept_lamps of the JSON report at ``path`` (ValueError with the cause when it cannot be read)."""
+    try:
+        with open(path) as fh:
+            report = json.load(fh)
+    except OSError as exc:
+        raise ValueError(f"--keep: cannot read {path}: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--keep: {path} is not JSON ({exc.msg}, line {exc.lineno})") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"--keep: {path} is not JSON (not text: a .blend? give the report of a solve)") from None
+    return kept_lamps(report, path)
