@@ -482,3 +482,20 @@ def test_staircase_quality(staircase):
     assert curve[2].relative_error <= g[2].relative_error <= 0.13
     gc = bl.best_k_curve(T, b, 3, area, swap=False, score="correlation")
     assert gc[2].relative_error >= g[2].relative_error
+
+
+def test_the_gram_matrix_is_shared_by_content_and_follows_changes_in_place():
+    """best_lights.gram / column_subset: one Gram matrix per transfer array's content (the
+    certificate, the curve and the surface lights' curve share it); an array changed in place, as
+    InverseProblem.correct_direct changes T, gets its own."""
+    from relight_addon.engine import best_lights
+
+    rng = np.random.default_rng(5)
+    t = rng.random((30, 12))
+    G = best_lights.gram(t)
+    assert best_lights.gram(t) is G and np.allclose(G, t.T @ t)
+    cols = np.array([0, 3, 4, 9])
+    sub = best_lights.column_subset([t, t, t], cols)
+    assert sub[0] is sub[1] is sub[2] and np.allclose(best_lights.gram(sub[0]), t[:, cols].T @ t[:, cols])
+    t[:, 2] += 1.0  # in place
+    assert np.allclose(best_lights.gram(t), t.T @ t)

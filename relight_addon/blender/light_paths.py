@@ -25,12 +25,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine.bounces import TAIL, bounce_deficit, kept_terms, required_bounces
+from ..engine.bounces import TAIL, bounce_deficit, kept_terms, matvec, required_bounces
 from ..engine.units import MAX_REFLECTANCE, radiance_from_exitance
 
 __all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_materials",
            "scene_max_reflectance",
-           "assess", "assess_solve", "assess_radiosity"]
+           "assess", "assess_solve", "assess_radiosity", "snapshot"]
 
 #: a difference on the targets above this (relative) is worth a warning
 NOTICEABLE = 0.01
@@ -119,17 +119,24 @@ def scene_max_reflectance(context=None) -> float:
     return scene_materials(context)["max_reflectance"]
 
 
-def _matvec(F, x):
-    return F.matvec(x) if hasattr(F, "matvec") else np.asarray(F @ x, dtype=np.float64)
+def snapshot(scene) -> dict:
+    """What ``assess`` reads of the scene (its light-path settings and the largest glossy share of
+    its materials), read once on the main thread: ``assess(None, ..., settings=snapshot(scene))``
+    then runs in any thread (Live mode's worker)."""
+    return {"scene": current_settings(scene), "max_glossy": scene_materials()["max_glossy"]}
 
 
-def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", glossy_share=None) -> tuple:
+def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", glossy_share=None,
+           settings=None) -> tuple:
     """(render_settings block, warnings) for radiosity ``B`` (P, 3) W/m^2 on patches of
     ``reflectance`` with form factors ``F``, if the scene is rendered with its current settings.
     ``mask``: the patches the difference is reported on (``what`` names them);
     ``glossy_share``: the largest glossy part of the materials' reflectance (whether Filter
-    Glossy matters; default: read from the scene's materials)."""
-    cur = current_settings(scene)
+    Glossy matters; default: read from the scene's materials). ``settings``: ``snapshot``'s,
+    instead of reading the scene (no bpy)."""
+    cur = current_settings(scene) if settings is None else dict(settings["scene"])
+    if settings is not None and glossy_share is None:
+        glossy_share = settings["max_glossy"]
     rho = np.asarray(reflectance, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
     rho_max = float(rho.max()) if rho.size else 0.0
@@ -165,7 +172,7 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "bounce without keeping their energy, so the specular layers render darker in indirect light "
                         "(measured ~4 % on targets of default Principled materials; not estimated here); use Match "
                         "Cycles Light Paths (--out turns it off)")
-    e = B - rho * _matvec(F, B)  # the exitance that gives B
+    e = B - rho * matvec(F, B)  # the exitance that gives B
     radiance_max = float(radiance_from_exitance(max(e.max(), 0.0)))
     clamps = {k: cur[k] for k in ("sample_clamp_direct", "sample_clamp_indirect") if cur[k] > 0}
     if clamps:
@@ -180,13 +187,14 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
     return block, warnings
 
 
-def assess_solve(scene, outcome) -> tuple:
-    """``assess`` for a solve's final configuration, on its target patches."""
+def assess_solve(scene, outcome, settings=None) -> tuple:
+    """``assess`` for a solve's final configuration, on its target patches (``settings``: a
+    ``snapshot``, no bpy)."""
     problem, patches = outcome.problem, outcome.patches
     B = np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64)
     mask = problem.target_mask
     what = "targets" if outcome.report.get("command") == "solve" else "lit faces"
-    return assess(scene, problem.F, patches.reflectance, B, mask, patches.area, what)
+    return assess(scene, problem.F, patches.reflectance, B, mask, patches.area, what, settings=settings)
 
 
 def assess_radiosity(scene, result) -> tuple:

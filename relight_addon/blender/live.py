@@ -30,7 +30,7 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from . import export, preparation
+from . import export, light_paths, preparation
 from ..pipeline import jobs
 
 __all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "status_text"]
@@ -110,6 +110,7 @@ class LiveSession:
     def _start_live(self, job, state, faces):
         self.solving = self.paint
         self.status = "solving"
+        settings = light_paths.snapshot(bpy.data.scenes[self.scene])  # the worker finishes the report
 
         def work():
             t0 = time.perf_counter()
@@ -122,6 +123,8 @@ class LiveSession:
                                             session=job.session)
                 out = full.run(cancel=self.cancel.is_set)
                 self.result["job"] = full
+            self.result["job"].finish(None, out, view_radiance=False, settings=settings)
+            self.result["finished"] = True
             self.result["seconds"] = time.perf_counter() - t0
             return out
 
@@ -179,7 +182,9 @@ class LiveSession:
         try:
             from .ui import operators
 
-            operators.show_solve(context, result["job"], outcome)
+            # the meshes are the exported ones (the geometry digest, checked at every change)
+            operators.show_solve(context, result["job"], outcome, finished=result.get("finished", False),
+                                 trusted=self.base is not None)
         except Exception as exc:  # noqa: BLE001  (SceneError, ValueError: the scene is unchanged)
             self.paused, self.status = f"{exc}", "paused"
             return
@@ -203,11 +208,12 @@ class LiveSession:
 
 
 def _geometry_digest(objects) -> str:
-    """A digest of the exported objects' base meshes (vertex positions, polygon loops) and
-    placement: what a stroke never changes."""
+    """A digest of the exported objects' evaluated meshes (vertex positions and polygon loops,
+    after their modifiers and shape keys: the export's) and placement: what a stroke never changes."""
     h = hashlib.blake2b(digest_size=16)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
     for ob in objects:
-        me = ob.data
+        me = ob.evaluated_get(depsgraph).data
         co = export.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
         loops = export.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
         h.update(co.tobytes())

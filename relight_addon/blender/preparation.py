@@ -76,11 +76,12 @@ class SolveJob:
             outcome.warnings.append(f"solved from scratch: {why}")
         return outcome
 
-    def finish(self, scene, outcome, view_radiance=True, input_path=None):
+    def finish(self, scene, outcome, view_radiance=True, input_path=None, settings=None):
         """The report finished with what only Blender can tell: the render settings of the scene's
-        Cycles light paths, and (``view_radiance``) the radiance along the target faces' normals."""
+        Cycles light paths, and (``view_radiance``) the radiance along the target faces' normals.
+        ``settings``: light_paths.snapshot(scene), read before (then any thread: ``scene`` unused)."""
         rows = self.normal_radiance(outcome) if view_radiance else None
-        report.finish(outcome.report, outcome.warnings, light_paths.assess_solve(scene, outcome), rows,
+        report.finish(outcome.report, outcome.warnings, light_paths.assess_solve(scene, outcome, settings), rows,
                       export_seconds=self.exp.seconds, input_path=input_path)
         return outcome
 

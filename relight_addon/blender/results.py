@@ -138,18 +138,20 @@ def store_result(scene, outcome, fingerprints=None, text=None) -> str:
     return rid
 
 
-def show_outcome(scene, outcome, fingerprints=None) -> dict:
+def show_outcome(scene, outcome, fingerprints=None, trusted=False) -> dict:
     """Replace any previous result by this solve's: store its curve, show its final configuration.
     All-or-nothing: the new result is packed (finite values) and checked against the scene (every
     object present and unchanged since the export) before the previous one is touched; should
-    showing still fail, the new result is cleared and the error raised."""
+    showing still fail, the new result is cleared and the error raised. ``trusted``: the caller
+    has checked that the meshes are the exported ones (Live mode, on its own digest of them):
+    their fingerprints are not evaluated again."""
     data = _stored_data(outcome, fingerprints)
     text = data.pack()  # ValueError on non-finite values: nothing changed yet
-    check_stored(scene, data)  # StaleResult when the scene changed during the solve: nothing changed yet
+    check_stored(scene, data, trusted)  # StaleResult when the scene changed during the solve: nothing changed yet
     clear_results(scene)
     store_result(scene, outcome, fingerprints, text)
     try:
-        return apply_stored_point(scene, outcome.final_index)
+        return apply_stored_point(scene, outcome.final_index, trusted)
     except BaseException:
         clear_results(scene)
         raise
@@ -172,10 +174,11 @@ def _objects_of(scene, data):
     return out
 
 
-def check_stored(scene, data):
-    """Validate the stored result against the scene: every object present and unchanged."""
+def check_stored(scene, data, trusted=False):
+    """Validate the stored result against the scene: every object present and unchanged (its
+    polygon count; its fingerprint unless ``trusted``: show_outcome's)."""
     objs = _objects_of(scene, data)
-    fps = data.meta.get("fingerprints", {})
+    fps = {} if trusted else data.meta.get("fingerprints", {})
     for oi, ob in objs.items():
         fp = fps.get(ob.name)
         n = int(data.polygon_offset[oi + 1] - data.polygon_offset[oi])
@@ -588,7 +591,7 @@ def check_writers(data) -> None:
                              f"({kind if kind is not None else f'code {code}'}); run Solve & Reduce again")
 
 
-def apply_stored_point(scene, index) -> dict:
+def apply_stored_point(scene, index, trusted=False) -> dict:
     """Show configuration ``index`` of the stored curve: the emitters object (cells with a positive
     exitance: a material cannot emit negative light), the radiosity layer, and in direct-lighting
     mode the scene's emitters switched off and its lamps set (the kept ones' Power and colour,
@@ -601,7 +604,7 @@ def apply_stored_point(scene, index) -> dict:
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
     index = int(index)
-    objs = check_stored(scene, data)
+    objs = check_stored(scene, data, trusted)
     check_writers(data)
     exitance = data.exitance[index].astype(np.float64)
     if not (np.all(np.isfinite(exitance)) and np.all(np.isfinite(data.radiosity[index]))):

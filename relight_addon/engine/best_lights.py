@@ -47,6 +47,7 @@ All functions are pure numpy/scipy; indices are the problem's lights (columns of
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 import warnings as _warnings
@@ -106,6 +107,48 @@ def _as_transfer(T):
     if len({a.shape for a in out}) != 1:
         raise ValueError(f"the 3 transfer matrices differ in shape: {[a.shape for a in out]}")
     return out
+
+
+#: digest of an (m, n) transfer array -> its Gram matrix T^T T (the last GRAMS_KEPT): the
+#: certificate, the curve and the surface lights' curve of one problem share one per channel
+#: (``gram``, ``column_subset``); keyed by content, so an array changed in place is computed anew
+_GRAMS = {}
+GRAMS_KEPT = 8
+
+
+def _digest(t) -> bytes:
+    return hashlib.blake2b(np.ascontiguousarray(t).view(np.uint8), digest_size=16).digest() + bytes(str(t.shape),
+                                                                                                   "ascii")
+
+
+def _keep_gram(key, G):
+    G.setflags(write=False)
+    _GRAMS[key] = G
+    while len(_GRAMS) > GRAMS_KEPT:
+        del _GRAMS[next(iter(_GRAMS))]
+    return G
+
+
+def gram(t) -> np.ndarray:
+    """T^T T of the (m, n) float64 array ``t`` (read-only: shared), computed once per content."""
+    key = _digest(t)
+    G = _GRAMS.get(key)
+    return G if G is not None else _keep_gram(key, t.T @ t)
+
+
+def column_subset(T, columns) -> list:
+    """The 3 transfer matrices' ``columns`` (channels sharing an array still share one), their
+    Gram matrices taken from the whole ones' when those are known (no new product)."""
+    columns = np.asarray(columns, dtype=np.int64)
+    out = {}
+    for t in T:
+        if id(t) not in out:
+            sub = np.ascontiguousarray(t[:, columns], dtype=np.float64)
+            G = _GRAMS.get(_digest(np.ascontiguousarray(t, dtype=np.float64)))
+            if G is not None:
+                _keep_gram(_digest(sub), np.ascontiguousarray(G[np.ix_(columns, columns)]))
+            out[id(t)] = sub
+    return [out[id(t)] for t in T]
 
 
 def _as_targets(b, m):
@@ -210,7 +253,7 @@ class _Model:
         self.G, self.d = {}, {}
         for key, chans in self.groups.items():
             t = self.T[chans[0]]
-            G = t.T @ t
+            G = gram(t)
             self.G[key] = G
             self.d[key] = np.diag(G).copy()
         self.h = np.stack([self.T[c].T @ self.b[:, c] for c in range(3)], axis=1)  # (n, 3)

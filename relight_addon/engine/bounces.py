@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-__all__ = ["TAIL", "MAX_BOUNCES", "kept_terms", "required_bounces", "truncated_radiosity", "bounce_deficit"]
+__all__ = ["TAIL", "MAX_BOUNCES", "kept_terms", "required_bounces", "truncated_radiosity", "bounce_deficit", "matvec"]
 
 TAIL = 0.005
 #: Cycles' largest bounce limit
@@ -47,8 +47,15 @@ def required_bounces(rho_max: float, tail: float = TAIL) -> int:
     return int(min(MAX_BOUNCES, max(1, n - 2)))
 
 
-def _matvec(F, x):
-    return F.matvec(x) if hasattr(F, "matvec") else np.asarray(F @ x, dtype=np.float64)
+def matvec(F, x):
+    """F x in float64 (F: an operator with ``matvec``, or a dense or sparse matrix). A float32 F
+    multiplies x in float32 (numpy would otherwise copy the whole of F to float64 for each product:
+    a dense F of 2,300 patches is 21 MB), its result rounded to 1e-7 relative."""
+    if hasattr(F, "matvec"):
+        return F.matvec(x)
+    if getattr(F, "dtype", None) == np.float32:
+        return np.asarray(F @ np.asarray(x, dtype=np.float32), dtype=np.float64)
+    return np.asarray(F @ x, dtype=np.float64)
 
 
 def truncated_radiosity(F, reflectance, B, n: int) -> np.ndarray:
@@ -57,10 +64,10 @@ def truncated_radiosity(F, reflectance, B, n: int) -> np.ndarray:
     limit of n - 1, ``kept_terms``)."""
     rho = np.asarray(reflectance, dtype=np.float64)
     B = np.asarray(B, dtype=np.float64)
-    term = B - rho * _matvec(F, B)
+    term = B - rho * matvec(F, B)
     total = term.copy()
     for _ in range(int(n)):
-        term = rho * _matvec(F, term)
+        term = rho * matvec(F, term)
         total += term
     return total
 

@@ -84,7 +84,7 @@ def override():
 
 def mods():
     return {k: sys.modules[f"{PKG}.{k}"] for k in ("blender.results", "blender.ui.panels", "blender.ui.operators",
-                                                   "blender.ui.viewport", "blender.export")}
+                                                   "blender.ui.viewport", "blender.export", "blender.live")}
 
 
 # --- input ----------------------------------------------------------------------------------

@@ -305,10 +305,10 @@ def sync_curve_list(scene):
     results.update_chart(scene)
 
 
-def store_outcome(context, outcome, fingerprints=None):
+def store_outcome(context, outcome, fingerprints=None, trusted=False):
     """Keep the curve in the scene and show the final configuration (main thread); returns the
-    messages about objects that could not show everything."""
-    shown = results.show_outcome(context.scene, outcome, fingerprints)
+    messages about objects that could not show everything (``trusted``: results.show_outcome's)."""
+    shown = results.show_outcome(context.scene, outcome, fingerprints, trusted)
     _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
     context.scene.relight.curve_result = results.result_id(context.scene) or ""
     context.scene.relight.apply_error = ""
@@ -316,12 +316,14 @@ def store_outcome(context, outcome, fingerprints=None):
     return shown["skipped"]
 
 
-def show_solve(context, job, outcome) -> list:
+def show_solve(context, job, outcome, finished=False, trusted=False) -> list:
     """A solve's outcome into the scene (main thread, Object Mode): the report finished (light
-    paths), the curve stored and its final configuration shown, the sidebar's summary and
-    warnings; returns the warnings. Raises SceneError / ValueError, the scene unchanged."""
-    job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
-    skipped = store_outcome(context, outcome, job.exp.fingerprints)
+    paths; ``finished``: the worker did it), the curve stored and its final configuration shown,
+    the sidebar's summary and warnings; returns the warnings. Raises SceneError / ValueError, the
+    scene unchanged. ``trusted``: results.show_outcome's."""
+    if not finished:
+        job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
+    skipped = store_outcome(context, outcome, job.exp.fingerprints, trusted)
     warnings = list(outcome.warnings) + list(skipped or [])
     settings = context.scene.relight
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))

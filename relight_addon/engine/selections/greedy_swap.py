@@ -15,7 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..best_lights import EQUAL_ERROR_RTOL, best_k_curve, best_k_with_certificate
+from ..best_lights import EQUAL_ERROR_RTOL, best_k_curve, best_k_with_certificate, column_subset
 from ..registry import SELECTIONS
 
 
@@ -45,8 +45,7 @@ def greedy_swap(s):
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts,
                                             cancel=lambda: stop["cancel"], progress=progress)
     if both and not stop["cancel"]:
-        columns = {}
-        T = [columns.setdefault(id(t), t[:, surface]) for t in p.transfer]
+        T = column_subset(p.transfer, surface)
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
                              cancel=lambda: stop["cancel"], progress=lambda d, t: progress(d, t, 1))
         curve = never_worse(curve, cells, surface, tol=EQUAL_ERROR_RTOL * max(float(np.linalg.norm(p.b_target)),
