@@ -79,8 +79,15 @@ class LiveSession:
                 self._start_full(context)
             return
         if job is not self.base:  # a new preparation: Live's first solve, or Solve & Reduce
+            if self.worker is not None:
+                return  # (a stroke's full solve: collected first)
             self.base, self.changed, self.paused, self.dirty = job, set(), None, True
             self.geometry = _geometry_digest(job.exp.objects)
+            problem = state.model.problem  # the transfer to every patch, made before the first stroke
+            self.status = "preparing the transfer to every patch"
+            self._run(lambda: problem.all_rows_transfer() and None, job)
+            self.result["prewarm"] = True
+            return
         if not self.changed and self.options_fn(context.scene.relight).to_dict() != state.options.to_dict():
             self.changed.add("the options")
         if self.changed:
@@ -164,6 +171,9 @@ class LiveSession:
             self.status = "paused"
             self.paused = None if isinstance(exc, jobs.Cancelled) else f"{exc}"
             self.error = self.paused
+            return
+        if result.get("prewarm"):
+            self.status = "ready"
             return
         outcome = result.get("outcome")
         if outcome is None:  # the state could not follow: say why, wait for Solve & Reduce

@@ -422,15 +422,17 @@ def floor_strokes(floor, n_strokes=3, per_stroke=4):
     centres = [M @ p.center for p in floor.data.polygons]
     hub = sum((centres[k] for k in np.flatnonzero(painted)), centres[0] * 0) / max(int(painted.sum()), 1)
     free = sorted(np.flatnonzero(~painted), key=lambda k: (centres[k] - hub).length)
-    paths = []
-    for i in range(n_strokes):
-        pts = []
-        for k in free[i * per_stroke:(i + 1) * per_stroke]:
-            p = location_3d_to_region_2d(r, rv3d, centres[k])
-            if p is not None and 5 < p.x < r.width - 5 and 5 < p.y < r.height - 5:
-                pts.append(to_screen(r, p.x, p.y))
-        paths.append(pts)
-    return paths
+    right = region("UI", a).x - r.x  # the sidebar overlaps the region's right side
+    pts = []
+    for k in free:
+        p = location_3d_to_region_2d(r, rv3d, centres[k])
+        if p is not None and 20 < p.x < right - 20 and 20 < p.y < r.height - 20:
+            pts.append(to_screen(r, p.x, p.y))
+    FLOOR_POINTS[:] = [len(free), len(pts)]
+    return [pts[i * per_stroke:(i + 1) * per_stroke] for i in range(n_strokes)]
+
+
+FLOOR_POINTS = [0, 0]  # unpainted floor faces, of which in view (floor_strokes' last)
 
 
 def drag(points):
@@ -488,7 +490,7 @@ def live_mode(scene, settings, floor):
     RESULT["timings"]["live"] = {"answer_after_stroke_s": waits, "longest_pause_s": pauses,
                                  "last": live.status_text(s)}
     check("the lights change after each stroke in Live mode", changed and all(changed),
-          f"{changed}; {live.status_text(s)}")
+          f"{changed}; {live.status_text(s)}; unpainted floor faces {FLOOR_POINTS[0]}, in view {FLOOR_POINTS[1]}")
     check("the brush stays responsive in Live mode", pauses and max(pauses) < PAUSE_LIMIT,
           f"longest main-thread pauses per stroke {pauses} s; answers {waits} s after the stroke")
     # ESC right after a stroke: the re-solve running (if any) is dropped; the scene keeps the last answer
@@ -786,6 +788,7 @@ def scenario():
     # change after each; the brush never waits (the main thread's pauses recorded); ESC turns it
     # off with the scene as last written
     yield from live_mode(scene, settings, floor)
+    result_before = scene.get("relight_result")  # (Live wrote its answers)
 
     # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
     settings.rays_per_patch = 262144

@@ -1,0 +1,166 @@
+"""Live mode (issue 20): a stroke of about a dozen faces, through the add-on's Live session in one
+bpy process (blender/live.py, ticked as the modal operator's timer ticks it), against a cold solve
+of the same painted scene, one run each.
+
+Per scene: Live's first answer (a full solve through the session: the preparation), the transfer
+to every patch (InverseProblem.all_rows_transfer, made at the first stroke) and what the session
+keeps, then three strokes of 12 unpainted faces next to the painted ones: each stroke's re-solve in
+the worker (PreparedScene.live: the selection, the certificate, the curve, the report), the write
+on the main thread (the lights, the radiosity layer, the chart: operators.show_solve), the final
+relative error, and a cold solve (jobs.run_solve) of the last stroke's painted scene with its
+error.
+
+    .venv/bin/python benchmarks/bench_live.py [--only NAME]
+
+Writes benchmarks/results/bench_live.json and prints a table (docs/benchmarks.md).
+"""
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "tests"))
+OUT = os.path.join(ROOT, "benchmarks", "results", "bench_live.json")
+
+import bpy  # noqa: E402
+
+import artist_scenes  # noqa: E402
+import relight_addon  # noqa: E402
+from relight_addon.blender import export, live, preparation  # noqa: E402
+from relight_addon.blender.ui import operators  # noqa: E402
+from relight_addon.pipeline import jobs, prepared  # noqa: E402
+
+#: (name, living_room detail or a sample, paint object, patch model)
+CASES = [("living room 22k", 2, "Floor", "adaptive"), ("living room 1M", 5, "Floor", "adaptive"),
+         ("staircase", "staircase_targets.blend", "flight_1", "polygon")]
+
+
+def nbytes(x, seen=None) -> int:
+    """Bytes of the numpy arrays and sparse matrices reachable from ``x`` (each counted once)."""
+    seen = set() if seen is None else seen
+    if id(x) in seen:
+        return 0
+    seen.add(id(x))
+    if isinstance(x, np.ndarray):
+        return x.nbytes
+    if hasattr(x, "data") and hasattr(x, "indices") and hasattr(x, "indptr"):
+        return x.data.nbytes + x.indices.nbytes + x.indptr.nbytes
+    if isinstance(x, (list, tuple)):
+        return sum(nbytes(v, seen) for v in x)
+    if isinstance(x, dict):
+        return sum(nbytes(v, seen) for v in x.values())
+    if hasattr(x, "lu") and isinstance(getattr(x, "lu"), tuple):  # a dense LU factor
+        return sum(nbytes(v, seen) for v in x.lu)
+    if hasattr(x, "__dict__") and type(x).__module__.startswith(("relight_addon",)):
+        return sum(nbytes(v, seen) for v in vars(x).values())
+    return 0
+
+
+def run(s, until, timeout=1800):
+    t0 = time.monotonic()
+    while not until():
+        if time.monotonic() - t0 > timeout or s.paused:
+            raise RuntimeError(f"Live did not answer: {s.status} {s.paused}")
+        bpy.context.view_layer.update()
+        s.tick(bpy.context)
+        time.sleep(0.005)
+
+
+def stroke_faces(ob, n, k):
+    """The k-th dozen of the object's unpainted polygons nearest its painted ones (as a brush extends paint)."""
+    me = ob.data
+    col = np.zeros((len(me.loops), 4), dtype=np.float32)
+    me.color_attributes["relight_target"].data.foreach_get("color", col.ravel())
+    starts = np.zeros(len(me.polygons), dtype=np.int64)
+    me.polygons.foreach_get("loop_start", starts)
+    painted = col[starts, 3] >= 0.5
+    cen = np.zeros(3 * len(me.polygons))
+    me.polygons.foreach_get("center", cen)
+    cen = cen.reshape(-1, 3)
+    hub = cen[painted].mean(axis=0)
+    free = np.flatnonzero(~painted)
+    free = free[np.argsort(np.linalg.norm(cen[free] - hub, axis=1))]
+    return free[:n].tolist(), tuple(col[starts[np.flatnonzero(painted)[0]], :3])
+
+
+def case(name, source, paint_on, model):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if isinstance(source, int):
+        artist_scenes.living_room(source)
+    else:
+        bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "sample_blends", source))
+    scene = bpy.context.scene
+    scene.relight.patch_model = model
+    preparation.PREPARED.clear()
+    s = live.start(bpy.context, operators.job_options)
+    t0 = time.perf_counter()
+    run(s, lambda: s.updates == 1)
+    t_first = time.perf_counter() - t0
+    state = preparation.PREPARED[scene.name]
+    job = preparation.PREPARED_JOBS[scene.name]
+    t0 = time.perf_counter()
+    state.model.problem.all_rows_transfer()
+    t_rows = time.perf_counter() - t0
+    ob = bpy.data.objects[paint_on]
+    strokes = []
+    for k in range(3):
+        faces, rgb = stroke_faces(ob, 12, k)
+        artist_scenes.paint(ob, faces, rgb)
+        n = s.updates
+        run(s, lambda: s.updates == n + 1)
+        rep = export.repaint(job.exp)
+        strokes.append({"solve_s": s.last_seconds[0], "write_s": s.last_seconds[1],
+                        "from_state": state.reason is None, "live": state.live_solves,
+                        "error": float(bpy.context.scene.relight.curve[
+                            bpy.context.scene.relight.curve_index].relative_error),
+                        "targets": int(rep.target.sum())})
+        print(name, "stroke", k, strokes[-1], flush=True)
+    live.stop(scene.name)
+    faces = export.repaint(job.exp)
+    options = job.options
+    t0 = time.perf_counter()
+    cold = jobs.run_solve(faces, options, **job.inputs)
+    t_cold = time.perf_counter() - t0
+    kept = nbytes(state.model) + nbytes(state.form_factors) + nbytes(state.kernel_rows)
+    row = {"scene": name, "model": model, "triangles": int(len(job.exp.faces.triangles)),
+           "patches": int(state.patches.n_patches), "lights": int(state.model.problem.n_lights),
+           "first_s": t_first, "all_rows_s": t_rows, "kept_bytes": int(kept), "strokes": strokes,
+           "cold_s": t_cold, "cold_error": float(cold.report["final"]["relative_error"])}
+    print(json.dumps(row), flush=True)
+    return row
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--only", help="run only the case of this name (rows of the others are kept)")
+    args = ap.parse_args()
+    relight_addon.register()
+    rows = []
+    if args.only and os.path.exists(OUT):
+        rows = [r for r in json.load(open(OUT))["rows"] if r["scene"] != args.only]
+    for name, source, on, model in CASES:
+        if args.only and name != args.only:
+            continue
+        rows.append(case(name, source, on, model))
+    order = [c[0] for c in CASES]
+    rows.sort(key=lambda r: order.index(r["scene"]))
+    os.makedirs(os.path.dirname(OUT), exist_ok=True)
+    with open(OUT, "w") as fh:
+        json.dump({"command": "benchmarks/bench_live.py", "load": os.getloadavg(), "rows": rows}, fh, indent=1)
+    print("| scene | triangles | patches | lights | preparation (first answer) | transfer to every patch | kept "
+          "| stroke: solve / write | error live / cold | cold solve |")
+    for r in rows:
+        st = r["strokes"]
+        print(f"| {r['scene']}, {r['model']} | {r['triangles']:,} | {r['patches']:,} | {r['lights']} | "
+              f"{r['first_s']:.1f} s | {r['all_rows_s']:.2f} s | {r['kept_bytes'] / 2**20:.0f} MB | "
+              + ", ".join(f"{1000 * x['solve_s']:.0f} / {1000 * x['write_s']:.0f} ms" for x in st)
+              + f" | {st[-1]['error']:.4f} / {r['cold_error']:.4f} | {r['cold_s']:.1f} s |")
+
+
+if __name__ == "__main__":
+    main()
