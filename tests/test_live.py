@@ -114,3 +114,42 @@ def test_stopping_live_drops_a_running_re_solve(addon):
     s.worker.join()
     s.tick(bpy.context)  # a stopped session writes nothing, even if ticked
     assert results.result_id(scene) == written and s.updates == 1
+
+
+def test_kept_lamps_stay_and_the_next_solve_finds_the_rest(addon):
+    """Keep Lamps (issue 20, item 3): the shown lamps become the scene's own (Clear Results and the
+    next solve leave them), the next solve keeps them at their place and power (its fixed light)
+    and finds Max Lights more around them, its error never below the certificate of the rest."""
+    from relight_addon.blender import preparation
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    with pytest.raises(RuntimeError, match="no placed lamp to keep"):  # nothing solved: refused, said
+        bpy.ops.relight.keep_lamps()
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    placed = {o.name: (tuple(o.matrix_world.translation), o.data.energy, tuple(o.data.color))
+              for o in scene.objects if o.type == "LIGHT" and "relight_owner" in o}
+    assert placed, "the solve placed no lamp"
+    assert bpy.ops.relight.keep_lamps() == {"FINISHED"}
+    kept = {n + " (kept)": v for n, v in placed.items()}
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    for name, (loc, energy, color) in kept.items():
+        ob = bpy.data.objects[name]
+        assert "relight_owner" not in ob and ob.name in scene.collection.objects
+        assert np.allclose(ob.matrix_world.translation, loc) and ob.data.energy == energy
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    from relight_addon.blender import results
+
+    data = results.load_result(scene)
+    fixed = scene.relight.last_fixed_light
+    for name, (loc, energy, color) in kept.items():
+        ob = bpy.data.objects[name]  # unchanged by the solve, and counted as the scene's light
+        assert np.allclose(ob.matrix_world.translation, loc) and ob.data.energy == energy and name in fixed
+    # the certificate is of the rest (the candidates, the kept lamps on): the final configuration is
+    # never below it, unless its lamps were refined off the candidates (and then the note says so)
+    i = int(data.final)
+    rel, bound = float(data.curve_relative_error[i]), float(data.curve_bound_relative_error[i])
+    assert bound > 0 and (rel >= bound * (1 - 1e-6) or "were refined" in scene.relight.last_warnings), (rel, bound)
+    assert f"no {int(data.curve_n_lights[i])} non-negative lights can go below {bound:.3g}" in \
+        scene.relight.last_warnings

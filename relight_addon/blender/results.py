@@ -51,7 +51,7 @@ from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
-from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, fingerprint_change, foreach_array, loop_polygons,
+from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
                      owner_of, tag_owned)
 
 EMISSION_ATTRIBUTE = "relight_emission"
@@ -499,6 +499,34 @@ def write_placed(scene, rid, plan) -> None:
     scene.collection.children.link(coll)
     for rec, energy, color in plan:
         coll.objects.link(new_lamp(rec, energy, color, owner=rid))
+
+
+def keep_placed(scene) -> list:
+    """The lamps the shown result placed made the scene's own (issue 20, item 3): untagged (no
+    result removes them), named "<name> (kept)", in the scene's collection. The next solve counts
+    their light as the scene's and finds Max Lights more around them (pipeline/kept.py). Returns
+    their names; nothing placed: SceneError."""
+    from ..pipeline.kept import KEPT_SUFFIX
+
+    rid = result_id(scene)
+    obs = [o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)]
+    if not obs:
+        raise SceneError("the shown configuration has no placed lamp to keep (its lights are emissive cells, or "
+                         "nothing is solved yet)")
+    names = []
+    for ob in obs:
+        for idb in (ob, ob.data):
+            for prop in (RELIGHT_OWNER_PROP, RELIGHT_NAME_PROP):
+                if prop in idb:
+                    del idb[prop]
+        ob.name = ob.name + KEPT_SUFFIX
+        if ob.name not in scene.collection.objects:
+            scene.collection.objects.link(ob)
+        for coll in list(ob.users_collection):
+            if coll is not scene.collection and owner_of(coll) is not None:
+                coll.objects.unlink(ob)
+        names.append(ob.name)
+    return names
 
 
 def _remove_placed(rid) -> int:

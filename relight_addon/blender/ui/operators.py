@@ -642,6 +642,24 @@ class RELIGHT_OT_make_area_lights(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class RELIGHT_OT_keep_lamps(bpy.types.Operator):
+    """Keep the shown lamps at their place and power: they become the scene's own lamps (move or
+    resize them as you like; no result removes them), and the next Solve & Reduce finds Max Lights
+    more around them, its certificate bounding the rest"""
+    bl_idname = "relight.keep_lamps"
+    bl_label = "Keep Lamps"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        try:
+            names = results.keep_placed(context.scene)
+        except (SceneError, ValueError, KeyError) as exc:
+            return _refuse(self, exc)
+        self.report({"INFO"}, f"Kept {len(names)} lamp(s) ({', '.join(names[:4])}): Solve & Reduce finds the rest "
+                              "around them")
+        return {"FINISHED"}
+
+
 class RELIGHT_OT_show_radiosity(bpy.types.Operator):
     """Show the predicted radiosity (Solid shading, Color: Attribute, the relight_radiosity
     layer) in the 3D Viewports, or, when it is shown, give the viewports their shading back"""
@@ -700,6 +718,7 @@ CLASSES = (
     RELIGHT_OT_apply_configuration,
     RELIGHT_OT_clear_results,
     RELIGHT_OT_make_area_lights,
+    RELIGHT_OT_keep_lamps,
     RELIGHT_OT_show_radiosity,
 )
 

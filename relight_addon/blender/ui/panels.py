@@ -518,6 +518,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         col = layout.column(align=True)
         col.operator("relight.select_faces", text="Select Light Faces", icon="RESTRICT_SELECT_OFF").kind = "LIGHT"
         col.operator("relight.make_area_lights", icon="LIGHT_AREA")
+        col.operator("relight.keep_lamps", icon="PINNED")
         shown = viewport.is_shown(context.scene)
         col.operator("relight.show_radiosity", text="Hide Radiosity" if shown else "Show Radiosity",
                      icon="HIDE_ON" if shown else "SHADING_SOLID")
