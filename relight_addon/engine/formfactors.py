@@ -545,6 +545,32 @@ def auto_rays_per_patch(n_patches: int, kernel: bool = False) -> int:
     return int(np.clip(2 ** k, QUALITY["draft"], QUALITY["default"]))
 
 
+def pairs_then_sending_scale(matrix, area, send, rec=None, src=None, K=None, unscale=False):
+    """The ray-cast ``matrix`` (float32, dense or CSR) with the kernel's pairs ``K`` (receivers
+    ``rec`` x sources ``src``, kernel_transfer.apply_kernel_pairs; none when K is None), then every
+    column scaled by the sending scale ``send`` of partly buried patches (a patch sends its light
+    from its visible part: the module docstring), as compute_form_factors builds F. ``unscale``:
+    ``matrix`` is a built F, its sending scale taken out first (pipeline.prepared adds a stroke's
+    kernel rows to the prepared F this way)."""
+    send = np.ones(matrix.shape[0]) if send is None else np.asarray(send, dtype=np.float64)
+    dense = isinstance(matrix, np.ndarray)
+    part = np.flatnonzero(send != 1.0)
+    if unscale and len(part):
+        inv = np.where(send > 0, 1.0 / np.where(send > 0, send, 1.0), 1.0)
+        matrix = matrix.astype(np.float64) * inv[None, :] if dense else (matrix @ sp.diags(inv)).tocsr()
+    elif K is not None and dense:
+        matrix = matrix.copy() if unscale else matrix
+    if K is not None:
+        matrix = apply_kernel_pairs(matrix, area, rec, src, K)
+    if len(part):
+        if dense:
+            matrix = np.asarray(matrix, dtype=np.float32) if matrix.dtype != np.float32 else matrix
+            matrix[:, part] *= send[part].astype(np.float32)
+        else:
+            matrix = (matrix @ sp.diags(send.astype(np.float32))).tocsr()
+    return matrix.astype(np.float32) if matrix.dtype != np.float32 else matrix
+
+
 def compute_form_factors(
     patches: PatchSet,
     rays_per_patch: int | str | None = None,
@@ -634,17 +660,11 @@ def compute_form_factors(
         K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel, sampler=sampler,
                                 progress=None if user_progress is None else (lambda f: user_progress(0.5 + 0.5 * f)),
                                 **(kernel_options or {}))
-        matrix = apply_kernel_pairs(matrix, patches.area, rec, src, K)
         n_kernel = K.size
-    # a partly buried patch sends its light from its visible part (the module docstring)
+    else:
+        rec = src = K = None
     send = sending_scale(visible)
-    part = np.flatnonzero(send != 1.0)
-    if len(part):
-        scale = send
-        if dense:
-            matrix[:, part] *= scale[part].astype(np.float32)
-        else:
-            matrix = (matrix @ sp.diags(scale.astype(np.float32))).tocsr().astype(np.float32)
+    matrix = pairs_then_sending_scale(matrix, patches.area, send, rec, src, K)
     data = matrix if dense else matrix.data
     if not np.all(np.isfinite(data)):
         raise SceneError("form factors contain NaN or infinite values (degenerate geometry?)")

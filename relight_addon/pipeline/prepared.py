@@ -40,8 +40,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..engine.formfactors import auto_rays_per_patch, compute_form_factors
-from ..engine.kernel_transfer import apply_kernel_pairs, kernel_form_factors
+from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
+from ..engine.kernel_transfer import kernel_form_factors
 from ..engine.options import JobOptions
 from ..engine.registry import ESTIMATORS, PATCH_MODELS
 from ..engine.scene import FaceSet, PatchSet
@@ -188,15 +188,9 @@ class PreparedScene:
                                     sampler=F.sampler)
             self.kernel_rows.update({int(r): K[i] for i, r in enumerate(new)})
         K = np.stack([self.kernel_rows[int(r)] for r in rec]) if len(rec) else np.zeros((0, len(src)))
-        # the pairs replace F's entries before the sending scale of partly buried patches (as in
-        # compute_form_factors): taken out of F's columns, put back after
-        send = np.ones(patches.n_patches) if F.send is None else np.asarray(F.send, dtype=np.float64)
-        scale = np.where(send > 0, send, 1.0)
-        M = F.matrix.astype(np.float64) / scale[None, :] if isinstance(F.matrix, np.ndarray) \
-            else F.matrix.multiply(1.0 / scale[None, :]).tocsr()
-        M = apply_kernel_pairs(M, patches.area, rec, src, K)
-        M = (M * scale[None, :]).astype(np.float32) if isinstance(M, np.ndarray) \
-            else M.multiply(scale[None, :]).tocsr().astype(np.float32)
+        # the pairs replace F's entries before the sending scale of partly buried patches, as
+        # compute_form_factors applies them
+        M = pairs_then_sending_scale(F.matrix, patches.area, F.send, rec, src, K, unscale=True)
         self.seconds["kernel rows"] = time.perf_counter() - t0
         return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
 
