@@ -133,6 +133,9 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     assert final.n_negative == 0 and final.n_lights <= options.max_lights
     assert final.error == pytest.approx(live.problem.error(_full(live.problem, final)), rel=1e-9)
     assert np.all(np.isfinite(live.stored.radiosity)) and any("live answer" in w for w in live.warnings)
+    # the layer (every patch's radiosity, from the kept transfer) against a forward solve of the answer
+    B = live.problem.configuration_radiosity(_full(live.problem, final)) + live.problem.background_radiosity
+    np.testing.assert_allclose(live.stored.radiosity[live.final_index], B, rtol=1e-5, atol=1e-6 * np.abs(B).max())
     cold = jobs.run_solve(exp2.faces, options, default_max_patch_size=size)
     assert abs(_final(live)[1] - _final(cold)[1]) <= 0.1 * _final(cold)[1], (_final(live), _final(cold))
     moved = replace(exp2.faces, vertices=exp2.faces.vertices * 1.01)

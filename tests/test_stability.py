@@ -173,6 +173,12 @@ def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     nn = solve_inverse(prob, "nnls")
     assert len(notes) == 1 and "no positive lighting meets these targets" in notes[0]
     assert f"{nn.relative_error:.3g}" in notes[0]
+    # from the certificate's own all-lights NNLS (no second NNLS): the same bound and note
+    from relight_addon.engine.best_lights import lower_bounds
+
+    shared = positive_bound(prob, inv, red.final, lower_bounds(prob.transfer, prob.b_target, 3))
+    assert shared.relative_error == pytest.approx(nn.relative_error, rel=1e-6, abs=1e-9)
+    assert _positivity_notes(shared, red.final) == notes
     # a feasible room: the note, if any, points to more lights instead
     base = CASES["room"][1]() if "room" in CASES else None
     if base is not None:

@@ -757,10 +757,14 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
 def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
-    exact, and the swap search starts from there above. Returns (curve, bounds)."""
+    exact, and the swap search starts from there above. ``initial`` (best_k_curve's: a list
+    indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others.
+    Returns (curve, bounds)."""
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit)
-    initial = [s for s in bounds.optimum_lights if s is not None] + list(kw.pop("initial", None) or [])
-    return best_k_curve(T, b, k_max, light_watts, initial=initial or None, **kw), bounds
+    given = kw.pop("initial", None) or {}
+    starts = dict(given) if isinstance(given, dict) else {k + 1: st for k, st in enumerate(given)}
+    starts.update({k + 1: st for k, st in enumerate(bounds.optimum_lights) if st is not None})
+    return best_k_curve(T, b, k_max, light_watts, initial=starts or None, **kw), bounds
 
 
 def best_k_for_problem(problem, k_max, **kw):
@@ -790,6 +794,7 @@ class LowerBounds:
     nnls_relative: float
     optimum_lights: list = field(default_factory=list)
     seconds: float = 0.0
+    nnls_exitance: np.ndarray = None  # (n, 3): the all-lights NNLS configuration the ``nnls`` bound is of
 
     def at(self, k):
         """Bound for k lights (k beyond k_max: the NNLS bound, valid for every k)."""
@@ -895,10 +900,12 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000):
     # the all-lights NNLS optimum, with its KKT gap checked
     cols = np.flatnonzero(model.usable)
     err2 = model.bb.copy()
+    e_nnls = np.zeros((model.n, 3))
     if len(cols):
         for c in range(3):
             A = model.T[c][:, cols]
             x = _nnls(A, model.b[:, c])
+            e_nnls[cols, c] = x
             r = A @ x - model.b[:, c]
             err2[c] = float(r @ r)
     nnls_err = math.sqrt(max(err2.sum(), 0.0)) * (1 - BOUND_MARGIN)
@@ -925,7 +932,7 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000):
     norm = model.norm if model.norm > 0 else 1.0
     return LowerBounds(k=np.arange(1, k_max + 1), bound=bound, relative=bound / norm, exact=exact,
                        nnls=nnls_err, nnls_relative=nnls_err / norm, optimum_lights=opt_sets,
-                       seconds=time.perf_counter() - t0)
+                       seconds=time.perf_counter() - t0, nnls_exitance=e_nnls)
 
 
 def curve_notes(curve, bounds, target_norm, gap=0.1, k=None):

@@ -495,6 +495,10 @@ class InverseProblem:
             self._all_rows = out
         return self._all_rows
 
+    def prepared_rows_transfer(self):
+        """``all_rows_transfer`` when it is made already, else None (it is never made here)."""
+        return self._all_rows
+
     def retarget(self, target_mask, target_radiosity) -> "InverseProblem":
         """This problem with other targets (the same scene, lights, solvers and fixed light): its
         T is rows of ``all_rows_transfer`` (no factorisation, no solve), its b_P the new targets'

@@ -184,6 +184,8 @@ class Selection:
     tolerance: float | None = None  # the least-power selection's band (relative)
     certificate: object = None  # set by the selection: best_lights.LowerBounds, or left None
     curve_lights: int | None = None  # how far a per-k curve goes (greedy-swap; None: the selection's own)
+    initial: dict | None = None  # {k: lights}: configurations to start from (greedy-swap: an earlier answer's)
+    quick: bool = False  # a stroke's re-solve (Live): the selection's quicker search, where it has one
 
 
 class _ErrorEval:
@@ -276,7 +278,8 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
 def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination", distribution="distance",
                   max_lights=None, error_threshold=None, relative_error_threshold=None,
                   require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
-                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None):
+                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None,
+                  initial=None, quick=False):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
     The whole curve is computed (eliminations down to one light, constructions
@@ -286,8 +289,10 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     from the previous radiosity; exitance-* selections only). ``progress(done,
     total)`` is called every step; ``cancel()`` returning True stops the curve
     where it is (``result.cancelled``). ``curve_lights``: the selections that build a curve per
-    number of lights (greedy-swap) stop there (None: their own length). Deterministic: ties go
-    to the lower index.
+    number of lights (greedy-swap) stop there (None: their own length). ``initial`` {k: lights}
+    and ``quick``: a stroke's re-solve (Live): configurations to start from (an earlier answer's)
+    and the selection's quicker search (greedy-swap: without the surface lights' own curve).
+    Deterministic: ties go to the lower index.
     """
     method = SELECTIONS[selection]
     if error_route not in ERROR_ROUTES:
@@ -333,7 +338,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
 
     dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
     sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
-                    curve_lights=curve_lights)
+                    curve_lights=curve_lights, initial=initial, quick=quick)
     notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")

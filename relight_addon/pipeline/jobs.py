@@ -25,7 +25,7 @@ from ..engine.cost import DIRECT_LIGHTS, check_memory, estimate_cost, estimate_p
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.kernel_transfer import lights_direct_correction
 from ..engine.incidence import first_bounce_matrices, incidence_tables, lamp_albedo_excess, lamp_excess
-from ..engine.inverse import InverseError, InverseProblem, direct_lighting_problem, solve_inverse
+from ..engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
 from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, append_lamps, candidate_mask
@@ -475,15 +475,17 @@ def solve_stage(model: Model, options: JobOptions) -> tuple:
 
 
 def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None,
-                 curve_lights=None) -> ReductionResult:
-    """Stage 3: the selection x distribution over the whole curve (a per-k curve to
-    ``curve_lights`` when given); the stop criteria pick the final point."""
+                 curve_lights=None, initial=None) -> ReductionResult:
+    """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the
+    final point. ``curve_lights``, ``initial``: a stroke's re-solve (Live; reduce_lights': a
+    per-k curve to ``curve_lights``, the quick search, from the configurations ``initial``)."""
     by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
     red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
                         max_lights=None if by_lp else options.max_lights,
                         relative_error_threshold=None if by_lp else options.error_threshold,
                         require_positive=options.require_positive, tolerance=options.param("tolerance"),
                         coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
+                        initial=initial, quick=curve_lights is not None,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
@@ -828,22 +830,27 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
     for k, ci in enumerate(keep):
         pt = red.curve[ci]
         E[k, pt.lights] = pt.exitance
-    E_patch = np.zeros((P, n_pts, 3))
-    for k in range(n_pts):  # the lights' exitance on their patches
-        E_patch[C, k] = problem.light_basis @ E[k]
-    H = problem.lights.irradiance
-    if problem.direct_correction is not None:  # the curve's lights' direct light by the kernel (direct_stage)
-        H = problem.direct_correction if H is None else (sp.csc_matrix(H) + problem.direct_correction).tocsc()
-    facs = problem.factors()
     B = np.empty((n_pts, P, 3))
-    S = problem.source(E_patch)
-    for c in range(3):  # every light's source (engine.lights), transported
-        src = S[:, :, c]
-        if H is not None:
-            src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
-        if problem.lamp_excess is not None:
-            src = src + np.asarray(problem.lamp_excess[c] @ E[:, :, c].T)
-        B[:, :, c] = (facs[c].solve(src) + problem.background_radiosity[:, c:c + 1]).T
+    T_all = problem.prepared_rows_transfer()
+    if T_all is not None:  # a retargeted problem (Live): every light's radiosity on every patch, kept
+        for c in range(3):
+            B[:, :, c] = (T_all[c] @ E[:, :, c].T + problem.background_radiosity[:, c:c + 1]).T
+    else:
+        H = problem.lights.irradiance
+        if problem.direct_correction is not None:  # the curve's lights' direct light by the kernel (direct_stage)
+            H = problem.direct_correction if H is None else (sp.csc_matrix(H) + problem.direct_correction).tocsc()
+        facs = problem.factors()
+        E_patch = np.zeros((P, n_pts, 3))
+        for k in range(n_pts):  # the lights' exitance on their patches
+            E_patch[C, k] = problem.light_basis @ E[k]
+        S = problem.source(E_patch)
+        for c in range(3):  # every light's source (engine.lights), transported
+            src = S[:, :, c]
+            if H is not None:
+                src = src + patches.reflectance[:, c:c + 1] * np.asarray(H @ E[:, :, c].T)
+            if problem.lamp_excess is not None:
+                src = src + np.asarray(problem.lamp_excess[c] @ E[:, :, c].T)
+            B[:, :, c] = (facs[c].solve(src) + problem.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
     pmap = PolygonMap(model.faces, patches, polygon_counts)
@@ -913,13 +920,14 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
 
 
 def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None,
-                live=False):
+                live=False, initial=None):
     """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct
     light, the certificate, the lamp refinement, the curve and the report; a SolveOutcome.
     ``t0``: when the job started (perf_counter), for the report's total. ``live``: a stroke's
     re-solve on a retargeted model (retarget_model): the curve to Max Lights + LIVE_CURVE_EXTRA,
     without the kernel's direct light of lights the model has not corrected yet and without the
-    lamp refinement (the model's lamps, refined for the earlier targets, are candidates)."""
+    lamp refinement (the model's lamps, refined for the earlier targets, are candidates), the
+    selection's quick search from the configurations ``initial`` {n_lights: lights}."""
     mode = model.mode
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
@@ -931,14 +939,15 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
         raise Cancelled("solve cancelled")
     t2 = time.perf_counter()
     red = reduce_stage(model, e_x, options, progress, cancel,
-                       curve_lights=int(options.max_lights) + LIVE_CURVE_EXTRA if live else None)
+                       curve_lights=int(options.max_lights) + LIVE_CURVE_EXTRA if live else None,
+                       initial=initial if live else None)
     t_direct = time.perf_counter()
     model.direct = None if live else direct_stage(model, red, options, cancel)
     t_direct = time.perf_counter() - t_direct
     bounds = point_bounds = positive = None
     if mode == "inverse":  # of the candidate lights (the refined lamps are found after, outside them)
         bounds = certificate(model.problem, red)
-        positive = positive_bound(model.problem, inv, red.final)
+        positive = positive_bound(model.problem, inv, red.final, bounds)
     t_refine = time.perf_counter()
     model.lamp_refinement = None if live else refine_stage(model, red, options, progress, cancel)
     t_refine = time.perf_counter() - t_refine
@@ -989,12 +998,21 @@ def placed_light_at(model: Model, strength) -> list:
 POSITIVE_GAP = 0.1
 
 
-def positive_bound(problem, inv, final):
+def positive_bound(problem, inv, final, bounds=None):
     """NNLS on T when ``final`` misses the targets by more than POSITIVE_GAP (the best any set of
-    the candidate lights, non-negative, can do: an InverseResult), else None."""
+    the candidate lights, non-negative, can do: an InverseResult), else None. ``bounds``: the
+    certificate of the same T, whose all-lights NNLS it is when it has it."""
     if not final.relative_error > POSITIVE_GAP:
         return None
-    return inv if inv is not None and inv.solver == "nnls" else solve_inverse(problem, "nnls")
+    if inv is not None and inv.solver == "nnls":
+        return inv
+    e = getattr(bounds, "nnls_exitance", None)
+    if e is None or e.shape != (problem.n_lights, 3):
+        return solve_inverse(problem, "nnls")
+    err = problem.error(e)
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    return InverseResult(solver="nnls", exitance=e, rank=int((e.max(axis=1) > 0).sum()), error=err,
+                         relative_error=err / norm, n_negative=0, seconds=0.0)
 
 
 def _positivity_notes(bound, final):

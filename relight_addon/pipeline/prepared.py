@@ -127,6 +127,7 @@ class PreparedScene:
     reason: str = None  # why the last solve started from scratch (None: from the kept state)
     model: object = None  # jobs.Model of the last solve (``live`` retargets it)
     live_solves: int = 0  # live re-solves made
+    starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -223,6 +224,7 @@ class PreparedScene:
         else:
             self.patches, self.model = outcome.patches, outcome.model
             self.paint = (faces.target.copy(), faces.target_radiosity.copy())
+            self.starts = _starts(outcome)
         return outcome
 
     def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
@@ -238,9 +240,16 @@ class PreparedScene:
         jobs.check_solvable(faces, "inverse", notes)
         t0 = time.perf_counter()
         model = jobs.retarget_model(self.model, faces, self.painted(faces))
-        outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True)
+        outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,
+                                   initial=dict(self.starts))  # (the last solve's: the answer is of the paint alone)
         self.live_solves += 1
         outcome.warnings.append(jobs.LIVE_NOTE.format(
             why=f"the lights offered and refined for the last solve's targets, {self.model.problem.m} target "
                 "patches; the new targets' direct light by the ray-cast form factors"))
         return outcome
+
+
+def _starts(outcome) -> dict:
+    """{n_lights: lights} of an answer's non-negative configurations (a live re-solve's starts)."""
+    return {int(pt.n_lights): np.asarray(pt.lights, dtype=np.int64).copy() for pt in outcome.reduction.curve
+            if pt.n_negative == 0 and pt.n_lights > 0}

@@ -435,6 +435,22 @@ def floor_strokes(floor, n_strokes=3, per_stroke=4):
 FLOOR_POINTS = [0, 0]  # unpainted floor faces, of which in view (floor_strokes' last)
 
 
+HOW = []  # how each Live stroke was painted, and the targets before and after
+
+
+def op_stroke(points):
+    """The stroke through ``points`` (screen) by Vertex Paint's own operator, in the viewport."""
+    r = region("WINDOW")
+    stroke = []
+    for i, (sx, sy) in enumerate(points):
+        x, y = to_region(r, sx, sy)
+        stroke.append({"name": "", "location": (0.0, 0.0, 0.0), "mouse": (x, y), "mouse_event": (x, y),
+                       "pressure": 1.0, "size": 50.0, "pen_flip": False, "time": 0.05 * i, "is_start": i == 0,
+                       "x_tilt": 0.0, "y_tilt": 0.0})
+    with override():
+        bpy.ops.paint.vertex_paint(stroke=stroke)
+
+
 def drag(points):
     """A brush stroke through ``points`` (screen), the left button held."""
     move(*points[0])
@@ -478,6 +494,12 @@ def live_mode(scene, settings, floor):
         n0, rid0, targets0 = s.updates, results.result_id(scene), counts()[0]
         t_stroke = time.monotonic()
         yield from drag(path)
+        yield 0.5
+        how = "mouse"
+        if counts()[0] == targets0:  # the pointer's stroke painted nothing: the paint operator's stroke
+            how = "operator"
+            op_stroke(path)
+            yield 0.2
         t_up = time.monotonic()
         while s.updates == n0 and not s.paused and time.monotonic() - t_up < 120:
             yield 0.1
@@ -485,12 +507,15 @@ def live_mode(scene, settings, floor):
         waits.append(round(t_done - t_up, 2))
         pauses.append(round(max_gap(t_stroke, t_done), 2))
         changed.append(s.updates > n0 and results.result_id(scene) != rid0 and counts()[0] > targets0)
+        HOW.append(f"{how}: targets {targets0} -> {counts()[0]}")
         log("live stroke", i, live.status_text(s), "targets", targets0, "->", counts()[0])
         shot(f"11f_live_stroke_{i}")
     RESULT["timings"]["live"] = {"answer_after_stroke_s": waits, "longest_pause_s": pauses,
                                  "last": live.status_text(s)}
+    brush = getattr(bpy.context.tool_settings.vertex_paint, "brush", None)
     check("the lights change after each stroke in Live mode", changed and all(changed),
-          f"{changed}; {live.status_text(s)}; unpainted floor faces {FLOOR_POINTS[0]}, in view {FLOOR_POINTS[1]}")
+          f"{changed}; strokes {HOW}; {live.status_text(s)}; unpainted floor faces {FLOOR_POINTS[0]}, in view "
+          f"{FLOOR_POINTS[1]}; brush {getattr(brush, 'name', None)}")
     check("the brush stays responsive in Live mode", pauses and max(pauses) < PAUSE_LIMIT,
           f"longest main-thread pauses per stroke {pauses} s; answers {waits} s after the stroke")
     # ESC right after a stroke: the re-solve running (if any) is dropped; the scene keeps the last answer
@@ -788,7 +813,7 @@ def scenario():
     # change after each; the brush never waits (the main thread's pauses recorded); ESC turns it
     # off with the scene as last written
     yield from live_mode(scene, settings, floor)
-    result_before = scene.get("relight_result")  # (Live wrote its answers)
+    result_before, n_rows = scene.get("relight_result"), len(settings.curve)  # (Live wrote its answers)
 
     # 9. a large solve: the cost question, then ESC; the UI keeps running while it cancels
     settings.rays_per_patch = 262144

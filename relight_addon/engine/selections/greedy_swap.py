@@ -37,12 +37,15 @@ def greedy_swap(s):
     k_max = min(p.n_lights, s.curve_lights or max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
     stop = {"cancel": False}
     surface = surface_lights(p)
-    both = 0 < len(surface) < p.n_lights  # cells and lamps: the cells' own curve too
+    # cells and lamps: the cells' own curve too (a stroke's quick re-solve starts from the earlier
+    # answer's configurations instead)
+    both = 0 < len(surface) < p.n_lights and not s.quick
 
     def progress(done, total, part=0):
         stop["cancel"] = s.step(done + part * total, (2 if both else 1) * total)
 
-    curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts,
+    initial = {k: v for k, v in (s.initial or {}).items() if k <= k_max and np.all(np.asarray(v) < p.n_lights)}
+    curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
                                             cancel=lambda: stop["cancel"], progress=progress)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
