@@ -14,6 +14,18 @@ for _p in (ROOT, SAMPLES):  # the package, and sample_blends/generate.py as ``ge
 
 
 @pytest.fixture
+def addon():
+    """The add-on registered in the bpy session for the test (a factory scene after it)."""
+    bpy = pytest.importorskip("bpy", reason="the add-on needs bpy (Blender as a Python module)")
+    import relight_addon
+
+    relight_addon.register()
+    yield bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    relight_addon.unregister()
+
+
+@pytest.fixture
 def bpy_clean():
     """bpy reset to an empty factory scene before (and after) the test."""
     bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")

@@ -16,16 +16,6 @@ from relight_addon.pipeline import jobs  # noqa: E402
 SAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_blends")
 
 
-@pytest.fixture
-def addon():
-    import relight_addon
-
-    relight_addon.register()
-    yield
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    relight_addon.unregister()
-
-
 def _run(s, until, timeout=300, pause=False):
     """Tick (as the modal operator's timer does, with Blender's depsgraph updates in between)
     until ``until()``; a pause fails unless ``pause``."""
@@ -153,3 +143,49 @@ def test_kept_lamps_stay_and_the_next_solve_finds_the_rest(addon):
     assert bound > 0 and (rel >= bound * (1 - 1e-6) or "were refined" in scene.relight.last_warnings), (rel, bound)
     assert f"no {int(data.curve_n_lights[i])} non-negative lights can go below {bound:.3g}" in \
         scene.relight.last_warnings
+
+
+def test_live_follows_a_kept_lamp_moved_by_hand(addon):
+    """A kept lamp moved or set to another power with Live on (issue 20, item 3): the error and the
+    layer follow from the prepared transport, with the rest re-solved around it, and no new full
+    solve: the kept model's fixed light is the lamp's new direct light, through its factorisation."""
+    from relight_addon.blender import live, preparation
+    from relight_addon.blender.ui import operators
+    from relight_addon.engine.inverse import InverseProblem
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    assert bpy.ops.relight.keep_lamps() == {"FINISHED"}
+    kept = next(o for o in scene.objects if o.type == "LIGHT" and o.name.endswith("(kept)"))
+    s = live.start(bpy.context, operators.job_options)
+    _run(s, lambda: s.updates == 1)  # the scene as it is now: the kept lamp is the scene's light
+    state = preparation.PREPARED[scene.name]
+    solves = state.solves
+    bg0 = state.model.problem.background_radiosity.copy()
+    assert np.any(bg0 > 0) and kept.name in scene.relight.last_fixed_light
+
+    kept.location.x -= 0.3
+    _run(s, lambda: s.updates == 2)
+    assert state.solves == solves and state.live_solves == 1 and s.paused is None
+    model = state.model
+    bg1 = model.problem.background_radiosity.copy()
+    assert not np.allclose(bg0, bg1)
+    # against the fixed light of a problem built anew (the constructor's route) on the same patches
+    H, _ = jobs.scene_light(model.faces, model.patches, model.form_factors, state.options.seed)
+    p = model.patches
+    fresh = InverseProblem(model.form_factors, p.area, p.reflectance, p.target, p.target_radiosity,
+                           model.problem.candidate_mask, p.center, p.normal, lights=model.lights,
+                           background=model.background, background_irradiance=H.sum(axis=1),
+                           background_excess=jobs.scene_light_excess(model.faces, p, H))
+    np.testing.assert_allclose(bg1, fresh.background_radiosity, rtol=1e-9, atol=1e-12 * np.abs(bg1).max())
+
+    kept.data.energy *= 2.0  # linear in the lamp's power (the scene has no World light)
+    _run(s, lambda: s.updates == 3)
+    assert state.solves == solves and state.live_solves == 2
+    assert scene.world is None or state.model.faces.world_radiance is None
+    np.testing.assert_allclose(state.model.problem.background_radiosity, 2.0 * bg1, rtol=1e-6,
+                               atol=1e-9 * np.abs(bg1).max())
+    assert "relight_owner" not in kept and kept.name in scene.objects
+    live.stop(scene.name)

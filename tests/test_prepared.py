@@ -190,16 +190,6 @@ def test_paint_on_clustered_faces_is_solved_from_scratch_and_named():
     assert state.patches is outcome.patches and state.unmappable(painted) is None
 
 
-@pytest.fixture
-def addon():
-    import relight_addon
-
-    relight_addon.register()
-    yield
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    relight_addon.unregister()
-
-
 def _clustered_polygons(state, name):
     """The polygons of object ``name`` that the state's patches cluster with others."""
     exp = export.export_scene()

@@ -5,18 +5,22 @@ the radiosity layer and the chart. bpy on the main thread; the re-solves in a wo
 A ``LiveSession`` per scene, driven by ``tick()`` on the main thread (the ``relight.live`` modal
 operator's timer):
 
-- it starts with a full solve (preparation.SolveJob, in the worker) when the scene has no
-  prepared model yet; later Solve & Reduce solves replace the model it re-solves from;
+- its first answer is a solve of the scene as it is when Live is turned on (preparation.SolveJob
+  in the worker: from the session's prepared state when that still serves); later Solve & Reduce
+  solves replace the model it re-solves from;
 - when Blender reported a change (``depsgraph_update_post``: ``dirty``), the paint is read again
   (export.repaint: the target layers only, no export); paint that is new and has not changed
   for one tick (the stroke ended) is re-solved in the worker. While a re-solve runs, newer paint
   waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
 - an answer for the newest paint is written into the scene (operators.show_solve), and the
   time of the update and its cost are shown;
-- paint on faces the patch model clustered with others is solved in full (in the worker); a
-  change the prepared state cannot follow (geometry, materials, forbidden faces, lamps and
-  World, options) pauses Live with the reason, the scene as last written, until Solve & Reduce
-  prepares again;
+- paint on faces the patch model clustered with others is solved in full (in the worker);
+- a lamp of the scene moved, turned or set to another power (a kept one, say): its light is cast
+  again on the kept scene and taken through the kept factorisation (PreparedScene.move_lamps),
+  and the rest re-solved around it, without a full solve;
+- a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
+  the World, options) pauses Live with the reason, the scene as last written, until Solve &
+  Reduce prepares again;
 - ``stop()`` (the toggle, ESC, another file): a re-solve running is asked to stop and its answer
   dropped; the scene keeps the last answer written, whole.
 """
@@ -32,6 +36,7 @@ import numpy as np
 
 from . import export, light_paths, preparation
 from ..pipeline import jobs
+from ..pipeline.prepared import scene_lamps_differ
 
 __all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "status_text"]
 
@@ -63,7 +68,10 @@ class LiveSession:
         self.base = None  # the preparation.PREPARED_JOBS job re-solved from
         self.geometry = None  # _geometry_digest of its objects
         self.changed = set()  # what changed that the prepared state cannot follow (the depsgraph's)
+        self.lamps_moved = set()  # the lamps whose placement or settings changed (followed: ``_lamps``)
+        self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
+        self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
 
     # -- main thread ---------------------------------------------------------------------
     def tick(self, context) -> None:
@@ -73,7 +81,9 @@ class LiveSession:
             self._collect(context)
         job = preparation.PREPARED_JOBS.get(self.scene)
         state = preparation.PREPARED.get(self.scene)
-        if job is None or state is None or state.model is None:
+        if self.prepared is None or job is None or state is None or state.model is None:
+            # Live's first answer is a solve of the scene as it is now (from the session's prepared
+            # state when it still serves: preparation.SolveJob.run), its model the one strokes follow
             if self.worker is None and (self.dirty or not self.paused):  # (paused: retried on a change)
                 self.dirty = False
                 self._start_full(context)
@@ -94,17 +104,26 @@ class LiveSession:
             self.paused = f"{', '.join(sorted(self.changed))} changed: Solve & Reduce prepares again"
             self.status = "paused"
             return
+        if self.lamps_moved and self.worker is None:  # the scene's lamps read again: re-solved around them
+            self.lamps_moved = set()
+            lamps, _ = export.export_lamps(context, export.render_visible_objects(context), export.owner_of)
+            self.lamps = lamps
+            self.shown = None  # the answer shown is of the lamps before
+            self.dirty = True
         if self.dirty:
             self.dirty = False
             faces = export.repaint(job.exp)  # (an object in Edit Mode: its edit mesh first)
+            if self.lamps is not None:
+                faces = replace(faces, lamps=self.lamps)
             if _geometry_digest(job.exp.objects) != self.geometry:
                 self.changed.add("the geometry")
                 return
             paint = (faces.target, faces.target_radiosity)
+            self._faces = faces
             if self.paint is not None and _same(paint, self.paint):
                 self.stable += 1
             else:
-                self.paint, self.stable, self._faces = paint, 0, faces
+                self.paint, self.stable = paint, 0
                 self.dirty = True  # read again next tick: re-solve once the stroke has ended
                 return
         if self.worker is not None or self.paused or self.stable < 1:
@@ -121,8 +140,10 @@ class LiveSession:
 
         def work():
             t0 = time.perf_counter()
-            # only the paint differs from the export the state was prepared from (export.repaint;
-            # the rest is watched on the main thread): its key is the state's
+            # only the paint (and the lamps, read again) differs from the export the state was
+            # prepared from (export.repaint; the rest is watched on the main thread)
+            if faces.lamps is not state.model.faces.lamps and scene_lamps_differ(faces, state.model.faces):
+                state.move_lamps(faces)  # the kept model's fixed light anew: their light, on the kept scene
             out = state.live(faces, job.inputs["polygon_counts"], cancel=self.cancel.is_set,
                              notes=job.inputs["notes"], key=state.key)
             if out is None:  # paint on clustered faces: the full solve, from the state (meshed for the paint)
@@ -149,6 +170,7 @@ class LiveSession:
         self.solving = self.paint
         self.status = "preparing (a full solve)"
         self._run(lambda: job.run(cancel=self.cancel.is_set), job)
+        self.result["first"] = True
 
     def _run(self, fn, job):
         self.result = {"job": job}
@@ -181,6 +203,8 @@ class LiveSession:
             self.paused = f"{state.reason if state else 'nothing prepared'}: Solve & Reduce prepares again"
             self.status = "paused"
             return
+        if result.get("first"):
+            self.prepared = result["job"]
         if self.paint is not None and not _same(solving, self.paint):
             self.superseded += 1  # a newer stroke: its re-solve comes next
             return
@@ -273,11 +297,16 @@ def _on_depsgraph(scene, depsgraph=None):
     for u in getattr(depsgraph, "updates", ()):
         idb = getattr(u.id, "original", u.id)
         kind = _WATCHED.get(type(idb).__name__) if not isinstance(idb, bpy.types.Object) else "object"
+        if isinstance(idb, bpy.types.Light):
+            kind = "lamp"
         if kind is None or export.owner_of(idb) is not None:
             continue
         if kind == "object" and not (u.is_updated_transform and idb.type in {"MESH", "LIGHT"}):
             continue
         if kind == "material" and not u.is_updated_shading:
+            continue
+        if kind == "lamp" or (kind == "object" and idb.type == "LIGHT"):
+            s.lamps_moved.add(idb.name)  # (a kept lamp moved or resized: Live follows it)
             continue
         s.changed.add(f"{kind} {idb.name!r}" if kind != "the World" else kind)
 

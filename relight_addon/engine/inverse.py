@@ -499,6 +499,20 @@ class InverseProblem:
         """``all_rows_transfer`` when it is made already, else None (it is never made here)."""
         return self._all_rows
 
+    def with_background(self, background=None, background_irradiance=None, background_excess=None):
+        """This problem with another fixed light (the arguments as the constructor's: the scene's
+        own emitters' exitance, the lamps' direct irradiance, its first reflection's excess):
+        its radiosity through the kept factorisation, the targets' b_P less it; the lights, the
+        transfer and the solvers shared. A kept lamp moved (pipeline.prepared)."""
+        n = self.n_patches
+        new = copy.copy(self)
+        e = np.zeros((n, 3)) if background is None else np.asarray(background, dtype=np.float64).reshape(n, 3)
+        new.background_radiosity = self.forward_radiosity(e, background_irradiance, background_excess)
+        if not np.all(np.isfinite(new.background_radiosity)):
+            raise InverseError("the scene's own light gives non-finite radiosity")
+        new.b_target = self.b_target + self.background_radiosity[self.targets] - new.background_radiosity[self.targets]
+        return new
+
     def retarget(self, target_mask, target_radiosity) -> "InverseProblem":
         """This problem with other targets (the same scene, lights, solvers and fixed light): its
         T is rows of ``all_rows_transfer`` (no factorisation, no solve), its b_P the new targets'

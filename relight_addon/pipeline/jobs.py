@@ -919,6 +919,19 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)
 
 
+def move_scene_light(model: Model, faces: FaceSet, seed=0) -> Model:
+    """A solved model (inverse mode) whose scene's lamps or World changed (``faces``: the same
+    scene with its new lamps): their direct light cast again on the model's patches (scene_light,
+    on its Embree scene) and the fixed light's radiosity through the model's factorisation
+    (InverseProblem.with_background); the lights, form factors and transfer kept."""
+    patches, F = model.patches, model.form_factors
+    lamp_H, lamp_names = scene_light(faces, patches, F, seed) if has_scene_light(faces) else \
+        (np.zeros((patches.n_patches, 0, 3)), [])
+    problem = model.problem.with_background(model.background, lamp_H.sum(axis=1),
+                                            scene_light_excess(faces, patches, lamp_H))
+    return replace(model, faces=faces, problem=problem, lamp_irradiance=lamp_H, lamp_names=lamp_names)
+
+
 def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None,
                 live=False, initial=None):
     """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct

@@ -54,33 +54,37 @@ _SCENE_ARRAYS = ("vertices", "triangles", "triangle_face", "loop_vertices", "loo
                  "face_object", "face_index", "reflectance", "exitance", "forbidden", "face_material")
 
 
+def _feed(h, x):
+    """Hash ``x`` into ``h``: every value whole (a repr would cut a large array short)."""
+    if isinstance(x, np.ndarray):
+        h.update(f"{x.dtype}{x.shape}".encode())
+        h.update(np.ascontiguousarray(x).tobytes())
+    elif isinstance(x, (list, tuple)):
+        h.update(f"{type(x).__name__}{len(x)}".encode())
+        for v in x:
+            _feed(h, v)
+    elif isinstance(x, dict):
+        for k in sorted(x, key=repr):
+            _feed(h, k)
+            _feed(h, x[k])
+    elif hasattr(x, "__dict__") and not isinstance(x, type):
+        h.update(type(x).__name__.encode())
+        _feed(h, vars(x))
+    else:
+        h.update(repr(x).encode())
+
+
+def digest(*items) -> str:
+    """sha1 of ``items``, every value whole (scene_key's parts)."""
+    h = hashlib.sha1()
+    for x in items:
+        _feed(h, x)
+    return h.hexdigest()
+
+
 def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> dict:
     """What the prepared state depends on, part by part: {part: digest}. Two keys differ in the
     parts that changed (``stale_reason`` names them)."""
-    def feed(h, x):  # every value whole (a repr would cut a large array short)
-        if isinstance(x, np.ndarray):
-            h.update(f"{x.dtype}{x.shape}".encode())
-            h.update(np.ascontiguousarray(x).tobytes())
-        elif isinstance(x, (list, tuple)):
-            h.update(f"{type(x).__name__}{len(x)}".encode())
-            for v in x:
-                feed(h, v)
-        elif isinstance(x, dict):
-            for k in sorted(x, key=repr):
-                feed(h, k)
-                feed(h, x[k])
-        elif hasattr(x, "__dict__") and not isinstance(x, type):
-            h.update(type(x).__name__.encode())
-            feed(h, vars(x))
-        else:
-            h.update(repr(x).encode())
-
-    def digest(*items):
-        h = hashlib.sha1()
-        for x in items:
-            feed(h, x)
-        return h.hexdigest()
-
     arrays = {a: getattr(faces, a) for a in _SCENE_ARRAYS if getattr(faces, a) is not None}
     return {
         "geometry": digest(*(arrays[a] for a in ("vertices", "triangles", "triangle_face", "loop_vertices",
@@ -227,6 +231,22 @@ class PreparedScene:
             self.starts = _starts(outcome)
         return outcome
 
+    def move_lamps(self, faces: FaceSet) -> None:
+        """The scene's lamps changed and nothing else (a kept lamp moved, turned, resized or set to
+        another power: ``faces``' lamps): the last solve's model takes their light as its fixed
+        light anew (jobs.move_scene_light: their direct light cast on the kept scene, its
+        radiosity through the kept factorisation) and this state its key, so that ``live``
+        re-solves the rest around them. Its lights, form factors and transfer stay. ValueError
+        when anything else changed, or nothing is solved yet."""
+        if self.model is None:
+            raise ValueError("nothing is solved yet")
+        key = scene_key(faces, self.options, self.default_max_patch_size)
+        changed = [part for part in key if key[part] != self.key.get(part)]
+        if any(part != "lamps and World" for part in changed):
+            raise ValueError(f"the {', '.join(changed)} changed since it was prepared")
+        self.model = jobs.move_scene_light(self.model, faces, self.options.seed)
+        self.key = key
+
     def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
         """A stroke's live re-solve (Live mode) from the last solve's model: its patches with the
         paint of ``faces`` (mapped as ``solve`` maps it), its lights, form factors and solvers,
@@ -253,3 +273,8 @@ def _starts(outcome) -> dict:
     """{n_lights: lights} of an answer's non-negative configurations (a live re-solve's starts)."""
     return {int(pt.n_lights): np.asarray(pt.lights, dtype=np.int64).copy() for pt in outcome.reduction.curve
             if pt.n_negative == 0 and pt.n_lights > 0}
+
+
+def scene_lamps_differ(a: FaceSet, b: FaceSet) -> bool:
+    """Whether two exports of a scene differ in their lamps (scene_key's "lamps and World" part)."""
+    return digest(a.lamps) != digest(b.lamps)
