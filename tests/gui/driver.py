@@ -84,7 +84,8 @@ def override():
 
 def mods():
     return {k: sys.modules[f"{PKG}.{k}"] for k in ("blender.results", "blender.ui.panels", "blender.ui.operators",
-                                                   "blender.ui.viewport", "blender.export", "blender.live")}
+                                                   "blender.ui.viewport", "blender.export", "blender.live",
+                                                   "blender.preparation")}
 
 
 # --- input ----------------------------------------------------------------------------------
@@ -409,59 +410,30 @@ def check_marker(name, path):
 
 # --- the scenario ---------------------------------------------------------------------------
 
-def floor_strokes(floor, n_strokes=3, per_stroke=4):
-    """Screen paths over unpainted floor faces next to the painted ones (as an artist extends the
-    paint), one list of points per stroke."""
-    from bpy_extras.view3d_utils import location_3d_to_region_2d
-
-    a = area3d()
-    r = region("WINDOW", a)
-    rv3d = a.spaces.active.region_3d
+def floor_strokes(floor, n_strokes=4, per_stroke=12):
+    """Groups of unpainted polygons of ``floor`` (a mesh object) next to its painted ones (as a
+    brush extends the paint)."""
     painted = mods()["blender.export"].face_flags(floor, "target")
     M = floor.matrix_world
     centres = [M @ p.center for p in floor.data.polygons]
     hub = sum((centres[k] for k in np.flatnonzero(painted)), centres[0] * 0) / max(int(painted.sum()), 1)
     free = sorted(np.flatnonzero(~painted), key=lambda k: (centres[k] - hub).length)
-    right = region("UI", a).x - r.x  # the sidebar overlaps the region's right side
-    pts = []
-    for k in free:
-        p = location_3d_to_region_2d(r, rv3d, centres[k])
-        if p is not None and 20 < p.x < right - 20 and 20 < p.y < r.height - 20:
-            pts.append(to_screen(r, p.x, p.y))
-    FLOOR_POINTS[:] = [len(free), len(pts)]
-    return [pts[i * per_stroke:(i + 1) * per_stroke] for i in range(n_strokes)]
+    return [[int(k) for k in free[i * per_stroke:(i + 1) * per_stroke]] for i in range(n_strokes)]
 
 
-FLOOR_POINTS = [0, 0]  # unpainted floor faces, of which in view (floor_strokes' last)
-
-
-HOW = []  # how each Live stroke was painted, and the targets before and after
-
-
-def op_stroke(points):
-    """The stroke through ``points`` (screen) by Vertex Paint's own operator, in the viewport."""
-    r = region("WINDOW")
-    stroke = []
-    for i, (sx, sy) in enumerate(points):
-        x, y = to_region(r, sx, sy)
-        stroke.append({"name": "", "location": (0.0, 0.0, 0.0), "mouse": (x, y), "mouse_event": (x, y),
-                       "pressure": 1.0, "size": 50.0, "pen_flip": False, "time": 0.05 * i, "is_start": i == 0,
-                       "x_tilt": 0.0, "y_tilt": 0.0})
-    with override():
-        bpy.ops.paint.vertex_paint(stroke=stroke)
-
-
-def drag(points):
-    """A brush stroke through ``points`` (screen), the left button held."""
-    move(*points[0])
-    yield 0.3
-    xdo("mousedown", "1")
-    for a, b in zip(points, points[1:] + points[-1:]):
-        for t in np.linspace(0.0, 1.0, 6):
-            move(a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]))
-            yield 0.03
-    xdo("mouseup", "1")
-    yield 0.3
+def attr_stroke(ob, faces, rgb):
+    """What a Vertex Paint stroke writes (Debian's Blender has no brush to paint with: shared/
+    gui-blender.md): the faces' corners of the active target layer at colour ``rgb``, alpha 1, and
+    the mesh updated, in Vertex Paint mode in the window."""
+    me = ob.data
+    layer = me.color_attributes["relight_target"]
+    col = np.zeros((len(me.loops), 4), dtype=np.float32)
+    layer.data.foreach_get("color", col.ravel())
+    for k in faces:
+        p = me.polygons[k]
+        col[p.loop_start:p.loop_start + p.loop_total] = (*rgb, 1.0)
+    layer.data.foreach_set("color", col.ravel())
+    me.update()
 
 
 def live_mode(scene, settings, floor):
@@ -487,19 +459,28 @@ def live_mode(scene, settings, floor):
     shot("11e_live_on")
     found = yield from probe_sidebar()
     yield from press(found, "bpy.ops.relight.paint_targets()", settle=1.5)
-    changed, waits, pauses = [], [], []
-    for i, path in enumerate(floor_strokes(floor)):
-        if len(path) < 2:
-            continue
+    changed, waits, pauses, how = [], [], [], []
+    stairs = scene.objects["flight_1"]
+    groups = floor_strokes(floor)
+    steps = floor_strokes(stairs, 2, 6)
+    rgb = tuple(settings.paint_color)
+    state = mods()["blender.preparation"].PREPARED
+    # on the stairs (faces the adaptive model keeps whole: the live re-solve), on the floor (faces it
+    # clustered: solved in full in the worker), then Fill Selected on the stairs
+    for i, (ob, faces) in enumerate([(stairs, steps[0]), (floor, groups[0]), (stairs, steps[1])]):
         n0, rid0, targets0 = s.updates, results.result_id(scene), counts()[0]
         t_stroke = time.monotonic()
-        yield from drag(path)
-        yield 0.5
-        how = "mouse"
-        if counts()[0] == targets0:  # the pointer's stroke painted nothing: the paint operator's stroke
-            how = "operator"
-            op_stroke(path)
-            yield 0.2
+        if i < 2:  # in Vertex Paint: what a brush stroke writes
+            attr_stroke(ob, faces, rgb)
+            kind = "vertex paint layer"
+        else:  # Fill Selected in Edit Mode, its button clicked
+            with override():
+                bpy.ops.object.mode_set(mode="OBJECT")
+            set_active(ob)
+            yield from edit_faces(ob, faces)
+            found = yield from probe_sidebar()
+            yield from press(found, "bpy.ops.relight.fill_targets(unpaint=False)", settle=0.5)
+            kind = "Fill Selected"
         t_up = time.monotonic()
         while s.updates == n0 and not s.paused and time.monotonic() - t_up < 120:
             yield 0.1
@@ -507,21 +488,24 @@ def live_mode(scene, settings, floor):
         waits.append(round(t_done - t_up, 2))
         pauses.append(round(max_gap(t_stroke, t_done), 2))
         changed.append(s.updates > n0 and results.result_id(scene) != rid0 and counts()[0] > targets0)
-        HOW.append(f"{how}: targets {targets0} -> {counts()[0]}")
+        st = state.get(scene.name)
+        how.append(f"{ob.name}, {kind}: {'live re-solve' if st is not None and st.reason is None else 'full'}")
         log("live stroke", i, live.status_text(s), "targets", targets0, "->", counts()[0])
         shot(f"11f_live_stroke_{i}")
-    RESULT["timings"]["live"] = {"answer_after_stroke_s": waits, "longest_pause_s": pauses,
+    RESULT["timings"]["live"] = {"answer_after_stroke_s": waits, "longest_pause_s": pauses, "strokes": how,
                                  "last": live.status_text(s)}
-    brush = getattr(bpy.context.tool_settings.vertex_paint, "brush", None)
     check("the lights change after each stroke in Live mode", changed and all(changed),
-          f"{changed}; strokes {HOW}; {live.status_text(s)}; unpainted floor faces {FLOOR_POINTS[0]}, in view "
-          f"{FLOOR_POINTS[1]}; brush {getattr(brush, 'name', None)}")
+          f"{changed}; strokes {how}; {live.status_text(s)}")
     check("the brush stays responsive in Live mode", pauses and max(pauses) < PAUSE_LIMIT,
           f"longest main-thread pauses per stroke {pauses} s; answers {waits} s after the stroke")
     # ESC right after a stroke: the re-solve running (if any) is dropped; the scene keeps the last answer
-    path = floor_strokes(floor, 4)[3]
-    if len(path) >= 2:
-        yield from drag(path)
+    if bpy.context.mode == "EDIT_MESH":
+        yield from key_in_viewport("Tab")
+    with override():
+        bpy.ops.object.mode_set(mode="OBJECT")
+    set_active(floor)
+    attr_stroke(floor, groups[1], rgb)
+    yield 0.15
     move(*viewport_center())
     n_esc, rid_esc, solving = s.updates, results.result_id(scene), s.worker is not None
     xdo("key", "Escape")
