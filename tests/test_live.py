@@ -50,9 +50,35 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     first = _shown(scene)
     avoid = _clustered_polygons(state, "flight_1")
 
-    _stroke(12, "flight_1", avoid)  # a stroke: re-solved live, without a full solve
+    # a stroke in Vertex Paint on the target layer: re-solved live, without a full solve, and the
+    # brush keeps its layer (the radiosity layer is written, not made active)
+    stairs = bpy.data.objects["flight_1"]
+    bpy.context.view_layer.objects.active = stairs
+    stairs.data.color_attributes.active_color = stairs.data.color_attributes["relight_target"]
+    bpy.ops.object.mode_set(mode="VERTEX_PAINT")
+    _stroke(12, "flight_1", avoid)
     _run(s, lambda: s.updates == 2)
-    assert state.solves == 1 and state.live_solves == 1 and s.status == "up to date"
+    assert stairs.data.color_attributes.active_color_name == "relight_target"
+    assert "relight_radiosity" in stairs.data.color_attributes
+    # Fill Selected in Edit Mode: followed too (the edit mesh read), and the user left in Edit Mode
+    import bmesh
+
+    from relight_addon.blender import export
+
+    taken = set(np.flatnonzero(export.face_flags(stairs, "target")).tolist()) | set(avoid)
+    bpy.ops.object.mode_set(mode="EDIT")
+    bm = bmesh.from_edit_mesh(stairs.data)
+    for f in bm.faces:
+        f.select_set(False)
+    free = [f for f in bm.faces if f.index not in taken][-3:]
+    for f in free:
+        f.select_set(True)
+    bmesh.update_edit_mesh(stairs.data)
+    assert bpy.ops.relight.fill_targets() == {"FINISHED"}
+    _run(s, lambda: s.updates == 3)
+    assert bpy.context.mode == "EDIT_MESH" and s.paused is None
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert state.solves == 1 and state.live_solves == 2 and s.status == "up to date"
     second = _shown(scene)
     assert first.shape != second.shape or not np.allclose(first, second), "the lights did not change"
     assert "live answer from the prepared transport" in scene.relight.last_warnings
@@ -66,7 +92,7 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     _run(s, lambda: s.worker is not None)
     painted = s.solving
     _stroke(6, "flight_1", avoid)
-    _run(s, lambda: s.updates == 3)
+    _run(s, lambda: s.updates == 4)
     assert s.superseded == 1 and not np.array_equal(painted[0], s.shown[0])
     assert np.array_equal(s.shown[0], s.paint[0])
     written = results.result_id(scene)
@@ -79,7 +105,7 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     for _ in range(10):
         bpy.context.view_layer.update()
         s.tick(bpy.context)
-    assert s.worker is None and results.result_id(scene) == written and s.updates == 3
+    assert s.worker is None and results.result_id(scene) == written and s.updates == 4
     # Solve & Reduce prepares again: Live follows the new model
     assert bpy.ops.relight.solve() == {"FINISHED"}
     _run(s, lambda: s.paused is None and s.status == "up to date", timeout=30, pause=True)

@@ -479,9 +479,43 @@ def read_forbidden(attr, n) -> np.ndarray:
     return foreach_array(attr.data, "value", n, np.int64) != 0
 
 
-def _base_attributes(ob, target_scale, notes=None):
+def linear_to_srgb(c):
+    """Scene-linear -> sRGB-encoded values (what BMesh byte colour layers hold)."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+
+
+def srgb_to_linear(c):
+    """sRGB-encoded values (a BMesh byte colour layer's) -> scene-linear."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4))
+
+
+def _edit_target_colours(ob):
+    """(loops, 4) linear RGBA of the target layer of ``ob`` in Edit Mode, read from its edit mesh
+    (the mesh's own attribute data is not current there), in the mesh's loop order; None
+    without the layer."""
+    import bmesh
+
+    bm = bmesh.from_edit_mesh(ob.data)
+    layers = bm.loops.layers
+    layer, byte = layers.float_color.get(TARGET_ATTRIBUTE), False
+    if layer is None:
+        layer, byte = layers.color.get(TARGET_ATTRIBUTE), True
+    if layer is None:
+        return None
+    bm.faces.ensure_lookup_table()
+    col = np.array([tuple(loop[layer]) for f in bm.faces for loop in f.loops], dtype=np.float64).reshape(-1, 4)
+    if byte:
+        col[:, :3] = srgb_to_linear(col[:, :3])
+    return col
+
+
+def _base_attributes(ob, target_scale, notes=None, forbidden_too=True):
     """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool).
-    ``notes``: a list that gets the messages about layers found but not used."""
+    ``notes``: a list that gets the messages about layers found but not used. An object in
+    Edit Mode: its edit mesh's paint. ``forbidden_too``: False leaves the forbidden faces unread
+    (all False: export.repaint reads the paint alone)."""
     me = ob.data
     n = len(me.polygons)
     target = np.zeros(n, dtype=bool)
@@ -495,7 +529,10 @@ def _base_attributes(ob, target_scale, notes=None):
         if notes is not None:
             notes.append(str(exc))
     if attr is not None and len(me.loops):
-        col = foreach_array(attr.data, "color", len(me.loops), np.float64, 4)
+        editing = ob.mode == "EDIT" and me.is_editmode
+        col = _edit_target_colours(ob) if editing else None
+        if col is None or len(col) != len(me.loops):
+            col = foreach_array(attr.data, "color", len(me.loops), np.float64, 4)
         if not np.all(np.isfinite(col)):
             raise SceneError(f"{ob.name}: its {TARGET_ATTRIBUTE} holds NaN or infinite colours; paint it again")
         # a face is a target when its corners' mean alpha is >= 1/2; its colour is the mean over its
@@ -512,7 +549,7 @@ def _base_attributes(ob, target_scale, notes=None):
                              "set to 0 (light cannot be negative)")
             rgb = np.maximum(rgb, 0.0)
         target_b[target] = exitance_from_radiance(rgb * target_scale)
-    attr = forbidden_layer(me, ob.name)  # another domain or type: refused (never ignored)
+    attr = forbidden_layer(me, ob.name) if forbidden_too else None  # another domain or type: refused
     if attr is not None:
         forbidden = read_forbidden(attr, n)
     if no_lights(ob):
@@ -964,16 +1001,14 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
 
 def repaint(exp: ExportedScene) -> FaceSet:
     """The exported faces with the paint their objects hold now (Live mode, after a stroke): the
-    targets and their radiosity read again from each object's base mesh (an object in Edit Mode
+    targets and their radiosity read again from each object's base mesh (an object in Edit Mode:
     from its edit mesh), mapped onto the exported faces as export_scene maps them; everything else
     as exported. The caller checks that nothing else changed (pipeline.prepared's stale check)."""
     faces = exp.faces
     target, radiosity = faces.target.copy(), faces.target_radiosity.copy()
     scale = exp.settings["target_scale"]
     for oi, ob in enumerate(exp.objects):
-        if ob.mode == "EDIT":
-            ob.update_from_editmode()
-        t, b, _ = _base_attributes(ob, scale)
+        t, b, _ = _base_attributes(ob, scale, forbidden_too=False)  # (in Edit Mode: its edit mesh's paint)
         rows = np.flatnonzero(faces.face_object == oi)
         idx = faces.face_index[rows]
         ok = (idx >= 0) & (idx < len(t))

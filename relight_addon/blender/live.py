@@ -115,8 +115,10 @@ class LiveSession:
             faces = export.repaint(job.exp)  # (an object in Edit Mode: its edit mesh first)
             if self.lamps is not None:
                 faces = replace(faces, lamps=self.lamps)
-            if _geometry_digest(job.exp.objects) != self.geometry:
-                self.changed.add("the geometry")
+            now = _geometry_digest(job.exp.objects)
+            moved = sorted(name for name in now if now[name] != self.geometry.get(name))
+            if moved:
+                self.changed.update(f"object {name!r} (moved or edited)" for name in moved)
                 return
             paint = (faces.target, faces.target_radiosity)
             self._faces = faces
@@ -210,6 +212,10 @@ class LiveSession:
             return
         t0 = time.perf_counter()
         mode = None
+        painting = context.mode == "PAINT_VERTEX"
+        # while painting, the brush keeps its layer (the radiosity layer is written, not made active)
+        layers = {ob.name: ob.data.color_attributes.active_color_name for ob in context.scene.objects
+                  if painting and ob.type == "MESH" and ob.data is not None}
         if context.mode == "EDIT_MESH":  # the meshes are written in Object Mode (Fill Selected)
             mode = context.object.mode
             bpy.ops.object.mode_set(mode="OBJECT")
@@ -218,7 +224,11 @@ class LiveSession:
 
             # the meshes are the exported ones (the geometry digest, checked at every change)
             operators.show_solve(context, result["job"], outcome, finished=result.get("finished", False),
-                                 trusted=self.base is not None)
+                                 trusted=self.base is not None, show=not painting)
+            for name, layer in layers.items():
+                colors = bpy.data.objects[name].data.color_attributes
+                if layer and layer in colors and colors.active_color_name != layer:
+                    colors.active_color = colors[layer]
         except Exception as exc:  # noqa: BLE001  (SceneError, ValueError: the scene is unchanged)
             self.paused, self.status = f"{exc}", "paused"
             return
@@ -241,19 +251,28 @@ class LiveSession:
         self.status = "off"
 
 
-def _geometry_digest(objects) -> str:
-    """A digest of the exported objects' evaluated meshes (vertex positions and polygon loops,
-    after their modifiers and shape keys: the export's) and placement: what a stroke never changes."""
-    h = hashlib.blake2b(digest_size=16)
+def _geometry_digest(objects) -> dict:
+    """{object name: digest} of the exported objects' evaluated meshes (vertex positions and
+    polygon loops, after their modifiers and shape keys: the export's) and placement: what a
+    stroke never changes."""
+    out = {}
     depsgraph = bpy.context.evaluated_depsgraph_get()
     for ob in objects:
-        me = ob.evaluated_get(depsgraph).data
-        co = export.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
-        loops = export.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
+        h = hashlib.blake2b(digest_size=16)
+        ob_eval = ob.evaluated_get(depsgraph)
+        editing = ob.mode == "EDIT"  # (its evaluated mesh wraps the edit mesh: converted to read it)
+        me = ob_eval.to_mesh() if editing else ob_eval.data
+        try:
+            co = export.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
+            loops = export.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
+        finally:
+            if editing:
+                ob_eval.to_mesh_clear()
         h.update(co.tobytes())
         h.update(loops.tobytes())
         h.update(np.array(ob.matrix_world, dtype=np.float32).tobytes())
-    return h.hexdigest()
+        out[ob.name] = h.hexdigest()
+    return out
 
 
 def _same(a, b) -> bool:
@@ -288,8 +307,8 @@ _WATCHED = {"Material": "material", "World": "the World", "Light": "lamp", "Obje
 
 
 def _on_depsgraph(scene, depsgraph=None):
-    """Blender changed something: read the paint again at the next tick; a material, the World, a
-    lamp or an object's placement the user changed (not Relight's own results) is named."""
+    """Blender changed something: read the paint again at the next tick; a material or the World
+    the user changed (not Relight's own results) is named, a lamp moved or set anew followed."""
     s = SESSIONS.get(scene.name)
     if s is None:
         return
@@ -301,7 +320,8 @@ def _on_depsgraph(scene, depsgraph=None):
             kind = "lamp"
         if kind is None or export.owner_of(idb) is not None:
             continue
-        if kind == "object" and not (u.is_updated_transform and idb.type in {"MESH", "LIGHT"}):
+        # (a mesh's placement is in the geometry digest: a mode switch also flags its transform)
+        if kind == "object" and not (u.is_updated_transform and idb.type == "LIGHT"):
             continue
         if kind == "material" and not u.is_updated_shading:
             continue

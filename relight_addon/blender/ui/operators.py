@@ -66,12 +66,6 @@ def _refuse(op, exc):
     return {"CANCELLED"}
 
 
-def linear_to_srgb(c):
-    """Scene-linear -> sRGB-encoded values (what BMesh byte colour layers hold)."""
-    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
-
-
 # --- targets ---------------------------------------------------------------------------
 
 class RELIGHT_OT_paint_targets(bpy.types.Operator):
@@ -138,7 +132,7 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
             if layer is None and bm.loops.layers.color.get(TARGET) is not None:
                 layer = bm.loops.layers.color.get(TARGET)
                 if not self.unpaint:
-                    value = tuple(linear_to_srgb(color[:3])) + (1.0,)
+                    value = tuple(export.linear_to_srgb(color[:3])) + (1.0,)
             if layer is None:
                 layer = bm.loops.layers.float_color.new(TARGET)
             for f in bm.faces:
@@ -316,11 +310,12 @@ def store_outcome(context, outcome, fingerprints=None, trusted=False):
     return shown["skipped"]
 
 
-def show_solve(context, job, outcome, finished=False, trusted=False) -> list:
+def show_solve(context, job, outcome, finished=False, trusted=False, show=True) -> list:
     """A solve's outcome into the scene (main thread, Object Mode): the report finished (light
     paths; ``finished``: the worker did it), the curve stored and its final configuration shown,
     the sidebar's summary and warnings; returns the warnings. Raises SceneError / ValueError, the
-    scene unchanged. ``trusted``: results.show_outcome's."""
+    scene unchanged. ``trusted``: results.show_outcome's. ``show``: the viewports switched to the
+    predicted radiosity (not while painting: Live in Vertex Paint)."""
     if not finished:
         job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
     skipped = store_outcome(context, outcome, job.exp.fingerprints, trusted)
@@ -329,7 +324,7 @@ def show_solve(context, job, outcome, finished=False, trusted=False) -> list:
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))
     settings.last_fixed_light = fixed_light_rows(outcome.report)
     settings.last_warnings = "\n".join(warnings)
-    if not bpy.app.background:
+    if show and not bpy.app.background:
         viewport.show_radiosity(context)  # the lights and the predicted radiosity
     return warnings
 
@@ -555,6 +550,10 @@ class RELIGHT_OT_live(bpy.types.Operator):
                 s.tick(context)
             except (SceneError, ValueError) as exc:  # e.g. a target layer made unreadable: said, Live waits
                 s.paused, s.status = _message(exc), "paused"
+            except Exception as exc:  # noqa: BLE001  (a defect: said once, Live waits; never a dead modal)
+                if s.paused is None:
+                    self.report({"ERROR"}, f"Relight Live: {type(exc).__name__}: {exc}")
+                s.paused, s.status = f"{type(exc).__name__}: {exc}", "paused"
             if (s.status, s.updates, s.paused) != before:
                 results.redraw_sidebars()
         return {"PASS_THROUGH"}
