@@ -479,6 +479,7 @@ def live_mode(scene, settings, floor):
             set_active(ob)
             yield from edit_faces(ob, faces)
             found = yield from probe_sidebar()
+            t_stroke = time.monotonic()  # (the pauses from the click on: the probe is the driver's own)
             yield from press(found, "bpy.ops.relight.fill_targets(unpaint=False)", settle=0.5)
             kind = "Fill Selected"
         t_up = time.monotonic()
