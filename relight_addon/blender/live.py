@@ -72,6 +72,7 @@ class LiveSession:
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
         self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
+        self.prewarm_seconds = None  # the transfer to every patch: its time (made before the first stroke)
 
     # -- main thread ---------------------------------------------------------------------
     def tick(self, context) -> None:
@@ -95,7 +96,13 @@ class LiveSession:
             self.geometry = _geometry_digest(job.exp.objects)
             problem = state.model.problem  # the transfer to every patch, made before the first stroke
             self.status = "preparing the transfer to every patch"
-            self._run(lambda: problem.all_rows_transfer() and None, job)
+
+            def prewarm():
+                t0 = time.perf_counter()
+                problem.all_rows_transfer()
+                self.prewarm_seconds = time.perf_counter() - t0
+
+            self._run(prewarm, job)
             self.result["prewarm"] = True
             return
         if not self.changed and self.options_fn(context.scene.relight).to_dict() != state.options.to_dict():
@@ -180,7 +187,8 @@ class LiveSession:
 
         def work():
             try:
-                self.result["outcome"] = fn()
+                with preparation.LOCKS[self.scene]:  # (one solve at a time on the scene's state)
+                    self.result["outcome"] = fn()
             except BaseException as exc:  # noqa: BLE001  (reported on the main thread)
                 self.result["error"] = exc
 

@@ -15,6 +15,8 @@ scratch and the solve's warnings say why.
 """
 from __future__ import annotations
 
+import collections
+import threading
 from dataclasses import dataclass
 
 import bpy
@@ -23,12 +25,15 @@ import numpy as np
 from . import export, light_paths
 from ..pipeline import jobs, prepared, report, viewing
 
-__all__ = ["SolveJob", "PREPARED", "PREPARED_JOBS"]
+__all__ = ["SolveJob", "PREPARED", "PREPARED_JOBS", "LOCKS"]
 
 #: the session's prepared scenes: scene name -> pipeline.prepared.PreparedScene
 PREPARED = {}
 #: the job whose solve last filled PREPARED[scene name] (Live mode re-reads its objects' paint)
 PREPARED_JOBS = {}
+#: scene name -> the lock of its prepared state: one solve at a time works on it (Solve & Reduce's
+#: worker, Live's): the engine's factorisations and its BLAS calls are not shared between threads
+LOCKS = collections.defaultdict(threading.RLock)
 
 
 @dataclass
@@ -62,6 +67,10 @@ class SolveJob:
         if self.session is None or self.mode != "inverse":
             return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
                                   patches=self.patches, **self.inputs)
+        with LOCKS[self.session]:
+            return self._run_session(progress, cancel)
+
+    def _run_session(self, progress, cancel):
         faces, size = self.exp.faces, self.inputs["default_max_patch_size"]
         key = prepared.scene_key(faces, self.options, size)  # hashed once for the check and the solve
         state = PREPARED.get(self.session)
