@@ -24,13 +24,19 @@ and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the
 form factors. A change the fingerprint sees (an object moved, a material, a forbidden face, an
 option) is not followed: ``stale_reason`` names it, and the caller prepares again.
 
-Not yet kept (issue 20 stays open on them): the factorisation of the radiosity system and the
-transfer to every paintable patch (each solve factorises again), the lights offered for the targets.
+The last solve's model (jobs.Model: its lights, the lamps offered and refined for its targets
+among them, its factorised radiosity system) is kept too, for Live mode's strokes (``live``): the
+problem retargeted on the transfer from every light to every patch (InverseProblem.retarget,
+all_rows_transfer), then the selection's quick search from the last solve's configurations, the
+certificate and the curve (jobs.solve_model(live=True)); and for a lamp of the scene moved or set
+anew (``move_lamps``: the model's fixed light cast again). A stroke's live answer is of the paint
+alone (it starts from the last *solve*, never from an earlier stroke).
+
 Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
 stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
 977 patches to 1,451 and moved the predicted error from 0.063 / 0.051 (seeds 3 / 4) to 0.073 / 0.074,
 so it is not done until Cycles says which prediction is right: a stroke on clustered faces solves
-from scratch and says so.
+from scratch and says so (Live solves it in full in its worker).
 """
 from __future__ import annotations
 
