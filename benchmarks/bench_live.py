@@ -97,7 +97,7 @@ def case(name, source, paint_on, model):
     scene = bpy.context.scene
     scene.relight.patch_model = model
     preparation.PREPARED.clear()
-    s = live.start(bpy.context, operators.job_options)
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
     t0 = time.perf_counter()
     run(s, lambda: s.updates == 1)
     t_first = time.perf_counter() - t0

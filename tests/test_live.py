@@ -43,7 +43,7 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     preparation.PREPARED.clear()
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
     scene = bpy.context.scene
-    s = live.start(bpy.context, operators.job_options)
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
     _run(s, lambda: s.updates == 1)  # no prepared model: Live's first answer is a full solve
     state = preparation.PREPARED[scene.name]
     assert state.solves == 1 and state.live_solves == 0 and len(scene.relight.curve)
@@ -121,7 +121,7 @@ def test_stopping_live_drops_a_running_re_solve(addon):
     preparation.PREPARED.clear()
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
     scene = bpy.context.scene
-    s = live.start(bpy.context, operators.job_options)
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
     _run(s, lambda: s.updates == 1)
     written = results.result_id(scene)
     _stroke(12, "flight_1", _clustered_polygons(preparation.PREPARED[scene.name], "flight_1"))
@@ -185,7 +185,7 @@ def test_live_follows_a_kept_lamp_moved_by_hand(addon):
     assert bpy.ops.relight.solve() == {"FINISHED"}
     assert bpy.ops.relight.keep_lamps() == {"FINISHED"}
     kept = next(o for o in scene.objects if o.type == "LIGHT" and o.name.endswith("(kept)"))
-    s = live.start(bpy.context, operators.job_options)
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
     _run(s, lambda: s.updates == 1)  # the scene as it is now: the kept lamp is the scene's light
     state = preparation.PREPARED[scene.name]
     solves = state.solves

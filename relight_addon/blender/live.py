@@ -47,9 +47,10 @@ TICK = 0.1
 
 
 class LiveSession:
-    def __init__(self, context, options_fn):
+    def __init__(self, context, options_fn, show_fn):
         self.scene = context.scene.name
         self.options_fn = options_fn  # settings (scene.relight) -> JobOptions: the sidebar's
+        self.show_fn = show_fn  # (context, job, outcome, finished=, trusted=, show=): ui.operators.show_solve
         self.dirty = True
         self.paint = None  # (target, radiosity) last read
         self.stable = 0  # ticks the paint read has not changed
@@ -228,11 +229,9 @@ class LiveSession:
             mode = context.object.mode
             bpy.ops.object.mode_set(mode="OBJECT")
         try:
-            from .ui import operators
-
             # the meshes are the exported ones (the geometry digest, checked at every change)
-            operators.show_solve(context, result["job"], outcome, finished=result.get("finished", False),
-                                 trusted=self.base is not None, show=not painting)
+            self.show_fn(context, result["job"], outcome, finished=result.get("finished", False),
+                         trusted=self.base is not None, show=not painting)
             for name, layer in layers.items():
                 colors = bpy.data.objects[name].data.color_attributes
                 if layer and layer in colors and colors.active_color_name != layer:
@@ -291,10 +290,11 @@ def session(scene) -> LiveSession | None:
     return SESSIONS.get(scene.name)
 
 
-def start(context, options_fn) -> LiveSession:
+def start(context, options_fn, show_fn) -> LiveSession:
+    """Live on for the context's scene: its session (a new one, or the one running)."""
     s = SESSIONS.get(context.scene.name)
     if s is None:
-        s = SESSIONS[context.scene.name] = LiveSession(context, options_fn)
+        s = SESSIONS[context.scene.name] = LiveSession(context, options_fn, show_fn)
     if _on_depsgraph not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph)
     return s

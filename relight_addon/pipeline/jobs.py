@@ -147,11 +147,12 @@ def face_areas(faces: FaceSet) -> np.ndarray:
     return np.bincount(faces.triangle_face, weights=a, minlength=faces.n_faces)
 
 
-def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = None):
+def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = None, area=None):
     """Fail early, before any work, on problems the user can fix. ``notes`` (export: what the
-    scene holds but Relight does not use) are repeated in the message they explain."""
+    scene holds but Relight does not use) are repeated in the message they explain. ``area``:
+    face_areas(faces), when the caller keeps it (a prepared scene)."""
     notes = notes or {}
-    area = face_areas(faces)
+    area = face_areas(faces) if area is None else area
     scale = float(np.linalg.norm(np.ptp(faces.vertices, axis=0))) if len(faces.vertices) else 0.0
     has_area = area > (1e-10 * max(scale, 1e-300)) ** 2
     if mode == "inverse":
@@ -267,6 +268,8 @@ class Model:
     lamp_lights: tuple = None  # direct mode: (light indices, faces.lamps indices) of the lamps being reduced
     lamp_refinement: dict = None  # refine_stage: the chosen lamps' refinement, per curve point
     direct: dict = None  # direct_stage: the curve's lights' direct light by the kernel
+    polygons: PolygonMap = None  # assemble_curve's patches -> polygons map (paint-independent: a retargeted
+    #                              model keeps it)
 
 
 @dataclass
@@ -853,7 +856,8 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
             B[:, :, c] = (facs[c].solve(src) + problem.background_radiosity[:, c:c + 1]).T
     if not np.all(np.isfinite(B)):
         raise SceneError("the solve produced NaN or infinite values")
-    pmap = PolygonMap(model.faces, patches, polygon_counts)
+    pmap = model.polygons if model.polygons is not None else PolygonMap(model.faces, patches, polygon_counts)
+    model.polygons = pmap
     cells = (pmap.pairs[:, C] > 0).astype(np.float64)  # polygons x candidate patches
     light_polygons = (cells @ problem.light_basis).T.tocsr()
     light_polygons.data[:] = 1.0

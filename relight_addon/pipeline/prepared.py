@@ -138,6 +138,8 @@ class PreparedScene:
     model: object = None  # jobs.Model of the last solve (``live`` retargets it)
     live_solves: int = 0  # live re-solves made
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
+    _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
+    _face_area: np.ndarray = None  # jobs.face_areas of the prepared scene's faces (geometry only)
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -161,7 +163,9 @@ class PreparedScene:
             return None
         target, radiosity = self.paint
         changed = (faces.target != target) | np.any(faces.target_radiosity != radiosity, axis=1)
-        hit = changed & clustered_faces(self.patches)
+        if self._clustered is None or self._clustered[0] is not self.patches:
+            self._clustered = (self.patches, clustered_faces(self.patches))
+        hit = changed & self._clustered[1]
         if hit.any():
             names = sorted({faces.object_names[o] for o in faces.face_object[hit]})
             return (f"the paint changed on {int(hit.sum())} face(s) the patch model had clustered with others "
@@ -263,7 +267,9 @@ class PreparedScene:
                        or ("nothing is solved yet" if self.model is None else self.unmappable(faces)))
         if self.reason is not None:
             return None
-        jobs.check_solvable(faces, "inverse", notes)
+        if self._face_area is None:  # (the geometry is the prepared one: the key says so)
+            self._face_area = jobs.face_areas(faces)
+        jobs.check_solvable(faces, "inverse", notes, area=self._face_area)
         t0 = time.perf_counter()
         model = jobs.retarget_model(self.model, faces, self.painted(faces))
         outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,

@@ -518,7 +518,7 @@ class RELIGHT_OT_live(bpy.types.Operator):
         if bpy.app.background or context.window is None:
             self.report({"ERROR"}, "Live mode follows the brush in a window; headless, use Solve & Reduce")
             return {"CANCELLED"}
-        self._session = live.start(context, job_options)
+        self._session = live.start(context, job_options, show_solve)
         self._timer = context.window_manager.event_timer_add(live.TICK, window=context.window)
         context.window_manager.modal_handler_add(self)
         results.redraw_sidebars()
