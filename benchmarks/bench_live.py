@@ -136,14 +136,14 @@ def case(name, source, paint_on, model):
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--only", help="run only the case of this name (rows of the others are kept)")
+    ap.add_argument("--only", action="append", help="run only the cases of these names (the others' rows are kept)")
     args = ap.parse_args()
     relight_addon.register()
     rows = []
     if args.only and os.path.exists(OUT):
-        rows = [r for r in json.load(open(OUT))["rows"] if r["scene"] != args.only]
+        rows = [r for r in json.load(open(OUT))["rows"] if r["scene"] not in args.only]
     for name, source, on, model in CASES:
-        if args.only and name != args.only:
+        if args.only and name not in args.only:
             continue
         rows.append(case(name, source, on, model))
     order = [c[0] for c in CASES]
