@@ -95,12 +95,12 @@ class LiveSession:
                 return  # (a stroke's full solve: collected first)
             self.base, self.changed, self.paused, self.dirty = job, set(), None, True
             self.geometry = _geometry_digest(job.exp.objects)
-            problem = state.model.problem  # the transfer to every patch, made before the first stroke
             self.status = "preparing the transfer to every patch"
+            faces = job.exp.faces
 
-            def prewarm():
+            def prewarm():  # what every stroke reads, made before the first (PreparedScene.prepare_live)
                 t0 = time.perf_counter()
-                problem.all_rows_transfer()
+                state.prepare_live(faces)
                 self.prewarm_seconds = time.perf_counter() - t0
 
             self._run(prewarm, job)

@@ -257,6 +257,13 @@ class PreparedScene:
         self.model = jobs.move_scene_light(self.model, faces, self.options.seed)
         self.key = key
 
+    def prepare_live(self, faces: FaceSet) -> None:
+        """What every live stroke reads, made once before the first (Live's worker): the transfer
+        from every light to every patch, the faces the patch model clustered, the face areas."""
+        self.model.problem.all_rows_transfer()
+        self._clustered = (self.patches, clustered_faces(self.patches))
+        self._face_area = jobs.face_areas(faces)
+
     def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
         """A stroke's live re-solve (Live mode) from the last solve's model: its patches with the
         paint of ``faces`` (mapped as ``solve`` maps it), its lights, form factors and solvers,
