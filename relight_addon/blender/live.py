@@ -65,11 +65,10 @@ class LiveSession:
         self.last_seconds = None  # its solve (worker) and write (main thread) seconds
         self.status = "starting"
         self.paused = None  # why Live waits for Solve & Reduce
-        self.error = None
         self.base = None  # the preparation.PREPARED_JOBS job re-solved from
         self.geometry = None  # _geometry_digest of its objects
         self.changed = set()  # what changed that the prepared state cannot follow (the depsgraph's)
-        self.lamps_moved = set()  # the lamps whose placement or settings changed (followed: ``_lamps``)
+        self.lamps_moved = set()  # the lamps whose placement or settings changed (followed, not paused)
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
         self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
@@ -203,7 +202,6 @@ class LiveSession:
             exc = result["error"]
             self.status = "paused"
             self.paused = None if isinstance(exc, jobs.Cancelled) else f"{exc}"
-            self.error = self.paused
             return
         if result.get("prewarm"):
             self.status = "ready"
@@ -247,10 +245,6 @@ class LiveSession:
         self.last_update = time.strftime("%H:%M:%S")
         self.last_seconds = (result.get("seconds", outcome.report["timings_s"]["total"]), time.perf_counter() - t0)
         self.status = "up to date"
-
-    def resume(self):
-        """After Solve & Reduce: re-solve from its model."""
-        self.paused, self.error, self.dirty = None, None, True
 
     def stop(self):
         """Ask a running re-solve to stop; its answer is never written (the scene keeps the last)."""
@@ -311,7 +305,7 @@ def stop(scene_name=None) -> None:
 
 
 #: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
-_WATCHED = {"Material": "material", "World": "the World", "Light": "lamp", "Object": "object"}
+_WATCHED = {"Material": "material", "World": "the World"}  # (lamps and objects: by their bpy type)
 
 
 def _on_depsgraph(scene, depsgraph=None):
@@ -323,9 +317,8 @@ def _on_depsgraph(scene, depsgraph=None):
     s.dirty = True
     for u in getattr(depsgraph, "updates", ()):
         idb = getattr(u.id, "original", u.id)
-        kind = _WATCHED.get(type(idb).__name__) if not isinstance(idb, bpy.types.Object) else "object"
-        if isinstance(idb, bpy.types.Light):
-            kind = "lamp"
+        kind = ("object" if isinstance(idb, bpy.types.Object) else "lamp" if isinstance(idb, bpy.types.Light)
+                else _WATCHED.get(type(idb).__name__))
         if kind is None or export.owner_of(idb) is not None:
             continue
         # (a mesh's placement is in the geometry digest: a mode switch also flags its transform)

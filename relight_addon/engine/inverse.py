@@ -287,10 +287,19 @@ class InverseProblem:
         e_bg = None if background is None else arr(background, (n, 3), "background exitance")
         h_bg = None if background_irradiance is None else arr(background_irradiance, (n, 3), "background irradiance")
         x_bg = None if background_excess is None else arr(background_excess, (n, 3), "background excess")
-        if (e_bg is not None and np.any(e_bg > 0)) or (h_bg is not None and np.any(h_bg > 0)):
-            self.background_radiosity = self.forward_radiosity(np.zeros((n, 3)) if e_bg is None else e_bg, h_bg,
-                                                               x_bg)
-            self.b_target = self.b_target - self.background_radiosity[self.targets]
+        self.background_radiosity = self._fixed_light(e_bg, h_bg, x_bg)
+        self.b_target = self.b_target - self.background_radiosity[self.targets]
+
+    def _fixed_light(self, background=None, irradiance=None, excess=None) -> np.ndarray:
+        """(P, 3) W/m^2: the radiosity of the fixed light (the scene's own emitters' exitance
+        ``background``, the lamps' direct irradiance ``irradiance`` and its first reflection's
+        ``excess``), 0 without any."""
+        n = self.n_patches
+        if not ((background is not None and np.any(background > 0)) or
+                (irradiance is not None and np.any(irradiance > 0))):
+            return np.zeros((n, 3))
+        e = np.zeros((n, 3)) if background is None else background
+        return self.forward_radiosity(e, irradiance, excess)
 
     def _init_lights(self, light_groups, light_basis, lights=None):
         C = self.candidates
@@ -506,8 +515,9 @@ class InverseProblem:
         transfer and the solvers shared. A kept lamp moved (pipeline.prepared)."""
         n = self.n_patches
         new = copy.copy(self)
-        e = np.zeros((n, 3)) if background is None else np.asarray(background, dtype=np.float64).reshape(n, 3)
-        new.background_radiosity = self.forward_radiosity(e, background_irradiance, background_excess)
+        shaped = [None if x is None else np.asarray(x, dtype=np.float64).reshape(n, 3)
+                  for x in (background, background_irradiance, background_excess)]
+        new.background_radiosity = self._fixed_light(*shaped)
         if not np.all(np.isfinite(new.background_radiosity)):
             raise InverseError("the scene's own light gives non-finite radiosity")
         new.b_target = self.b_target + self.background_radiosity[self.targets] - new.background_radiosity[self.targets]

@@ -929,8 +929,7 @@ def move_scene_light(model: Model, faces: FaceSet, seed=0) -> Model:
     on its Embree scene) and the fixed light's radiosity through the model's factorisation
     (InverseProblem.with_background); the lights, form factors and transfer kept."""
     patches, F = model.patches, model.form_factors
-    lamp_H, lamp_names = scene_light(faces, patches, F, seed) if has_scene_light(faces) else \
-        (np.zeros((patches.n_patches, 0, 3)), [])
+    lamp_H, lamp_names = scene_light(faces, patches, F, seed)  # (as build_model casts it)
     problem = model.problem.with_background(model.background, lamp_H.sum(axis=1),
                                             scene_light_excess(faces, patches, lamp_H))
     return replace(model, faces=faces, problem=problem, lamp_irradiance=lamp_H, lamp_names=lamp_names)
