@@ -757,13 +757,15 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
 def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
-    exact, and the swap search starts from there above. ``initial`` (best_k_curve's: a list
+    exact, and the swap search starts from there above (best_k_curve enumerates nothing again:
+    the certificate's enumeration reaches at least as far). ``initial`` (best_k_curve's: a list
     indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others.
     Returns (curve, bounds)."""
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit)
     given = kw.pop("initial", None) or {}
     starts = dict(given) if isinstance(given, dict) else {k + 1: st for k, st in enumerate(given)}
     starts.update({k + 1: st for k, st in enumerate(bounds.optimum_lights) if st is not None})
+    kw["exhaustive_limit"] = 0
     return best_k_curve(T, b, k_max, light_watts, initial=starts or None, **kw), bounds
 
 
@@ -856,17 +858,27 @@ def _exhaustive(model, k_top, chunk=50000):
                 Gs = G[Cc[:, :, None], Cc[:, None, :]]  # (N, s, s)
                 dg = np.sqrt(np.maximum(np.einsum("nii->ni", Gs), 1e-300))
                 Gn = Gs / dg[:, :, None] / dg[:, None, :]  # unit diagonal
-                if s == 1:
+                if s == 2:  # closed form: Gn = [[1, rho], [rho, 1]], eigenvalues 1 -+ |rho|
+                    rho = Gn[:, 0, 1]
+                    det = 1.0 - rho * rho
+                    indep = 1.0 - np.abs(rho) > 1e-10 * (1.0 + np.abs(rho))
+                    det = np.where(indep, det, 1.0)
+                elif s == 1:
                     w = np.ones((len(Cc), 1))
                     V = np.ones((len(Cc), 1, 1))
+                    indep = np.ones(len(Cc), dtype=bool)
                 else:
                     w, V = np.linalg.eigh(Gn)
-                indep = w[:, 0] > 1e-10 * w[:, -1]
-                winv = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), 0.0)
+                    indep = w[:, 0] > 1e-10 * w[:, -1]
+                if s != 2:
+                    winv = np.where(w > 0, 1.0 / np.where(w > 0, w, 1.0), 0.0)
                 for c in chans:
                     hs = model.h[Cc, c] / dg  # (N, s)
-                    y = np.einsum("nij,ni->nj", V, hs) * winv
-                    xn = np.einsum("nij,nj->ni", V, y)  # solution in normalised coordinates
+                    if s == 2:
+                        xn = np.stack([hs[:, 0] - rho * hs[:, 1], hs[:, 1] - rho * hs[:, 0]], axis=1) / det[:, None]
+                    else:
+                        y = np.einsum("nij,ni->nj", V, hs) * winv
+                        xn = np.einsum("nij,nj->ni", V, y)  # solution in normalised coordinates
                     feas = indep & np.all(xn >= 0, axis=1)
                     val = np.maximum(model.bb[c] - np.einsum("ni,ni->n", xn, hs), 0.0)
                     ls[:, c] = np.where(feas, val, np.inf)

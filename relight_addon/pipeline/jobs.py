@@ -836,8 +836,10 @@ def assemble_curve(model: Model, red: ReductionResult, polygon_counts=None) -> C
     B = np.empty((n_pts, P, 3))
     T_all = problem.prepared_rows_transfer()
     if T_all is not None:  # a retargeted problem (Live): every light's radiosity on every patch, kept
+        on = np.flatnonzero(E.any(axis=(0, 2)))  # the curve's lights (a few of the columns)
         for c in range(3):
-            B[:, :, c] = (T_all[c] @ E[:, :, c].T + problem.background_radiosity[:, c:c + 1]).T
+            B[:, :, c] = (T_all[c][:, on] @ np.ascontiguousarray(E[:, on, c].T)
+                          + problem.background_radiosity[:, c:c + 1]).T
     else:
         H = problem.lights.irradiance
         if problem.direct_correction is not None:  # the curve's lights' direct light by the kernel (direct_stage)

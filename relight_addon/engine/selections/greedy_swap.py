@@ -26,6 +26,8 @@ def surface_lights(problem) -> np.ndarray:
 
 #: the curve covers at least this many lights
 CURVE_LIGHTS = 32
+#: a stroke's quick search (Live): swap rounds per k
+QUICK_SWAP_ROUNDS = 2
 
 
 @SELECTIONS.register("greedy-swap", "Best k Lights",
@@ -45,8 +47,12 @@ def greedy_swap(s):
         stop["cancel"] = s.step(done + part * total, (2 if both else 1) * total)
 
     initial = {k: v for k, v in (s.initial or {}).items() if k <= k_max and np.all(np.asarray(v) < p.n_lights)}
+    # quick: the swap search from the best start only, 2 rounds (the earlier answer's
+    # configurations are starts: measured on the living room and the staircase, the same final
+    # error as the full search at 60-75 % of its time; docs/benchmarks.md, "Live")
+    quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS) if s.quick else {}
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
-                                            cancel=lambda: stop["cancel"], progress=progress)
+                                            cancel=lambda: stop["cancel"], progress=progress, **quick)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
