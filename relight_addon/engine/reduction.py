@@ -186,6 +186,7 @@ class Selection:
     curve_lights: int | None = None  # how far a per-k curve goes (greedy-swap; None: the selection's own)
     initial: dict | None = None  # {k: lights}: configurations to start from (greedy-swap: an earlier answer's)
     quick: bool = False  # a stroke's re-solve (Live): the selection's quicker search, where it has one
+    nnls_start: object = None  # (n_lights, 3): an earlier stroke's all-lights NNLS (greedy-swap's certificate)
 
 
 class _ErrorEval:
@@ -279,7 +280,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
                   max_lights=None, error_threshold=None, relative_error_threshold=None,
                   require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
                   gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None,
-                  initial=None, quick=False):
+                  initial=None, quick=False, nnls_start=None):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
     The whole curve is computed (eliminations down to one light, constructions
@@ -291,7 +292,8 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     where it is (``result.cancelled``). ``curve_lights``: the selections that build a curve per
     number of lights (greedy-swap) stop there (None: their own length). ``initial`` {k: lights}
     and ``quick``: a stroke's re-solve (Live): configurations to start from (an earlier answer's)
-    and the selection's quicker search (greedy-swap: without the surface lights' own curve).
+    and the selection's quicker search (greedy-swap: without the surface lights' own curve);
+    ``nnls_start``: an earlier stroke's all-lights NNLS exitance, the certificate's start.
     Deterministic: ties go to the lower index.
     """
     method = SELECTIONS[selection]
@@ -338,7 +340,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
 
     dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
     sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
-                    curve_lights=curve_lights, initial=initial, quick=quick)
+                    curve_lights=curve_lights, initial=initial, quick=quick, nnls_start=nnls_start)
     notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")

@@ -478,7 +478,7 @@ def solve_stage(model: Model, options: JobOptions) -> tuple:
 
 
 def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=None,
-                 curve_lights=None, initial=None) -> ReductionResult:
+                 curve_lights=None, initial=None, nnls_start=None) -> ReductionResult:
     """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the
     final point. ``curve_lights``, ``initial``: a stroke's re-solve (Live; reduce_lights': a
     per-k curve to ``curve_lights``, the quick search, from the configurations ``initial``)."""
@@ -488,7 +488,7 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
                         relative_error_threshold=None if by_lp else options.error_threshold,
                         require_positive=options.require_positive, tolerance=options.param("tolerance"),
                         coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
-                        initial=initial, quick=curve_lights is not None,
+                        initial=initial, quick=curve_lights is not None, nnls_start=nnls_start,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
@@ -938,14 +938,15 @@ def move_scene_light(model: Model, faces: FaceSet, seed=0) -> Model:
 
 
 def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None, t0=None,
-                live=False, initial=None):
+                live=False, initial=None, nnls_start=None):
     """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct
     light, the certificate, the lamp refinement, the curve and the report; a SolveOutcome.
     ``t0``: when the job started (perf_counter), for the report's total. ``live``: a stroke's
     re-solve on a retargeted model (retarget_model): the curve to Max Lights + LIVE_CURVE_EXTRA,
     without the kernel's direct light of lights the model has not corrected yet and without the
     lamp refinement (the model's lamps, refined for the earlier targets, are candidates), the
-    selection's quick search from the configurations ``initial`` {n_lights: lights}."""
+    selection's quick search from the configurations ``initial`` {n_lights: lights}, its
+    certificate's all-lights NNLS from ``nnls_start`` (an earlier stroke's, the same optimum)."""
     mode = model.mode
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
@@ -958,7 +959,7 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     t2 = time.perf_counter()
     red = reduce_stage(model, e_x, options, progress, cancel,
                        curve_lights=int(options.max_lights) + LIVE_CURVE_EXTRA if live else None,
-                       initial=initial if live else None)
+                       initial=initial if live else None, nnls_start=nnls_start if live else None)
     t_direct = time.perf_counter()
     model.direct = None if live else direct_stage(model, red, options, cancel)
     t_direct = time.perf_counter() - t_direct

@@ -140,6 +140,7 @@ class PreparedScene:
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
     _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
     _face_area: np.ndarray = None  # jobs.face_areas of the prepared scene's faces (geometry only)
+    _nnls_start: np.ndarray = None  # the last stroke's all-lights NNLS (the next certificate's start)
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -237,6 +238,7 @@ class PreparedScene:
             self.patches = self._cast_for = self.form_factors = self.model = None
         else:
             self.patches, self.model = outcome.patches, outcome.model
+            self._nnls_start = None  # (another model's lights)
             self.paint = (faces.target.copy(), faces.target_radiosity.copy())
             self.starts = _starts(outcome)
         return outcome
@@ -280,8 +282,11 @@ class PreparedScene:
         t0 = time.perf_counter()
         model = jobs.retarget_model(self.model, faces, self.painted(faces))
         outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,
-                                   initial=dict(self.starts))  # (the last solve's: the answer is of the paint alone)
+                                   initial=dict(self.starts),  # (the last solve's: the answer is of the paint alone)
+                                   nnls_start=self._nnls_start)
         self.live_solves += 1
+        bounds = outcome.reduction.certificate
+        self._nnls_start = None if bounds is None else bounds.nnls_exitance
         outcome.warnings.append(jobs.LIVE_NOTE.format(
             why=f"the lights offered and refined for the last solve's targets, {self.model.problem.m} target "
                 "patches; the new targets' direct light by the ray-cast form factors"))

@@ -52,7 +52,8 @@ def greedy_swap(s):
     # error as the full search at 60-75 % of its time; docs/benchmarks.md, "Live")
     quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS) if s.quick else {}
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
-                                            cancel=lambda: stop["cancel"], progress=progress, **quick)
+                                            cancel=lambda: stop["cancel"], progress=progress,
+                                            nnls_start=s.nnls_start, **quick)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
