@@ -261,7 +261,10 @@ def _power(problem, point) -> float:
 
 
 def _nan_to_none(rows):
-    return [None if np.isnan(r).any() else r for r in np.asarray(rows)]
+    """Rows (polygons) with a NaN channel as None (unpainted), the others as lists."""
+    rows = np.asarray(rows)
+    bad = np.isnan(rows).any(axis=1)
+    return [None if b else r for b, r in zip(bad.tolist(), rows.tolist())]
 
 
 def radiosity_report(faces, patches, options, form_factors, info: dict, polygon_radiosity: dict, cost: dict,
