@@ -275,8 +275,13 @@ class _Model:
             raise ValueError(f"light_watts must have {n} entries, got {self.area.shape}")
         if not np.all(np.isfinite(self.area)) or np.any(self.area <= 0):
             raise ValueError("light areas (the power per unit strength) must be positive and finite")
+        self.bb = (self.b * self.b).sum(axis=0)  # (3,)
+        # the channels with a target: a channel whose targets are all 0 fits no light (NNLS: 0, its
+        # error 0 whatever the lights) and is skipped (a colour-constrained problem has two such,
+        # engine/light_colour.py)
+        self.chans = tuple(c for c in range(3) if self.bb[c] > 0) or (0,)
         self.groups = {}  # id(T) -> channels sharing that matrix
-        for c in range(3):
+        for c in self.chans:
             self.groups.setdefault(id(self.T[c]), []).append(c)
         self.G, self.d = {}, {}
         for key, chans in self.groups.items():
@@ -284,11 +289,11 @@ class _Model:
             G = gram(t)
             self.G[key] = G
             self.d[key] = np.diag(G).copy()
-        self.h = np.stack([self.T[c].T @ self.b[:, c] for c in range(3)], axis=1)  # (n, 3)
-        self.bb = (self.b * self.b).sum(axis=0)  # (3,)
+        self.h = np.stack([self.T[c].T @ self.b[:, c] if c in self.chans else np.zeros(n) for c in range(3)],
+                          axis=1)  # (n, 3)
         self.norm = float(np.sqrt(self.bb.sum()))
         self.tol = EQUAL_ERROR_RTOL * max(self.norm, 1e-300)
-        dsum = sum(self.d[id(self.T[c])] for c in range(3))
+        dsum = sum(self.d[id(self.T[c])] for c in self.chans)
         self.usable = dsum > 0  # lights that reach at least one target
         self._cache = {}
         self._gcache = {}
@@ -305,7 +310,7 @@ class _Model:
         err2 = self.bb.copy()
         if len(S):
             self.n_fits += 1
-            for c in range(3):
+            for c in self.chans:
                 A = self.T[c][:, idx]
                 e[:, c] = _nnls(A, self.b[:, c])
                 r = np.einsum("ij,j->i", A, e[:, c]) - self.b[:, c]
@@ -397,7 +402,7 @@ class _Model:
         gain1 = np.zeros(n)
         exact_val = np.zeros(n)
         exact = np.ones(n, dtype=bool)
-        for c in range(3):
+        for c in self.chans:
             key = id(self.T[c])
             G, d = self.G[key], self.d[key]
             act = e[:, c] > 0 if len(S) else np.zeros(0, dtype=bool)
@@ -446,7 +451,7 @@ class _Model:
         chan = []
         LB0 = np.zeros((k, n))
         UB1 = np.zeros((k, n))
-        for c in range(3):
+        for c in self.chans:
             key = id(self.T[c])
             G, d = self.G[key], self.d[key]
             act = e[:, c] > 0
@@ -944,7 +949,7 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
     err2 = model.bb.copy()
     e_nnls = np.zeros((model.n, 3))
     if len(cols):
-        for c in range(3):
+        for c in model.chans:
             A = model.T[c][:, cols]
             if nnls_start is not None and np.shape(nnls_start) == (model.n, 3):
                 on = np.flatnonzero(np.asarray(nnls_start)[cols, c] > 0)
