@@ -199,6 +199,9 @@ class InverseProblem:
     ``light_rows()`` describe the lights.
     """
 
+    #: the light colour mode (a LIGHT_COLOURS instance, engine/colours/); None: free colours
+    colour = None
+
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
                  first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,

@@ -34,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.optimize as sopt
 
-from .best_lights import _nnls
+from .light_colour import fit_columns
 from .geometry import unit
 from .candidate_lamps import _reach as lamp_reach, patch_radius
 from .lamps import lamp_irradiance
@@ -188,12 +188,13 @@ class _LampParameters:
 
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
-                         seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None) -> tuple:
+                         seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None, exitance=None) -> tuple:
     """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
     channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
     (see the module docstring). ``step_length``: the slide of one unit (m). Returns ([RefinedLamp] of the lamps whose
     refinement lowered the error, the columns with theirs replaced, the relative error before and
-    after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET)."""
+    after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET). ``exitance``
+    (k, 3): the configuration's strengths, whose colours a constrained light colour keeps."""
     patches = mount.patches
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
@@ -203,13 +204,8 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
     radius = patch_radius(patches)
 
-    def error(cs):
-        err2 = 0.0
-        for c in range(3):
-            s = _nnls(cs[c], b[:, c])
-            r = cs[c] @ s - b[:, c]
-            err2 += float(r @ r)
-        return math.sqrt(err2) / norm
+    def error(cs):  # the best strengths of the problem's light colour (NNLS per channel when free)
+        return fit_columns(problem, cs, exitance, refit=False)[1] / norm
 
     def irradiance(lamp, points=SEARCH_POINTS):
         return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,

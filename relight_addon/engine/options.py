@@ -17,8 +17,8 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from . import distributions, estimators, patch_models, selections, solvers  # noqa: F401  (register the methods)
-from .registry import DISTRIBUTIONS, ESTIMATORS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
+from . import colours, distributions, estimators, patch_models, selections, solvers  # noqa: F401  (register the methods)
+from .registry import DISTRIBUTIONS, ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
 DEFAULT_SOLVER = "reduced"
@@ -27,6 +27,7 @@ DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
 DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
 DEFAULT_ESTIMATOR = "kernel"
+DEFAULT_LIGHT_COLOUR = "free"
 
 #: threads at most: more than the machine's CPU threads only costs memory (the ray buffers)
 MAX_THREADS = 4 * (os.cpu_count() or 1)
@@ -41,7 +42,7 @@ REFINE_RAY_FRACTION = 4
 
 #: the option holding each user-chosen method, and its registry (the order the panel shows them)
 METHOD_CHOICES = (("solver", SOLVERS), ("selection", SELECTIONS), ("distribution", DISTRIBUTIONS),
-                  ("patch_model", PATCH_MODELS), ("estimator", ESTIMATORS))
+                  ("patch_model", PATCH_MODELS), ("estimator", ESTIMATORS), ("light_colour", LIGHT_COLOURS))
 
 
 def _unused_without_distribution(o):
@@ -105,6 +106,9 @@ JOB_PARAMS = (
     Param("distribution", str, DEFAULT_DISTRIBUTION, registry=DISTRIBUTIONS, label="Distribution",
           unused=_unused_without_distribution,
           description="Where a removed light's power goes (selections that distribute power)"),
+    Param("light_colour", str, DEFAULT_LIGHT_COLOUR, registry=LIGHT_COLOURS, label="Light Colour", inverse_only=True,
+          description="What colour a light may have: free (each channel fitted on its own), white, or blackbody "
+                      "(a colour temperature in a range)"),
     Param("max_lights", int, DEFAULT_MAX_LIGHTS, min=1, label="Max Lights", ui="toggle", soft_max=64,
           unused=_unused_by_least_power, description="Stop criterion: at most this many lights"),
     Param("error_threshold", float, None, min=0.0, label="Relative Error", ui="toggle", ui_default=0.1,

@@ -61,11 +61,12 @@ error among the rest), and the result says so in ``warnings``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .inverse import InverseProblem
+from .light_colour import colour_problem
 from . import distributions, selections  # noqa: F401  (register the methods reduce_lights dispatches to)
 from .registry import DISTRIBUTIONS, SELECTIONS
 
@@ -222,6 +223,33 @@ class _ErrorEval:
         return float(np.linalg.norm(B[self.p.targets] - self.b))
 
 
+def in_colour(problem, view, colour, curve, refits=False) -> list:
+    """A curve found on a colour view (engine.light_colour.ColourProblem) as the lights' exitance
+    (their power times their colour), its errors on the problem's own T (the same values); with
+    ``refits`` (the selections that fit by NNLS) each non-negative configuration's colours refitted
+    (colour.fit: a blackbody light's temperature) where that lowers its error, and the curve kept
+    from rising (a configuration no better than the one before it with fewer lights is replaced
+    by that one)."""
+    T, b = problem.transfer, problem.b_target
+    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    out = []
+    for pt in curve:
+        lights = np.asarray(pt.lights, dtype=np.int64)
+        e = view.exitance_of(lights, pt.exitance)
+        if refits and pt.n_negative == 0 and len(lights):
+            e2, _ = colour.fit([T[c][:, lights] for c in range(3)], b, e)
+            on = e2.max(axis=1) > 0
+            lights, e = lights[on], e2[on]
+        err = float(np.linalg.norm(np.stack([T[c][:, lights] @ e[:, c] for c in range(3)], axis=1) - b))
+        new = CurvePoint(len(lights), err, err / norm, _neg(e), lights, e.copy(), int(pt.changed))
+        prev = out[-1] if out else None
+        if refits and prev is not None and prev.n_negative == 0 and new.n_negative == 0 \
+                and prev.n_lights <= new.n_lights and prev.error < new.error:
+            new = replace(prev, lights=prev.lights.copy(), exitance=prev.exitance.copy())
+        out.append(new)
+    return out
+
+
 def _neg(e):
     return int((e < 0).any(axis=1).sum())
 
@@ -316,7 +344,15 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         raise ValueError("e_x contains NaN or infinite values")
 
     t0 = time.perf_counter()
-    err_fn = _ErrorEval(problem, error_route, compare_cold=gs_compare_cold)
+    colour = getattr(problem, "colour", None)
+    view = colour_problem(problem, colour)  # the problem with the lights' colours tied (engine.light_colour)
+    work = problem
+    if view is not None:
+        if error_route == "gauss-seidel":
+            raise ValueError(f"the Gauss-Seidel error route re-solves each channel on its own; with {colour.name} "
+                             "lights use the 'transfer' route")
+        work, e_x = view, view.start()
+    err_fn = _ErrorEval(work, error_route, compare_cold=gs_compare_cold)
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     curve = []
     cancelled = False
@@ -338,12 +374,19 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
             cancelled = True
         return cancelled
 
-    dist = Distributor(problem, distribution, coplanar_tol) if method.get("distributes", True) else None
-    sel = Selection(problem, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
+    dist = Distributor(work, distribution, coplanar_tol) if method.get("distributes", True) else None
+    sel = Selection(work, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
                     curve_lights=curve_lights, initial=initial, quick=quick, nnls_start=nnls_start)
     notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")
+    if view is not None:  # back to the lights' colours (refitted where the selection fits by NNLS)
+        refits = getattr(colour, "refits", False) and not method.get("distributes", True) \
+            and not method.get("needs_tolerance")
+        curve = in_colour(problem, view, colour, curve, refits)
+        if sel.certificate is not None:
+            sel.certificate = colour.certificate(problem, view, view.real_bounds(sel.certificate),
+                                                 len(sel.certificate.bound))
     idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
                               relative_error_threshold, require_positive)
     warns = list(notes) + warns

@@ -2,7 +2,7 @@
 
 A new method is one file that registers itself here, plus its import in its package's
 ``__init__`` (``solvers/``, ``selections/``, ``distributions/``, ``patch_models/``,
-``estimators/``, ``lights/``). The CLI choices, the job options, the add-on's enum properties and the
+``estimators/``, ``lights/``, ``colours/``). The CLI choices, the job options, the add-on's enum properties and the
 cost model all read these registries, so nothing else changes when a method is added.
 
 A method's own parameters are declared with it, once, as :class:`Param` s; the CLI's flags,
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 __all__ = ["Param", "Method", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS", "DISTRIBUTIONS",
-           "LIGHT_KINDS"]
+           "LIGHT_KINDS", "LIGHT_COLOURS"]
 
 
 @dataclass(frozen=True)
@@ -240,3 +240,4 @@ SOLVERS = Registry("inverse solver", ".solvers")
 SELECTIONS = Registry("selection", ".selections")
 DISTRIBUTIONS = Registry("distribution", ".distributions")
 LIGHT_KINDS = Registry("light kind", ".lights")
+LIGHT_COLOURS = Registry("light colour", ".colours")

@@ -16,8 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from ..engine.best_lights import lower_bounds
-from ..engine.best_lights import _nnls
+from ..engine.light_colour import colour_problem, fit_columns, fit_lights, lower_bounds_of
 from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
 from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, refine_configuration
 from ..engine.lights.placed import WRITER as PLACED
@@ -34,7 +33,7 @@ from ..engine.options import REFINE_RAY_FRACTION, JobOptions
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
-from ..engine.registry import ESTIMATORS, PATCH_MODELS, SELECTIONS
+from ..engine.registry import ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS
 from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from .polygons import PolygonMap
@@ -409,6 +408,10 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         check_memory(solve_cost(patches, options, len(faces.triangles), mode),
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
+    if mode == "inverse":  # the lights' colour (an automatic mode chooses it on the final problem)
+        problem.colour, note = light_colour_of(problem, options)
+        if note:
+            warnings.append(note)
     if mode == "inverse" and (np.any(background > 0) or has_scene_light(faces)):
         emitting = np.any(patches.exitance > 0, axis=1)
         warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps),
@@ -496,11 +499,20 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     return red
 
 
-def _fit(problem, ids):
-    """NNLS strengths (len(ids), 3) per channel of the lights ``ids`` on T, and their error (W/m^2)."""
-    T, b = problem.transfer, problem.b_target
-    e = np.stack([_nnls(T[c][:, ids], b[:, c]) for c in range(3)], axis=1)
-    return e, _error(problem, ids, e)
+def light_colour_of(problem, options) -> tuple:
+    """(the problem's light colour mode, None for free colours; a note): the option's mode, or
+    the one an automatic mode chooses for this problem (engine/colours/auto.py)."""
+    mode, note = LIGHT_COLOURS[options.light_colour](options), None
+    if hasattr(mode, "choose"):
+        mode, note = mode.choose(problem)
+    return (None if mode.free else mode), note
+
+
+def _fit(problem, ids, e=None):
+    """The best non-negative strengths (len(ids), 3) of the lights ``ids`` on T, of the problem's
+    light colour (NNLS per channel for free colours; ``e``: their strengths now, whose colours a
+    refit starts from), and their error (W/m^2)."""
+    return fit_lights(problem, ids, e)
 
 
 def _error(problem, ids, e):
@@ -559,12 +571,14 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
             # again; the selection's other configurations with negatives keep their strengths
             e = e + _least_squares_change(problem, ids, e) if len(ids) == problem.n_lights else e
         elif refit is not None:
-            e, note = refit(problem, ids, options.param("tolerance"))
+            view = colour_problem(problem, problem.colour, ids, e)  # (the configuration's colours kept)
+            e, note = refit(view or problem, ids, options.param("tolerance"))
+            e = view.exitance_of(ids, e) if view is not None else e
             notes += [note] if i == red.final_index and note else []
             on = e.max(axis=1) > 0
             ids, e = ids[on], e[on]
         else:
-            fit, _ = _fit(problem, ids)
+            fit, _ = _fit(problem, ids, e)
             e = fit if np.all(fit.max(axis=1) > 0) else e
         error = _error(problem, ids, e)
         red.curve[i] = replace(pt, n_lights=len(ids), lights=ids, exitance=e, error=error,
@@ -616,7 +630,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
                   if lights.lamp(j) is not None and lights.kind_of(j).writer == PLACED}
         refined, cols, before, after, n_eval = refine_configuration(
             problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
-            seed=options.seed, budget=REFINE_BUDGET - evaluations, cancel=cancel)
+            seed=options.seed, budget=REFINE_BUDGET - evaluations, cancel=cancel, exitance=pt.exitance)
         evaluations += n_eval
         rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
                      "lamps_refined": len(refined), "evaluations": n_eval})
@@ -631,10 +645,9 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
                 new_H.append(r.irradiance)
                 for c in range(3):
                     new_cols[c].append(cols[c][:, r.index])
-            e = np.stack([_nnls(cols[c], problem.b_target[:, c]) for c in range(3)], axis=1)
+            e, error = fit_columns(problem, cols, pt.exitance)  # (of the light colour)
             order = np.argsort(ids, kind="stable")
             on = e[order].max(axis=1) > 0
-            error = float(np.linalg.norm(np.stack([cols[c] @ e[:, c] for c in range(3)], axis=1) - problem.b_target))
             red.curve[i] = replace(pt, n_lights=int(on.sum()), lights=ids[order][on], exitance=e[order][on],
                                    error=error, relative_error=error / (problem.target_norm or 1.0))
         if progress is not None:
@@ -698,7 +711,7 @@ def certificate(problem: InverseProblem, red: ReductionResult):
     k_top = int(min(problem.n_lights, max(min(CERTIFICATE_LIGHTS, max(p.n_lights for p in red.curve)), 1)))
     bounds = red.certificate  # the greedy-swap selection computed it already
     if bounds is None or len(bounds.bound) < k_top:
-        bounds = lower_bounds(problem.transfer, problem.b_target, k_top)
+        bounds = lower_bounds_of(problem, k_top)
     return bounds
 
 

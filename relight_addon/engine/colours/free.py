@@ -1,0 +1,17 @@
+"""Free colours: every channel fitted on its own (NNLS per channel), the selections' own way; a
+light's colour is whatever the three fits give."""
+from __future__ import annotations
+
+from ..registry import LIGHT_COLOURS
+
+
+@LIGHT_COLOURS.register("free", "Free", "Each channel fitted on its own: a light's colour is whatever the fit "
+                        "gives (it may be saturated, e.g. pure red)")
+class Free:
+    free = True
+
+    def __init__(self, options=None):
+        pass
+
+    def describe(self, exitance) -> list:
+        return [{} for _ in range(len(exitance))]
