@@ -43,6 +43,7 @@ import bpy
 import numpy as np
 
 from ..engine.geometry import group_mean
+from ..engine.light_colour import blackbody_rec709, temperature_of
 from ..engine.scene import SceneError
 from ..engine import lights  # noqa: F401  (registers the light kinds)
 from ..engine.registry import LIGHT_KINDS
@@ -426,6 +427,11 @@ def _lights_of_writer(data, writer) -> np.ndarray:
                      and LIGHT_KINDS[names[code]].impl.writer == writer], dtype=np.int64)
 
 
+#: whether this Blender's Lights have a Temperature (4.5 on; 4.2 has not: a blackbody lamp's colour
+#: is then its colour alone)
+HAS_TEMPERATURE = "use_temperature" in bpy.types.Light.bl_rna.properties
+
+
 def plan_placed(data, strength) -> list:
     """The placed writer's plan for configuration ``strength`` (n_lights, 3), computed and checked
     before anything is written: per placed lamp that is on, (its stored record, Blender's Power
@@ -433,12 +439,17 @@ def plan_placed(data, strength) -> list:
     from ..engine.lights.lamp import blender_values
 
     plan = []
+    colour = data.meta.get("light_colour") or {}
     for j in _lights_of_writer(data, "placed"):
         s = np.asarray(strength[j], dtype=np.float64)
         if not np.any(s > 0):
             continue
         rec = data.lamps[int(data.light_lamp[j])]
-        energy, color = blender_values(s, rec["energy"], rec["color"])
+        gain = None
+        if colour.get("mode") == "blackbody" and HAS_TEMPERATURE:  # the Light's Temperature carries its colour
+            t = float(temperature_of(s[None, :], *colour["range_K"])[0])
+            rec, gain = dict(rec, temperature_K=t), blackbody_rec709(t)
+        energy, color = blender_values(s, rec["energy"], rec["color"], gain)
         values = np.concatenate([[energy], color, rec["position"], rec["direction"], rec["axis_u"], rec["axis_v"]])
         if not np.all(np.isfinite(values)):
             raise SceneError(f"lamp {rec['name']!r} of the stored result has non-finite values: solve again")
@@ -448,12 +459,16 @@ def plan_placed(data, strength) -> list:
 
 def new_lamp(rec, energy, color, owner=None):
     """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
-    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, and its frame
-    (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
+    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, its
+    Temperature (a blackbody light's ``temperature_K``, where this Blender has Use Temperature), and
+    its frame (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
 
     ld = bpy.data.lights.new(rec["name"], rec["type"])
     make_plain(ld)  # Cycles emits colour x Power
+    if rec.get("temperature_K") is not None and HAS_TEMPERATURE:  # ... x its blackbody colour (a blackbody light)
+        ld.use_temperature = True
+        ld.temperature = float(rec["temperature_K"])
     ld.energy = float(energy)
     ld.color = tuple(float(x) for x in color)
     if rec["type"] in ("POINT", "SPOT"):

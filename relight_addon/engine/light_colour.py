@@ -57,8 +57,11 @@ _B = ((5.96945309e-11, -4.85742887e-08, -9.70622247e-05, -4.07936148e-03),
       (-1.97075738e-11, 1.75359352e-07, -2.50542825e-04, -2.22783266e-02),
       (-1.61997957e-13, -1.64216008e-08, 3.86216271e-04, -7.38077418e-01),
       (6.72650283e-13, -2.73078809e-08, 4.24098264e-04, -7.52335691e-01))
-#: Blender's Blackbody node takes 800 K to 12,000 K (outside, Cycles returns the ends' colours)
+#: Blender's Blackbody node takes 800 K to 12,000 K; at 12,000 K and above, and below 800 K,
+#: Cycles returns these colours
 BLACKBODY_LIMITS = (800.0, 12000.0)
+_HOT = np.array([0.8262954810464208, 0.9945080501520986, 1.566307710274283])
+_COLD = np.array([5.413294490189271, -0.20319390035873933, -0.0822535242887164])
 
 #: temperatures a blackbody light may take in a range, evenly spaced in mired (1e6 / K)
 TEMPERATURE_STEPS = 33
@@ -73,12 +76,15 @@ FIT_ROUNDS = 4
 def blackbody_rec709(temperature) -> np.ndarray:
     """(..., 3) linear Rec.709 colour of a blackbody at ``temperature`` K, as Cycles computes it
     (Blender's Blackbody node; a Light's ``temperature_color``): luminance about 1, clamped at 0."""
-    t = np.clip(np.asarray(temperature, dtype=np.float64), *BLACKBODY_LIMITS)
+    t0 = np.asarray(temperature, dtype=np.float64)
+    t = np.clip(t0, *BLACKBODY_LIMITS)
     i = np.searchsorted(np.asarray(_BANDS), t, side="right")
     r, g, b = (np.asarray(x)[i] for x in (_R, _G, _B))
     rgb = np.stack([r[..., 0] / t + r[..., 1] * t + r[..., 2],
                     g[..., 0] / t + g[..., 1] * t + g[..., 2],
                     ((b[..., 0] * t + b[..., 1]) * t + b[..., 2]) * t + b[..., 3]], axis=-1)
+    rgb = np.where((t0 >= BLACKBODY_LIMITS[1])[..., None], _HOT, rgb)  # (Cycles' ends)
+    rgb = np.where((t0 < BLACKBODY_LIMITS[0])[..., None], _COLD, rgb)
     return np.maximum(rgb, 0.0)
 
 
@@ -280,7 +286,8 @@ def cone_edges(t_min, t_max, checks=BLACKBODY_CHECKS, points=CONE_POINTS) -> np.
     curve (Cycles' fit: nearly straight, piecewise); the cone's edges are the vertices of the convex
     hull of ``points`` colours of the range each moved by +-delta along the curve's normal, delta
     1.5 x the largest distance of ``checks`` colours of the range from the polyline through them
-    (so the band around the polyline, which holds the curve, is inside). Checked: each of the
+    (so the band around the polyline, which holds the curve, is inside; an edge may have a channel
+    below 0 near the range's ends: a relaxation needs only to contain the colours). Checked: each of the
     ``checks`` colours is a non-negative combination of the edges (NNLS residual below 1e-9 of it);
     delta doubled until it is (ValueError after 20 doublings)."""
     from scipy.spatial import ConvexHull
@@ -308,7 +315,7 @@ def cone_edges(t_min, t_max, checks=BLACKBODY_CHECKS, points=CONE_POINTS) -> np.
         pts = np.vstack([P + delta * normal, P - delta * normal])
         V = pts[ConvexHull(pts).vertices]
         E = np.stack([V[:, 0], 1.0 - V[:, 0] - V[:, 1], V[:, 1]], axis=1)
-        if np.all(E > 0) and all(sopt.nnls(E.T, col)[1] <= 1e-9 * np.linalg.norm(col) for col in fine_rgb):
+        if all(sopt.nnls(E.T, col)[1] <= 1e-9 * np.linalg.norm(col) for col in fine_rgb):
             return E
         delta *= 2.0
     raise ValueError(f"the blackbody colours of {t_min:g}-{t_max:g} K could not be enclosed in a cone")

@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 __all__ = ["MAX_REFLECTANCE", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
-           "radiance_from_exitance", "illuminance_lux"]
+           "radiance_from_exitance", "illuminance_lux", "luminous_flux_lm"]
 
 #: reflectance of an exported material is clamped to [0, MAX_REFLECTANCE] (with a warning):
 #: a reflectance of 1 or more creates energy; the engine's forward solver clamps to the same value
@@ -38,6 +38,11 @@ def exitance_from_radiance(radiance):
 def radiance_from_exitance(exitance):
     """Radiance (W/(m^2 sr)) of a Lambertian surface of exitance or radiosity ``exitance`` (W/m^2): e / pi."""
     return exitance / math.pi
+
+
+def luminous_flux_lm(power_rgb) -> np.ndarray:
+    """Luminous flux (lm) of a radiant power (..., 3) in W per channel (a lamp's, a light's)."""
+    return LUMENS_PER_WATT * (np.asarray(power_rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE))
 
 
 def illuminance_lux(irradiance_rgb) -> np.ndarray:

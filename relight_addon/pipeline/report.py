@@ -14,6 +14,9 @@ import math
 
 import numpy as np
 
+from ..engine.light_colour import blackbody_rec709
+from ..engine.units import luminous_flux_lm
+
 __all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
            "kinds_text"]
 
@@ -69,24 +72,29 @@ def lamp_records(model, strength) -> list:
     return out
 
 
-def placed_record(lamp, kind, strength) -> dict:
+def placed_record(lamp, kind, strength, temperature=None) -> dict:
     """A lamp the solve placed (engine/lights/spot.py, area.py, point.py) at ``strength`` (3,)
     (its power per channel, W), as the report lists it and the written copy makes it: object (the
     Light object's name), kind (spot, area, point), type (Blender's), location and direction (its
     -Z; a point lamp's is only its orientation), power (W, the channels' sum), strength [r, g, b],
     energy (Blender's Power, W) and color (Power x colour = the strength), radius (m), a spot's
     spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
-    shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg."""
+    shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg.
+    ``temperature`` (K, a blackbody light's): the Light's Temperature (Use Temperature on: Cycles
+    multiplies colour x Power by its blackbody colour), and energy and color with it."""
     from ..engine.lights.area import blender_shape
     from ..engine.lights.lamp import blender_values
 
     s = np.asarray(strength, dtype=np.float64).reshape(3)
-    energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain)
+    gain = lamp.gain if temperature is None else blackbody_rec709(temperature)
+    energy, color = blender_values(s, lamp.energy, lamp.color, gain)
     rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
            "location": lamp.position, "direction": lamp.direction, "axis_u": lamp.axis_u, "center": lamp.position,
            "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
            "area": float(lamp.area) if lamp.kind == "AREA" else 0.0, "exitance": None, "strength": s,
            "power": float(s.sum()), "energy": float(energy), "color": color}
+    if temperature is not None:
+        rec["temperature_K"] = float(temperature)
     if lamp.kind in ("POINT", "SPOT"):
         rec["radius"] = float(lamp.radius)
     if lamp.kind == "SPOT":
@@ -101,7 +109,8 @@ def placed_record(lamp, kind, strength) -> dict:
 def light_records(model, curve, row: int) -> list:
     """The lights of kept configuration ``row`` with a non-zero exitance, as the report lists
     them: object, polygons (base-mesh indices), kind, center and normal (world), area (m^2),
-    exitance [r, g, b] (W/m^2) and power (W). A lamp (direct mode): object = the lamp's name, no
+    exitance [r, g, b] (W/m^2), power (W), luminous_flux_lm (lm: engine.units) and, for blackbody
+    lights, temperature_K. A lamp (direct mode): object = the lamp's name, no
     polygons, its position and direction (none for a point lamp), area (an Area lamp's; a sun's:
     the area it lights), exitance None, ``strength`` [r, g, b] (its power per channel) and
     power, with the values ``lamp_records`` gives it."""
@@ -111,25 +120,34 @@ def light_records(model, curve, row: int) -> list:
     lamps = {r["name"]: r for r in lamp_records(model, e)}
     lamp_of = dict(zip(*model.lamp_lights)) if model.lamp_lights is not None else {}
     out = []
-    for j in np.flatnonzero(np.any(e != 0, axis=1)):
-        if lights.kind_of(j).writer == "placed":
-            out.append(placed_record(lights.lamp(j), kinds[j], e[j]))
-            continue
-        if j in lamp_of:
-            rec = lamps[model.faces.lamps[lamp_of[j]].name]
-            out.append({"object": rec["name"], "polygons": [], "kind": kinds[j], "center": lights.center[j],
-                        "normal": lights.normal[j], "area": float(lights.area[j]), "exitance": None,
-                        "strength": e[j], "power": float(e[j].sum() * watts[j]),
-                        **{k: v for k, v in rec.items() if k not in ("name", "kind")}})
-            continue
-        pids = curve.light_polygons[j].indices
-        obj = model.patches.object[lights.members(j)[0]]
-        out.append({"object": model.faces.object_names[obj],
-                    "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
-                    "kind": kinds[j],
-                    "center": lights.center[j], "normal": lights.normal[j], "area": float(lights.area[j]),
-                    "exitance": e[j], "power": float(e[j].sum() * watts[j])})
+    on = np.flatnonzero(np.any(e != 0, axis=1))
+    colour = getattr(model.problem, "colour", None)
+    info = dict(zip(on.tolist(), colour.describe(e[on]))) if colour is not None else {}
+    for j in on:
+        rec = _one_light(model, curve, lights, lamps, lamp_of, e, j, info.get(int(j), {}))
+        power = rec["strength"] if rec.get("exitance") is None else np.asarray(e[j]) * watts[j]  # W per channel
+        rec["luminous_flux_lm"] = float(luminous_flux_lm(power))
+        rec.update(info.get(int(j), {}))
+        out.append(rec)
     return out
+
+
+def _one_light(model, curve, lights, lamps, lamp_of, e, j, info) -> dict:
+    """light_records' record of light ``j`` (``info``: its colour's, e.g. a blackbody's temperature)."""
+    watts, kinds = lights.watts, lights.kind_names
+    if lights.kind_of(j).writer == "placed":
+        return placed_record(lights.lamp(j), kinds[j], e[j], info.get("temperature_K"))
+    if j in lamp_of:
+        rec = lamps[model.faces.lamps[lamp_of[j]].name]
+        return {"object": rec["name"], "polygons": [], "kind": kinds[j], "center": lights.center[j],
+                "normal": lights.normal[j], "area": float(lights.area[j]), "exitance": None,
+                "strength": e[j], "power": float(e[j].sum() * watts[j]),
+                **{k: v for k, v in rec.items() if k not in ("name", "kind")}}
+    pids = curve.light_polygons[j].indices
+    obj = model.patches.object[lights.members(j)[0]]
+    return {"object": model.faces.object_names[obj], "polygons": np.sort(pids - curve.polygons.offset[obj]).tolist(),
+            "kind": kinds[j], "center": lights.center[j], "normal": lights.normal[j],
+            "area": float(lights.area[j]), "exitance": e[j], "power": float(e[j].sum() * watts[j])}
 
 
 def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None,
@@ -186,6 +204,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         },
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
+        "light_colour": light_colour_record(problem, options),
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
                    "n_negative": p.n_negative, "power": _power(problem, p),
                    "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
@@ -205,6 +224,14 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def light_colour_record(problem, options) -> dict:
+    """The report's light colour: the mode the lights have (``mode``: free, white, blackbody with
+    its ``range_K``), and the option that chose it (``option``: e.g. auto)."""
+    colour = getattr(problem, "colour", None)
+    rec = colour.summary() if colour is not None else {"mode": "free"}
+    return {**rec, "option": getattr(options, "light_colour", "free")}
 
 
 def target_rows_text(patches, targets) -> str:

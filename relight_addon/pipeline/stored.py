@@ -137,7 +137,8 @@ class StoredResult:
             target_patch=model.problem.targets,  # the painted patches and their painted radiosity (W/m^2)
             target_value=patches.target_radiosity[model.problem.targets],
             target_norm=np.array(model.problem.target_norm),
-            meta={"command": report["command"], "options": json_safe(report["options"])},
+            meta={"command": report["command"], "options": json_safe(report["options"]),
+                  "light_colour": json_safe(report.get("light_colour") or {"mode": "free"})},
             lamps=lamps, light_lamp=light_lamp,
         )
 

@@ -21,6 +21,7 @@ AUTO_GAP = 0.05
 @LIGHT_COLOURS.register("auto", "Automatic", "Blackbody lights, unless the targets ask for colours no blackbody "
                         "light gives (then free colours, with a note)")
 class Auto:
+    name = "auto"
     free = False
 
     def __init__(self, options=None):

@@ -24,6 +24,7 @@ DEFAULT_RANGE = (2700.0, 6500.0)
                                       label="Max Temperature", soft_max=12000.0,
                                       description="Blackbody lights: the highest colour temperature, K")))
 class Blackbody:
+    name = "blackbody"
     free = False
     refits = True  # every configuration's temperatures refitted (engine.reduction.in_colour)
 
@@ -54,5 +55,9 @@ class Blackbody:
         return relaxed_bound(problem, self.range, k_max)
 
     def describe(self, exitance) -> list:
+        """Per light (rows of ``exitance`` (k, 3)): its temperature, K (of the range's grid)."""
         temps = temperature_of(exitance, *self.range)
         return [{"temperature_K": float(t)} for t in temps]
+
+    def summary(self) -> dict:
+        return {"mode": self.name, "range_K": list(self.range), "temperature_steps": len(self.grid)}

@@ -8,6 +8,7 @@ from ..registry import LIGHT_COLOURS
 @LIGHT_COLOURS.register("free", "Free", "Each channel fitted on its own: a light's colour is whatever the fit "
                         "gives (it may be saturated, e.g. pure red)")
 class Free:
+    name = "free"
     free = True
 
     def __init__(self, options=None):
@@ -15,3 +16,6 @@ class Free:
 
     def describe(self, exitance) -> list:
         return [{} for _ in range(len(exitance))]
+
+    def summary(self) -> dict:
+        return {"mode": self.name}

@@ -11,6 +11,7 @@ from ..registry import LIGHT_COLOURS
 
 @LIGHT_COLOURS.register("white", "White", "Each light is a power times white")
 class White:
+    name = "white"
     free = False
 
     def __init__(self, options=None):
@@ -32,3 +33,6 @@ class White:
 
     def describe(self, exitance) -> list:
         return [{} for _ in range(len(exitance))]
+
+    def summary(self) -> dict:
+        return {"mode": self.name}
