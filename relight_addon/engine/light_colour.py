@@ -350,8 +350,9 @@ def relaxed_bound(problem, t_range, k_max) -> object:
     if reach.any():
         x[reach] = _nnls(cols[:, reach], y)
     err = float(np.linalg.norm(cols @ x - y)) * (1 - BOUND_MARGIN)
+    e = x.reshape(len(edges), n).T @ edges  # (n, 3): each light's colour in the cone (not a blackbody's)
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     k = np.arange(1, int(k_max) + 1)
     bound = np.full(len(k), err)
     return LowerBounds(k=k, bound=bound, relative=bound / norm, exact=np.zeros(len(k), dtype=bool), nnls=err,
-                       nnls_relative=err / norm, optimum_lights=[None] * len(k), nnls_exitance=None)
+                       nnls_relative=err / norm, optimum_lights=[None] * len(k), nnls_exitance=e)

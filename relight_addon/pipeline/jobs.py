@@ -987,7 +987,7 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     warnings = list(model.warnings)
     if mode == "inverse":
         point_bounds = np.array([bounds.at(p.n_lights) for p in red.curve])
-        warnings.extend(_positivity_notes(positive, red.final))
+        warnings.extend(_positivity_notes(positive, red.final, model.problem.colour))
         warnings.extend(certificate_notes(model.problem, bounds, red.final, refined=model.lamp_refinement))
     fixed = None
     if mode == "inverse" or model.lamp_names:
@@ -1047,7 +1047,13 @@ def positive_bound(problem, inv, final, bounds=None):
                          relative_error=err / norm, n_negative=0, seconds=0.0)
 
 
-def _positivity_notes(bound, final):
+def colour_text(colour) -> str:
+    """A light colour mode in words ("white", "blackbody 2700-6500 K")."""
+    rec = colour.summary()
+    return rec["mode"] + (f" {rec['range_K'][0]:.0f}-{rec['range_K'][1]:.0f} K" if "range_K" in rec else "")
+
+
+def _positivity_notes(bound, final, colour=None):
     """Say so when the final configuration misses the targets by much: whether no positive
     lighting can do better (targets brighter or darker than light can make them) or whether
     more lights / another selection would. ``bound``: positive_bound's."""
@@ -1055,9 +1061,10 @@ def _positivity_notes(bound, final):
         return []
     n_pos = int((bound.exitance.max(axis=1) > 0).sum())
     if bound.relative_error > POSITIVE_GAP:
-        return [f"no positive lighting meets these targets: the best any non-negative set of the candidate lights "
-                f"can do is a relative error of {bound.relative_error:.3g} (NNLS, {n_pos} lights); the final configuration's "
-                f"is {final.relative_error:.3g}"]
+        best = ("the best any non-negative set of the candidate lights can do is" if colour is None else
+                f"no non-negative set of the candidate lights, {colour_text(colour)}, goes below")
+        return [f"no positive lighting meets these targets: {best} a relative error of {bound.relative_error:.3g} "
+                f"(NNLS, {n_pos} lights); the final configuration's is {final.relative_error:.3g}"]
     return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
             f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "
             "greedy-swap selection (Best k Lights)"]

@@ -338,6 +338,7 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         s = context.scene.relight
         options = operators.job_options(s, validate=False)
         draw_method(layout, s, "selection", options)
+        draw_method(layout, s, "light_colour", options)
         box = layout.box()
         stops = options.uses("max_lights")
         if stops:  # (least-power: its tolerance decides)
