@@ -27,7 +27,7 @@ DEFAULT_DISTRIBUTION = "distance"  # the paper's choice (section 5)
 DEFAULT_MAX_LIGHTS = 3
 DEFAULT_PATCH_MODEL = "adaptive"  # the polygon model is the paper's (a patch per face)
 DEFAULT_ESTIMATOR = "kernel"
-DEFAULT_LIGHT_COLOUR = "free"
+DEFAULT_LIGHT_COLOUR = "auto"  # measured: docs/benchmarks.md "Light colour"
 
 #: threads at most: more than the machine's CPU threads only costs memory (the ray buffers)
 MAX_THREADS = 4 * (os.cpu_count() or 1)
