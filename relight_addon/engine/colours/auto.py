@@ -11,8 +11,6 @@ from __future__ import annotations
 from ..best_lights import lower_bounds
 from ..light_colour import relaxed_bound
 from ..registry import LIGHT_COLOURS
-from .blackbody import DEFAULT_RANGE, Blackbody
-from .free import Free
 
 #: relative error: blackbody lights are chosen unless their bound is this much above free colours'
 AUTO_GAP = 0.05
@@ -29,6 +27,9 @@ class Auto:
 
     def choose(self, problem):
         """(the mode to solve with, a note)."""
+        from .blackbody import DEFAULT_RANGE, Blackbody  # (imported here: the registry lists Automatic first)
+        from .free import Free
+
         free = lower_bounds(problem.transfer, problem.b_target, 1, exhaustive_limit=0).nnls_relative
         warm = relaxed_bound(problem, DEFAULT_RANGE, 1).nnls_relative
         if warm <= free + AUTO_GAP:
