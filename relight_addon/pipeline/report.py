@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..engine.light_colour import blackbody_rec709
-from ..engine.units import luminous_flux_lm
+from ..engine.units import illuminance_lux, luminous_flux_lm
 
 __all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
            "kinds_text"]
@@ -166,6 +166,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                                  pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
     objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
                for name in radiosity}
+    photometric = target_photometry(model, curve.radiosity[fi], E_patch) if model.mode == "inverse" else None
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     lamps = lamp_records(model, curve.exitance[fi]) if model.mode != "inverse" else None
@@ -220,10 +221,45 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": light_records(model, curve, fi)},
         "fixed_light": fixed_light,
+        "targets_photometric": photometric,
         "lamps": lamps,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def target_photometry(model, radiosity, exitance) -> dict:
+    """The painted targets' predicted light, per target object (its target patches, area-weighted):
+    radiosity (W/m^2, mean [r, g, b]) and the illuminance arriving there (lx: engine.units, from
+    the irradiance E = (B - e) / reflectance of each channel, B = e + reflectance x E): mean, min,
+    max and the uniformity U0 = min / mean (EN 12464-1). A patch with a channel of reflectance
+    below MIN_REFLECTANCE_LUX reflects too little to read its illuminance from its radiosity: left
+    out, and counted (``unread_patches``). ``radiosity``, ``exitance``: (P, 3) of the configuration."""
+    patches = model.patches
+    tg = np.flatnonzero(patches.target)
+    rho = patches.reflectance[tg]
+    ok = np.all(rho >= MIN_REFLECTANCE_LUX, axis=1)
+    irr = np.where(ok[:, None], (radiosity[tg] - exitance[tg]) / np.where(ok[:, None], rho, 1.0), 0.0)
+    lux = illuminance_lux(np.maximum(irr, 0.0))
+    out = {}
+    obj = patches.object[tg]
+    for o in np.unique(obj):
+        sel = obj == o
+        a = patches.area[tg][sel]
+        rec = {"radiosity_mean": (radiosity[tg][sel] * a[:, None]).sum(axis=0) / a.sum(),
+               "unread_patches": int(np.sum(~ok[sel]))}
+        use = sel & ok
+        if use.any():
+            w, x = patches.area[tg][use], lux[use]
+            mean = float((w * x).sum() / w.sum())
+            rec["illuminance_lx"] = {"mean": mean, "min": float(x.min()), "max": float(x.max()),
+                                     "u0": float(x.min() / mean) if mean > 0 else None}
+        out[model.faces.object_names[int(o)]] = rec
+    return out
+
+
+#: a target patch's illuminance is read from its radiosity where every channel reflects at least this
+MIN_REFLECTANCE_LUX = 0.01
 
 
 def light_colour_record(problem, options) -> dict:
