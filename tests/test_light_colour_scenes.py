@@ -130,3 +130,21 @@ def test_written_blackbody_lamps_carry_their_temperature(solved):
             np.testing.assert_allclose(emitted, li["strength"], rtol=1e-4)
     finally:
         cr.reset_blender()
+
+
+def test_targets_illuminance_read_out(solved):
+    """The report's predicted illuminance on a target object of one material: the area-weighted
+    mean illuminance is 683 lm/W x Rec.709 luminance of its mean radiosity / its reflectance (the
+    Canvas material's base colour, Lambertian: B = reflectance x E on a face that does not emit),
+    min <= mean <= max, U0 = min / mean; and the sidebar's row of it."""
+    from relight_addon.pipeline.report import photometric_rows
+
+    report, _ = solved["free"]
+    rec = report["targets_photometric"]["Painting"]
+    rho = np.array([0.6, 0.55, 0.5])
+    lx = rec["illuminance_lx"]
+    expect = 683.0 * float(np.dot(np.asarray(rec["radiosity_mean"]) / rho, (0.2126, 0.7152, 0.0722)))
+    assert lx["mean"] == pytest.approx(expect, rel=1e-6)
+    assert lx["min"] <= lx["mean"] <= lx["max"] and lx["u0"] == pytest.approx(lx["min"] / lx["mean"], rel=1e-12)
+    assert rec["unread_patches"] == 0
+    assert any(line.startswith("Painting\t") for line in photometric_rows(report).split("\n"))

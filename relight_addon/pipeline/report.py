@@ -295,6 +295,10 @@ def summary_line(report, n_rows=None) -> str:
     n = len(report["curve"]) if n_rows is None else n_rows
     text = (f"{f['n_lights']} lights, relative error {f['relative_error']:.3g}{f' over {over}' if over else ''}, "
             f"{neg} ({n} configurations on the curve); {kinds_text(report)}")
+    colour = report.get("light_colour") or {}
+    if colour.get("mode") not in (None, "free"):
+        text += f"; {colour['mode']} lights" + (f" {colour['range_K'][0]:.0f}-{colour['range_K'][1]:.0f} K"
+                                                 if "range_K" in colour else "")
     fixed = [r for r in report.get("fixed_light") or [] if r.get("share") is not None]
     if fixed:  # the scene's own light the solve kept, and its share of the painted light
         text += "; the scene's own light: " + ", ".join(f"{r['name']} {100 * r['share']:.0f} %" for r in fixed)
@@ -306,6 +310,17 @@ def fixed_light_rows(report) -> str:
     object the solve kept, "kind<TAB>name<TAB>share" (share of the targets' painted light)."""
     return "\n".join(f"{r['kind']}\t{r['name']}\t{r['share']:.6g}" for r in report.get("fixed_light") or []
                      if r.get("share") is not None)
+
+
+def photometric_rows(report) -> str:
+    """The Results panel's predicted light on the targets: one line per target object whose
+    illuminance is read, "object<TAB>mean lx<TAB>min lx<TAB>U0"."""
+    rows = []
+    for name, rec in (report.get("targets_photometric") or {}).items():
+        lx = rec.get("illuminance_lx")
+        if lx:
+            rows.append(f"{name}\t{lx['mean']:.6g}\t{lx['min']:.6g}\t{(lx['u0'] or 0.0):.6g}")
+    return "\n".join(rows)
 
 
 def kinds_text(report) -> str:

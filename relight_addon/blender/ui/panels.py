@@ -497,6 +497,12 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
             for kind, name, share in rows:
                 col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
+        rows = [line.split("\t") for line in s.last_photometric.split("\n") if line.count("\t") == 3]
+        if rows:  # the predicted illuminance on the targets (the final configuration)
+            col = layout.box().column(align=True)
+            col.label(text="Targets' illuminance (predicted)", icon="LIGHT_SUN")
+            for name, mean, low, u0 in rows:
+                col.label(text=f"{name}: {float(mean):.0f} lx, min {float(low):.0f}, U0 {float(u0):.2f}")
         icon = chart_icon(context)
         if icon:
             ui = context.preferences.system.ui_scale

@@ -166,6 +166,9 @@ _SETTINGS = {
                                    description="Summary of the last Solve & Reduce (shown in the Results panel)"),
     "last_warnings": StringProperty(name="Warnings", default="",
                                     description="Warnings of the last Solve & Reduce, one per line"),
+    "last_photometric": StringProperty(name="Targets' Light", default="",
+                                       description="The last Solve & Reduce's predicted illuminance on each target "
+                                                   "object: name, mean and min (lx), U0, one per line"),
     "last_fixed_light": StringProperty(name="Scene Light", default="",
                                        description="The scene's own light the last Solve & Reduce kept (lamps, "
                                                    "World, emissive objects): kind, name and share of the "
