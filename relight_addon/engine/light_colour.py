@@ -265,19 +265,17 @@ def lower_bounds_of(problem, k_max):
 
 def solo_temperatures(problem, grid) -> np.ndarray:
     """(n,) per light, the temperature of ``grid`` at which it alone fits the targets best (the
-    largest gain max(0, t . y)^2 / ||t||^2 of its stacked column)."""
-    y = np.asarray(problem.b_target, dtype=np.float64).T.reshape(-1)
-    chis = blackbody_rec709(grid)
-    best = np.full(problem.n_lights, -1.0)
-    out = np.full(problem.n_lights, float(grid[len(grid) // 2]))
+    largest gain max(0, t . y)^2 / ||t||^2 of its stacked column t = (chi_c T_c[:, j])_c: with
+    u_c = T_c^T y_c and s_c = ||T_c[:, j]||^2, t . y = u . chi and ||t||^2 = s . chi^2, every
+    temperature at once)."""
+    b = np.asarray(problem.b_target, dtype=np.float64)
     T = problem.transfer
-    for t, chi in zip(grid, chis):
-        h = sum(chi[c] * (T[c].T @ y[c * problem.m:(c + 1) * problem.m]) for c in range(3))
-        d = sum(chi[c] ** 2 * np.einsum("ij,ij->j", T[c], T[c]) for c in range(3))
-        gain = np.where(d > 0, np.maximum(h, 0.0) ** 2 / np.where(d > 0, d, 1.0), 0.0)
-        better = gain > best
-        best[better], out[better] = gain[better], t
-    return out
+    U = np.stack([T[c].T @ b[:, c] for c in range(3)], axis=1)  # (n, 3)
+    S = np.stack([np.einsum("ij,ij->j", T[c], T[c]) for c in range(3)], axis=1)
+    chis = blackbody_rec709(grid)  # (g, 3)
+    h, d = U @ chis.T, S @ (chis * chis).T  # (n, g)
+    gain = np.where(d > 0, np.maximum(h, 0.0) ** 2 / np.where(d > 0, d, 1.0), 0.0)
+    return np.asarray(grid, dtype=np.float64)[np.argmax(gain, axis=1)]
 
 
 def cone_edges(t_min, t_max, checks=BLACKBODY_CHECKS, points=CONE_POINTS) -> np.ndarray:

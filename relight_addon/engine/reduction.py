@@ -351,7 +351,9 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
         if error_route == "gauss-seidel":
             raise ValueError(f"the Gauss-Seidel error route re-solves each channel on its own; with {colour.name} "
                              "lights use the 'transfer' route")
-        work, e_x = view, view.start()
+        # (the paper's selections start from the constrained problem's inverse solution; the others
+        # do not read it)
+        work, e_x = view, view.start() if method.get("distributes", True) else np.zeros((k, 3))
     err_fn = _ErrorEval(work, error_route, compare_cold=gs_compare_cold)
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     curve = []
