@@ -220,7 +220,9 @@ def test_the_certificate_is_relative_to_the_painted_targets_with_scene_light(run
     """A room whose own lamps give part of the painted light (lit_rooms.lamp_room): the
     certificate's relative bounds are of the painted targets' norm, like every relative error of
     the report, so none exceeds the error a configuration reached (they were of what the lights
-    add to the lamps' light: 0.10 for the NNLS bound against a final 0.052)."""
+    add to the lamps' light: 0.10 for the NNLS bound against a final 0.052). Without the lamp
+    refinement: a refined lamp is not a candidate, and may go below the candidates' bound (with
+    the default blackbody lights here the refined 3-light answer does, 0.065 against 0.071)."""
     import bpy
 
     import lit_rooms
@@ -232,7 +234,8 @@ def test_the_certificate_is_relative_to_the_painted_targets_with_scene_light(run
     for name in ("floor", "wall_s", "wall_n", "wall_w", "wall_e"):
         bpy.data.objects[name]["relight_no_lights"] = True
     bpy.ops.wm.save_as_mainfile(filepath=str(blend))
-    code, r, err = run_cli(["solve", blend, "--report", tmp_path / "r.json", "--rays-per-patch", "512"])
+    code, r, err = run_cli(["solve", blend, "--report", tmp_path / "r.json", "--rays-per-patch", "512",
+                            "--no-lamp-refinement"])
     assert code == 0, err
     assert sum(row["share"] for row in r["fixed_light"]) > 0.3  # the lamps give a good part of it
     cert = r["certificate"]

@@ -20,6 +20,8 @@ bpy = pytest.importorskip("bpy")
 import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
 from relight_addon import cli  # noqa: E402
+from relight_addon.blender.lamps import cycles_gain  # noqa: E402
+from relight_addon.engine.light_colour import blackbody_rec709  # noqa: E402
 
 FAST = ["--quiet", "--seed", "1"]
 NO_LAMPS = ["--no-spot-lamps"]  # (area and point lamps are off by default)
@@ -104,7 +106,9 @@ def test_the_gallery_answers_with_a_spot_well_below_what_cells_allow(gallery):
         if li["kind"] == "spot":  # a cone that just covers the painting or a part of it: a narrow one
             assert 2 < li["cone_angle_deg"] < 40 and li["location"][2] < artist_scenes.GALLERY[2]
             assert np.allclose(np.linalg.norm(li["direction"]), 1) and li["direction"][1] > 0  # toward the north wall
-            np.testing.assert_allclose(np.array(li["color"]) * li["energy"], li["strength"], rtol=1e-9)
+            # Cycles emits colour x Power, times the Temperature's colour for a blackbody light
+            gain = blackbody_rec709(li["temperature_K"]) if "temperature_K" in li else 1.0
+            np.testing.assert_allclose(np.array(li["color"]) * li["energy"] * gain, li["strength"], rtol=1e-9)
             assert li["power"] == pytest.approx(sum(li["strength"]))
 
 
@@ -117,8 +121,9 @@ def test_the_written_copy_holds_the_lamps_as_reported(gallery):
         for name, li in lamps.items():
             ob, ld = placed[name], placed[name].data
             assert ld.type == li["type"].upper() and ld.get(OWNER) == scene["relight_result_id"]
-            np.testing.assert_allclose(np.array(ld.color) * ld.energy, li["strength"], rtol=1e-5)
             M = np.array(ob.matrix_world)
+            # what Cycles emits: colour x Power x the Light's gain (its Temperature's colour, for a blackbody light)
+            np.testing.assert_allclose(np.array(ld.color) * ld.energy * cycles_gain(ld, M), li["strength"], rtol=1e-5)
             np.testing.assert_allclose(M[:3, 3], li["location"], atol=1e-5)
             np.testing.assert_allclose(-M[:3, 2], li["direction"], atol=1e-5)
             if ld.type == "SPOT":
