@@ -97,7 +97,7 @@ import numpy as np
 
 from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
-from ..engine.units import MAX_REFLECTANCE, exitance_from_radiance
+from ..engine.units import MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, irradiance_from_lux
 from ..engine.world import sees_sky
 from .lamps import export_lamps, hidden_warning
 from .world import world_light
@@ -105,6 +105,8 @@ from .world import world_light
 DEFAULT_REFLECTANCE = 0.8
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
 TARGET_ATTRIBUTE = "relight_target"
+#: illuminance targets: a Face float attribute, lx (0: none)
+LUX_ATTRIBUTE = "relight_target_lux"
 FORBIDDEN_ATTRIBUTE = "relight_forbidden"
 NO_LIGHTS_PROP = "relight_no_lights"
 TARGET_SCALE_PROP = "relight_target_scale"
@@ -511,8 +513,62 @@ def _edit_target_colours(ob):
     return col
 
 
+def lux_layer(mesh, owner=None):
+    """The mesh's ``relight_target_lux`` (a Face FLOAT attribute: illuminance targets, lx), None
+    when there is none; of another domain or type: SceneError naming it."""
+    return _checked_layer(mesh, LUX_ATTRIBUTE, "FACE", ("FLOAT",), owner,
+                          "reads it as a Face float attribute (illuminance targets, lx)")
+
+
+def _lux_values(ob, n) -> np.ndarray:
+    """(n,) the illuminance targets (lx, 0: none) of ``ob``'s base-mesh polygons (in Edit Mode,
+    from its edit mesh); NaN, infinite or negative values refused, naming the object."""
+    me = ob.data
+    attr = lux_layer(me, ob.name)
+    if attr is None:
+        return np.zeros(n)
+    if ob.mode == "EDIT" and me.is_editmode:
+        import bmesh
+
+        bm = bmesh.from_edit_mesh(me)
+        layer = bm.faces.layers.float.get(LUX_ATTRIBUTE)
+        v = np.array([f[layer] for f in bm.faces], dtype=np.float64) if layer is not None else np.zeros(n)
+    else:
+        v = foreach_array(attr.data, "value", n, np.float64)
+    if len(v) != n:
+        v = np.zeros(n)
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        bad = int(np.sum(~np.isfinite(v) | (v < 0)))
+        raise SceneError(f"{ob.name}: {bad} face(s) of its {LUX_ATTRIBUTE} hold a negative, NaN or infinite "
+                         "illuminance; fill them again (lx >= 0)")
+    return v
+
+
+def illuminance_targets(target, target_b, lux, reflectance, face_object, names):
+    """The faces' targets with their illuminance targets (``lux`` (F,), lx, 0: none) among them:
+    a face of illuminance E_v lx is a target of radiosity reflectance x E (engine.units.
+    irradiance_from_lux: white light of that illuminance), the illuminance arriving there whatever
+    its reflectance. A face that reflects too little for its radiosity to tell its illuminance
+    (a channel below MIN_REFLECTANCE_LUX) is refused, naming its object."""
+    on = lux > 0
+    if not on.any():
+        return target, target_b
+    dark = on & np.any(reflectance < MIN_REFLECTANCE_LUX, axis=1)
+    if dark.any():
+        objs = sorted({names[o] for o in face_object[dark]})
+        raise SceneError(f"{int(dark.sum())} face(s) with an illuminance target reflect less than "
+                         f"{MIN_REFLECTANCE_LUX:g} in a channel (objects: {', '.join(objs[:5])}): Relight reads "
+                         "illuminance from the light a face reflects; give them a grey material (a work plane that "
+                         "neither reflects nor occludes is not modelled yet)")
+    target, target_b = target.copy(), target_b.copy()
+    target[on] = True
+    target_b[on] = reflectance[on] * irradiance_from_lux(lux[on])[:, None]
+    return target, target_b
+
+
 def _base_attributes(ob, target_scale, notes=None, forbidden_too=True):
-    """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool).
+    """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool) and
+    illuminance target (lx, 0: none; a face painted and given an illuminance both is refused).
     ``notes``: a list that gets the messages about layers found but not used. An object in
     Edit Mode: its edit mesh's paint. ``forbidden_too``: False leaves the forbidden faces unread
     (all False: export.repaint reads the paint alone)."""
@@ -554,7 +610,13 @@ def _base_attributes(ob, target_scale, notes=None, forbidden_too=True):
         forbidden = read_forbidden(attr, n)
     if no_lights(ob):
         forbidden[:] = True
-    return target, target_b, forbidden
+    lux = _lux_values(ob, n)
+    both = target & (lux > 0)
+    if both.any():
+        raise SceneError(f"{ob.name}: {int(both.sum())} face(s) carry both a painted target ({TARGET_ATTRIBUTE}) and "
+                         f"an illuminance target ({LUX_ATTRIBUTE}): keep one kind per face (Unpaint them, or Fill "
+                         "Selected with the kind you want)")
+    return target, target_b, forbidden, lux
 
 
 def no_lights(ob) -> bool:
@@ -642,6 +704,7 @@ class _Builder:
         self.verts, self.tris, self.tri_face = [], [], []
         self.loop_vert, self.loop_start, self.loop_total = [], [], []
         self.f_obj, self.f_idx, self.rho, self.e, self.tgt, self.tgt_b, self.forb = [], [], [], [], [], [], []
+        self.lux = []  # per face: its illuminance target, lx (0: none)
         self.warnings = []
         self.mat_cache = {}
         self.mat_ids = {}  # material name (None: no material) -> index into self.lobes
@@ -677,7 +740,7 @@ class _Builder:
         return (np.array([p[0] for p in props])[mi], exitance_from_radiance(np.array([p[1] for p in props]))[mi],
                 linked)
 
-    def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden):
+    def add(self, geo, matrix, name, oi, face_index, target, target_b, forbidden, lux=None):
         M = np.asarray(matrix, dtype=np.float64)
         if not np.all(np.isfinite(M)):
             raise SceneError(f"object {name!r} has a NaN or infinite transform (its location, rotation or scale, "
@@ -713,6 +776,7 @@ class _Builder:
         self.tgt.append(target)
         self.tgt_b.append(target_b)
         self.forb.append(forbidden)
+        self.lux.append(np.zeros(npoly) if lux is None else lux)
         self.nf += npoly
         self.nv += len(W)
 
@@ -766,6 +830,7 @@ class _Builder:
         self.f_idx.append(np.full(len(sel), -1, dtype=np.int64))
         self.tgt.append(np.zeros(len(sel), dtype=bool))
         self.tgt_b.append(np.zeros((len(sel), 3)))
+        self.lux.append(np.zeros(len(sel)))
         self.forb.append(np.ones(len(sel), dtype=bool))
         self.linked.append(np.zeros(len(sel), dtype=bool))
         self.geos.append(None)
@@ -898,7 +963,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         for oi, ob in enumerate(objs):
             counts[ob.name] = len(ob.data.polygons)
             names.append(ob.name)
-            target, target_b, forbidden = _base_attributes(ob, settings["target_scale"], notes["target"])
+            target, target_b, forbidden, lux = _base_attributes(ob, settings["target_scale"], notes["target"])
             ob_eval, me, mapping = _evaluated_mesh(ob, context)
             try:
                 geo = _mesh_geometry(ob_eval, me, ob.name)
@@ -916,7 +981,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
             ok = idx >= 0
             safe = np.where(ok, idx, 0)
             b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
-                  np.where(ok, forbidden[safe], no_lights(ob)))
+                  np.where(ok, forbidden[safe], no_lights(ob)), np.where(ok, lux[safe], 0.0))
         # instances: geometry only (occluders, reflectors and emitters), never targets or lights
         geo_cache, group = {}, {}
         n_inst = 0
@@ -969,6 +1034,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         e = np.maximum(e, 0.0)
     lamps, lamp_warnings = export_lamps(context, renderable, owner_of)
     warnings.extend(w for w in lamp_warnings if w not in warnings)
+    lux = np.concatenate(b.lux)
+    target, target_b = illuminance_targets(np.concatenate(b.tgt), np.concatenate(b.tgt_b), lux, rho,
+                                           np.concatenate(b.f_obj), names)
     faces = FaceSet(
         vertices=np.concatenate(b.verts),
         triangles=np.concatenate(b.tris),
@@ -981,8 +1049,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         object_names=names,
         reflectance=rho,
         exitance=e,
-        target=np.concatenate(b.tgt),
-        target_radiosity=np.concatenate(b.tgt_b),
+        target=target,
+        target_radiosity=target_b,
+        target_lux=lux,
         forbidden=np.concatenate(b.forb),
         warnings=warnings,
         face_material=np.concatenate(b.f_mat),
@@ -1006,15 +1075,19 @@ def repaint(exp: ExportedScene) -> FaceSet:
     as exported. The caller checks that nothing else changed (pipeline.prepared's stale check)."""
     faces = exp.faces
     target, radiosity = faces.target.copy(), faces.target_radiosity.copy()
+    lux = np.zeros(faces.n_faces) if faces.target_lux is None else faces.target_lux.copy()
     scale = exp.settings["target_scale"]
     for oi, ob in enumerate(exp.objects):
-        t, b, _ = _base_attributes(ob, scale, forbidden_too=False)  # (in Edit Mode: its edit mesh's paint)
+        t, b, _, lx = _base_attributes(ob, scale, forbidden_too=False)  # (in Edit Mode: its edit mesh's paint)
         rows = np.flatnonzero(faces.face_object == oi)
         idx = faces.face_index[rows]
         ok = (idx >= 0) & (idx < len(t))
         target[rows] = np.where(ok, t[np.where(ok, idx, 0)], False)
         radiosity[rows] = np.where(ok[:, None], b[np.where(ok, idx, 0)], 0.0)
-    return replace(faces, target=target, target_radiosity=radiosity)
+        lux[rows] = np.where(ok, lx[np.where(ok, idx, 0)], 0.0)
+    target, radiosity = illuminance_targets(target, radiosity, lux, faces.reflectance, faces.face_object,
+                                            faces.object_names)
+    return replace(faces, target=target, target_radiosity=radiosity, target_lux=lux)
 
 
 def _linked_text(b, names) -> str:
@@ -1234,9 +1307,9 @@ def export_faceset(context=None, target_scale=None) -> FaceSet:
 
 def face_flags(ob, kind):
     """Per base-mesh polygon of ``ob``: kind "target", "forbidden" or "candidate" (bool array)."""
-    target, _, forbidden = _base_attributes(ob, 1.0, [])
+    target, _, forbidden, lux = _base_attributes(ob, 1.0, [])
     if kind == "target":
-        return target
+        return target | (lux > 0)
     if kind == "forbidden":
         return forbidden
     if kind == "candidate":

@@ -59,6 +59,9 @@ class FaceSet:
     target_radiosity: np.ndarray = None  # (F, 3) W/m^2, zeros where not a target
     forbidden: np.ndarray = None  # (F,) bool
     warnings: list = field(default_factory=list)
+    #: optional (F,) lx: the faces' illuminance targets (0: none; such a face is a target of
+    #: radiosity reflectance x lux / 683 in ``target_radiosity``)
+    target_lux: np.ndarray = None
     #: optional: per face, an index into ``material_lobes`` (each material's BSDFs, the
     #: direction-dependent reflection of engine.incidence); None: every material is Lambertian
     face_material: np.ndarray = None

@@ -16,12 +16,16 @@ import math
 
 import numpy as np
 
-__all__ = ["MAX_REFLECTANCE", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
-           "radiance_from_exitance", "illuminance_lux", "luminous_flux_lm"]
+__all__ = ["MAX_REFLECTANCE", "MIN_REFLECTANCE_LUX", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
+           "radiance_from_exitance", "illuminance_lux", "irradiance_from_lux", "luminous_flux_lm"]
 
 #: reflectance of an exported material is clamped to [0, MAX_REFLECTANCE] (with a warning):
 #: a reflectance of 1 or more creates energy; the engine's forward solver clamps to the same value
 MAX_REFLECTANCE = 0.99
+
+#: a face's illuminance is read from its radiosity (E = B / reflectance) where every channel
+#: reflects at least this; an illuminance target on a face reflecting less is refused
+MIN_REFLECTANCE_LUX = 0.01
 
 #: luminous efficacy of the photometric standard: 683 lm per W at 555 nm
 LUMENS_PER_WATT = 683.0
@@ -43,6 +47,12 @@ def radiance_from_exitance(exitance):
 def luminous_flux_lm(power_rgb) -> np.ndarray:
     """Luminous flux (lm) of a radiant power (..., 3) in W per channel (a lamp's, a light's)."""
     return LUMENS_PER_WATT * (np.asarray(power_rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE))
+
+
+def irradiance_from_lux(lux) -> np.ndarray:
+    """The irradiance (W/m^2 per channel, the same in each: white light) of an illuminance (lx):
+    lux / 683 (the luminance weights sum to 1, so illuminance_lux of it gives the lux back)."""
+    return np.asarray(lux, dtype=np.float64) / LUMENS_PER_WATT
 
 
 def illuminance_lux(irradiance_rgb) -> np.ndarray:

@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from ..engine.light_colour import blackbody_rec709
-from ..engine.units import illuminance_lux, luminous_flux_lm
+from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
 
 __all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
            "kinds_text"]
@@ -232,7 +232,8 @@ def target_photometry(model, radiosity, exitance) -> dict:
     """The painted targets' predicted light, per target object (its target patches, area-weighted):
     radiosity (W/m^2, mean [r, g, b]) and the illuminance arriving there (lx: engine.units, from
     the irradiance E = (B - e) / reflectance of each channel, B = e + reflectance x E): mean, min,
-    max and the uniformity U0 = min / mean (EN 12464-1). A patch with a channel of reflectance
+    max and the uniformity U0 = min / mean (EN 12464-1); ``target_lx``: the mean of its
+    illuminance targets (Fill Selected in lx), where it has some. A patch with a channel of reflectance
     below MIN_REFLECTANCE_LUX reflects too little to read its illuminance from its radiosity: left
     out, and counted (``unread_patches``). ``radiosity``, ``exitance``: (P, 3) of the configuration."""
     patches = model.patches
@@ -248,6 +249,10 @@ def target_photometry(model, radiosity, exitance) -> dict:
         a = patches.area[tg][sel]
         rec = {"radiosity_mean": (radiosity[tg][sel] * a[:, None]).sum(axis=0) / a.sum(),
                "unread_patches": int(np.sum(~ok[sel]))}
+        lux_target = None if model.faces.target_lux is None else model.faces.target_lux[patches.face[tg][sel]]
+        if lux_target is not None and np.any(lux_target > 0):  # its illuminance targets (lx), area-weighted
+            w = a * (lux_target > 0)
+            rec["target_lx"] = float((w * lux_target).sum() / w.sum())
         use = sel & ok
         if use.any():
             w, x = patches.area[tg][use], lux[use]
@@ -256,10 +261,6 @@ def target_photometry(model, radiosity, exitance) -> dict:
                                      "u0": float(x.min() / mean) if mean > 0 else None}
         out[model.faces.object_names[int(o)]] = rec
     return out
-
-
-#: a target patch's illuminance is read from its radiosity where every channel reflects at least this
-MIN_REFLECTANCE_LUX = 0.01
 
 
 def light_colour_record(problem, options) -> dict:

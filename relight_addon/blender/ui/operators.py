@@ -102,12 +102,15 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
 
 
 class RELIGHT_OT_fill_targets(bpy.types.Operator):
-    """Set the selected faces (Edit Mode) of the active object as targets of the target colour"""
+    """Set the selected faces (Edit Mode) of the objects in Edit Mode as targets of the target
+    colour (radiance), or of the Illuminance (lx); a face holds one kind: the other is removed"""
     bl_idname = "relight.fill_targets"
     bl_label = "Fill Selected Faces"
     bl_options = {"REGISTER", "UNDO"}
 
     unpaint: BoolProperty(name="Unpaint", default=False, description="Make the selected faces non-targets")
+    illuminance: BoolProperty(name="Illuminance", default=False,
+                              description="Fill with the illuminance target (lx) instead of the target colour")
 
     @classmethod
     def poll(cls, context):
@@ -120,15 +123,24 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
             for obj in objs:
                 export.check_writable_mesh(obj)
                 export.target_layer(obj.data, obj.name)  # None, or a Face Corner colour layer of either type
+                export.lux_layer(obj.data, obj.name)  # None, or a Face float layer
         except SceneError as exc:
             return _refuse(self, exc)
         count = 0
+        lux = float(context.scene.relight.paint_lux) if self.illuminance and not self.unpaint else 0.0
         for obj in objs:
             mesh = obj.data
             bm = bmesh.from_edit_mesh(mesh)
+            lux_layer = bm.faces.layers.float.get(export.LUX_ATTRIBUTE)
+            if lux_layer is None and lux > 0:
+                lux_layer = bm.faces.layers.float.new(export.LUX_ATTRIBUTE)
+            if lux_layer is not None:
+                for f in bm.faces:
+                    if f.select:
+                        f[lux_layer] = lux
             # write into the existing layer whatever its type (BMesh byte colours hold sRGB values)
             layer = bm.loops.layers.float_color.get(TARGET)
-            value = (0.0, 0.0, 0.0, 0.0) if self.unpaint else color
+            value = (0.0, 0.0, 0.0, 0.0) if self.unpaint or self.illuminance else color
             if layer is None and bm.loops.layers.color.get(TARGET) is not None:
                 layer = bm.loops.layers.color.get(TARGET)
                 if not self.unpaint:
@@ -141,7 +153,8 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
                         loop[layer] = value
                     count += 1
             bmesh.update_edit_mesh(mesh)
-        self.report({"INFO"}, f"{'Unpainted' if self.unpaint else 'Painted'} {count} face(s)")
+        done = "Unpainted" if self.unpaint else (f"Set {lux:g} lx on" if self.illuminance else "Painted")
+        self.report({"INFO"}, f"{done} {count} face(s)")
         return {"FINISHED"}
 
 
@@ -153,7 +166,8 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
 
     def execute(self, context):
         objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
-        objs = [o for o in objs if o.data.attributes.get(TARGET) is not None]
+        objs = [o for o in objs if o.data.attributes.get(TARGET) is not None
+                or o.data.attributes.get(export.LUX_ATTRIBUTE) is not None]
         try:  # all or nothing: a linked (read-only) mesh among them refuses the whole operation
             for obj in objs:
                 export.check_writable_mesh(obj)
@@ -163,10 +177,11 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
             bpy.ops.object.mode_set(mode="OBJECT")
         n = 0
         for obj in objs:
-            attr = obj.data.attributes.get(TARGET)
-            if attr is not None:
-                obj.data.attributes.remove(attr)
-                n += 1
+            for name in (TARGET, export.LUX_ATTRIBUTE):
+                attr = obj.data.attributes.get(name)
+                if attr is not None:
+                    obj.data.attributes.remove(attr)
+            n += 1
         self.report({"INFO"}, f"Cleared targets on {n} object(s)")
         return {"FINISHED"}
 

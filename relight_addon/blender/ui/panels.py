@@ -221,6 +221,9 @@ class RELIGHT_PT_targets(RELIGHT_PT_base, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("relight.fill_targets", text="Fill Selected").unpaint = False
         row.operator("relight.fill_targets", text="Unpaint").unpaint = True
+        row = layout.row(align=True)
+        row.prop(settings, "paint_lux", text="lx")
+        row.operator("relight.fill_targets", text="Fill Selected (lx)").illuminance = True
         if edit and obj is not None:
             layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
         else:

@@ -149,6 +149,11 @@ _SETTINGS = {
     "paint_color": bpy.props.FloatVectorProperty(
         name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
         description="Colour used by Fill Targets"),
+    "paint_lux": FloatProperty(
+        name="Illuminance", default=500.0, min=0.0, soft_max=5000.0, precision=0,
+        description="Illuminance target, lx, that Fill Selected (lx) gives the selected faces: the light arriving "
+                    "there, whatever the face's reflectance (EN 12464-1: 500 lx on a desk). Stored in the Face "
+                    "attribute relight_target_lux"),
     # the job's options: rays_per_patch, max_patch_size, seed, solver, selection, distribution,
     # use_max_lights / max_lights, use_error_threshold / error_threshold, require_positive,
     # patch_model, estimator, and every method's parameters (tolerance, light_size, ...)
