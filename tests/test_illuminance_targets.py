@@ -134,3 +134,29 @@ def test_a_solve_meets_a_lux_target(gallery, tmp_path):
     assert rec["target_lx"] == pytest.approx(300.0)
     err = r["final"]["relative_error"]
     assert abs(rec["illuminance_lx"]["mean"] / 300.0 - 1) <= max(2 * err, 0.05)
+
+
+def test_cycles_agrees_on_the_predicted_illuminance(gallery, tmp_path):
+    """The floor strip at 300 lx, `solve --out` (its lamps blackbody lights by the default, written
+    with their Temperature), the written file's floor baked by Cycles (Lambertian, no World): the
+    illuminance Cycles gives the strip, pi x baked radiance / reflectance through engine.units'
+    luminance, is the report's predicted mean within 3 %."""
+    strip = _strip(gallery["Floor"])
+    _set_lux(gallery["Floor"], strip, 300.0)
+    blend, out, report = tmp_path / "lux.blend", tmp_path / "out.blend", tmp_path / "r.json"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["solve", str(blend), "--report", str(report), "--out", str(out), "--quiet", "--seed", "1"]) == 0
+    r = json.loads(report.read_text())
+    predicted = r["targets_photometric"]["Floor"]["illuminance_lx"]["mean"]
+    try:
+        bpy.ops.wm.open_mainfile(filepath=str(out))
+        baked = cr.cycles_face_radiance(samples=512, seed=2, objects=[bpy.data.objects["Floor"]],
+                                        faces={"Floor": [int(p) for p in strip]})
+    finally:
+        cr.reset_blender()
+    from relight_addon.engine.units import illuminance_lux
+
+    L = baked["Floor"].radiance[strip]  # (faces, 3) W/(m^2 sr); the strip's faces are of one area
+    cycles = float(np.mean(illuminance_lux(np.pi * L / WOOD)))
+    print(f"illuminance: predicted {predicted:.1f} lx, Cycles {cycles:.1f} lx, target 300")
+    assert cycles == pytest.approx(predicted, rel=0.03)
