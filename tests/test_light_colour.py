@@ -153,7 +153,6 @@ def test_other_selections_keep_white(selection):
 
 
 def test_bad_range_refused():
-    """A reversed range is refused with a message naming it."""
-    options = JobOptions(light_colour="blackbody", temperature_min=7000.0, temperature_max=3000.0).validate()
+    """A reversed range is refused by the options' check (before any work), naming it."""
     with pytest.raises(ValueError, match="blackbody range .* 7000-3000 K"):
-        Blackbody(options)
+        JobOptions(light_colour="blackbody", temperature_min=7000.0, temperature_max=3000.0).validate()
