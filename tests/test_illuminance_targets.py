@@ -160,3 +160,24 @@ def test_cycles_agrees_on_the_predicted_illuminance(gallery, tmp_path):
     cycles = float(np.mean(illuminance_lux(np.pi * L / WOOD)))
     print(f"illuminance: predicted {predicted:.1f} lx, Cycles {cycles:.1f} lx, target 300")
     assert cycles == pytest.approx(predicted, rel=0.03)
+
+
+def test_least_power_with_a_uniformity_goal(gallery, tmp_path):
+    """The floor strip at 300 lx, least power within +-30 % and U0 >= 0.6: the report's predicted
+    uniformity on the strip (from its radiosity, not the programme's rows) meets the goal, or the
+    report says which U0 is reachable and the answer has that."""
+    strip = _strip(gallery["Floor"])
+    _set_lux(gallery["Floor"], strip, 300.0)
+    blend, report = tmp_path / "lux.blend", tmp_path / "r.json"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend))
+    assert cli.main(["solve", str(blend), "--report", str(report), "--quiet", "--seed", "1",
+                     "--selection", "least-power", "--tolerance", "0.3", "--uniformity", "0.6"]) == 0
+    r = json.loads(report.read_text())
+    u0 = r["targets_photometric"]["Floor"]["illuminance_lx"]["u0"]
+    said = " ".join(r["warnings"])
+    print(f"U0 {u0:.3f}: {said[:300]}")
+    if "is reachable" in said:
+        reach = float(said.split("U0 >= ")[2].split(" is reachable")[0])
+        assert u0 >= reach - 1e-3
+    else:
+        assert "U0 >= 0.6 met" in said and u0 >= 0.6 - 1e-6

@@ -1047,6 +1047,7 @@ class ToleranceResult:
     zero_band: float = 0.0
     unreachable: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     seconds: float = 0.0
+    reachable_uniformity: float | None = None  # the uniformity goal could not be met: the largest that is
 
 
 def _band_scale(b, zero_band):
@@ -1116,7 +1117,25 @@ def min_max_deviation(T, b, zero_band=None, skip_unreachable=True):
     return max(xs), e
 
 
-def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
+def _uniformity_rows(t, regions, u):
+    """(A_ub, b_ub) of the uniformity goal ``u`` on one channel's programme: per region (rows of
+    ``t``, their reflectance, fixed light's radiosity and area), every row's irradiance
+    E_i = (t_i e + bg_i) / rho_i at least u x the region's area-weighted mean irradiance."""
+    A, ub = [], []
+    for idx, rho, bg, area in regions:
+        ti = t[idx] / rho[:, None]
+        w = area / area.sum()
+        mean_row, mean_bg = w @ ti, float(w @ (bg / rho))
+        A.append(-(ti - u * mean_row[None, :]))
+        ub.append(bg / rho - u * mean_bg)
+    return np.vstack(A), np.concatenate(ub)
+
+
+#: the reachable uniformity is found to this (bisection)
+UNIFORMITY_STEP = 1e-3
+
+
+def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, uniformity=None):
     """Least total power keeping every target within +-tolerance of its painted value (an LP).
 
     minimise  sum_j A_j sum_c e_jc   (W)
@@ -1130,7 +1149,14 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
     Target channels no light reaches (zero rows of T) are left out of the constraints and named
     in the message. When no non-negative configuration satisfies the band, the result has status
     'infeasible', a message naming the smallest reachable tolerance (the min-max deviation
-    LP), and the least-power configuration at that tolerance. Returns a ToleranceResult.
+    LP), and the least-power configuration at that tolerance.
+
+    ``uniformity`` (u, [per channel: [(target rows, their reflectance, fixed light's radiosity,
+    area), ...] per region]): the goal U0 = E_min / E_mean >= u on the irradiance of each region,
+    each channel's (a sufficient condition for the illuminance's: a luminance is a positive
+    combination of the channels), as constraints of the same programme. When it cannot be met
+    within the band, the largest reachable u (bisection, to UNIFORMITY_STEP) is used and said
+    (``reachable_uniformity``). Returns a ToleranceResult.
     """
     t0 = time.perf_counter()
     model = _Model(T, b, light_watts)
@@ -1145,7 +1171,10 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
     unreach = _unreachable(model)
     rows = ~unreach
 
-    def solve(x):
+    goal, regions = (None, None) if uniformity is None else uniformity
+
+    def solve(x, u=None):
+        u = goal if u is None else u
         e = np.zeros((n, 3))
         for c in range(3):
             keep = rows[:, c]
@@ -1156,6 +1185,9 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
             hi = model.b[keep, c] + x * scale[keep, c]
             A = np.vstack([t, -t])
             ub = np.concatenate([hi, -lo])
+            if u and regions and regions[c]:
+                Au, bu = _uniformity_rows(model.T[c], regions[c], u)
+                A, ub = np.vstack([A, Au]), np.concatenate([ub, bu])
             res = sopt.linprog(model.area, A_ub=A, b_ub=ub, bounds=(0, None), method="highs",
                                options=_lp_options())
             if res.status == 2:
@@ -1165,15 +1197,31 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
             e[:, c] = np.maximum(res.x, 0.0)
         return e, "ok"
 
-    e, status = solve(tol)
-    reach = None
+    e, status = solve(tol, 0.0)  # the band alone
+    reach = reach_u = None
+    x_used = tol
     if e is None and status == "infeasible":
         reach, _ = min_max_deviation(model.T, model.b, zb)
         x = max(reach * (1 + 1e-7), reach + 1e-9, tol)
-        e, st2 = solve(x)
+        e, st2 = solve(x, 0.0)
         if e is None:  # a hair more room for the LP's tolerances
-            e, st2 = solve(x * (1 + 1e-4) + 1e-7)
+            x = x * (1 + 1e-4) + 1e-7
+            e, st2 = solve(x, 0.0)
+        x_used = x
         status = "infeasible" if e is not None else st2
+    if e is not None and goal:  # the uniformity goal within that band, else the largest that holds
+        eg, _ = solve(x_used, goal)
+        if eg is not None:
+            e = eg
+        else:
+            lo_u, hi_u = 0.0, float(goal)
+            while hi_u - lo_u > UNIFORMITY_STEP:
+                mid = 0.5 * (lo_u + hi_u)
+                lo_u, hi_u = (mid, hi_u) if solve(x_used, mid)[0] is not None else (lo_u, mid)
+            reach_u = lo_u
+            if reach_u > 0:
+                got = solve(x_used, reach_u)[0]
+                e = got if got is not None else e
     if e is None:
         return ToleranceResult(status="failed", message=status, tolerance=tol, exitance=np.zeros((n, 3)),
                                lights=np.zeros(0, dtype=np.int64), n_lights=0, power=0.0,
@@ -1201,7 +1249,12 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None):
     if len(bad):
         msg += (f"; {len(bad)} target(s) no candidate light reaches are left out (always dark): target rows "
                 f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
+    if goal and reach_u is not None:
+        msg += (f"; the uniformity U0 >= {goal:.3g} cannot be met within the band (±{100 * x_used:.3g} %): "
+                f"U0 >= {reach_u:.3g} is reachable (and kept)")
+    elif goal:
+        msg += f"; uniformity U0 >= {goal:.3g} met (every channel's irradiance, each illuminance region)"
     return ToleranceResult(status=status, message=msg, tolerance=tol, exitance=e, lights=np.flatnonzero(on),
                            n_lights=int(on.sum()), power=power, max_deviation=dev, error=err, relative_error=rel,
                            reachable_tolerance=reach, zero_band=zb, unreachable=bad,
-                           seconds=time.perf_counter() - t0)
+                           seconds=time.perf_counter() - t0, reachable_uniformity=reach_u)

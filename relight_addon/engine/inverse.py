@@ -201,6 +201,9 @@ class InverseProblem:
 
     #: the light colour mode (a LIGHT_COLOURS instance, engine/colours/); None: free colours
     colour = None
+    #: optional (m,) per target row: the object of an illuminance target, -1 for a painted one
+    #: (pipeline.jobs.target_regions: the least-power selection's uniformity regions)
+    target_region = None
 
     def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,

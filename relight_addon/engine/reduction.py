@@ -188,6 +188,7 @@ class Selection:
     initial: dict | None = None  # {k: lights}: configurations to start from (greedy-swap: an earlier answer's)
     quick: bool = False  # a stroke's re-solve (Live): the selection's quicker search, where it has one
     nnls_start: object = None  # (n_lights, 3): an earlier stroke's all-lights NNLS (greedy-swap's certificate)
+    uniformity: float | None = None  # the least-power selection's uniformity goal U0 (illuminance targets)
 
 
 class _ErrorEval:
@@ -308,7 +309,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
                   max_lights=None, error_threshold=None, relative_error_threshold=None,
                   require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
                   gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None,
-                  initial=None, quick=False, nnls_start=None):
+                  initial=None, quick=False, nnls_start=None, uniformity=None):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
     The whole curve is computed (eliminations down to one light, constructions
@@ -378,7 +379,8 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
 
     dist = Distributor(work, distribution, coplanar_tol) if method.get("distributes", True) else None
     sel = Selection(work, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
-                    curve_lights=curve_lights, initial=initial, quick=quick, nnls_start=nnls_start)
+                    curve_lights=curve_lights, initial=initial, quick=quick, nnls_start=nnls_start,
+                    uniformity=uniformity)
     notes = method(sel) or []
     if not curve:
         raise ValueError("the reduction produced no configuration")

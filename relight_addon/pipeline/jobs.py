@@ -409,6 +409,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
     if mode == "inverse":  # the lights' colour (an automatic mode chooses it on the final problem)
+        problem.target_region = target_regions(faces, patches, problem)
         problem.colour, note = light_colour_of(problem, options)
         if note:
             warnings.append(note)
@@ -490,6 +491,7 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
                         max_lights=None if by_lp else options.max_lights,
                         relative_error_threshold=None if by_lp else options.error_threshold,
                         require_positive=options.require_positive, tolerance=options.param("tolerance"),
+                        uniformity=options.param("uniformity"),
                         coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
                         initial=initial, quick=curve_lights is not None, nnls_start=nnls_start,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
@@ -497,6 +499,16 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     if red.cancelled:
         raise Cancelled("solve cancelled")
     return red
+
+
+def target_regions(faces, patches, problem) -> np.ndarray:
+    """(m,) per target row of ``problem``: the object of an illuminance target (faces.target_lux),
+    -1 for a painted one (the least-power selection's uniformity regions)."""
+    tg = problem.targets
+    if faces.target_lux is None:
+        return np.full(len(tg), -1, dtype=np.int64)
+    lux = faces.target_lux[patches.face[tg]] > 0
+    return np.where(lux, patches.object[tg], -1).astype(np.int64)
 
 
 def light_colour_of(problem, options) -> tuple:
@@ -572,7 +584,7 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
             e = e + _least_squares_change(problem, ids, e) if len(ids) == problem.n_lights else e
         elif refit is not None:
             view = colour_problem(problem, problem.colour, ids, e)  # (the configuration's colours kept)
-            e, note = refit(view or problem, ids, options.param("tolerance"))
+            e, note = refit(view or problem, ids, options.param("tolerance"), options.param("uniformity"))
             e = view.exitance_of(ids, e) if view is not None else e
             notes += [note] if i == red.final_index and note else []
             on = e.max(axis=1) > 0
@@ -933,6 +945,7 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
     t0 = time.perf_counter()
     problem = model.problem.retarget(patches.target, patches.target_radiosity)
+    problem.target_region = target_regions(faces, patches, problem)
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

@@ -11,13 +11,16 @@ from ..best_lights import least_power_within_tolerance
 from ..registry import SELECTIONS, Param
 
 
-def refit(problem, ids, tolerance):
+def refit(problem, ids, tolerance, uniformity=None):
     """The programme again on the chosen lights ``ids`` alone, after their columns of T changed
-    (pipeline.jobs.direct_stage: their direct light by the kernel), so that the band holds on the T
-    the configuration is measured on: (exitance (len(ids), 3), the programme's message)."""
+    (pipeline.jobs.direct_stage: their direct light by the kernel), so that the band (and the
+    uniformity goal) holds on the T the configuration is measured on: (exitance (len(ids), 3), the
+    programme's message)."""
     ids = np.asarray(ids, dtype=np.int64)
+    regions = uniformity_regions(problem) if uniformity else None
     res = least_power_within_tolerance([t[:, ids] for t in problem.transfer], problem.b_target,
-                                       np.asarray(problem.light_watts)[ids], tolerance)
+                                       np.asarray(problem.light_watts)[ids], tolerance,
+                                       uniformity=(float(uniformity), regions) if regions else None)
     return res.exitance, res.message
 
 
@@ -28,14 +31,49 @@ def refit(problem, ids, tolerance):
                      params=(Param("tolerance", float, 0.1, min=0.0, label="Tolerance", soft_max=1.0,
                                    description="Every target within +-this fraction of its painted value "
                                                "(0.1 = +-10 %); when no non-negative lights can, the reachable "
-                                               "tolerance is reported and used"),))
+                                               "tolerance is reported and used"),
+                             Param("uniformity", float, None, min=0.0, max=1.0, label="Uniformity U0", ui="toggle",
+                                   ui_default=0.6, none="no goal",
+                                   description="Illuminance targets: on each object's, the lowest illuminance at "
+                                               "least this fraction of their mean (U0 = E_min / E_mean, EN 12464-1: "
+                                               "0.6 on a desk); when it cannot be met, the reachable U0 is reported "
+                                               "and used")))
 def least_power(s):
     p = s.problem
     if s.tolerance is None:
         raise ValueError("the least-power selection needs a tolerance (e.g. --tolerance 0.1 for +-10 %)")
     s.step(0, 1)
-    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, s.tolerance)
+    notes = []
+    goal = None
+    if s.uniformity:
+        regions = uniformity_regions(p)
+        if regions is None:
+            notes.append("the uniformity goal applies to illuminance targets (Fill Selected in lx), and there are none")
+        else:
+            goal = (float(s.uniformity), regions)
+    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, s.tolerance, uniformity=goal)
     on = np.flatnonzero(res.exitance.max(axis=1) > 0)
     s.record(on, res.exitance[on])
     s.step(1, 1)
-    return [res.message] if res.message else []
+    return notes + ([res.message] if res.message else [])
+
+
+def uniformity_regions(p):
+    """The uniformity goal's regions of problem ``p`` (its ``target_region``: per target row, the
+    object of an illuminance target, -1 otherwise), per channel of the programme: [(rows, their
+    reflectance, the fixed light's radiosity there, area), ...]; on a colour view (engine.
+    light_colour: the channels stacked in channel 0) every channel's block in channel 0. None
+    without illuminance targets."""
+    reg = getattr(p, "target_region", None)
+    if reg is None or not np.any(reg >= 0):
+        return None
+    tg = p.targets
+    rho, bg, area, m = p.reflectance[tg], p.background_radiosity[tg], p.area[tg], len(tg)
+    stacked = hasattr(p, "exitance_of")  # (a ColourProblem)
+    out = [[], [], []]
+    for r in np.unique(reg[reg >= 0]):
+        rows = np.flatnonzero(reg == r)
+        for c in range(3):
+            out[0 if stacked else c].append((rows + c * m if stacked else rows, rho[rows, c], bg[rows, c],
+                                             area[rows]))
+    return out
