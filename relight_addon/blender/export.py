@@ -109,6 +109,8 @@ TARGET_ATTRIBUTE = "relight_target"
 LUX_ATTRIBUTE = "relight_target_lux"
 FORBIDDEN_ATTRIBUTE = "relight_forbidden"
 NO_LIGHTS_PROP = "relight_no_lights"
+#: an object that is a work plane: light passes through it and it reflects none into the scene
+WORK_PLANE_PROP = "relight_work_plane"
 TARGET_SCALE_PROP = "relight_target_scale"
 MAX_PATCH_SIZE_PROP = "relight_max_patch_size"
 _FACE_INDEX_ATTRIBUTE = "_relight_face_index"
@@ -558,8 +560,8 @@ def illuminance_targets(target, target_b, lux, reflectance, face_object, names):
         objs = sorted({names[o] for o in face_object[dark]})
         raise SceneError(f"{int(dark.sum())} face(s) with an illuminance target reflect less than "
                          f"{MIN_REFLECTANCE_LUX:g} in a channel (objects: {', '.join(objs[:5])}): Relight reads "
-                         "illuminance from the light a face reflects; give them a grey material (a work plane that "
-                         "neither reflects nor occludes is not modelled yet)")
+                         "illuminance from the light a face reflects; give them a grey material, or make the object a "
+                         "Work Plane (light passes through it; its material is not used)")
     target, target_b = target.copy(), target_b.copy()
     target[on] = True
     target_b[on] = reflectance[on] * irradiance_from_lux(lux[on])[:, None]
@@ -631,6 +633,22 @@ def no_lights(ob) -> bool:
     if isinstance(raw, float) and math.isnan(raw):
         return True
     return bool(getattr(ob, NO_LIGHTS_PROP, False) or raw)
+
+
+WORK_PLANE_NOTE = ("work plane(s) {}: light passes through them and they reflect none into the scene (their "
+                   "material is not used; no light on them); Cycles renders them as surfaces unless their Ray "
+                   "Visibility is off: Match Cycles Light Paths (--out) turns it off in the copy")
+
+
+def work_plane(ob) -> bool:
+    """The object's "work plane" switch (the add-on's property, or a custom property of that name;
+    a boolean or a number): light passes through its faces and they reflect none into the scene
+    (a plane where the light is measured, as lighting software has them)."""
+    raw = ob.get(WORK_PLANE_PROP)
+    if raw is not None and not isinstance(raw, (bool, int, float)):
+        raise SceneError(f"object {ob.name!r}: custom property {WORK_PLANE_PROP} is {raw!r}, not a boolean or a "
+                         "number: set it to True/False (or 1/0)")
+    return bool(getattr(ob, WORK_PLANE_PROP, False) or raw)
 
 
 def _evaluated_mesh(ob, context):
@@ -1035,6 +1053,12 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     lamps, lamp_warnings = export_lamps(context, renderable, owner_of)
     warnings.extend(w for w in lamp_warnings if w not in warnings)
     lux = np.concatenate(b.lux)
+    planes = [oi for oi, ob in enumerate(objs) if work_plane(ob)]
+    passes = np.isin(np.concatenate(b.f_obj), planes) if planes else None
+    if passes is not None:  # reflect none into the scene (nothing sees them): read as white, no light on them
+        rho, e = rho.copy(), e.copy()
+        rho[passes], e[passes] = MAX_REFLECTANCE, 0.0
+        warnings.append(WORK_PLANE_NOTE.format(", ".join(repr(objs[oi].name) for oi in planes)))
     target, target_b = illuminance_targets(np.concatenate(b.tgt), np.concatenate(b.tgt_b), lux, rho,
                                            np.concatenate(b.f_obj), names)
     faces = FaceSet(
@@ -1052,7 +1076,8 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         target=target,
         target_radiosity=target_b,
         target_lux=lux,
-        forbidden=np.concatenate(b.forb),
+        passes=passes,
+        forbidden=np.concatenate(b.forb) | (passes if passes is not None else False),
         warnings=warnings,
         face_material=np.concatenate(b.f_mat),
         material_lobes=b.lobes,

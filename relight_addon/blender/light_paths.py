@@ -65,8 +65,9 @@ def matched_settings(rho_max: float, settings: dict | None = None) -> dict:
 
 
 def match_light_paths(scene, rho_max: float) -> dict:
-    """Write ``matched_settings`` into the scene's Cycles settings; returns {setting: (old, new)}
-    of what changed (the render engine is left alone)."""
+    """Write ``matched_settings`` into the scene's Cycles settings, and turn the work planes' Ray
+    Visibility off (WORK_PLANE_VISIBILITY: light passes through them, as Relight models them);
+    returns {setting: (old, new)} of what changed (the render engine is left alone)."""
     cur = current_settings(scene)
     want = matched_settings(rho_max, cur)
     changed = {}
@@ -74,7 +75,20 @@ def match_light_paths(scene, rho_max: float) -> dict:
         if cur[k] != v:
             setattr(scene.cycles, k, v)
             changed[k] = (cur[k], v)
+    from .export import work_plane
+
+    for ob in scene.objects:  # work planes: light passes through them, as Relight models them
+        if ob.type == "MESH" and work_plane(ob):
+            for k in WORK_PLANE_VISIBILITY:
+                if getattr(ob, k, False):
+                    setattr(ob, k, False)
+                    changed[f"{ob.name}.{k}"] = (True, False)
     return changed
+
+
+#: the Ray Visibility a work plane is given (the camera still sees it)
+WORK_PLANE_VISIBILITY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
+                         "visible_shadow")
 
 
 def describe(changed: dict) -> str:

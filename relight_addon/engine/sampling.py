@@ -102,12 +102,21 @@ class SceneSampler:
         self._n_ext = np.concatenate([self.tn, np.zeros((1, 3))]).astype(np.float32)
         self._patch_ext = np.concatenate([tri_patch, [P]])
 
+        # the ray scene: every triangle but those of the patches light passes through (work planes,
+        # PatchSet.passes: they occlude nothing and nothing sees them)
+        self._occluders = None
+        if patches.passes is not None and np.any(patches.passes):
+            self._occluders = np.flatnonzero(~np.asarray(patches.passes, dtype=bool)[tri_patch])
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-        self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
+        self._mesh = TriangleMesh(self.scene, (tv if self._occluders is None else tv[self._occluders]).astype(np.float32))
 
     def first_hit(self, org, d) -> np.ndarray:
         """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a miss."""
-        return self.scene.run(org, d)
+        prim = self.scene.run(org, d)
+        if self._occluders is None:
+            return prim
+        prim = np.asarray(prim)
+        return np.where(prim >= 0, self._occluders[np.maximum(prim, 0)], -1)
 
     def front_hit_patches(self, org, d) -> np.ndarray:
         """The patch whose front side each ray hits first; n_patches for a miss or a hit on a back side."""

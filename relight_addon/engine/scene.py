@@ -62,6 +62,10 @@ class FaceSet:
     #: optional (F,) lx: the faces' illuminance targets (0: none; such a face is a target of
     #: radiosity reflectance x lux / 683 in ``target_radiosity``)
     target_lux: np.ndarray = None
+    #: optional (F,) bool: work-plane faces, which light passes through (they occlude nothing, no
+    #: other face sees them: they reflect nothing into the scene; engine.sampling leaves them out
+    #: of its ray scene)
+    passes: np.ndarray = None
     #: optional: per face, an index into ``material_lobes`` (each material's BSDFs, the
     #: direction-dependent reflection of engine.incidence); None: every material is Lambertian
     face_material: np.ndarray = None
@@ -152,6 +156,7 @@ class PatchSet:
     n_faces: int
     max_patch_size: float
     light_size: float | None = None  # the adaptive model's light-cell size (m)
+    passes: np.ndarray = None  # (P,) bool: light passes through it (FaceSet.passes), None: none does
     level: np.ndarray = None  # (P,) int, the adaptive model's refinement level of each patch
 
     @property
@@ -312,6 +317,7 @@ def build_patches(faces: FaceSet, tri, tri_face, key, max_patch_size, **extra) -
         target=faces.target[patch_face].copy(),
         target_radiosity=faces.target_radiosity[patch_face].copy(),
         forbidden=faces.forbidden[patch_face].copy(),
+        passes=None if faces.passes is None or not faces.passes.any() else faces.passes[patch_face].copy(),
         n_faces=faces.n_faces,
         max_patch_size=max_patch_size,
         **extra,

@@ -57,7 +57,7 @@ __all__ = ["PreparedScene", "scene_key", "paint_independent"]
 
 #: the FaceSet arrays a solve depends on apart from the paint
 _SCENE_ARRAYS = ("vertices", "triangles", "triangle_face", "loop_vertices", "loop_start", "loop_total",
-                 "face_object", "face_index", "reflectance", "exitance", "forbidden", "face_material")
+                 "face_object", "face_index", "reflectance", "exitance", "forbidden", "face_material", "passes")
 
 
 def _feed(h, x):
@@ -94,7 +94,7 @@ def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) 
     arrays = {a: getattr(faces, a) for a in _SCENE_ARRAYS if getattr(faces, a) is not None}
     return {
         "geometry": digest(*(arrays[a] for a in ("vertices", "triangles", "triangle_face", "loop_vertices",
-                                                 "loop_start", "loop_total", "face_object", "face_index")
+                                                 "loop_start", "loop_total", "face_object", "face_index", "passes")
                              if a in arrays), list(faces.object_names)),
         "materials": digest(arrays["reflectance"], arrays["exitance"], arrays.get("face_material", 0),
                             faces.material_lobes),

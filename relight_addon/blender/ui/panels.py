@@ -242,6 +242,7 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         obj = _mesh(context)
         if obj is not None:
             layout.prop(obj, "relight_no_lights")
+            layout.prop(obj, "relight_work_plane")
         else:
             layout.label(text="Select a mesh object", icon="INFO")
         row = layout.row(align=True)

@@ -199,10 +199,16 @@ def register():
     bpy.types.Object.relight_no_lights = BoolProperty(
         name="No Lights on This Object", default=False,
         description="No face of this object may become a light (it still reflects and occludes)")
+    bpy.types.Object.relight_work_plane = BoolProperty(
+        name="Work Plane", default=False,
+        description="A plane where the light is measured: light passes through it and it reflects none into the "
+                    "scene (give it illuminance targets: Fill Selected (lx)); Match Cycles Light Paths turns its Ray "
+                    "Visibility off so that Cycles renders it so")
 
 
 def unregister():
     del bpy.types.Object.relight_no_lights
+    del bpy.types.Object.relight_work_plane
     del bpy.types.Scene.relight
     for cls in reversed(CLASSES):
         bpy.utils.unregister_class(cls)
