@@ -156,3 +156,22 @@ def test_bad_range_refused():
     """A reversed range is refused by the options' check (before any work), naming it."""
     with pytest.raises(ValueError, match="blackbody range .* 7000-3000 K"):
         JobOptions(light_colour="blackbody", temperature_min=7000.0, temperature_max=3000.0).validate()
+
+
+def test_one_colour_per_light():
+    """One colour per light: the selection keeps each light's channels together (its colour the one
+    it alone fits best), then each configuration's colours are refitted per channel; every
+    configuration is non-negative and no worse than its lights at their solo colours (stacked NNLS
+    here), and the certificate is the free problem's, below every configuration."""
+    from relight_addon.engine.best_lights import lower_bounds
+    from relight_addon.engine.colours.one_colour import OneColour
+
+    prob = room(colour=OneColour())
+    red = solve(prob, max_lights=3)
+    solo = lc.solo_colours(prob)
+    free_bound = lower_bounds(prob.transfer, prob.b_target, len(red.certificate.bound))
+    np.testing.assert_allclose(red.certificate.bound, free_bound.bound, rtol=1e-12)
+    for pt in red.curve:
+        assert np.all(pt.exitance >= 0)
+        assert pt.error <= stacked_error(prob, pt.lights, solo[pt.lights]) * (1 + 1e-9) + 1e-12
+        assert red.certificate.at(pt.n_lights) <= pt.error * (1 + 1e-9) + 1e-12

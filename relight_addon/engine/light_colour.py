@@ -278,6 +278,19 @@ def solo_temperatures(problem, grid) -> np.ndarray:
     return np.asarray(grid, dtype=np.float64)[np.argmax(gain, axis=1)]
 
 
+def solo_colours(problem) -> np.ndarray:
+    """(n, 3) per light, the colour it alone fits the targets best: per channel the best
+    non-negative multiple of its column, max(0, t_c . b_c) / ||t_c||^2, normalised to a mean of 1
+    (white for a light that reaches no target)."""
+    b = np.asarray(problem.b_target, dtype=np.float64)
+    T = problem.transfer
+    h = np.stack([T[c].T @ b[:, c] for c in range(3)], axis=1)
+    d = np.stack([np.einsum("ij,ij->j", T[c], T[c]) for c in range(3)], axis=1)
+    x = np.where(d > 0, np.maximum(h, 0.0) / np.where(d > 0, d, 1.0), 0.0)
+    m = x.mean(axis=1, keepdims=True)
+    return np.where(m > 0, x / np.where(m > 0, m, 1.0), 1.0)
+
+
 def cone_edges(t_min, t_max, checks=BLACKBODY_CHECKS, points=CONE_POINTS) -> np.ndarray:
     """(g, 3) colours whose non-negative combinations contain every blackbody colour of the range
     (the relaxation's cone). In the chromaticity plane (r + g + b = 1) the range's colours lie on a

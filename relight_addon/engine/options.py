@@ -108,7 +108,8 @@ JOB_PARAMS = (
           description="Where a removed light's power goes (selections that distribute power)"),
     Param("light_colour", str, DEFAULT_LIGHT_COLOUR, registry=LIGHT_COLOURS, label="Light Colour", inverse_only=True,
           description="What colour a light may have: auto (blackbody unless the targets ask for coloured light), "
-                      "free (each channel fitted on its own), white, or blackbody (a colour temperature in a range)"),
+                      "free (each channel fitted on its own), white, blackbody (a colour temperature in a range), or "
+                      "one-colour (any one colour per light, chosen with the light)"),
     Param("max_lights", int, DEFAULT_MAX_LIGHTS, min=1, label="Max Lights", ui="toggle", soft_max=64,
           unused=_unused_by_least_power, description="Stop criterion: at most this many lights"),
     Param("error_threshold", float, None, min=0.0, label="Relative Error", ui="toggle", ui_default=0.1,
