@@ -192,8 +192,12 @@ def test_panel_rows_follow_the_chosen_methods(addon):
     assert "distribution" not in drawn(panels.RELIGHT_PT_solve_advanced)
     s.selection = "exitance-elimination"
     assert "distribution" in drawn(panels.RELIGHT_PT_solve_advanced)
+    # the light colour (issue 21) and, for blackbody lights, their range
+    assert "light_colour" in drawn(panels.RELIGHT_PT_solve) and "temperature_min" not in drawn(panels.RELIGHT_PT_solve)
+    s.light_colour = "blackbody"
+    assert {"light_colour", "temperature_min", "temperature_max"} <= set(drawn(panels.RELIGHT_PT_solve))
     s.selection = "least-power"
-    assert "tolerance" in drawn(panels.RELIGHT_PT_solve)
+    assert {"tolerance", "use_uniformity"} <= set(drawn(panels.RELIGHT_PT_solve))
     assert "max_lights" not in drawn(panels.RELIGHT_PT_solve)  # its tolerance decides
     s.patch_model = "adaptive"
     assert {"patch_model", "estimator", "light_size", "refine_passes", "refine_tolerance"} <= set(

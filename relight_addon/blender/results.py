@@ -118,12 +118,13 @@ def _stored_data(outcome, fingerprints=None) -> StoredResult:
     """The outcome's stored curve, with the meshes' fingerprints and what the Results panel shows
     of the solve (its summary, warnings and the scene light kept: a file solved by the CLI shows
     them too)."""
-    from ..pipeline.report import fixed_light_rows, photometric_rows, summary_line
+    from ..pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
 
     data = outcome.stored.with_fingerprints(fingerprints)
     data.meta.update(summary=summary_line(outcome.report, len(outcome.curve)),
                      warnings=list(outcome.report.get("warnings") or []),
-                     fixed_light=fixed_light_rows(outcome.report), photometric=photometric_rows(outcome.report))
+                     fixed_light=fixed_light_rows(outcome.report), photometric=photometric_rows(outcome.report),
+                     lights=light_rows(outcome.report))
     return data
 
 

@@ -324,6 +324,14 @@ def photometric_rows(report) -> str:
     return "\n".join(rows)
 
 
+def light_rows(report) -> str:
+    """The Results panel's lights of the final configuration: one line per light,
+    "name<TAB>kind<TAB>power W<TAB>luminous flux lm<TAB>temperature K or empty"."""
+    return "\n".join(f"{li['object']}\t{li['kind']}\t{li['power']:.6g}\t{li.get('luminous_flux_lm', 0.0):.6g}\t"
+                     f"{'' if li.get('temperature_K') is None else format(li['temperature_K'], '.0f')}"
+                     for li in report["final"]["lights"])
+
+
 def kinds_text(report) -> str:
     """What kinds of light the solve offered and chose, in words: "offered 180 cell, 42 group, 1
     polygon, 72 spot; chose 1 cell, 2 spot" (the report's model.lights_by_kind and final.lights)."""

@@ -12,7 +12,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from .. import ADDON_PACKAGE, export, live, results
 from ...pipeline import jobs
-from ...pipeline.report import fixed_light_rows, photometric_rows, summary_line
+from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
 from ..preparation import SolveJob
 from . import viewport
 from .properties import set_curve_index, ui_value
@@ -311,6 +311,7 @@ def sync_curve_list(scene):
     settings.last_warnings = "\n".join(data.meta.get("warnings", []))
     settings.last_fixed_light = data.meta.get("fixed_light", "")
     settings.last_photometric = data.meta.get("photometric", "")
+    settings.last_lights = data.meta.get("lights", "")
     settings.curve_result = rid or ""
     results.update_chart(scene)
 
@@ -340,6 +341,7 @@ def show_solve(context, job, outcome, finished=False, trusted=False, show=True) 
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))
     settings.last_fixed_light = fixed_light_rows(outcome.report)
     settings.last_photometric = photometric_rows(outcome.report)
+    settings.last_lights = light_rows(outcome.report)
     settings.last_warnings = "\n".join(warnings)
     if show and not bpy.app.background:
         viewport.show_radiosity(context)  # the lights and the predicted radiosity

@@ -507,6 +507,15 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             col.label(text="Targets' illuminance (predicted)", icon="LIGHT_SUN")
             for name, mean, low, u0 in rows:
                 col.label(text=f"{name}: {float(mean):.0f} lx, min {float(low):.0f}, U0 {float(u0):.2f}")
+        rows = [line.split("\t") for line in s.last_lights.split("\n") if line.count("\t") == 4]
+        if rows:  # the final lights: power and luminous flux (and a blackbody light's temperature)
+            col = layout.box().column(align=True)
+            col.label(text="Final lights", icon="OUTLINER_OB_LIGHT")
+            for name, kind, watts, lm, kelvin in rows[:8]:
+                col.label(text=f"{name} ({kind}): {float(watts):.3g} W, {float(lm):,.0f} lm"
+                          + (f", {kelvin} K" if kelvin else ""))
+            if len(rows) > 8:
+                col.label(text=f"... and {len(rows) - 8} more")
         icon = chart_icon(context)
         if icon:
             ui = context.preferences.system.ui_scale

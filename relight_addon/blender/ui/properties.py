@@ -171,6 +171,9 @@ _SETTINGS = {
                                    description="Summary of the last Solve & Reduce (shown in the Results panel)"),
     "last_warnings": StringProperty(name="Warnings", default="",
                                     description="Warnings of the last Solve & Reduce, one per line"),
+    "last_lights": StringProperty(name="Lights", default="",
+                                  description="The last Solve & Reduce's final lights: name, kind, power (W), "
+                                              "luminous flux (lm), temperature (K), one per line"),
     "last_photometric": StringProperty(name="Targets' Light", default="",
                                        description="The last Solve & Reduce's predicted illuminance on each target "
                                                    "object: name, mean and min (lx), U0, one per line"),
