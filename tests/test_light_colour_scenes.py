@@ -148,3 +148,30 @@ def test_targets_illuminance_read_out(solved):
     assert lx["min"] <= lx["mean"] <= lx["max"] and lx["u0"] == pytest.approx(lx["min"] / lx["mean"], rel=1e-12)
     assert rec["unread_patches"] == 0
     assert any(line.startswith("Painting\t") for line in photometric_rows(report).split("\n"))
+
+
+@pytest.mark.parametrize("mode", ["white", "blackbody"])
+def test_living_room_lights_are_of_their_kind(mode):
+    """The living room (22k triangles, the furniture's modifiers): white and blackbody lights are of
+    exactly that kind there too (every light's chromaticity: white's equal channels, blackbody's
+    its temperature's), and the certificate is below the answer (unless lamps were refined)."""
+    from relight_addon.blender import export
+    from relight_addon.engine.options import JobOptions
+    from relight_addon.pipeline import jobs
+
+    cr.reset_blender()
+    try:
+        artist_scenes.living_room(2)
+        exp = export.export_scene()
+    finally:
+        cr.reset_blender()
+    out = jobs.run_solve(exp.faces, JobOptions(light_colour=mode).validate(),
+                         default_max_patch_size=exp.settings.get("max_patch_size"))
+    r = out.report
+    assert r["light_colour"]["mode"] == mode
+    for li, c in zip(r["final"]["lights"], _colours(r)):
+        chi = np.ones(3) if mode == "white" else blackbody_rec709(li["temperature_K"])
+        np.testing.assert_allclose(c / c.sum(), chi / chi.sum(), rtol=1e-9)
+    refined = (out.model.lamp_refinement or {}).get("lamps_refined", 0)
+    if not refined:  # (a refined lamp is no candidate: it may go below the candidates' bound)
+        assert r["final"]["bound_relative_error"] <= r["final"]["relative_error"] * (1 + 1e-9)
