@@ -248,14 +248,16 @@ def test_the_certificate_is_relative_to_the_painted_targets_with_scene_light(run
                    r["final"]["relative_error"] for w in r["warnings"])
 
 
-def test_solve_keeps_the_lamps_of_an_earlier_report_and_finds_the_rest(run_cli, tmp_path):
+@pytest.mark.parametrize("colour", ["auto", "blackbody"])
+def test_solve_keeps_the_lamps_of_an_earlier_report_and_finds_the_rest(run_cli, tmp_path, colour):
     """--keep (issue 20, items 3-4): the earlier answer's lamps held at their place and power (the
     scene's lamps in the copy and in the solve's fixed light), Max Lights more found around them,
-    their error never below what the certificate allows for the rest."""
+    their error never below what the certificate allows for the rest. Blackbody lamps keep their
+    Temperature (their power through it: colour x Power x its colour)."""
     import bpy
 
     scene = os.path.join(SAMPLES, "staircase_targets.blend")
-    code, first, err = run_cli(["solve", scene, "--report", tmp_path / "r1.json", "-q"])
+    code, first, err = run_cli(["solve", scene, "--report", tmp_path / "r1.json", "-q", "--light-colour", colour])
     assert code == 0, err
     lamps = [li for li in first["final"]["lights"] if li.get("type") in ("spot", "point", "area")]
     assert lamps, "the first answer has no lamp to keep"
@@ -277,6 +279,8 @@ def test_solve_keeps_the_lamps_of_an_earlier_report_and_finds_the_rest(run_cli, 
         ob = bpy.data.objects[f"{li['object']} (kept)"]
         assert np.allclose(ob.matrix_world.translation, li["location"], atol=1e-6)
         assert ob.data.energy == pytest.approx(li["energy"], rel=1e-6)
+        if "temperature_K" in li and hasattr(ob.data, "use_temperature"):
+            assert ob.data.use_temperature and ob.data.temperature == pytest.approx(li["temperature_K"], rel=1e-6)
         assert "relight_owner" not in ob and "relight_owner" not in ob.data  # the scene's own: no result removes it
     code, _, err = run_cli(["solve", scene, "--report", tmp_path / "r3.json", "--keep", tmp_path / "o2.blend"])
     assert code == 2 and err.count("\n") == 1 and "--keep" in err and "not JSON" in err, err

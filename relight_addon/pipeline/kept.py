@@ -43,7 +43,7 @@ def _frame(direction, axis_u=None):
 def kept_lamps(report: dict, source: str = "the report") -> tuple:
     """(records, notes): the lamps of ``report``'s final configuration as results.new_lamp makes
     them (name, type, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
-    size_v, ellipse, spread, energy, color), and what is not kept. Raises ValueError on a report
+    size_v, ellipse, spread, energy, color, temperature_K), and what is not kept. Raises ValueError on a report
     that is not a solve's."""
     if not isinstance(report, dict) or report.get("command") not in ("solve", "reduce") \
             or not isinstance(report.get("final"), dict) or "lights" not in report["final"]:
@@ -66,7 +66,9 @@ def kept_lamps(report: dict, source: str = "the report") -> tuple:
                    "ellipse": str(li.get("shape", "")).upper() in ("DISK", "ELLIPSE"),
                    "spread": float(li.get("spread", np.pi)),
                    "energy": float(li["energy"]), "color": [float(x) for x in li["color"]],
-                   "power": float(li["power"])}
+                   "power": float(li["power"]),
+                   # a blackbody light's Temperature (its energy and color are with it)
+                   "temperature_K": None if li.get("temperature_K") is None else float(li["temperature_K"])}
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"{source}: light {i} ({li.get('object')}) lacks what a lamp needs ({exc})") from None
         if not all(np.all(np.isfinite(rec[k])) for k in ("position", "direction", "energy", "color")) \
