@@ -615,6 +615,12 @@ def scenario():
     yield from press(found, "bpy.ops.relight.fill_targets(unpaint=True)", settle=1.5)
     t3 = counts()[0]
     check("Unpaint makes them non-targets again", t3 == t0, f"{t2} -> {t3}")
+    # Fill Selected (lx): the same faces become illuminance targets (issue 21), Unpaint removes them
+    yield from press(found, "bpy.ops.relight.fill_targets(illuminance=True)", settle=1.5)
+    t4 = counts()[0]
+    check("Fill Selected (lx) makes the 4 selected faces illuminance targets", t4 == t0 + 4, f"{t0} -> {t4}")
+    yield from press(found, "bpy.ops.relight.fill_targets(unpaint=True)", settle=1.5)
+    check("Unpaint removes the illuminance targets", counts()[0] == t0, f"{t4} -> {counts()[0]}")
 
     # 6. Forbid / Allow Selected in Edit Mode on a wall
     yield from key_in_viewport("Tab")

@@ -36,11 +36,13 @@ def _bmesh_counts(obj):
         return None, None, faces
     layers = bm.loops.layers
     tl = layers.float_color.get(export.TARGET_ATTRIBUTE) or layers.color.get(export.TARGET_ATTRIBUTE)
+    lux = bm.faces.layers.float.get(export.LUX_ATTRIBUTE)  # (illuminance targets count too)
     targets = 0
-    if tl is not None:
+    if tl is not None or lux is not None:
         for f in bm.faces:
             loops = f.loops
-            if sum(min(max(loop[tl][3], 0.0), 1.0) for loop in loops) >= 0.5 * len(loops):
+            if (lux is not None and f[lux] > 0) or (
+                    tl is not None and sum(min(max(loop[tl][3], 0.0), 1.0) for loop in loops) >= 0.5 * len(loops)):
                 targets += 1
     if export.no_lights(obj):
         return targets, 0, faces
