@@ -20,7 +20,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 OUT = os.path.join(ROOT, "benchmarks", "results", "bench_light_colour.json")
 SCENES = ("gallery", "gallery, red painting", "living room 22k", "staircase")
-MODES = ("free", "white", "blackbody", "auto")
+MODES = ("free", "white", "blackbody", "one-colour", "auto")
 
 
 def run_scene(name):
