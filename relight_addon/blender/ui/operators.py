@@ -108,8 +108,10 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
     bl_label = "Fill Selected Faces"
     bl_options = {"REGISTER", "UNDO"}
 
-    unpaint: BoolProperty(name="Unpaint", default=False, description="Make the selected faces non-targets")
-    illuminance: BoolProperty(name="Illuminance", default=False,
+    # (not remembered between calls: each button says what it does)
+    unpaint: BoolProperty(name="Unpaint", default=False, description="Make the selected faces non-targets",
+                          options={"SKIP_SAVE"})
+    illuminance: BoolProperty(name="Illuminance", default=False, options={"SKIP_SAVE"},
                               description="Fill with the illuminance target (lx) instead of the target colour")
 
     @classmethod

@@ -245,8 +245,9 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         if obj is not None:
             layout.prop(obj, "relight_no_lights")
             layout.prop(obj, "relight_work_plane")
-        else:
+        else:  # (as many rows as with a mesh: the buttons below stay in place)
             layout.label(text="Select a mesh object", icon="INFO")
+            layout.label(text="")
         row = layout.row(align=True)
         row.operator("relight.forbid_faces", text="Forbid Selected").allow = False
         row.operator("relight.forbid_faces", text="Allow Selected").allow = True
