@@ -102,6 +102,7 @@ def test_fill_selected_writes_one_kind_per_face(addon, gallery):
         floor.data.polygons[p].select = True
     bpy.ops.object.mode_set(mode="EDIT")
     bpy.context.scene.relight.paint_lux = 400.0
+    assert bpy.ops.relight.fill_targets(unpaint=True) == {"FINISHED"}  # (an Unpaint first: not remembered)
     assert bpy.ops.relight.fill_targets(illuminance=True) == {"FINISHED"}
     bpy.ops.object.mode_set(mode="OBJECT")
     lux = np.zeros(len(floor.data.polygons))
