@@ -240,9 +240,7 @@ def fit_columns(problem, columns, e=None, ids=None, refit=True):
     b = problem.b_target
     mode = problem.colour
     if mode is None or mode.free:
-        x = np.stack([_nnls(columns[c], b[:, c]) for c in range(3)], axis=1)
-        err = float(np.linalg.norm(np.stack([columns[c] @ x[:, c] for c in range(3)], axis=1) - b))
-        return x, err
+        return fit_per_channel(columns, b)
     k = columns[0].shape[1]
     if e is not None and np.all(np.asarray(e).sum(axis=1) > 0):
         colours = np.asarray(e, dtype=np.float64)
@@ -251,6 +249,18 @@ def fit_columns(problem, columns, e=None, ids=None, refit=True):
     else:
         colours = np.ones((k, 3))
     return mode.fit(columns, b, colours, refit)
+
+
+def fit_per_channel(columns, b):
+    """(exitance (k, 3), error W/m^2): NNLS per channel of lights of transfer ``columns`` (3 arrays
+    (m, k)) on the targets ``b`` (m, 3): free colours' fit."""
+    x = np.stack([_nnls(columns[c], b[:, c]) for c in range(3)], axis=1)
+    return x, channel_error(columns, x, b)
+
+
+def channel_error(columns, e, b) -> float:
+    """Eq. 1 (W/m^2) of lights of transfer ``columns`` (3 arrays (m, k)) at exitance ``e`` (k, 3)."""
+    return float(np.linalg.norm(np.stack([columns[c] @ e[:, c] for c in range(3)], axis=1) - b))
 
 
 def lower_bounds_of(problem, k_max):
@@ -263,15 +273,21 @@ def lower_bounds_of(problem, k_max):
     return problem.colour.certificate(problem, view, None, k_max)
 
 
+def _solo_terms(problem) -> tuple:
+    """(U, S) (n, 3): per light and channel, t_c . b_c and ||t_c||^2 of its column (what a light
+    alone fits: solo_temperatures, solo_colours)."""
+    b = np.asarray(problem.b_target, dtype=np.float64)
+    T = problem.transfer
+    return (np.stack([T[c].T @ b[:, c] for c in range(3)], axis=1),
+            np.stack([np.einsum("ij,ij->j", T[c], T[c]) for c in range(3)], axis=1))
+
+
 def solo_temperatures(problem, grid) -> np.ndarray:
     """(n,) per light, the temperature of ``grid`` at which it alone fits the targets best (the
     largest gain max(0, t . y)^2 / ||t||^2 of its stacked column t = (chi_c T_c[:, j])_c: with
     u_c = T_c^T y_c and s_c = ||T_c[:, j]||^2, t . y = u . chi and ||t||^2 = s . chi^2, every
     temperature at once)."""
-    b = np.asarray(problem.b_target, dtype=np.float64)
-    T = problem.transfer
-    U = np.stack([T[c].T @ b[:, c] for c in range(3)], axis=1)  # (n, 3)
-    S = np.stack([np.einsum("ij,ij->j", T[c], T[c]) for c in range(3)], axis=1)
+    U, S = _solo_terms(problem)
     chis = blackbody_rec709(grid)  # (g, 3)
     h, d = U @ chis.T, S @ (chis * chis).T  # (n, g)
     gain = np.where(d > 0, np.maximum(h, 0.0) ** 2 / np.where(d > 0, d, 1.0), 0.0)
@@ -282,10 +298,7 @@ def solo_colours(problem) -> np.ndarray:
     """(n, 3) per light, the colour it alone fits the targets best: per channel the best
     non-negative multiple of its column, max(0, t_c . b_c) / ||t_c||^2, normalised to a mean of 1
     (white for a light that reaches no target)."""
-    b = np.asarray(problem.b_target, dtype=np.float64)
-    T = problem.transfer
-    h = np.stack([T[c].T @ b[:, c] for c in range(3)], axis=1)
-    d = np.stack([np.einsum("ij,ij->j", T[c], T[c]) for c in range(3)], axis=1)
+    h, d = _solo_terms(problem)
     x = np.where(d > 0, np.maximum(h, 0.0) / np.where(d > 0, d, 1.0), 0.0)
     m = x.mean(axis=1, keepdims=True)
     return np.where(m > 0, x / np.where(m > 0, m, 1.0), 1.0)

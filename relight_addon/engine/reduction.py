@@ -66,7 +66,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .inverse import InverseProblem
-from .light_colour import colour_problem
+from .light_colour import channel_error, colour_problem
 from . import distributions, selections  # noqa: F401  (register the methods reduce_lights dispatches to)
 from .registry import DISTRIBUTIONS, SELECTIONS
 
@@ -241,7 +241,7 @@ def in_colour(problem, view, colour, curve, refits=False) -> list:
             e2, _ = colour.fit([T[c][:, lights] for c in range(3)], b, e)
             on = e2.max(axis=1) > 0
             lights, e = lights[on], e2[on]
-        err = float(np.linalg.norm(np.stack([T[c][:, lights] @ e[:, c] for c in range(3)], axis=1) - b))
+        err = channel_error([t[:, lights] for t in T], e, b)
         new = CurvePoint(len(lights), err, err / norm, _neg(e), lights, e.copy(), int(pt.changed))
         prev = out[-1] if out else None
         if refits and prev is not None and prev.n_negative == 0 and new.n_negative == 0 \

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..best_lights import lower_bounds
-from ..light_colour import solo_colours
+from ..light_colour import fit_per_channel, solo_colours
 from ..registry import LIGHT_COLOURS
 
 
@@ -36,11 +36,7 @@ class OneColour:
         if not refit:
             e, err, _ = fit_colours(columns, b, colours)
             return e, err
-        from ..best_lights import _nnls
-
-        x = np.stack([_nnls(columns[c], b[:, c]) for c in range(3)], axis=1)
-        err = float(np.linalg.norm(np.stack([columns[c] @ x[:, c] for c in range(3)], axis=1) - b))
-        return x, err
+        return fit_per_channel(columns, b)
 
     def certificate(self, problem, view, bounds, k_max):
         """The free problem's certificate: the configurations allowed are free colours'."""
