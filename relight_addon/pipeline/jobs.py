@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from ..engine.light_colour import colour_problem, fit_columns, fit_lights, lower_bounds_of
+from ..engine.light_colour import channel_error, colour_problem, fit_columns, fit_lights, lower_bounds_of
 from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
 from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, refine_configuration
 from ..engine.lights.placed import WRITER as PLACED
@@ -530,7 +530,7 @@ def _fit(problem, ids, e=None):
 def _error(problem, ids, e):
     """Eq. 1 of the lights ``ids`` at strengths ``e`` (len(ids), 3), through T (W/m^2)."""
     T = problem.transfer
-    return float(np.linalg.norm(np.stack([T[c][:, ids] @ e[:, c] for c in range(3)], axis=1) - problem.b_target))
+    return channel_error([t[:, ids] for t in T], e, problem.b_target)
 
 
 def _least_squares_change(problem, ids, e):
