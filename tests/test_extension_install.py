@@ -51,7 +51,7 @@ def _isolated_pythonpath(tmp: Path) -> Path:
 
 def test_zip_content_matches_manifest(linux_zip):
     """The linux zip has the manifest at its root next to __init__.py, the linux wheels for
-    both Python versions, no wheels of other platforms, no numpy and no caches/tests."""
+    both Python versions and the pure-Python one, no wheels of other platforms, no numpy and no caches/tests."""
     with zipfile.ZipFile(linux_zip) as zf:
         names = zf.namelist()
         manifest = tomllib.loads(zf.read("blender_manifest.toml").decode())
@@ -62,9 +62,10 @@ def test_zip_content_matches_manifest(linux_zip):
     generated = manifest["build"]["generated"]
     assert generated["platforms"] == ["linux-x64"]
     assert sorted(w.removeprefix("./") for w in generated["wheels"]) == wheels
-    assert {w.split("/")[-1].split("-")[0] for w in wheels} == {"scipy", "embreex"}
-    assert {w.split("-")[2] for w in wheels} == {"cp311", "cp313"}
-    assert all("manylinux" in w for w in wheels)
+    assert {w.split("/")[-1].split("-")[0] for w in wheels} == {"scipy", "embreex", "threadpoolctl"}
+    binary = [w for w in wheels if not w.endswith("-py3-none-any.whl")]  # (threadpoolctl: pure Python)
+    assert {w.split("-")[2] for w in binary} == {"cp311", "cp313"}
+    assert all("manylinux" in w for w in binary)
     assert not any("__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/") for n in names)
 
 

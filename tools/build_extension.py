@@ -59,12 +59,15 @@ def blender_ext_script() -> Path:
     raise BuildError("blender_ext.py not found inside the bpy module")
 
 
-def wheel_download_args(filename: str) -> tuple[str, str, str]:
-    """(requirement, python version, platform tag) that make pip fetch exactly ``filename``."""
+def wheel_download_args(filename: str) -> tuple[str, str | None, str | None]:
+    """(requirement, python version, platform tag) that make pip fetch exactly ``filename``
+    (None, None: a pure-Python wheel, py3-none-any)."""
     parts = filename[: -len(".whl")].split("-")
     if len(parts) not in (5, 6):
         raise BuildError(f"not a wheel file name: {filename}")
     dist, version, python_tag, platform_tag = parts[0], parts[1], parts[-3], parts[-1]
+    if python_tag == "py3" and parts[-2] == "none" and platform_tag == "any":
+        return f"{dist}=={version}", None, None
     if not (python_tag.startswith("cp3") and python_tag[3:].isdigit()):
         raise BuildError(f"unexpected Python tag {python_tag!r} in {filename}")
     python_version = f"3.{python_tag[3:]}"
@@ -80,9 +83,10 @@ def download_wheels(manifest: dict, wheel_dir: Path = WHEEL_DIR) -> list[Path]:
         target = wheel_dir / name
         if not target.exists():
             requirement, python_version, platform_tag = wheel_download_args(name)
+            where = [] if python_version is None else ["--python-version", python_version,
+                                                       "--platform", platform_tag]
             cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--disable-pip-version-check",
-                   "--only-binary=:all:", "--no-deps", "--python-version", python_version,
-                   "--platform", platform_tag, "--dest", str(wheel_dir), requirement]
+                   "--only-binary=:all:", "--no-deps", *where, "--dest", str(wheel_dir), requirement]
             print("download:", name, flush=True)
             proc = subprocess.run(cmd, capture_output=True, text=True)
             if proc.returncode != 0:

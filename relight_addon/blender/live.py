@@ -35,6 +35,7 @@ import bpy
 import numpy as np
 
 from . import export, light_paths, preparation
+from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import scene_lamps_differ
 
@@ -160,7 +161,8 @@ class LiveSession:
                                             session=job.session)
                 out = full.run(cancel=self.cancel.is_set)
                 self.result["job"] = full
-            self.result["job"].finish(None, out, view_radiance=False, settings=settings)
+            with one_blas_thread():  # (the light paths' check: small products too)
+                self.result["job"].finish(None, out, view_radiance=False, settings=settings)
             self.result["finished"] = True
             self.result["seconds"] = time.perf_counter() - t0
             return out

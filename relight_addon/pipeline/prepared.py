@@ -46,6 +46,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..engine.blas_threads import one_blas_thread
 from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
 from ..engine.kernel_transfer import kernel_form_factors
 from ..engine.options import JobOptions
@@ -281,9 +282,10 @@ class PreparedScene:
         jobs.check_solvable(faces, "inverse", notes, area=self._face_area)
         t0 = time.perf_counter()
         model = jobs.retarget_model(self.model, faces, self.painted(faces))
-        outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,
-                                   initial=dict(self.starts),  # (the last solve's: the answer is of the paint alone)
-                                   nnls_start=self._nnls_start)
+        with one_blas_thread():  # (small products: a second thread costs more than it gives)
+            outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,
+                                       initial=dict(self.starts),  # (the last solve's: of the paint alone)
+                                       nnls_start=self._nnls_start)
         self.live_solves += 1
         bounds = outcome.reduction.certificate
         self._nnls_start = None if bounds is None else bounds.nnls_exitance
