@@ -18,6 +18,7 @@ from relight_addon.engine.kernel_transfer import (
     kernel_form_factors,
     point_polygon_form_factor,
 )
+import relight_addon.engine.kernel_transfer as kt
 from relight_addon.engine.sampling import Cancelled
 from relight_addon.engine.scene import PatchSet, mesh_patches, polygon_faceset
 
@@ -473,6 +474,21 @@ def test_reproducible_for_a_seed_whatever_the_threads():
     c = kernel_form_factors(ps, t, s, seed=6, threads=2)
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
+
+
+def test_plane_test_in_chunks_the_same(monkeypatch):
+    # the pairs' plane test (which pairs face each other, which receivers straddle a source's
+    # plane) gathers the triangles of one side in chunks of a bounded size: with chunks of a few
+    # triangles (every room pair split across many), the same numbers as in one go
+    ps, targets, sources = room_scene()
+    everything = np.arange(ps.n_patches)
+    stats = {}
+    a = kernel_form_factors(ps, everything[::7], sources[::3], seed=2, stats=stats)
+    monkeypatch.setattr(kt, "RANGE_CHUNK_TRIANGLES", 5)
+    small = {}
+    b = kernel_form_factors(ps, everything[::7], sources[::3], seed=2, stats=small)
+    assert np.array_equal(a, b)
+    assert stats["culled"] == small["culled"] > 0  # (the walls behind the ceiling's cells)
 
 
 def test_bad_input_and_cancel():

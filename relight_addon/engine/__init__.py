@@ -8,6 +8,7 @@ Data and units
   file per kind).
 - options: JobOptions and the defaults shared by the CLI and the add-on.
 - registry: the registries of interchangeable methods (below).
+- blas_threads: one BLAS thread for work of many small products (Live's re-solves).
 
 Transport
 - sampling: the one Embree scene of a solve and its queries, the chunk runner.

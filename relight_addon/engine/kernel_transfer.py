@@ -121,6 +121,8 @@ LEVEL_SPAN = 4.0
 COARSE_GAP = 2.0
 #: at most this many Gauss nodes along either direction of one receiver triangle.
 MAX_NODES = 24
+#: the triangles gathered at once by the pairs' plane test (_signed_range): about 0.4 GB of temporaries.
+RANGE_CHUNK_TRIANGLES = 1 << 21
 #: kernel evaluations (receiver point x source triangle) per work chunk.
 CHUNK_EVALS = 1 << 15
 #: at most about this many penumbra rays are generated at once (a batch within a work chunk:
@@ -468,16 +470,24 @@ def _signed_range(g: _Geometry, a, b):
     sel = np.flatnonzero(g.planar[a])
     if len(sel) == 0:
         return mn, mx, tol
-    ta, tb = a[sel], b[sel]
-    cnt = g.tcount[tb]
-    tri = _ragged(g.tstart[tb], cnt)
-    pair = np.repeat(np.arange(len(sel)), cnt)
-    h = np.einsum("kij,kj->ki", g.tv[tri] - g.center[ta][pair][:, None, :], g.normal[ta][pair])
-    lo = np.full(len(sel), np.inf)
-    hi = np.full(len(sel), -np.inf)
-    np.minimum.at(lo, pair, h.min(axis=1))
-    np.maximum.at(hi, pair, h.max(axis=1))
-    mn[sel], mx[sel] = lo, hi
+    # pairs in chunks of about RANGE_CHUNK_TRIANGLES of b's triangles (a dense receiver's
+    # thousands, times every source: the 1M-triangle room's 246 sources would take 17 GB at once)
+    cum = np.cumsum(g.tcount[b[sel]])
+    cuts = np.searchsorted(cum, np.arange(RANGE_CHUNK_TRIANGLES, int(cum[-1]), RANGE_CHUNK_TRIANGLES),
+                           side="left") + 1
+    edges = np.unique(np.concatenate([[0], cuts, [len(sel)]]))
+    for first, end in zip(edges[:-1], edges[1:]):
+        part = sel[first:end]
+        ta, tb = a[part], b[part]
+        cnt = g.tcount[tb]
+        tri = _ragged(g.tstart[tb], cnt)
+        pair = np.repeat(np.arange(len(part)), cnt)
+        h = np.einsum("kij,kj->ki", g.tv[tri] - g.center[ta][pair][:, None, :], g.normal[ta][pair])
+        lo = np.full(len(part), np.inf)
+        hi = np.full(len(part), -np.inf)
+        np.minimum.at(lo, pair, h.min(axis=1))
+        np.maximum.at(hi, pair, h.max(axis=1))
+        mn[part], mx[part] = lo, hi
     return mn, mx, tol
 
 
