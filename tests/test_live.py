@@ -95,6 +95,10 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     _run(s, lambda: s.updates == 4)
     assert s.superseded == 1 and not np.array_equal(painted[0], s.shown[0])
     assert np.array_equal(s.shown[0], s.paint[0])
+    # each tick reads again only the objects the depsgraph updated: what it holds is the paint of
+    # every object, as a full read has it
+    full = export.repaint(preparation.PREPARED_JOBS[scene.name].exp)
+    assert np.array_equal(s.paint[0], full.target) and np.array_equal(s.paint[1], full.target_radiosity)
     written = results.result_id(scene)
 
     # an object moved: Live cannot follow it; it pauses, says why, and leaves the scene as it was

@@ -1093,18 +1093,24 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
                          np.concatenate(b.f_mat), b.lobes, notes=notes, backs=backs)
 
 
-def repaint(exp: ExportedScene) -> FaceSet:
+def repaint(exp: ExportedScene, objects=None, base: FaceSet | None = None) -> FaceSet:
     """The exported faces with the paint their objects hold now (Live mode, after a stroke): the
     targets and their radiosity read again from each object's base mesh (an object in Edit Mode:
     from its edit mesh), mapped onto the exported faces as export_scene maps them; everything else
-    as exported. The caller checks that nothing else changed (pipeline.prepared's stale check)."""
+    as exported. ``objects``: the names of the objects to read again (None: all), the others'
+    paint as in ``base`` (an earlier repaint of ``exp``; default: the export). The caller checks
+    that nothing else changed (pipeline.prepared's stale check)."""
     faces = exp.faces
-    target, radiosity = faces.target.copy(), faces.target_radiosity.copy()
-    lux = np.zeros(faces.n_faces) if faces.target_lux is None else faces.target_lux.copy()
+    was = faces if base is None else base
+    target, radiosity = was.target.copy(), was.target_radiosity.copy()
+    lux = np.zeros(faces.n_faces) if was.target_lux is None else was.target_lux.copy()
     scale = exp.settings["target_scale"]
+    rows_of = _object_rows(exp)
     for oi, ob in enumerate(exp.objects):
+        if objects is not None and ob.name not in objects:
+            continue
         t, b, _, lx = _base_attributes(ob, scale, forbidden_too=False)  # (in Edit Mode: its edit mesh's paint)
-        rows = np.flatnonzero(faces.face_object == oi)
+        rows = rows_of[oi]
         idx = faces.face_index[rows]
         ok = (idx >= 0) & (idx < len(t))
         target[rows] = np.where(ok, t[np.where(ok, idx, 0)], False)
@@ -1113,6 +1119,16 @@ def repaint(exp: ExportedScene) -> FaceSet:
     target, radiosity = illuminance_targets(target, radiosity, lux, faces.reflectance, faces.face_object,
                                             faces.object_names)
     return replace(faces, target=target, target_radiosity=radiosity, target_lux=lux)
+
+
+def _object_rows(exp: ExportedScene) -> list:
+    """[the exported faces of object i] for every object of ``exp`` (made once, kept on it)."""
+    rows = exp.__dict__.get("_object_rows")
+    if rows is None:
+        order = np.argsort(exp.faces.face_object, kind="stable")
+        edges = np.searchsorted(exp.faces.face_object[order], np.arange(len(exp.objects) + 1))
+        rows = exp.__dict__["_object_rows"] = [order[edges[i]:edges[i + 1]] for i in range(len(exp.objects))]
+    return rows
 
 
 def _linked_text(b, names) -> str:
