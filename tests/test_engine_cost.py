@@ -19,13 +19,18 @@ def test_the_stages_of_a_solve_are_counted_when_they_run():
 
 def test_the_direct_light_grows_with_the_lights_size_and_the_triangles():
     base = _parts(kernel=True)["direct_light"][1]
-    polygons = _parts(kernel=True, patches_per_light=40)["direct_light"][1]
+    polygons = _parts(kernel=True, patches_per_light=10)["direct_light"][1]
     dense = _parts(kernel=True, n_triangles=1_000_000)["direct_light"][1]
     more = _parts(kernel=True, max_lights=8)["direct_light"][1]
     assert base < polygons and base < dense and base < more
-    # Max Lights + 1 lights of 40 patches, each gathered on all 2000 patches, plus the fixed parts
-    want = 2000 * 4 * 40 * cost.KERNEL_SECONDS_PER_PAIR + 4 * cost.DIRECT_SECONDS_PER_LIGHT
+    # Max Lights + 1 lights of 10 patches, each gathered on all 2000 patches, plus the fixed parts
+    want = 2000 * 4 * 10 * cost.KERNEL_SECONDS_PER_PAIR + 4 * cost.DIRECT_SECONDS_PER_LIGHT
     assert np.isclose(polygons, want)
+    # a spread light (DIRECT_SPREAD_PATCHES patches or more) keeps the ray-cast gather: never
+    # counted above the largest light the kernel takes
+    spread = _parts(kernel=True, patches_per_light=40)["direct_light"][1]
+    largest = _parts(kernel=True, patches_per_light=cost.DIRECT_SPREAD_PATCHES - 1)["direct_light"][1]
+    assert polygons < largest and np.isclose(spread, largest)
 
 
 def test_the_lamp_refinement_counts_triangles_and_at_most_its_expected_evaluations():

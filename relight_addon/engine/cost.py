@@ -74,6 +74,13 @@ KERNEL_SECONDS_PER_PAIR = 1.5e-5
 #: the curve's surface lights whose direct light on every patch the kernel computes again (at most;
 #: pipeline.jobs.direct_stage); measured: Max Lights + 1 at most on the bench_cost scenes (2-5)
 DIRECT_LIGHTS = 48
+#: a surface light of at least this many patches (a cluster's, a polygon's: spread) keeps the
+#: ray-cast form factors' gather of its direct light, which many rays make: the kernel's differs
+#: from it by 1.6-2.3 % on the living room's lights of 96-180 patches, against 4-35 % on its
+#: lights of 1-6 patches, and costs its patches x every patch in kernel pairs (13 s of a 21 s
+#: solve there after three strokes, 271 s of 291 s on the 1M-triangle room; docs/benchmarks.md,
+#: "Live"). On the staircase every light is one patch.
+DIRECT_SPREAD_PATCHES = 16
 #: per such light: a fixed part (the kernel's set-up) and a part per triangle of the scene (the
 #: receivers' quadrature, triangle by triangle) (s; measured, issue 19)
 DIRECT_SECONDS_PER_LIGHT = 0.05
@@ -159,7 +166,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
         parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
     if kernel:  # the curve's lights' direct light on every patch (pipeline.jobs.direct_stage)
         n_direct = min(C, DIRECT_LIGHTS, max(int(max_lights), 1) + 1)
-        pairs = float(P) * min(C, n_direct * max(float(patches_per_light), 1.0))
+        pairs = float(P) * min(C, n_direct * min(max(float(patches_per_light), 1.0), DIRECT_SPREAD_PATCHES - 1))
         parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR
                                  + n_direct * (DIRECT_SECONDS_PER_LIGHT + DIRECT_SECONDS_PER_TRIANGLE * tris))
     if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)

@@ -20,7 +20,7 @@ from ..engine.light_colour import channel_error, colour_problem, fit_columns, fi
 from ..engine.candidate_lamps import default_drop, lamp_bound, offer_lamps, offered_kinds
 from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, Mount, Transport, refine_configuration
 from ..engine.lights.placed import WRITER as PLACED
-from ..engine.cost import DIRECT_LIGHTS, check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
+from ..engine.cost import DIRECT_LIGHTS, DIRECT_SPREAD_PATCHES, check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.kernel_transfer import lights_direct_correction
 from ..engine.incidence import first_bounce_matrices, incidence_tables, lamp_albedo_excess, lamp_excess
@@ -548,7 +548,8 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     light with a few per cent of noise, which the reflections carry to the targets: on the
     staircase the 3-light answer's prediction moved by 1.2 % from seed to seed): the non-negative
     configurations of at most ``max_lights`` (or the final one's) lights, the smaller first, up to
-    DIRECT_LIGHTS lights. Their columns of T and the forward solves
+    DIRECT_LIGHTS lights; a light of DIRECT_SPREAD_PATCHES patches or more keeps F's gather
+    (engine/cost.py: many rays make it). Their columns of T and the forward solves
     take it (InverseProblem.correct_direct); each configuration's strengths are re-fitted (NNLS per
     channel, the same lights) and its error follows. Returns what the report says (None: nothing)."""
     if model.mode != "inverse" or model.form_factors is None:
@@ -557,13 +558,17 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     top = max(int(options.max_lights), red.final.n_lights)  # the rows above it are not the answer's
     order = sorted((i for i, pt in enumerate(red.curve) if pt.n_negative == 0 and pt.n_lights <= top),
                    key=lambda i: red.curve[i].n_lights)
-    todo = []
+    todo, spread = [], set()
     for i in order:
         for j in red.curve[i].lights:
-            if int(j) not in todo and lights.lamp(int(j)) is None and len(todo) < DIRECT_LIGHTS:
+            if int(j) in todo or int(j) in spread or lights.lamp(int(j)) is not None or len(todo) >= DIRECT_LIGHTS:
+                continue
+            if len(lights.members(int(j))) >= DIRECT_SPREAD_PATCHES:  # F's gather of it stays (cost.py)
+                spread.add(int(j))
+            else:
                 todo.append(int(j))
     if not todo:
-        return None
+        return None if not spread else {"lights": 0, "spread_lights": len(spread), "seconds": 0.0}
     t0 = time.perf_counter()
     ff = model.form_factors
     skip = problem.targets if uses_kernel_pairs(options) else None
@@ -600,7 +605,7 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
         red.notes = notes
     carry_refined(problem, red, {}, every=True)  # the curve never rises
     red.certificate = None  # the certificate is of the T the configurations are now measured on
-    return {"lights": len(todo), "seconds": time.perf_counter() - t0,
+    return {"lights": len(todo), "spread_lights": len(spread), "seconds": time.perf_counter() - t0,
             "final_relative_error_before": before[red.final_index],
             "final_relative_error_after": float(red.final.relative_error)}
 
