@@ -42,12 +42,38 @@ def test_stored_result_round_trips_and_matches_the_report(solved):
     assert sorted(kinds[c] for c in data.light_kind[lit]) == sorted(li["kind"] for li in report["final"]["lights"])
     # pack/unpack is lossless on what was stored
     again = StoredResult.unpack(data.pack())
-    for f in dataclasses.fields(StoredResult):
-        a, b = getattr(data, f.name), getattr(again, f.name)
-        if isinstance(a, np.ndarray):
-            np.testing.assert_array_equal(a, b, err_msg=f.name)
+    _same_stored(data, again)
+
+
+def _same_stored(a, b):
+    for f in dataclasses.fields(a):
+        x, y = getattr(a, f.name), getattr(b, f.name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype, f.name
+            np.testing.assert_array_equal(x, y, err_msg=f.name)
         else:
-            assert a == b, f.name
+            assert x == y and type(x) is type(y), f.name
+
+
+def test_a_result_just_stored_reads_as_its_text_does():
+    # results.store_result keeps the StoredResult it packed (as_stored) for load_result, which
+    # then does not unpack the text: what it shows is what reading the text gives, field by field
+    # (float32, JSON), from the solve's own float64 data
+    import bpy
+
+    from relight_addon.blender import preparation, results
+    from relight_addon.engine.options import JobOptions
+    from relight_addon.pipeline.stored import StoredResult
+
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    job = preparation.SolveJob.export(bpy.context, JobOptions().validate())
+    outcome = job.run()
+    data = results._stored_data(outcome, job.exp.fingerprints)
+    assert data.exitance.dtype == np.float64  # (the solve's, not yet rounded)
+    text = data.pack()
+    _same_stored(data.as_stored(), StoredResult.unpack(text))
+    results.store_result(bpy.context.scene, outcome, job.exp.fingerprints, text, data)
+    _same_stored(results.load_result(bpy.context.scene), StoredResult.unpack(text))
 
 
 def test_a_light_kind_without_a_writer_is_refused_before_writing(solved):

@@ -128,15 +128,19 @@ def _stored_data(outcome, fingerprints=None) -> StoredResult:
     return data
 
 
-def store_result(scene, outcome, fingerprints=None, text=None) -> str:
+def store_result(scene, outcome, fingerprints=None, text=None, data=None) -> str:
     """Keep the whole curve in the scene (stored.StoredResult) so any point can be re-applied;
-    returns the result's new id. ``text``: the packed curve when the caller has it."""
+    returns the result's new id. ``text``: the packed curve when the caller has it, ``data``: the
+    StoredResult it packs (then load_result reads it without unpacking the text)."""
     if text is None:
-        text = _stored_data(outcome, fingerprints).pack()
+        data = _stored_data(outcome, fingerprints)
+        text = data.pack()
     rid = uuid.uuid4().hex
     scene[RESULT_PROP] = text
     scene[RESULT_ID_PROP] = rid
     _cache.clear()
+    if data is not None:
+        _cache[(scene.name, hash(text))] = data.as_stored()
     return rid
 
 
@@ -151,7 +155,7 @@ def show_outcome(scene, outcome, fingerprints=None, trusted=False) -> dict:
     text = data.pack()  # ValueError on non-finite values: nothing changed yet
     check_stored(scene, data, trusted)  # StaleResult when the scene changed during the solve: nothing changed yet
     clear_results(scene)
-    store_result(scene, outcome, fingerprints, text)
+    store_result(scene, outcome, fingerprints, text, data)
     try:
         return apply_stored_point(scene, outcome.final_index, trusted)
     except BaseException:

@@ -177,7 +177,24 @@ class StoredResult:
                 arrays[k] = a32
         arrays["format"] = np.array(FORMAT)
         np.savez(buf, **arrays)
-        return base64.b64encode(zlib.compress(buf.getvalue(), 6)).decode("ascii")
+        # (level 1: the float32 arrays compress to 51 % at it, 49 % at 6, in 0.7 of its time)
+        return base64.b64encode(zlib.compress(buf.getvalue(), 1)).decode("ascii")
+
+    def as_stored(self) -> "StoredResult":
+        """What ``unpack(pack())`` gives, without the round trip (the result just stored, shown at
+        once: Live writes one at every stroke): the floating-point arrays in float32, the JSON
+        fields through JSON."""
+        out = {}
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name in _JSON:
+                out[f.name] = json.loads(json.dumps(v or _JSON[f.name]()))
+            elif f.name == "light_lamp" and v is None:
+                out[f.name] = np.full(len(self.light_area), -1, dtype=np.int64)
+            else:
+                a = np.asarray(v)
+                out[f.name] = a.astype(np.float32) if a.dtype.kind == "f" else a.copy()
+        return type(self)(**out)
 
     @classmethod
     def unpack(cls, text: str) -> "StoredResult":
