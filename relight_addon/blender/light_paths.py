@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..engine.bounces import TAIL, bounce_deficit, kept_terms, matvec, required_bounces
+from ..engine.bounces import TAIL, bounce_deficit, exitance_of, kept_terms, required_bounces
 from ..engine.units import MAX_REFLECTANCE, radiance_from_exitance
 
 __all__ = ["NOTICEABLE", "current_settings", "matched_settings", "match_light_paths", "scene_materials",
@@ -165,8 +165,9 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "shows the emitters but not their multi-bounce indirect light; see docs/validation.md)")
     if F is None or not np.any(B > 0):
         return block, warnings
+    e = exitance_of(F, rho, B)  # the exitance that gives B (the lights' radiance; the truncation's start)
     if n_eff < n_req:
-        d = bounce_deficit(F, rho, B, kept_terms(n_eff), mask, area)
+        d = bounce_deficit(F, rho, B, kept_terms(n_eff), mask, area, exitance=e)
         block["estimated_difference"] = {**d, "bounce_limit": n_eff, "of": what,
                                          "method": "engine radiosity truncated after the reflections the scene's "
                                                    "bounce limit keeps (Neumann series) against the converged one"}
@@ -186,7 +187,6 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "bounce without keeping their energy, so the specular layers render darker in indirect light "
                         "(measured ~4 % on targets of default Principled materials; not estimated here); use Match "
                         "Cycles Light Paths (--out turns it off)")
-    e = B - rho * matvec(F, B)  # the exitance that gives B
     radiance_max = float(radiance_from_exitance(max(e.max(), 0.0)))
     clamps = {k: cur[k] for k in ("sample_clamp_direct", "sample_clamp_indirect") if cur[k] > 0}
     if clamps:

@@ -24,7 +24,8 @@ import math
 
 import numpy as np
 
-__all__ = ["TAIL", "MAX_BOUNCES", "kept_terms", "required_bounces", "truncated_radiosity", "bounce_deficit", "matvec"]
+__all__ = ["TAIL", "MAX_BOUNCES", "kept_terms", "required_bounces", "exitance_of", "truncated_radiosity", "bounce_deficit",
+           "matvec"]
 
 TAIL = 0.005
 #: Cycles' largest bounce limit
@@ -58,13 +59,17 @@ def matvec(F, x):
     return np.asarray(F @ x, dtype=np.float64)
 
 
-def truncated_radiosity(F, reflectance, B, n: int) -> np.ndarray:
+def exitance_of(F, reflectance, B) -> np.ndarray:
+    """(P, 3) e = B - rho F B: the exitance that gives the converged radiosity B."""
+    return np.asarray(B, dtype=np.float64) - np.asarray(reflectance, dtype=np.float64) * matvec(F, B)
+
+
+def truncated_radiosity(F, reflectance, B, n: int, exitance=None) -> np.ndarray:
     """(P, 3) sum_{k=0}^{n} (rho F)^k e with e = B - rho F B (the exitance that gives the
-    converged radiosity B): what a path tracer keeping n reflections shows (Cycles: a bounce
-    limit of n - 1, ``kept_terms``)."""
+    converged radiosity B; ``exitance``: it, when the caller has it): what a path tracer keeping
+    n reflections shows (Cycles: a bounce limit of n - 1, ``kept_terms``)."""
     rho = np.asarray(reflectance, dtype=np.float64)
-    B = np.asarray(B, dtype=np.float64)
-    term = B - rho * matvec(F, B)
+    term = exitance_of(F, rho, B) if exitance is None else np.asarray(exitance, dtype=np.float64)
     total = term.copy()
     for _ in range(int(n)):
         term = rho * matvec(F, term)
@@ -72,15 +77,15 @@ def truncated_radiosity(F, reflectance, B, n: int) -> np.ndarray:
     return total
 
 
-def bounce_deficit(F, reflectance, B, n: int, mask=None, area=None) -> dict:
+def bounce_deficit(F, reflectance, B, n: int, mask=None, area=None, exitance=None) -> dict:
     """Relative difference (B_n - B) / B of the truncated radiosity on the patches ``mask``
     (default: all): ``mean`` the area-weighted one over them (RGB summed) and ``min`` the worst
-    patch (most negative)."""
+    patch (most negative). ``exitance``: truncated_radiosity's."""
     B = np.asarray(B, dtype=np.float64)
     P = len(B)
     mask = np.ones(P, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     area = np.ones(P) if area is None else np.asarray(area, dtype=np.float64)
-    Bn = truncated_radiosity(F, reflectance, B, n)
+    Bn = truncated_radiosity(F, reflectance, B, n, exitance)
     b, bn = B[mask].sum(axis=1), Bn[mask].sum(axis=1)
     a = area[mask]
     lit = b > 0
