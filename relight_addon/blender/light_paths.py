@@ -141,13 +141,14 @@ def snapshot(scene) -> dict:
 
 
 def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", glossy_share=None,
-           settings=None) -> tuple:
+           settings=None, stroke=None) -> tuple:
     """(render_settings block, warnings) for radiosity ``B`` (P, 3) W/m^2 on patches of
     ``reflectance`` with form factors ``F``, if the scene is rendered with its current settings.
     ``mask``: the patches the difference is reported on (``what`` names them);
     ``glossy_share``: the largest glossy part of the materials' reflectance (whether Filter
     Glossy matters; default: read from the scene's materials). ``settings``: ``snapshot``'s,
-    instead of reading the scene (no bpy)."""
+    instead of reading the scene (no bpy). ``stroke``: (bounces.ColumnProducts, B0, e) when B is
+    B0 + T e (a Live stroke's): its products with F from theirs, cached per light."""
     cur = current_settings(scene) if settings is None else dict(settings["scene"])
     if settings is not None and glossy_share is None:
         glossy_share = settings["max_glossy"]
@@ -165,9 +166,15 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "shows the emitters but not their multi-bounce indirect light; see docs/validation.md)")
     if F is None or not np.any(B > 0):
         return block, warnings
-    e = exitance_of(F, rho, B)  # the exitance that gives B (the lights' radiance; the truncation's start)
+    truncated = None
+    if stroke is not None:  # B = B0 + T e: rho F B and (rho F)^(n+1) B from the lights' columns'
+        products, B0, strengths = stroke
+        first, tail = products.of(B0, strengths, kept_terms(n_eff) if n_eff < n_req else 0)
+        e, truncated = B - first, B - tail
+    else:
+        e = exitance_of(F, rho, B)  # the exitance that gives B (the lights' radiance; the truncation's start)
     if n_eff < n_req:
-        d = bounce_deficit(F, rho, B, kept_terms(n_eff), mask, area, exitance=e)
+        d = bounce_deficit(F, rho, B, kept_terms(n_eff), mask, area, exitance=e, truncated=truncated)
         block["estimated_difference"] = {**d, "bounce_limit": n_eff, "of": what,
                                          "method": "engine radiosity truncated after the reflections the scene's "
                                                    "bounce limit keeps (Neumann series) against the converged one"}
@@ -201,14 +208,19 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
     return block, warnings
 
 
-def assess_solve(scene, outcome, settings=None) -> tuple:
+def assess_solve(scene, outcome, settings=None, products=None) -> tuple:
     """``assess`` for a solve's final configuration, on its target patches (``settings``: a
-    ``snapshot``, no bpy)."""
+    ``snapshot``, no bpy). ``products``: the prepared state's bounces.ColumnProducts (a Live
+    stroke's outcome: its radiosity the fixed light's plus its lights' columns of the transfer)."""
     problem, patches = outcome.problem, outcome.patches
     B = np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64)
     mask = problem.target_mask
     what = "targets" if outcome.report.get("command") == "solve" else "lit faces"
-    return assess(scene, problem.F, patches.reflectance, B, mask, patches.area, what, settings=settings)
+    stroke = None
+    if products is not None and problem.prepared_rows_transfer() is products.T:
+        stroke = (products, problem.background_radiosity, outcome.stored.exitance[outcome.final_index])
+    return assess(scene, problem.F, patches.reflectance, B, mask, patches.area, what, settings=settings,
+                  stroke=stroke)
 
 
 def assess_radiosity(scene, result) -> tuple:

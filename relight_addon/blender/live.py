@@ -172,7 +172,8 @@ class LiveSession:
                 out = full.run(cancel=self.cancel.is_set)
                 self.result["job"] = full
             with one_blas_thread():  # (the light paths' check: small products too)
-                self.result["job"].finish(None, out, view_radiance=False, settings=settings)
+                self.result["job"].finish(None, out, view_radiance=False, settings=settings,
+                                          products=state.column_products())
             self.result["finished"] = True
             self.result["seconds"] = time.perf_counter() - t0
             return out

@@ -85,13 +85,14 @@ class SolveJob:
             outcome.warnings.append(f"solved from scratch: {why}")
         return outcome
 
-    def finish(self, scene, outcome, view_radiance=True, input_path=None, settings=None):
+    def finish(self, scene, outcome, view_radiance=True, input_path=None, settings=None, products=None):
         """The report finished with what only Blender can tell: the render settings of the scene's
         Cycles light paths, and (``view_radiance``) the radiance along the target faces' normals.
-        ``settings``: light_paths.snapshot(scene), read before (then any thread: ``scene`` unused)."""
+        ``settings``: light_paths.snapshot(scene), read before (then any thread: ``scene`` unused).
+        ``products``: light_paths.assess_solve's (a Live stroke's)."""
         rows = self.normal_radiance(outcome) if view_radiance else None
-        report.finish(outcome.report, outcome.warnings, light_paths.assess_solve(scene, outcome, settings), rows,
-                      export_seconds=self.exp.seconds, input_path=input_path)
+        report.finish(outcome.report, outcome.warnings, light_paths.assess_solve(scene, outcome, settings, products),
+                      rows, export_seconds=self.exp.seconds, input_path=input_path)
         return outcome
 
     def normal_radiance(self, outcome):

@@ -24,8 +24,8 @@ import math
 
 import numpy as np
 
-__all__ = ["TAIL", "MAX_BOUNCES", "kept_terms", "required_bounces", "exitance_of", "truncated_radiosity", "bounce_deficit",
-           "matvec"]
+__all__ = ["TAIL", "MAX_BOUNCES", "ColumnProducts", "kept_terms", "required_bounces", "exitance_of",
+           "truncated_radiosity", "bounce_deficit", "matvec"]
 
 TAIL = 0.005
 #: Cycles' largest bounce limit
@@ -64,6 +64,53 @@ def exitance_of(F, reflectance, B) -> np.ndarray:
     return np.asarray(B, dtype=np.float64) - np.asarray(reflectance, dtype=np.float64) * matvec(F, B)
 
 
+class ColumnProducts:
+    """(rho F) x and (rho F)^(n+1) x for the columns x of a fixed basis ``T`` (3 arrays (P, L), one
+    per channel: the transfer from every light to every patch) and for a fixed radiosity ``B0``
+    (P, 3), each computed once (the columns asked together in one product with F a step). A Live
+    stroke's radiosity is B = B0 + T e with a few lights on, so its exitance e = B - rho F B and its
+    truncation B_n = B - (rho F)^(n+1) B (the telescoped Neumann sum: truncated_radiosity's) come
+    from a few cached columns: no product with F for the lights an earlier stroke had on."""
+
+    def __init__(self, F, reflectance, T):
+        self.F, self.rho, self.T = F, np.asarray(reflectance, dtype=np.float64), T
+        self.columns = {}  # (n, light) -> (rho F t, (rho F)^(n+1) t), each (P, 3)
+        self.base = {}  # n -> (B0, its two products)
+
+    def _products(self, X, n):
+        """X (P, 3, k) per channel -> ((rho F) X, (rho F)^(n+1) X), one product with F a step."""
+        P, _, k = X.shape
+        first = cur = None
+        for step in range(int(n) + 1):
+            src = X if cur is None else cur
+            cur = self.rho[:, :, None] * matvec(self.F, src.reshape(P, 3 * k)).reshape(P, 3, k)
+            if step == 0:
+                first = cur
+        return first, cur
+
+    def of(self, B0, e, n: int):
+        """(rho F B, (rho F)^(n+1) B) (P, 3) of B = B0 + T e (``e`` (L, 3): the lights' strengths)."""
+        e = np.asarray(e, dtype=np.float64)
+        on = np.flatnonzero(np.any(e != 0, axis=1))
+        new = [int(j) for j in on if (n, int(j)) not in self.columns]
+        base = self.base.get(n)
+        again = base is None or base[0] is not B0  # (the fixed light's: another after a lamp moved)
+        if new or again:  # the new columns and B0 in one batch
+            X = [np.stack([self.T[c][:, j] for c in range(3)], axis=1) for j in new]
+            X = np.stack(X + ([np.asarray(B0, dtype=np.float64)] if again else []), axis=2)
+            first, tail = self._products(X, n)
+            for i, j in enumerate(new):
+                self.columns[(n, j)] = (first[:, :, i], tail[:, :, i])
+            if again:
+                base = self.base[n] = (B0, first[:, :, -1], tail[:, :, -1])
+        first, tail = base[1].copy(), base[2].copy()
+        for j in on:
+            f, t = self.columns[(n, int(j))]
+            first += f * e[j][None, :]
+            tail += t * e[j][None, :]
+        return first, tail
+
+
 def truncated_radiosity(F, reflectance, B, n: int, exitance=None) -> np.ndarray:
     """(P, 3) sum_{k=0}^{n} (rho F)^k e with e = B - rho F B (the exitance that gives the
     converged radiosity B; ``exitance``: it, when the caller has it): what a path tracer keeping
@@ -77,15 +124,16 @@ def truncated_radiosity(F, reflectance, B, n: int, exitance=None) -> np.ndarray:
     return total
 
 
-def bounce_deficit(F, reflectance, B, n: int, mask=None, area=None, exitance=None) -> dict:
+def bounce_deficit(F, reflectance, B, n: int, mask=None, area=None, exitance=None, truncated=None) -> dict:
     """Relative difference (B_n - B) / B of the truncated radiosity on the patches ``mask``
     (default: all): ``mean`` the area-weighted one over them (RGB summed) and ``min`` the worst
-    patch (most negative). ``exitance``: truncated_radiosity's."""
+    patch (most negative). ``exitance``: truncated_radiosity's; ``truncated``: B_n itself, when
+    the caller has it (ColumnProducts)."""
     B = np.asarray(B, dtype=np.float64)
     P = len(B)
     mask = np.ones(P, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
     area = np.ones(P) if area is None else np.asarray(area, dtype=np.float64)
-    Bn = truncated_radiosity(F, reflectance, B, n, exitance)
+    Bn = truncated_radiosity(F, reflectance, B, n, exitance) if truncated is None else truncated
     b, bn = B[mask].sum(axis=1), Bn[mask].sum(axis=1)
     a = area[mask]
     lit = b > 0

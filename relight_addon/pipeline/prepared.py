@@ -47,6 +47,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..engine.blas_threads import one_blas_thread
+from ..engine.bounces import ColumnProducts
 from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
 from ..engine.kernel_transfer import kernel_form_factors
 from ..engine.options import JobOptions
@@ -142,6 +143,7 @@ class PreparedScene:
     _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
     _face_area: np.ndarray = None  # jobs.face_areas of the prepared scene's faces (geometry only)
     _nnls_start: np.ndarray = None  # the last stroke's all-lights NNLS (the next certificate's start)
+    _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -266,6 +268,17 @@ class PreparedScene:
         self.model.problem.all_rows_transfer()
         self._clustered = (self.patches, clustered_faces(self.patches))
         self._face_area = jobs.face_areas(faces)
+
+    def column_products(self):
+        """The products with F of the model's transfer to every patch, per light, kept across
+        strokes (bounces.ColumnProducts: a stroke's light-paths check, light_paths.assess_solve);
+        None before prepare_live."""
+        T_all = None if self.model is None else self.model.problem.prepared_rows_transfer()
+        if T_all is None:
+            return None
+        if self._products is None or self._products.T is not T_all:
+            self._products = ColumnProducts(self.model.problem.F, self.model.patches.reflectance, T_all)
+        return self._products
 
     def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
         """A stroke's live re-solve (Live mode) from the last solve's model: its patches with the
