@@ -253,6 +253,12 @@ class LiveSession:
         finally:
             if mode is not None:
                 bpy.ops.object.mode_set(mode=mode)
+        # the depsgraph takes the write now, and what it updated is forgotten: it is Relight's own
+        # (the radiosity layer on every mesh; digesting them all again took 0.24 s of the main
+        # thread at the next tick on the 1M-triangle room), nothing else ran meanwhile
+        touched, every = set(self.touched), self.touched_all
+        context.view_layer.update()
+        self.touched, self.touched_all = touched, every
         self.shown = solving
         self.updates += 1
         self.last_update = time.strftime("%H:%M:%S")
