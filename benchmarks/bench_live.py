@@ -7,8 +7,9 @@ to every patch (InverseProblem.all_rows_transfer, made at the first stroke) and 
 keeps, then three strokes of 12 unpainted faces next to the painted ones: each stroke's re-solve in
 the worker (PreparedScene.live: the selection, the certificate, the curve, the report), the write
 on the main thread (the lights, the radiosity layer, the chart: operators.show_solve), the final
-relative error, and a cold solve (jobs.run_solve) of the last stroke's painted scene with its
-error.
+relative error, the main thread's longest tick while the stroke was read, solved and written (the
+depsgraph update and Live's tick: what the brush would wait for), the process's memory, and a
+cold solve (jobs.run_solve) of the last stroke's painted scene with its error and stages.
 
     .venv/bin/python benchmarks/bench_live.py [--only NAME]
 
@@ -61,13 +62,24 @@ def nbytes(x, seen=None) -> int:
     return 0
 
 
+#: the longest main-thread tick (the depsgraph update and Live's tick) since the last stroke, s
+TICKS = []
+
+
+def rss_gb() -> float:
+    """The process's resident memory, GB (Linux)."""
+    return int(open("/proc/self/statm").read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**30
+
+
 def run(s, until, timeout=1800):
     t0 = time.monotonic()
     while not until():
         if time.monotonic() - t0 > timeout or s.paused:
             raise RuntimeError(f"Live did not answer: {s.status} {s.paused}")
+        t = time.perf_counter()
         bpy.context.view_layer.update()
         s.tick(bpy.context)
+        TICKS.append(time.perf_counter() - t)
         time.sleep(0.05)
 
 
@@ -111,13 +123,15 @@ def case(name, source, paint_on, model):
         faces, rgb = stroke_faces(ob, 12, k)
         artist_scenes.paint(ob, faces, rgb)
         n = s.updates
+        TICKS.clear()
         run(s, lambda: s.updates == n + 1)
         rep = export.repaint(job.exp)
         strokes.append({"solve_s": s.last_seconds[0], "write_s": s.last_seconds[1],
                         "from_state": state.reason is None, "live": state.live_solves,
                         "error": float(bpy.context.scene.relight.curve[
                             bpy.context.scene.relight.curve_index].relative_error),
-                        "targets": int(rep.target.sum())})
+                        "targets": int(rep.target.sum()), "longest_tick_s": max(TICKS),
+                        "rss_gb": rss_gb()})
         print(name, "stroke", k, strokes[-1], flush=True)
     live.stop(scene.name)
     faces = export.repaint(job.exp)
@@ -125,6 +139,8 @@ def case(name, source, paint_on, model):
     t0 = time.perf_counter()
     cold = jobs.run_solve(faces, options, **job.inputs)
     t_cold = time.perf_counter() - t0
+    print(name, "cold solve", {"patches": int(cold.patches.n_patches), "timings_s": cold.report["timings_s"],
+                               "rss_gb": rss_gb()}, flush=True)
     kept = nbytes(state.model) + nbytes(state.form_factors) + nbytes(state.kernel_rows)
     row = {"scene": name, "model": model, "triangles": int(len(job.exp.faces.triangles)),
            "patches": int(state.patches.n_patches), "lights": int(state.model.problem.n_lights),
