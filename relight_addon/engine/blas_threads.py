@@ -3,8 +3,9 @@
 A live re-solve (pipeline.prepared.PreparedScene.live) is hundreds of small products, fits and
 factorisations (tens to hundreds of targets by a few hundred lights). With OpenBLAS's second
 thread each of them pays the threads' hand-over, and the thread spins on the core Blender's main
-thread draws and paints on: bench_live.py measured the living room's strokes at 99-209 ms with
-numpy's and scipy's default threads and 84-99 ms with one (docs/benchmarks.md, "Live").
+thread draws and paints on: bench_live.py measured the living room's strokes at 99-197 ms with
+numpy's and scipy's default threads (two here), 91-103 ms with this limit and 84-99 ms with
+OPENBLAS_NUM_THREADS=1 for the whole process (docs/benchmarks.md, "Live").
 
 ``one_blas_thread()`` limits the BLAS libraries loaded in the process (numpy's and scipy's
 OpenBLAS, or MKL, BLIS, ...) to one thread for its span, through threadpoolctl (bundled with the
