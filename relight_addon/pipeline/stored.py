@@ -177,7 +177,7 @@ class StoredResult:
                 arrays[k] = a32
         arrays["format"] = np.array(FORMAT)
         np.savez(buf, **arrays)
-        # (level 1: the float32 arrays compress to 51 % at it, 49 % at 6, in 0.7 of its time)
+        # (level 1: the living room's 1.47 MB of arrays to 49.9 %, 48.5 % at 6, in 0.68 of its time)
         return base64.b64encode(zlib.compress(buf.getvalue(), 1)).decode("ascii")
 
     def as_stored(self) -> "StoredResult":
