@@ -48,3 +48,18 @@ class _Patches:
 def test_a_polygon_light_holds_its_polygons_patches():
     mask = np.array([1, 1, 1, 1, 1, 1, 1, 0], dtype=bool)  # polygons 0 (4 patches), 1 (1), 2 (2)
     assert PolygonModel.patches_per_light(_Patches, mask) == 7 / 3
+
+
+def test_the_blackbody_relaxation_is_counted_for_the_modes_that_run_it():
+    # Automatic and Blackbody run light_colour.relaxed_bound: its stacked columns (3 m x
+    # CONE_POINTS L, capped at RELAXATION_BYTES) a few times in memory, and time per entry
+    from relight_addon.engine.light_colour import CONE_POINTS, RELAXATION_BYTES
+    from relight_addon.engine.registry import LIGHT_COLOURS
+
+    assert "light_colour" not in _parts() and "light_colour" in _parts(colour_relaxation=True)
+    b, s = _parts(colour_relaxation=True)["light_colour"]
+    entries = 3 * 60 * CONE_POINTS * 800
+    assert np.isclose(b, cost.RELAXATION_COPIES * 8 * entries) and np.isclose(s, cost.RELAXATION_SECONDS_PER_ENTRY * entries)
+    big, _ = _parts(colour_relaxation=True, n_targets=100_000)["light_colour"]
+    assert np.isclose(big, cost.RELAXATION_COPIES * RELAXATION_BYTES)  # (a coarser cone beyond)
+    assert {m.name for m in LIGHT_COLOURS if m.get("relaxation")} == {"auto", "blackbody"}

@@ -28,6 +28,8 @@ N rays per patch, C candidate patches, L candidate lights, m targets, T triangle
   REFINE_SECONDS_PER_TRIANGLE per triangle, and the targets' rows of A^-1 (3 x 8 P m bytes);
 - the reduction: about L^2 m flops, REDUCTION_SECONDS and REDUCTION_SECONDS_PER_LIGHT per candidate
   light; the curve: STORED_POINTS forward solves (2 P^2 each);
+- the light colour's blackbody relaxation (Automatic, Blackbody): 3 m x CONE_POINTS L stacked
+  columns, RELAXATION_COPIES times, RELAXATION_SECONDS_PER_ENTRY an entry;
 - ray casting's working set: RAY_BYTES per ray in flight, at least one patch's rays (or
   formfactors.CHUNK_RAYS) per thread (measured with tracemalloc: 71-140 bytes per ray).
 
@@ -46,6 +48,7 @@ import numpy as np
 from .candidate_lamps import LAMP_POINTS
 from .lamp_refinement import BUDGET as REFINE_BUDGET, MAX_EVALUATIONS as REFINE_EVALUATIONS, ROUNDS as REFINE_ROUNDS
 from .lamp_refinement import SEARCH_POINTS
+from .light_colour import CONE_POINTS, RELAXATION_BYTES
 from .formfactors import CHUNK_RAYS, DENSE_LIMIT
 from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
@@ -81,6 +84,14 @@ DIRECT_LIGHTS = 48
 #: solve there after three strokes, 271 s of 291 s on the 1M-triangle room; docs/benchmarks.md,
 #: "Live"). On the staircase every light is one patch.
 DIRECT_SPREAD_PATCHES = 16
+#: the blackbody relaxation (light colour Automatic's choice, Blackbody's certificate:
+#: light_colour.relaxed_bound): its stacked columns, 3 m rows x CONE_POINTS L (at most
+#: light_colour.RELAXATION_BYTES), about RELAXATION_COPIES times in memory (the columns, the
+#: reachable ones, NNLS's own) and RELAXATION_SECONDS_PER_ENTRY a column entry. Measured, Automatic
+#: against Free, one run each: the 32 x 32 ceiling's 432 x 10,413 columns +153 MB and +1.37 s; the
+#: living room 22k's 180 x 7,641 +0.3 s, the staircase's 132 x 6,858 +0.2 s (their peak elsewhere)
+RELAXATION_COPIES = 4.25
+RELAXATION_SECONDS_PER_ENTRY = 3.0e-7
 #: per such light: a fixed part (the kernel's set-up) and a part per triangle of the scene (the
 #: receivers' quadrature, triangle by triangle) (s; measured, issue 19)
 DIRECT_SECONDS_PER_LIGHT = 0.05
@@ -131,12 +142,14 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
                   flops: float = FLOPS, memory_limit: float = MEMORY_WARNING_BYTES,
                   seconds_limit: float = SECONDS_WARNING, dense_limit: int = DENSE_LIMIT,
                   threads: int | None = None, n_lamps: int = 0, lamp_work: int | None = None,
-                  lamp_refinements: int = 0, max_lights: int = 3, patches_per_light: float = 1.0) -> dict:
+                  lamp_refinements: int = 0, max_lights: int = 3, patches_per_light: float = 1.0,
+                  colour_relaxation: bool = False) -> dict:
     """Peak memory (bytes) and time (s) estimate of a solve; see the module docstring.
 
     ``lamp_work``: the candidate lamps' receiver-point work in spots' (default ``n_lamps``).
     ``max_lights``: Max Lights (the curve's lights whose direct light is computed again);
     ``patches_per_light``: the mean patches of a surface light (1: cells; a polygon's otherwise).
+    ``colour_relaxation``: the light colour's blackbody relaxation runs (Automatic, Blackbody).
     Returns ``{"memory_bytes", "seconds", "warnings": [str], "parts": {name: (bytes, seconds)}}``;
     ``warnings`` is empty unless memory > ``memory_limit`` or time > ``seconds_limit``.
     """
@@ -191,6 +204,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     else:
         parts["inverse"] = (3 * 8.0 * m * L + 3 * 8.0 * P * k + 8.0 * m * m,
                             (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
+    if colour_relaxation:
+        columns = min(8.0 * 3 * m * CONE_POINTS * L, RELAXATION_BYTES)
+        parts["light_colour"] = (RELAXATION_COPIES * columns, RELAXATION_SECONDS_PER_ENTRY * columns / 8.0)
     parts["reduction"] = (8.0 * L * L, float(L) * L * max(m, 1) * 8.0 / flops
                           + REDUCTION_SECONDS + REDUCTION_SECONDS_PER_LIGHT * L)
     parts["curve"] = (8.0 * 3 * STORED_POINTS * (P + L), g * STORED_POINTS * t_rhs / flops)

@@ -219,7 +219,9 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
                                  n_triangles=n_triangles, refine_passes=passes, kernel=uses_kernel_pairs(options, mode),
                                  threads=options.threads, n_lamps=lamps, lamp_work=work,
                                  lamp_refinements=k * (k + 1) // 2, max_lights=options.max_lights,
-                                 patches_per_light=per_light)
+                                 patches_per_light=per_light,
+                                 colour_relaxation=mode == "inverse"
+                                 and bool(LIGHT_COLOURS[options.light_colour].get("relaxation", False)))
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:

@@ -17,7 +17,8 @@ AUTO_GAP = 0.05
 
 
 @LIGHT_COLOURS.register("auto", "Automatic", "Blackbody lights, unless the targets ask for colours no blackbody "
-                        "light gives (then free colours, with a note)")
+                        "light gives (then free colours, with a note)",
+                        relaxation=True)  # (its choice: light_colour.relaxed_bound; engine/cost.py)
 class Auto:
     name = "auto"
     free = False

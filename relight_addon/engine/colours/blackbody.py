@@ -22,7 +22,8 @@ DEFAULT_RANGE = (2700.0, 6500.0)
                                       description="Blackbody lights: the lowest colour temperature, K"),
                                 Param("temperature_max", float, DEFAULT_RANGE[1], min=800.0, max=12000.0,
                                       label="Max Temperature", soft_max=12000.0,
-                                      description="Blackbody lights: the highest colour temperature, K")))
+                                      description="Blackbody lights: the highest colour temperature, K")),
+                        relaxation=True)  # (its certificate: light_colour.relaxed_bound; engine/cost.py)
 class Blackbody:
     name = "blackbody"
     free = False
