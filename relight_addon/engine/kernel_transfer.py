@@ -461,6 +461,15 @@ def _ragged(starts, counts):
     return idx - np.repeat(ends - counts, counts) + np.repeat(np.asarray(starts, dtype=np.int64), counts)
 
 
+def _chunks(weights, size) -> list:
+    """[(first, end)]: contiguous ranges of the items of ``weights`` (> 0 in total), each of about
+    ``size`` of their sum (an item heavier than that alone)."""
+    cum = np.cumsum(weights)
+    cuts = np.searchsorted(cum, np.arange(size, int(cum[-1]), size), side="left") + 1
+    edges = np.unique(np.concatenate([[0], cuts, [len(cum)]]))
+    return list(zip(edges[:-1], edges[1:]))
+
+
 def _signed_range(g: _Geometry, a, b):
     """Per pair: (min, max) over patch b's vertices of the signed distance to planar patch
     a's plane (NaN where a is not planar), and the tolerance for 'in the plane'."""
@@ -472,11 +481,7 @@ def _signed_range(g: _Geometry, a, b):
         return mn, mx, tol
     # pairs in chunks of about RANGE_CHUNK_TRIANGLES of b's triangles (a dense receiver's
     # thousands, times every source: the 1M-triangle room's 246 sources would take 17 GB at once)
-    cum = np.cumsum(g.tcount[b[sel]])
-    cuts = np.searchsorted(cum, np.arange(RANGE_CHUNK_TRIANGLES, int(cum[-1]), RANGE_CHUNK_TRIANGLES),
-                           side="left") + 1
-    edges = np.unique(np.concatenate([[0], cuts, [len(sel)]]))
-    for first, end in zip(edges[:-1], edges[1:]):
+    for first, end in _chunks(g.tcount[b[sel]], RANGE_CHUNK_TRIANGLES):
         part = sel[first:end]
         ta, tb = a[part], b[part]
         cnt = g.tcount[tb]
@@ -652,10 +657,7 @@ def kernel_form_factors(
     # chunks: contiguous pair ranges of about CHUNK_EVALS kernel evaluations
     evals = pcount * g.tcount[ps]
     info["evaluations"] = int(evals.sum())
-    cum = np.cumsum(evals)
-    cuts = np.searchsorted(cum, np.arange(CHUNK_EVALS, int(cum[-1]), CHUNK_EVALS), side="left") + 1
-    bounds = np.unique(np.concatenate([[0], cuts, [len(pr)]]))
-    chunks = list(zip(bounds[:-1], bounds[1:]))
+    chunks = _chunks(evals, CHUNK_EVALS)
     values = np.zeros(len(pr))
     partial = np.zeros(len(pr), dtype=bool)
     rays = np.zeros(len(chunks), dtype=np.int64)
