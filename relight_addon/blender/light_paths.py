@@ -53,6 +53,23 @@ def effective_bounces(settings: dict) -> int:
     return int(min(settings["diffuse_bounces"], settings["max_bounces"]))
 
 
+def checked_terms(settings: dict, rho_max: float) -> int:
+    """The reflections ``assess`` truncates the radiosity after (``settings``: current_settings'):
+    what the bounce limit keeps when it is short of required_bounces(rho_max), else 0 (the
+    exitance alone is needed)."""
+    n_eff = effective_bounces(settings)
+    return kept_terms(n_eff) if n_eff < required_bounces(rho_max) else 0
+
+
+def prepare_stroke_checks(products, settings: dict, reflectance, B0) -> None:
+    """The products a Live stroke's ``assess`` reads (bounces.ColumnProducts: every light's and
+    those of the fixed light's radiosity ``B0``), made before the first stroke (any thread;
+    ``settings``: a ``snapshot``)."""
+    rho = np.asarray(reflectance)
+    n = checked_terms(settings["scene"], float(rho.max()) if rho.size else 0.0)
+    products.of(B0, np.zeros((products.T[0].shape[1], 3)), n)
+
+
 def matched_settings(rho_max: float, settings: dict | None = None) -> dict:
     """The light-path settings that render the converged, unclamped radiosity (see the module
     docstring); ``settings``: the current ones (higher bounce limits are kept)."""
@@ -169,7 +186,7 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
     truncated = None
     if stroke is not None:  # B = B0 + T e: rho F B and (rho F)^(n+1) B from the lights' columns'
         products, B0, strengths = stroke
-        first, tail = products.of(B0, strengths, kept_terms(n_eff) if n_eff < n_req else 0)
+        first, tail = products.of(B0, strengths, checked_terms(cur, rho_max))
         e, truncated = B - first, B - tail
     else:
         e = exitance_of(F, rho, B)  # the exitance that gives B (the lights' radiance; the truncation's start)

@@ -75,7 +75,7 @@ class LiveSession:
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
         self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
-        self.prewarm_seconds = None  # the transfer to every patch: its time (made before the first stroke)
+        self.prewarm_seconds = None  # the transfer to every patch and the check's products: their time (before the first stroke)
 
     # -- main thread ---------------------------------------------------------------------
     def tick(self, context) -> None:
@@ -100,10 +100,13 @@ class LiveSession:
             self.geometry = _geometry_digest(job.exp.objects)
             self.status = "preparing the transfer to every patch"
             faces = job.exp.faces
+            settings = light_paths.snapshot(bpy.data.scenes[self.scene])  # (the strokes' light-paths check)
 
             def prewarm():  # what every stroke reads, made before the first (PreparedScene.prepare_live)
                 t0 = time.perf_counter()
                 state.prepare_live(faces)
+                light_paths.prepare_stroke_checks(state.column_products(), settings, state.patches.reflectance,
+                                                  state.model.problem.background_radiosity)
                 self.prewarm_seconds = time.perf_counter() - t0
 
             self._run(prewarm, job)
