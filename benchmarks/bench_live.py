@@ -8,8 +8,9 @@ keeps, then three strokes of 12 unpainted faces next to the painted ones: each s
 the worker (PreparedScene.live: the selection, the certificate, the curve, the report), the write
 on the main thread (the lights, the radiosity layer, the chart: operators.show_solve), the final
 relative error, the main thread's longest tick while the stroke was read, solved and written (the
-depsgraph update and Live's tick: what the brush would wait for), the process's memory, and a
-cold solve (jobs.run_solve) of the last stroke's painted scene with its error and stages.
+depsgraph update and Live's tick: what the brush would wait for), the process's memory, the time
+from the stroke (its depsgraph update) to the answer written, ticked every live.TICK as the timer
+ticks (Live reads the paint QUIET seconds after the last update), and a cold solve (jobs.run_solve) of the last stroke's painted scene with its error and stages.
 
     .venv/bin/python benchmarks/bench_live.py [--only NAME]
 
@@ -80,7 +81,7 @@ def run(s, until, timeout=1800):
         bpy.context.view_layer.update()
         s.tick(bpy.context)
         TICKS.append(time.perf_counter() - t)
-        time.sleep(0.05)
+        time.sleep(live.TICK)  # (the modal operator's timer)
 
 
 def stroke_faces(ob, n, k):
@@ -124,9 +125,11 @@ def case(name, source, paint_on, model):
         artist_scenes.paint(ob, faces, rgb)
         n = s.updates
         TICKS.clear()
+        t0 = time.perf_counter()
         run(s, lambda: s.updates == n + 1)
+        latency = time.perf_counter() - t0
         rep = export.repaint(job.exp)
-        strokes.append({"solve_s": s.last_seconds[0], "write_s": s.last_seconds[1],
+        strokes.append({"solve_s": s.last_seconds[0], "write_s": s.last_seconds[1], "latency_s": latency,
                         "from_state": state.reason is None, "live": state.live_solves,
                         "error": float(bpy.context.scene.relight.curve[
                             bpy.context.scene.relight.curve_index].relative_error),
@@ -168,12 +171,13 @@ def main():
     with open(OUT, "w") as fh:
         json.dump({"command": "benchmarks/bench_live.py", "load": os.getloadavg(), "rows": rows}, fh, indent=1)
     print("| scene | triangles | patches | lights | preparation (first answer) | transfer to every patch | kept "
-          "| stroke: solve / write | error live / cold | cold solve |")
+          "| stroke: solve / write | stroke to answer written | error live / cold | cold solve |")
     for r in rows:
         st = r["strokes"]
         print(f"| {r['scene']}, {r['model']} | {r['triangles']:,} | {r['patches']:,} | {r['lights']} | "
               f"{r['first_s']:.1f} s | {r['all_rows_s']:.2f} s | {r['kept_bytes'] / 2**20:.0f} MB | "
-              + ", ".join(f"{1000 * x['solve_s']:.0f} / {1000 * x['write_s']:.0f} ms" for x in st)
+              + ", ".join(f"{1000 * x['solve_s']:.0f} / {1000 * x['write_s']:.0f} ms" for x in st) + " | "
+              + ", ".join(f"{1000 * x['latency_s']:.0f} ms" if "latency_s" in x else "-" for x in st)
               + f" | {st[-1]['error']:.4f} / {r['cold_error']:.4f} | {r['cold_s']:.1f} s |")
 
 

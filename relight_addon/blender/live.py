@@ -8,10 +8,10 @@ operator's timer):
 - its first answer is a solve of the scene as it is when Live is turned on (preparation.SolveJob
   in the worker: from the session's prepared state when that still serves); later Solve & Reduce
   solves replace the model it re-solves from;
-- when Blender reported a change (``depsgraph_update_post``: ``dirty``), the paint is read again
-  (export.repaint: the target layers only, no export); paint that is new and has not changed
-  for one tick (the stroke ended) is re-solved in the worker. While a re-solve runs, newer paint
-  waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
+- when Blender reported a change (``depsgraph_update_post``: ``dirty``) and then none for QUIET
+  seconds (the brush at rest: the stroke ended), the paint is read again (export.repaint: the
+  target layers only, no export) and, when new, re-solved in the worker. While a re-solve runs,
+  newer paint waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
 - an answer for the newest paint is written into the scene (operators.show_solve), and the
   time of the update and its cost are shown;
 - paint on faces the patch model clustered with others is solved in full (in the worker);
@@ -43,8 +43,12 @@ __all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "statu
 
 #: scene name -> LiveSession (at most one per scene)
 SESSIONS = {}
-#: seconds between two ticks (the modal operator's timer)
-TICK = 0.1
+#: seconds between two ticks (the modal operator's timer): how soon a finished answer is written
+TICK = 0.02
+#: seconds without a depsgraph update before the paint is read (the brush at rest: a stroke ended,
+#: or paused); while it paints, nothing is read (each read holds the main thread, 19 ms on the
+#: 22k-triangle living room)
+QUIET = 0.04
 
 
 class LiveSession:
@@ -53,8 +57,8 @@ class LiveSession:
         self.options_fn = options_fn  # settings (scene.relight) -> JobOptions: the sidebar's
         self.show_fn = show_fn  # (context, job, outcome, finished=, trusted=, show=): ui.operators.show_solve
         self.dirty = True
+        self.last_change = 0.0  # time.monotonic() of the last depsgraph update
         self.paint = None  # (target, radiosity) last read
-        self.stable = 0  # ticks the paint read has not changed
         self.shown = None  # the paint of the answer in the scene
         self.worker = None
         self.result = {}
@@ -81,6 +85,8 @@ class LiveSession:
     def tick(self, context) -> None:
         """Collect a finished answer, read the paint when Blender reported a change, start the
         next re-solve (main thread)."""
+        if self.dirty and time.monotonic() - self.last_change < QUIET:
+            return  # (the brush is painting: nothing is read or written until it rests)
         if self.worker is not None and not self.worker.is_alive():
             self._collect(context)
         job = preparation.PREPARED_JOBS.get(self.scene)
@@ -125,36 +131,38 @@ class LiveSession:
             self.shown = None  # the answer shown is of the lamps before
             self.dirty = True
         if self.dirty:
-            self.dirty = False
-            # only the objects the depsgraph updated are read again and digested (a stroke's: a
-            # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
-            touched, every = self.touched, self.touched_all or self._faces is None
-            self.touched, self.touched_all = set(), False
-            objs = [ob for ob in job.exp.objects
-                    if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
-            faces = export.repaint(job.exp, None if every else {ob.name for ob in objs},
-                                   None if every else self._faces)  # (in Edit Mode: its edit mesh first)
-            if self.lamps is not None:
-                faces = replace(faces, lamps=self.lamps)
-            now = _geometry_digest(objs)
-            moved = sorted(name for name in now if now[name] != self.geometry.get(name))
-            if moved:
-                self.changed.update(f"object {name!r} (moved or edited)" for name in moved)
+            self._read_paint(job)
+            if self.changed:
                 return
-            paint = (faces.target, faces.target_radiosity)
-            self._faces = faces
-            if self.paint is not None and _same(paint, self.paint):
-                self.stable += 1
-            else:
-                self.paint, self.stable = paint, 0
-                self.dirty = True  # read again next tick: re-solve once the stroke has ended
-                return
-        if self.worker is not None or self.paused or self.stable < 1:
+        if self.worker is not None or self.paused or self.paint is None:
             return
         if self.shown is not None and _same(self.paint, self.shown):
             self.status = "up to date"
             return
         self._start_live(job, state, self._faces)
+
+    def _read_paint(self, job) -> None:
+        """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that
+        moved or was edited is added to ``changed`` (the prepared state cannot follow it)."""
+        self.dirty = False
+        # only the objects the depsgraph updated are read again and digested (a stroke's: a
+        # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
+        touched, every = self.touched, self.touched_all or self._faces is None
+        self.touched, self.touched_all = set(), False
+        objs = [ob for ob in job.exp.objects
+                if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
+        faces = export.repaint(job.exp, None if every else {ob.name for ob in objs},
+                               None if every else self._faces)  # (in Edit Mode: its edit mesh first)
+        if self.lamps is not None:
+            faces = replace(faces, lamps=self.lamps)
+        now = _geometry_digest(objs)
+        moved = sorted(name for name in now if now[name] != self.geometry.get(name))
+        if moved:
+            self.changed.update(f"object {name!r} (moved or edited)" for name in moved)
+            return
+        self._faces = faces
+        if self.paint is None or not _same((faces.target, faces.target_radiosity), self.paint):
+            self.paint = (faces.target, faces.target_radiosity)
 
     def _start_live(self, job, state, faces):
         self.solving = self.paint
@@ -230,6 +238,10 @@ class LiveSession:
             return
         if result.get("first"):
             self.prepared = result["job"]
+        if self.dirty and self.base is not None and self.base is preparation.PREPARED_JOBS.get(self.scene):
+            self._read_paint(self.base)  # (a change since the last read: is this answer's paint still the newest?)
+            if self.changed:
+                return  # (the scene moved on: the next tick pauses and says why)
         if self.paint is not None and not _same(solving, self.paint):
             self.superseded += 1  # a newer stroke: its re-solve comes next
             return
@@ -336,7 +348,7 @@ def _on_depsgraph(scene, depsgraph=None):
     s = SESSIONS.get(scene.name)
     if s is None:
         return
-    s.dirty = True
+    s.dirty, s.last_change = True, time.monotonic()
     if depsgraph is None:
         s.touched_all = True
     for u in getattr(depsgraph, "updates", ()):
