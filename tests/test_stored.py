@@ -56,7 +56,7 @@ def _same_stored(a, b):
 
 
 def test_a_result_just_stored_reads_as_its_text_does():
-    # results.store_result keeps the StoredResult it packed (as_stored) for load_result, which
+    # results.store_result keeps what the StoredResult it packed reads as (as_stored) for load_result, which
     # then does not unpack the text: what it shows is what reading the text gives, field by field
     # (float32, JSON), from the solve's own float64 data
     import bpy
@@ -68,11 +68,11 @@ def test_a_result_just_stored_reads_as_its_text_does():
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
     job = preparation.SolveJob.export(bpy.context, JobOptions().validate())
     outcome = job.run()
-    data = results._stored_data(outcome, job.exp.fingerprints)
+    data, text, view = results.packed_result(outcome, job.exp.fingerprints)  # (as Live's worker packs it)
     assert data.exitance.dtype == np.float64  # (the solve's, not yet rounded)
-    text = data.pack()
-    _same_stored(data.as_stored(), StoredResult.unpack(text))
-    results.store_result(bpy.context.scene, outcome, job.exp.fingerprints, text, data)
+    assert text == data.pack()
+    _same_stored(view, StoredResult.unpack(text))
+    results.store_result(bpy.context.scene, text, view)
     _same_stored(results.load_result(bpy.context.scene), StoredResult.unpack(text))
 
 

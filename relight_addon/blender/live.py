@@ -34,7 +34,7 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from . import export, light_paths, preparation
+from . import export, light_paths, preparation, results
 from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import scene_lamps_differ
@@ -55,7 +55,7 @@ class LiveSession:
     def __init__(self, context, options_fn, show_fn):
         self.scene = context.scene.name
         self.options_fn = options_fn  # settings (scene.relight) -> JobOptions: the sidebar's
-        self.show_fn = show_fn  # (context, job, outcome, finished=, trusted=, show=): ui.operators.show_solve
+        self.show_fn = show_fn  # (context, job, outcome, finished=, trusted=, show=, packed=): ui.operators.show_solve
         self.dirty = True
         self.last_change = 0.0  # time.monotonic() of the last depsgraph update
         self.paint = None  # (target, radiosity) last read
@@ -186,6 +186,8 @@ class LiveSession:
                 self.result["job"].finish(None, out, view_radiance=False, settings=settings,
                                           products=state.column_products())
             self.result["finished"] = True
+            # (packed here: the main thread's write is the scene's alone; ValueError is said as any error)
+            self.result["packed"] = results.packed_result(out, self.result["job"].exp.fingerprints)
             self.result["seconds"] = time.perf_counter() - t0
             return out
 
@@ -257,7 +259,7 @@ class LiveSession:
         try:
             # the meshes are the exported ones (the geometry digest, checked at every change)
             self.show_fn(context, result["job"], outcome, finished=result.get("finished", False),
-                         trusted=self.base is not None, show=not painting)
+                         trusted=self.base is not None, show=not painting, packed=result.get("packed"))
             for name, layer in layers.items():
                 colors = bpy.data.objects[name].data.color_attributes
                 if layer and layer in colors and colors.active_color_name != layer:

@@ -128,34 +128,38 @@ def _stored_data(outcome, fingerprints=None) -> StoredResult:
     return data
 
 
-def store_result(scene, outcome, fingerprints=None, text=None, data=None) -> str:
-    """Keep the whole curve in the scene (stored.StoredResult) so any point can be re-applied;
-    returns the result's new id. ``text``: the packed curve when the caller has it, ``data``: the
-    StoredResult it packs (then load_result reads it without unpacking the text)."""
-    if text is None:
-        data = _stored_data(outcome, fingerprints)
-        text = data.pack()
+def packed_result(outcome, fingerprints=None) -> tuple:
+    """(StoredResult, its text, what load_result reads of it): the outcome's curve packed (no bpy:
+    any thread; Live's worker packs a stroke's answer, the main thread then only writes it).
+    ValueError on non-finite values."""
+    data = _stored_data(outcome, fingerprints)
+    return data, data.pack(), data.as_stored()
+
+
+def store_result(scene, text, view=None) -> str:
+    """Keep the whole curve in the scene (stored.StoredResult's packed ``text``) so any point can be
+    re-applied; returns the result's new id. ``view``: what load_result reads of it (as_stored),
+    when the caller has it."""
     rid = uuid.uuid4().hex
     scene[RESULT_PROP] = text
     scene[RESULT_ID_PROP] = rid
     _cache.clear()
-    if data is not None:
-        _cache[(scene.name, hash(text))] = data.as_stored()
+    if view is not None:
+        _cache[(scene.name, hash(text))] = view
     return rid
 
 
-def show_outcome(scene, outcome, fingerprints=None, trusted=False) -> dict:
+def show_outcome(scene, outcome, fingerprints=None, trusted=False, packed=None) -> dict:
     """Replace any previous result by this solve's: store its curve, show its final configuration.
     All-or-nothing: the new result is packed (finite values) and checked against the scene (every
     object present and unchanged since the export) before the previous one is touched; should
     showing still fail, the new result is cleared and the error raised. ``trusted``: the caller
     has checked that the meshes are the exported ones (Live mode, on its own digest of them):
-    their fingerprints are not evaluated again."""
-    data = _stored_data(outcome, fingerprints)
-    text = data.pack()  # ValueError on non-finite values: nothing changed yet
+    their fingerprints are not evaluated again. ``packed``: packed_result's, made by the caller."""
+    data, text, view = packed_result(outcome, fingerprints) if packed is None else packed
     check_stored(scene, data, trusted)  # StaleResult when the scene changed during the solve: nothing changed yet
     clear_results(scene)
-    store_result(scene, outcome, fingerprints, text, data)
+    store_result(scene, text, view)
     try:
         return apply_stored_point(scene, outcome.final_index, trusted)
     except BaseException:

@@ -30,6 +30,10 @@ def unit(v, axis=-1) -> np.ndarray:
     return v / np.where(n > 0, n, 1.0)
 
 
+#: group_sum sums values of at most this many columns with a bincount each
+BINCOUNT_COLUMNS = 8
+
+
 def group_sum(index, values, n, weights=None) -> np.ndarray:
     """Per group g in 0..n-1, the sum over items i with index[i] == g of weights[i] * values[i].
 
@@ -43,8 +47,12 @@ def group_sum(index, values, n, weights=None) -> np.ndarray:
         index, values, w = index[keep], values[keep], w[keep]
     if values.ndim == 1:
         return np.bincount(index, weights=w * values, minlength=n)[:n]
+    flat = values.reshape(len(index), -1)
+    if flat.shape[1] <= BINCOUNT_COLUMNS:  # (a few columns: one bincount each, no sparse matrix built)
+        return np.stack([np.bincount(index, weights=w * flat[:, j], minlength=n)[:n] for j in range(flat.shape[1])],
+                        axis=1)
     S = sp.csr_matrix((w, (index, np.arange(len(index)))), shape=(n, len(index)))
-    return np.asarray(S @ values.reshape(len(index), -1))
+    return np.asarray(S @ flat)
 
 
 def group_mean(index, values, n, weights=None, empty=0.0) -> np.ndarray:
@@ -55,10 +63,13 @@ def group_mean(index, values, n, weights=None, empty=0.0) -> np.ndarray:
     w = np.ones(len(index)) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     num = group_sum(index, values, n, w)
     den = group_sum(index, w, n)
+    den_b = den.reshape((-1,) + (1,) * (values.ndim - 1))
+    out = num / np.where(den_b > 0, den_b, 1.0)
+    if np.all(den > 0):
+        return out
     cnt = group_sum(index, np.ones(len(index)), n)
     plain = group_sum(index, values, n) / np.maximum(cnt, 1).reshape((-1,) + (1,) * (values.ndim - 1))
-    den_b = den.reshape((-1,) + (1,) * (values.ndim - 1))
-    out = np.where(den_b > 0, num / np.where(den_b > 0, den_b, 1.0), plain)
+    out = np.where(den_b > 0, out, plain)
     if empty != 0.0:
         out[cnt == 0] = empty
     return out

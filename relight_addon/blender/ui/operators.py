@@ -318,10 +318,11 @@ def sync_curve_list(scene):
     results.update_chart(scene)
 
 
-def store_outcome(context, outcome, fingerprints=None, trusted=False):
+def store_outcome(context, outcome, fingerprints=None, trusted=False, packed=None):
     """Keep the curve in the scene and show the final configuration (main thread); returns the
-    messages about objects that could not show everything (``trusted``: results.show_outcome's)."""
-    shown = results.show_outcome(context.scene, outcome, fingerprints, trusted)
+    messages about objects that could not show everything (``trusted``, ``packed``:
+    results.show_outcome's)."""
+    shown = results.show_outcome(context.scene, outcome, fingerprints, trusted, packed)
     _fill_curve_list(context.scene.relight, outcome.curve, outcome.final_index)
     context.scene.relight.curve_result = results.result_id(context.scene) or ""
     context.scene.relight.apply_error = ""
@@ -329,15 +330,16 @@ def store_outcome(context, outcome, fingerprints=None, trusted=False):
     return shown["skipped"]
 
 
-def show_solve(context, job, outcome, finished=False, trusted=False, show=True) -> list:
+def show_solve(context, job, outcome, finished=False, trusted=False, show=True, packed=None) -> list:
     """A solve's outcome into the scene (main thread, Object Mode): the report finished (light
     paths; ``finished``: the worker did it), the curve stored and its final configuration shown,
     the sidebar's summary and warnings; returns the warnings. Raises SceneError / ValueError, the
     scene unchanged. ``trusted``: results.show_outcome's. ``show``: the viewports switched to the
-    predicted radiosity (not while painting: Live in Vertex Paint)."""
+    predicted radiosity (not while painting: Live in Vertex Paint). ``packed``: the outcome's
+    results.packed_result, made by the worker (Live's; after ``finished``)."""
     if not finished:
         job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
-    skipped = store_outcome(context, outcome, job.exp.fingerprints, trusted)
+    skipped = store_outcome(context, outcome, job.exp.fingerprints, trusted, packed)
     warnings = list(outcome.warnings) + list(skipped or [])
     settings = context.scene.relight
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))
