@@ -144,7 +144,7 @@ def case(name, source, paint_on, model):
     t_cold = time.perf_counter() - t0
     print(name, "cold solve", {"patches": int(cold.patches.n_patches), "timings_s": cold.report["timings_s"],
                                "rss_gb": rss_gb()}, flush=True)
-    kept = nbytes(state.model) + nbytes(state.form_factors) + nbytes(state.kernel_rows)
+    kept = nbytes([state.model, state.form_factors, state.kernel_rows, state._products])  # (each array once)
     row = {"scene": name, "model": model, "triangles": int(len(job.exp.faces.triangles)),
            "patches": int(state.patches.n_patches), "lights": int(state.model.problem.n_lights),
            "first_s": t_first, "all_rows_s": t_rows, "kept_bytes": int(kept), "strokes": strokes,
