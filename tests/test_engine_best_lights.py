@@ -499,3 +499,20 @@ def test_the_gram_matrix_is_shared_by_content_and_follows_changes_in_place():
     assert sub[0] is sub[1] is sub[2] and np.allclose(best_lights.gram(sub[0]), t[:, cols].T @ t[:, cols])
     t[:, 2] += 1.0  # in place
     assert np.allclose(best_lights.gram(t), t.T @ t)
+
+
+@pytest.mark.parametrize("kind,seed", PROBLEMS[::3])
+def test_the_certificate_started_from_another_nnls_reaches_the_same_optimum(kind, seed):
+    """A Live stroke's certificate starts its all-lights NNLS from an earlier problem's active
+    lights (the last solve's or stroke's): the bound is the cold NNLS's (scipy on every column),
+    whatever the start: none, the optimum itself, another problem's, or every light."""
+    T, b, _ = make(kind, seed)
+    n = T[0].shape[1]
+    cold = np.sqrt(sum(sopt.nnls(T[c], b[:, c])[1] ** 2 for c in range(3)))
+    other = bl.lower_bounds(T, b * np.random.default_rng(seed).uniform(0.2, 2.0, b.shape), 2).nnls_exitance
+    optimum = bl.lower_bounds(T, b, 2).nnls_exitance
+    for start in (None, np.zeros((n, 3)), optimum, other, np.ones((n, 3))):
+        got = bl.lower_bounds(T, b, 2, nnls_start=start)
+        assert got.nnls == pytest.approx(cold * (1 - bl.BOUND_MARGIN), rel=1e-9, abs=1e-12)
+        r = np.stack([T[c] @ got.nnls_exitance[:, c] for c in range(3)], axis=1) - b
+        assert np.all(got.nnls_exitance >= 0) and np.linalg.norm(r) == pytest.approx(cold, rel=1e-9, abs=1e-12)

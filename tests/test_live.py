@@ -219,3 +219,27 @@ def test_live_follows_a_kept_lamp_moved_by_hand(addon):
                                atol=1e-9 * np.abs(bg1).max())
     assert "relight_owner" not in kept and kept.name in scene.objects
     live.stop(scene.name)
+
+
+def test_the_paint_is_read_once_the_stroke_ends():
+    """Live reads the paint at the first tick after a stroke (no wait) and never while a brush's
+    modal operator runs; where Blender cannot list the modal operators, after QUIET seconds."""
+    from types import SimpleNamespace as NS
+
+    from relight_addon.blender import live
+
+    def context(*windows):
+        return NS(window_manager=NS(windows=list(windows)))
+
+    def window(*idnames):
+        return NS(modal_operators=[NS(bl_idname=i) for i in idnames])
+
+    now = time.monotonic()
+    assert not live.stroke_running(context(), now)  # headless: no window, no stroke
+    assert not live.stroke_running(context(window("RELIGHT_OT_live")), now)  # Live's own timer
+    assert live.stroke_running(context(window("RELIGHT_OT_live", "PAINT_OT_vertex_paint")), now)
+    assert live.stroke_running(context(window(), window("SCULPT_OT_brush_stroke")), now)  # another window
+    assert not live.stroke_running(context(window("TRANSFORM_OT_translate")), now)
+    old = NS(windows=[NS()])  # a Blender without Window.modal_operators: the brush at rest after QUIET
+    assert live.stroke_running(NS(window_manager=old), now)
+    assert not live.stroke_running(NS(window_manager=old), now - 2 * live.QUIET)

@@ -8,9 +8,10 @@ operator's timer):
 - its first answer is a solve of the scene as it is when Live is turned on (preparation.SolveJob
   in the worker: from the session's prepared state when that still serves); later Solve & Reduce
   solves replace the model it re-solves from;
-- when Blender reported a change (``depsgraph_update_post``: ``dirty``) and then none for QUIET
-  seconds (the brush at rest: the stroke ended), the paint is read again (export.repaint: the
-  target layers only, no export) and, when new, re-solved in the worker. While a re-solve runs,
+- when Blender reported a change (``depsgraph_update_post``: ``dirty``) and no brush stroke runs
+  (``stroke_running``: no paint or sculpt modal operator in a window; where Blender cannot say,
+  none for QUIET seconds), the paint is read again (export.repaint: the target layers only, no
+  export) and, when new, re-solved in the worker. While a re-solve runs,
   newer paint waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
 - an answer for the newest paint is written into the scene (operators.show_solve), and the
   time of the update and its cost are shown;
@@ -45,9 +46,12 @@ __all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "statu
 SESSIONS = {}
 #: seconds between two ticks (the modal operator's timer): how soon a finished answer is written
 TICK = 0.02
-#: seconds without a depsgraph update before the paint is read (the brush at rest: a stroke ended,
-#: or paused); while it paints, nothing is read (each read holds the main thread, 19 ms on the
-#: 22k-triangle living room)
+#: while a brush stroke runs (a modal operator of these prefixes: Vertex Paint's, Sculpt's Paint
+#: brush, ...), nothing is read (each read holds the main thread, 19 ms on the 22k-triangle living
+#: room); it is read at the first tick after the stroke
+STROKE_OPERATORS = ("PAINT_OT_", "SCULPT_OT_")
+#: seconds without a depsgraph update before the paint is read where Blender cannot list the modal
+#: operators running (the brush at rest: a stroke ended, or paused)
 QUIET = 0.04
 
 
@@ -85,8 +89,8 @@ class LiveSession:
     def tick(self, context) -> None:
         """Collect a finished answer, read the paint when Blender reported a change, start the
         next re-solve (main thread)."""
-        if self.dirty and time.monotonic() - self.last_change < QUIET:
-            return  # (the brush is painting: nothing is read or written until it rests)
+        if self.dirty and stroke_running(context, self.last_change):
+            return  # (the brush is painting: nothing is read or written until the stroke ends)
         if self.worker is not None and not self.worker.is_alive():
             self._collect(context)
         job = preparation.PREPARED_JOBS.get(self.scene)
@@ -310,6 +314,20 @@ def _geometry_digest(objects) -> dict:
         h.update(np.array(ob.matrix_world, dtype=np.float32).tobytes())
         out[ob.name] = h.hexdigest()
     return out
+
+
+def stroke_running(context, last_change: float) -> bool:
+    """Whether a brush stroke may still be painting: a modal operator of STROKE_OPERATORS runs in
+    a window; where Blender cannot say (no ``Window.modal_operators``), a depsgraph update less
+    than QUIET seconds ago (``last_change``: time.monotonic()). Headless, no stroke runs."""
+    wm = getattr(context, "window_manager", None)
+    for win in getattr(wm, "windows", ()):
+        ops = getattr(win, "modal_operators", None)
+        if ops is None:
+            return time.monotonic() - last_change < QUIET
+        if any(op.bl_idname.startswith(STROKE_OPERATORS) for op in ops):
+            return True
+    return False
 
 
 def _same(a, b) -> bool:

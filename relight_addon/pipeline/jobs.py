@@ -975,7 +975,8 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     """Stages 2-5 on a built model (build_model's): the inverse solve, the reduction, the direct
     light, the certificate, the lamp refinement, the curve and the report; a SolveOutcome.
     ``t0``: when the job started (perf_counter), for the report's total. ``live``: a stroke's
-    re-solve on a retargeted model (retarget_model): the curve to Max Lights + LIVE_CURVE_EXTRA,
+    re-solve on a retargeted model (retarget_model): no inverse solution e_x when the selection
+    does not read it (Best k Lights, NNLS greedy, least power), the curve to Max Lights + LIVE_CURVE_EXTRA,
     without the kernel's direct light of lights the model has not corrected yet and without the
     lamp refinement (the model's lamps, refined for the earlier targets, are candidates), the
     selection's quick search from the configurations ``initial`` {n_lights: lights}, its
@@ -983,7 +984,10 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     mode = model.mode
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
-    e_x, inv = solve_stage(model, options)
+    if live and not SELECTIONS[options.selection].get("distributes", True):  # (the selection never reads e_x)
+        e_x, inv = np.zeros((model.problem.n_lights, 3)), None
+    else:
+        e_x, inv = solve_stage(model, options)
     t_inverse = time.perf_counter() - t1 + model.seconds["problem"]
     if progress is not None:
         progress("inverse", 0.8)
@@ -998,7 +1002,7 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     t_direct = time.perf_counter() - t_direct
     bounds = point_bounds = positive = None
     if mode == "inverse":  # of the candidate lights (the refined lamps are found after, outside them)
-        bounds = certificate(model.problem, red)
+        bounds = red.certificate = certificate(model.problem, red)  # (of the T the curve is measured on)
         positive = positive_bound(model.problem, inv, red.final, bounds)
     t_refine = time.perf_counter()
     model.lamp_refinement = None if live else refine_stage(model, red, options, progress, cancel)

@@ -142,7 +142,7 @@ class PreparedScene:
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
     _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
     _face_area: np.ndarray = None  # jobs.face_areas of the prepared scene's faces (geometry only)
-    _nnls_start: np.ndarray = None  # the last stroke's all-lights NNLS (the next certificate's start)
+    _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
 
     @classmethod
@@ -241,7 +241,9 @@ class PreparedScene:
             self.patches = self._cast_for = self.form_factors = self.model = None
         else:
             self.patches, self.model = outcome.patches, outcome.model
-            self._nnls_start = None  # (another model's lights)
+            # (the first stroke's certificate starts from this solve's all-lights NNLS: its lights)
+            bounds = outcome.reduction.certificate
+            self._nnls_start = None if bounds is None else bounds.nnls_exitance
             self.paint = (faces.target.copy(), faces.target_radiosity.copy())
             self.starts = _starts(outcome)
         return outcome
