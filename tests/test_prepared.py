@@ -11,7 +11,7 @@ import bpy  # noqa: E402
 
 from artist_scenes import paint  # noqa: E402
 from relight_addon.blender import export  # noqa: E402
-from relight_addon.engine import kernel_transfer  # noqa: E402
+from relight_addon.engine import best_lights as bl, kernel_transfer  # noqa: E402
 from relight_addon.engine.estimators import kernel as kernel_estimator  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.pipeline import jobs, prepared  # noqa: E402
@@ -133,6 +133,13 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     assert final.n_negative == 0 and final.n_lights <= options.max_lights
     assert final.error == pytest.approx(live.problem.error(_full(live.problem, final)), rel=1e-9)
     assert np.all(np.isfinite(live.stored.radiosity)) and any("live answer" in w for w in live.warnings)
+    # Best k Lights never reads the inverse solution: a stroke makes none (the report says so), and no
+    # per-face rows (the scene holds them); the certificate's NNLS started from the solve's
+    assert live.inverse is None and live.report["inverse"]["solved"] is False
+    assert live.report["inverse"]["relative_error"] is None and live.report["objects"] is None
+    assert first.report["inverse"]["solved"] is True and first.report["objects"]
+    assert live.reduction.certificate.nnls == pytest.approx(
+        bl.lower_bounds(live.problem.transfer, live.problem.b_target, 1).nnls, rel=1e-9)
     # the layer (every patch's radiosity, from the kept transfer) against a forward solve of the answer
     B = live.problem.configuration_radiosity(_full(live.problem, final)) + live.problem.background_radiosity
     np.testing.assert_allclose(live.stored.radiosity[live.final_index], B, rtol=1e-5, atol=1e-6 * np.abs(B).max())

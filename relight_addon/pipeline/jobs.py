@@ -978,7 +978,8 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     re-solve on a retargeted model (retarget_model): no inverse solution e_x when the selection
     does not read it (Best k Lights, NNLS greedy, least power), the curve to Max Lights + LIVE_CURVE_EXTRA,
     without the kernel's direct light of lights the model has not corrected yet and without the
-    lamp refinement (the model's lamps, refined for the earlier targets, are candidates), the
+    lamp refinement (the model's lamps, refined for the earlier targets, are candidates), no per-face
+    block in its report (the scene holds them), the
     selection's quick search from the configurations ``initial`` {n_lights: lights}, its
     certificate's all-lights NNLS from ``nnls_start`` (an earlier stroke's, the same optimum)."""
     mode = model.mode
@@ -1025,7 +1026,8 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
                "lamp_refinement": t_refine,
                "curve": curve.seconds,
                "solve": t_inverse + t_reduce + t_direct + t_refine, "apply": 0.0, "total": time.perf_counter() - t0}
-    report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed)
+    report = solve_report(model, options, inv, red, curve, warnings, timings, bounds, point_bounds, fixed,
+                          per_face=not live)
     rows = [{"n_lights": red.curve[i].n_lights, "error": red.curve[i].error,
              "relative_error": red.curve[i].relative_error, "n_negative": red.curve[i].n_negative,
              "curve_index": int(i)} for i in curve.keep]

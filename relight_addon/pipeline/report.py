@@ -151,21 +151,25 @@ def _one_light(model, curve, lights, lamps, lamp_of, e, j, info) -> dict:
 
 
 def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None,
-                 fixed_light=None) -> dict:
+                 fixed_light=None, per_face=True) -> dict:
     """Stage 5: the JSON report of a solve or a reduce (see README.md), from jobs.Model, the job's
     JobOptions, the InverseResult (None in direct mode), the ReductionResult, jobs.Curve and the
-    certificate's bounds."""
+    certificate's bounds. ``per_face`` False (a Live stroke's): ``objects`` is null, the per-face
+    values being in the scene (the radiosity layer, the stored result), not written as JSON."""
     faces, patches, problem = model.faces, model.patches, model.problem
     fi = curve.final_row
     final = red.curve[red.final_index]
     pmap = curve.polygons
     E_patch = model.lights.patch_exitance(curve.exitance[fi], patches.n_patches) + model.background
-    radiosity = pmap.split(curve.final_polygon_radiosity())
-    exitance = pmap.split(pmap.mean(E_patch))
-    target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
-                                 pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)), np.nan))
-    objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]), "exitance": exitance[name]}
-               for name in radiosity}
+    objects = None
+    if per_face:
+        radiosity = pmap.split(curve.final_polygon_radiosity())
+        exitance = pmap.split(pmap.mean(E_patch))
+        target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
+                                     pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)),
+                                     np.nan))
+        objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]),
+                          "exitance": exitance[name]} for name in radiosity}
     photometric = target_photometry(model, curve.radiosity[fi], E_patch) if model.mode == "inverse" else None
     n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
@@ -388,7 +392,7 @@ def finish(report: dict, warnings: list | None = None, render_settings=None, nor
             if w not in report["warnings"]:
                 report["warnings"].append(w)
     for name, rows in (normal_radiance or {}).items():
-        if name in report["objects"]:
+        if name in (report["objects"] or {}):
             report["objects"][name]["radiance_normal"] = json_safe(rows)
     if export_seconds is not None:
         report["timings_s"]["export"] = export_seconds
