@@ -228,3 +228,73 @@ def test_lamps_are_read_with_the_power_cycles_emits(bpy_clean):
         assert low[0] > 0
         with pytest.raises(ValueError, match="cannot emit blue .its Temperature's colour has none"):
             blender_values(lamps["warm"].power, 50.0, colour, lamps["warm"].gain * [1, 1, 0])
+
+
+def _face_normals(faces):
+    """(F, 3) unit area-weighted normals of the FaceSet's faces, from their triangles' winding, and
+    from their loops (Newell), which must agree."""
+    v = faces.vertices[faces.triangles]
+    tri = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    n = np.zeros((faces.n_faces, 3))
+    np.add.at(n, faces.triangle_face, tri)
+    newell = np.zeros((faces.n_faces, 3))
+    for f in range(faces.n_faces):
+        loop = faces.vertices[faces.loop_vertices[faces.loop_start[f]:faces.loop_start[f] + faces.loop_total[f]]]
+        newell[f] = np.cross(loop, np.roll(loop, -1, axis=0)).sum(axis=0)
+    unit = lambda x: x / np.linalg.norm(x, axis=1)[:, None]  # noqa: E731
+    assert np.allclose(unit(n), unit(newell), atol=1e-9)
+    return unit(n)
+
+
+def test_faces_seen_from_behind_are_turned_or_doubled(bpy_clean):
+    """A room made of the default cube (normals out, as added) holding a box: its six faces are
+    modelled facing in, their targets and forbidden state their own; a single plane lit from one
+    side and seen from the other (a shelf) gets its back as a face of its own; the box (a solid)
+    and a plane whose back sees nothing stay as they are; both said in warnings."""
+    bpy = bpy_clean
+    bpy.ops.mesh.primitive_cube_add(size=4.0, location=(0, 0, 2))
+    room = bpy.context.active_object
+    room.name = "Room"
+    me = room.data
+    floor = next(p.index for p in me.polygons if p.normal.z < -0.5)
+    forb = me.attributes.new("relight_forbidden", "BOOLEAN", "FACE")
+    forb.data.foreach_set("value", [p.index == floor for p in me.polygons])
+    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
+    col = np.zeros((len(me.loops), 4), dtype=np.float32)
+    p = me.polygons[floor]
+    col[p.loop_start:p.loop_start + p.loop_total] = (0.2, 0.2, 0.2, 1.0)
+    layer.data.foreach_set("color", col.ravel())
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-1.0, -1.0, 0.25))
+    bpy.context.active_object.name = "Box"
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.0, 1.0, 1.0))
+    bpy.context.active_object.name = "Shelf"
+    exp = export.export_scene()
+    faces = exp.faces
+    names = faces.object_names
+    n = _face_normals(faces)
+    obj = np.array([names[o] for o in faces.face_object])
+    centre = np.array([faces.vertices[faces.loop_vertices[s:s + t]].mean(axis=0)
+                       for s, t in zip(faces.loop_start, faces.loop_total)])
+    room_rows = np.flatnonzero(obj == "Room")
+    assert len(room_rows) == 6 and np.all(faces.face_index[room_rows] >= 0)
+    inward = np.einsum("ij,ij->i", n[room_rows], np.array([0.0, 0.0, 2.0]) - centre[room_rows])
+    assert np.all(inward > 0), inward  # every face of the room faces its inside now
+    fl = room_rows[faces.face_index[room_rows] == floor]
+    assert faces.target[fl].all() and faces.forbidden[fl].all() and n[fl[0], 2] > 0.99
+    assert not faces.target[room_rows[faces.face_index[room_rows] != floor]].any()
+    box = np.flatnonzero(obj == "Box")
+    outward = np.einsum("ij,ij->i", n[box], centre[box] - np.array([-1.0, -1.0, 0.25]))
+    assert len(box) == 6 and np.all(outward > 0)  # a solid: as it is
+    shelf = np.flatnonzero(obj == "Shelf")
+    assert len(shelf) == 2 and sorted(faces.face_index[shelf].tolist()) == [-1, 0]  # its back: a face, unreported
+    back = shelf[faces.face_index[shelf] == -1][0]
+    assert n[back, 2] < -0.99 and faces.forbidden[back] and not faces.target[back]
+    assert centre[back, 2] < 1.0  # (set just behind the front)
+    warns = faces.warnings
+    assert any("6 face(s) (6 of 'Room') face away from the scene" in w for w in warns), warns
+    assert any("1 face(s) (1 of 'Shelf') are seen from both sides" in w for w in warns), warns
+    # a floor plane under the same room's lights, its back to the void: nothing changes
+    bpy.data.objects.remove(bpy.data.objects["Shelf"])
+    bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.0, 1.0, 0.01))
+    faces = export.export_scene().faces
+    assert not any("are seen from both sides" in w for w in faces.warnings), faces.warnings

@@ -858,6 +858,20 @@ class _Builder:
         return len(sel)
 
 
+    def flip_faces(self, chunk, faces):
+        """Turn faces ``faces`` (bool, of chunk ``chunk``) to face the other way: their triangles'
+        winding and their polygons' loops reversed (the vertices stay; nothing else changes)."""
+        nv0, nf0, nl0 = self.base[chunk]
+        tsel = faces[self.tri_face[chunk] - nf0]
+        self.tris[chunk][tsel] = self.tris[chunk][tsel][:, ::-1]
+        sel = np.flatnonzero(faces)
+        ls, lt = self.loop_start[chunk][sel] - nl0, self.loop_total[chunk][sel]
+        first = np.repeat(ls, lt)
+        pos = first + np.arange(int(lt.sum())) - np.repeat(np.cumsum(lt) - lt, lt)
+        lv = self.loop_vert[chunk]
+        lv[pos] = lv[2 * first + np.repeat(lt, lt) - 1 - pos]
+
+
 def open_faces(geo) -> tuple:
     """((polygons,) bool, (polygons,) island label): the faces of a mesh (``_mesh_geometry``) on an
     island (faces joined by shared edges) that is not closed, i.e. that has an edge with one face or
@@ -891,6 +905,20 @@ BACK_RAY_BUDGET = 1 << 20
 BACK_GAP = 0.1
 #: rays (in all) that measure the light leaving the gaps of the backs against a surface
 LEAK_RAYS = 1 << 16
+#: the faces that may be seen from behind (_faces_seen_from_behind): rays per side of a face, and
+#: in all (fewer per face when there are many: at least 4)
+SIDE_RAYS = 32
+SIDE_RAY_BUDGET = 1 << 21
+#: a side whose rays reach a surface at most this often sees nothing; a back whose rays reach the
+#: scene at least SIDE_SEES often sees it; a closed island holds the scene when its backs' rays
+#: reach other objects' fronts at least ENCLOSES often
+SIDE_BLIND = 0.02
+SIDE_SEES = 0.1
+ENCLOSES = 0.01
+#: an island is first seen from this many of its faces (by area); its faces are cast one by one
+#: when at least ISLAND_SEES of those backs' rays see the scene
+ISLAND_FACES = 64
+ISLAND_SEES = 0.02
 
 
 def _painted_not_rendered(context, renderable) -> str | None:
@@ -1025,6 +1053,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     b.warnings.extend(material_warnings(b.material_notes))
     b.warnings.extend(_bake_linked_emission(b, objs, context))
     b.names = names
+    b.warnings.extend(_faces_seen_from_behind(b))
     back_warnings, backs = _emitting_backs(b)
     b.warnings.extend(back_warnings)
     b.warnings.extend(_not_modelled(context, objs, b, renderable))
@@ -1182,6 +1211,148 @@ def _linked_materials(b, geo, faces) -> set:
     slots = geo["slots"]
     mi = np.clip(geo["mat_index"][faces], 0, max(len(slots), 1) - 1)
     return {slots[i].name for i in np.unique(mi) if i < len(slots) and slots[i] is not None}
+
+
+def _faces_seen_from_behind(b) -> list:
+    """Cycles shades both sides of a mesh face alike; the radiosity model's faces are one-sided
+    (a ray reaching a back side is absorbed). Rays from both sides of the faces that may be seen
+    from behind (engine.backs.sides_view: a front sees the scene where its rays reach any surface,
+    a back where they reach front sides farther than BACK_GAP x its island's size; closer, it lies
+    against a surface; only backs in a shell's inside, it looks at its own inside) decide which
+    side the scene sees:
+
+    - an island (faces joined by their edges) whose fronts see nothing (at most SIDE_BLIND of
+      their rays reach a surface) while other objects lie behind it (at least ENCLOSES of its
+      backs' rays reach their fronts): the inside-out room, a cube whose normals point out of it
+      as added; every face turned to face the scene (Builder.flip_faces: its targets, forbidden
+      state and report row stay its own);
+    - a face of an open island (a plane, a room without a floor, a wall with a window cut), not
+      painted, whose front sees nothing and whose back sees the scene (at least SIDE_SEES of its
+      rays): turned the same way;
+    - a face of an open island whose both sides see the scene (a shelf that is a single plane, lit
+      from above, seen from below): its back becomes a face of its own (Builder.add_backs:
+      reflecting its reflectance, never a target or a light, not reported).
+
+    Closed islands (solids) face their inside with their backs: rays are cast only for those
+    whose box holds another object's centre. Emitting faces keep their orientation
+    (_emitting_backs models their backs). Returns the warnings that name what was turned or
+    doubled, per object."""
+    from ..engine.backs import sides_view
+
+    chosen, gaps, where, areas = [], [], [], []
+    islands, boxes = {}, {}
+    for ci in range(len(b.e)):
+        if len(b.verts[ci]):
+            o, W = int(b.f_obj[ci][0]) if len(b.f_obj[ci]) else -1, b.verts[ci]
+            lo, hi = boxes.get(o, (W.min(axis=0), W.max(axis=0)))
+            boxes[o] = (np.minimum(lo, W.min(axis=0)), np.maximum(hi, W.max(axis=0)))
+    centres = {o: 0.5 * (lo + hi) for o, (lo, hi) in boxes.items()}
+    for ci in range(len(b.e)):
+        if b.geos[ci] is None or not len(b.e[ci]):
+            continue
+        geo = b.geos[ci][0]
+        if id(geo) not in islands:  # instances share their mesh's arrays
+            islands[id(geo)] = open_faces(geo)
+        is_open, island = islands[id(geo)]
+        back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
+        still = ~(np.any(b.e[ci] > 0, axis=1) | np.any(back > 0, axis=1) | b.linked[ci])
+        k = int(island.max()) + 1
+        area = _chunk_face_areas(b, ci)
+        size = np.sqrt(np.bincount(island, weights=area, minlength=k))
+        # a closed island is cast when its box holds another object's centre
+        nv0, nf0, _ = b.base[ci]
+        lab = np.repeat(island, b.loop_total[ci])
+        order = np.argsort(lab, kind="stable")
+        P = b.verts[ci][b.loop_vert[ci][order] - nv0]
+        first = np.searchsorted(lab[order], np.arange(k))
+        lo, hi = np.minimum.reduceat(P, first, axis=0), np.maximum.reduceat(P, first, axis=0)
+        others = np.array([c for o, c in centres.items() if o != int(b.f_obj[ci][0])]).reshape(-1, 3)
+        holds = np.any(np.all((others[None] > lo[:, None]) & (others[None] < hi[:, None]), axis=2), axis=1)
+        sel = np.flatnonzero(still & (is_open | holds[island]))
+        if len(sel):
+            chosen.append(nf0 + sel)
+            gaps.append(BACK_GAP * size[island[sel]])
+            where.append((ci, sel, island[sel], is_open[sel]))
+            areas.append(area[sel])
+    if not chosen:
+        return []
+    geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
+    areas = np.concatenate(areas)
+    # 1. each island from ISLAND_FACES of its faces (by area): the inside-out ones, and those
+    # whose backs see the scene at all (their faces are cast one by one)
+    label = np.concatenate([ci * (1 << 32) + isl for ci, _, isl, _ in where])
+    rng = np.random.default_rng(0)
+    keys, start = np.unique(label, return_index=True)
+    inv = np.searchsorted(keys, label)
+    sample = []
+    for j in range(len(keys)):
+        rows = np.flatnonzero(inv == j)
+        if len(rows) > ISLAND_FACES:
+            rows = rng.choice(rows, ISLAND_FACES, replace=False, p=areas[rows] / areas[rows].sum())
+        sample.append(rows)
+    sample = np.concatenate(sample)
+    faces_all, gaps = np.concatenate(chosen), np.concatenate(gaps)
+    n_isl = len(keys)
+
+    def island_means(geometry):
+        coarse = sides_view(*geometry, faces_all[sample], gaps[sample], SIDE_RAYS)
+        return [np.bincount(inv[sample], weights=x, minlength=n_isl) / np.bincount(inv[sample], minlength=n_isl)
+                for x in (coarse.front, coarse.back, coarse.back_other)]
+
+    mean = island_means(geometry)
+    inside_out = (mean[0] <= SIDE_BLIND) & (mean[2] >= ENCLOSES)
+    turned, doubled = {}, {}
+
+    def apply(mask, count, ci, sel, act):
+        if mask.any():
+            faces = np.zeros(len(b.e[ci]), dtype=bool)
+            faces[sel[mask]] = True
+            act(ci, faces)
+            name = b.names[int(b.f_obj[ci][0])]
+            count[name] = count.get(name, 0) + int(mask.sum())
+
+    k = 0
+    for ci, sel, isl, _ in where:  # the inside-out islands turned first: what the faces see next
+        apply(inside_out[inv[k:k + len(sel)]], turned, ci, sel, b.flip_faces)
+        k += len(sel)
+    # 2. the faces of the open islands whose backs see the scene (as it is now), one by one
+    opened_all = np.concatenate([op for *_, op in where])
+    if inside_out.any():
+        geometry = (np.concatenate(b.verts), np.concatenate(b.tris), geometry[2], geometry[3])
+        if (opened_all & ~inside_out[inv]).any():
+            mean = island_means(geometry)
+    fine = np.flatnonzero(~inside_out[inv] & opened_all & (mean[1][inv] >= ISLAND_SEES))
+    if len(fine):
+        rays = int(np.clip(SIDE_RAY_BUDGET // (2 * len(fine)), 4, SIDE_RAYS))
+        view = sides_view(*geometry, faces_all[fine], gaps[fine], rays, seed=1)
+        V = geometry[0]
+        offset = BACK_OFFSET * max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-9)
+        front_all, back_all, cast_all = np.zeros(len(faces_all)), np.zeros(len(faces_all)), np.zeros(len(faces_all), bool)
+        front_all[fine], back_all[fine], cast_all[fine] = view.front, view.back, True
+        k = 0
+        for ci, sel, _, _ in where:
+            front, back, cast = (x[k:k + len(sel)] for x in (front_all, back_all, cast_all))
+            k += len(sel)
+            sees = cast & (back >= SIDE_SEES)
+            blind = front <= SIDE_BLIND
+            apply(sees & blind & ~b.tgt[ci][sel], turned, ci, sel, b.flip_faces)
+            apply(sees & ~blind, doubled, ci, sel, lambda c, f: b.add_backs(c, f, offset))
+    out = []
+    if turned:
+        out.append(f"{_counted(turned)} face away from the scene (their normals point away from where the "
+                   "scene sees them: a room whose normals point out of it): modelled from their other side, as "
+                   "Cycles renders both sides of a face alike (Mesh > Normals > Flip makes it the mesh's own)")
+    if doubled:
+        out.append(f"{_counted(doubled)} are seen from both sides (single planes lit on one side, seen from the "
+                   "other): their back sides are modelled as faces of their own (never targets or lights)")
+    return out
+
+
+def _counted(per_object) -> str:
+    """"3 face(s) of 'Room', 1 of 'Shelf' ...": counts per object, the largest first."""
+    rows = sorted(per_object.items(), key=lambda kv: -kv[1])
+    head = ", ".join(f"{n} of {name!r}" for name, n in rows[:5]) + (" ..." if len(rows) > 5 else "")
+    return f"{sum(per_object.values())} face(s) ({head})"
 
 
 def _emitting_backs(b) -> tuple:

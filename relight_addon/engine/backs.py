@@ -28,7 +28,7 @@ from .formfactors import _cosine_directions
 from .geometry import group_sum, triangle_cross, unit
 from .sampling import RAY_OFFSET
 
-__all__ = ["BackView", "back_view"]
+__all__ = ["BackView", "SidesView", "back_view", "sides_view"]
 
 
 @dataclass
@@ -45,16 +45,63 @@ class BackView:
     ray_hit: np.ndarray  # (n x rays,) the face whose front side it reaches, -1 when none
 
 
+def _embree_scene(vertices, triangles):
+    """An Embree scene of the triangles (indexed: half the time of one built from their corners)."""
+    from embreex import rtcore as rtc
+    from embreex import rtcore_scene as rtcs
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
+    TriangleMesh(scene, np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(triangles, dtype=np.int32))
+    return scene
+
+
+def _side_rays(vertices, triangles, triangle_face, idx, n_faces, rays_per_face, rng, side):
+    """Cosine-weighted rays leaving one side (``side`` +1: the front, -1: the back) of each face
+    ``idx`` from points uniform by area on it: (origins float32, directions float32, the rank in
+    ``idx`` of each ray's face, the ray offset (m), each face's unit normal)."""
+    n = len(idx)
+    rank = np.full(n_faces, -1, dtype=np.int64)
+    rank[idx] = np.arange(n)
+    tri = np.flatnonzero(rank[triangle_face] >= 0)
+    tri = tri[np.argsort(rank[triangle_face[tri]], kind="stable")]
+    tv = vertices[triangles[tri]]
+    cross = triangle_cross(tv)
+    area = 0.5 * np.linalg.norm(cross, axis=1)
+    trank = rank[triangle_face[tri]]
+    face_area = group_sum(trank, area, n)
+    normal = unit(group_sum(trank, cross, n))
+    # a triangle of each ray's face, chosen by area: the global key rank + within-face CDF
+    cdf = np.cumsum(area) - np.repeat(np.cumsum(face_area) - face_area, np.bincount(trank, minlength=n))
+    key = trank + cdf / np.where(face_area > 0, face_area, 1.0)[trank]
+    ray_face = np.repeat(np.arange(n), rays_per_face)
+    u = rng.random((len(ray_face), 4))
+    pick = np.minimum(np.searchsorted(key, ray_face + u[:, 0], side="right"), len(tri) - 1)
+    a, b = u[:, 1], u[:, 2]
+    flip = a + b > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    p = tv[pick, 0] + a[:, None] * (tv[pick, 1] - tv[pick, 0]) + b[:, None] * (tv[pick, 2] - tv[pick, 0])
+    out = side * normal[ray_face]
+    t1 = unit(np.cross(out, np.where(np.abs(out[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
+    t2 = np.cross(out, t1)
+    local = _cosine_directions(u[:, 3].astype(np.float32), rng.random(len(ray_face)).astype(np.float32))
+    d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * out
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(vertices).max())
+    return (p + offset * out).astype(np.float32), d.astype(np.float32), ray_face, offset, normal
+
+
+def _hit_normals(vertices, triangles, prim):
+    """(len(prim), 3) unit normals of the triangles ``prim`` (the ones rays reached)."""
+    return unit(triangle_cross(vertices[triangles[prim]]))
+
+
 def back_view(vertices, triangles, triangle_face, face_object, chosen, rays_per_face: int = 64,
               seed: int = 0) -> BackView:
     """Cast ``rays_per_face`` cosine-weighted rays from the back side of every face of ``chosen``
     ((F,) bool or face indices) against all the triangles: world-space ``vertices`` (V, 3),
     ``triangles`` (T, 3), the face of each triangle ``triangle_face`` (T,) and the object of each
     face ``face_object`` (F,) (a FaceSet's arrays; embreex)."""
-    from embreex import rtcore as rtc
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -65,45 +112,19 @@ def back_view(vertices, triangles, triangle_face, face_object, chosen, rays_per_
     if n == 0:
         z, zi = np.zeros(0), np.zeros(0, dtype=np.int64)
         return BackView(idx, z, z, zi, zi, z, np.zeros(0, dtype=bool), zi)
-    tv = vertices[np.asarray(triangles, dtype=np.int64)]
-    cross = triangle_cross(tv)
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    tnorm = unit(cross)
+    triangles = np.asarray(triangles, dtype=np.int64)
     rank = np.full(n_faces, -1, dtype=np.int64)
     rank[idx] = np.arange(n)
-    tri = np.flatnonzero(rank[triangle_face] >= 0)
-    tri = tri[np.argsort(rank[triangle_face[tri]], kind="stable")]
-    trank = rank[triangle_face[tri]]
-    face_area = group_sum(trank, area[tri], n)
-    normal = unit(group_sum(trank, cross[tri], n))
-    # a triangle of each ray's face, chosen by area: the global key rank + within-face CDF
-    cdf = np.cumsum(area[tri]) - np.repeat(np.cumsum(face_area) - face_area, np.bincount(trank, minlength=n))
-    key = trank + cdf / np.where(face_area > 0, face_area, 1.0)[trank]
-    rng = np.random.default_rng(seed)
-    ray_face = np.repeat(np.arange(n), rays_per_face)
-    u = rng.random((len(ray_face), 4))
-    pick = tri[np.minimum(np.searchsorted(key, ray_face + u[:, 0], side="right"), len(tri) - 1)]
-    a, b = u[:, 1], u[:, 2]
-    flip = a + b > 1
-    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
-    p = tv[pick, 0] + a[:, None] * (tv[pick, 1] - tv[pick, 0]) + b[:, None] * (tv[pick, 2] - tv[pick, 0])
+    org, d, ray_face, offset, normal = _side_rays(vertices, triangles, triangle_face, idx, n_faces, rays_per_face,
+                                                  np.random.default_rng(seed), -1)
     back = -normal[ray_face]
-    t1 = unit(np.cross(back, np.where(np.abs(back[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
-    t2 = np.cross(back, t1)
-    local = _cosine_directions(u[:, 3].astype(np.float32), rng.random(len(ray_face)).astype(np.float32))
-    d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * back
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
-    org = (p + offset * back).astype(np.float32)
-    d = d.astype(np.float32)
-    scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-    TriangleMesh(scene, tv.astype(np.float32))
+    scene = _embree_scene(vertices, triangles)
     hit = scene.run(org, d, output=1)
     prim = np.asarray(hit["primID"], dtype=np.int64)
     tfar = np.asarray(hit["tfar"], dtype=np.float64)
     ok = prim >= 0
     front = np.zeros(len(prim), dtype=bool)
-    front[ok] = np.einsum("ij,ij->i", tnorm[prim[ok]], d[ok]) < 0
+    front[ok] = np.einsum("ij,ij->i", _hit_normals(vertices, triangles, prim[ok]), d[ok]) < 0
     hit_face = np.where(front, triangle_face[np.maximum(prim, 0)], -1)
     # is the point a ray reaches over its emitter? a second ray from it, back towards the
     # emitter's plane along the face's normal, hits one of the chosen faces of the same object
@@ -134,3 +155,54 @@ def back_view(vertices, triangles, triangle_face, face_object, chosen, rays_per_
         first = np.searchsorted(pair[best, 0], np.arange(n), side="left")
         obj[has] = pair[best, 1][first[has]]
     return BackView(idx, frac, dist, obj, ray_face, np.where(front, tfar, np.inf), over, hit_face)
+
+
+@dataclass
+class SidesView:
+    """Per face asked for (in the order of ``faces``): what each of its sides sees (sides_view)."""
+
+    faces: np.ndarray  # (n,) FaceSet face indices
+    front: np.ndarray  # (n,) fraction of the front's rays that reach a face (either of its sides)
+    back: np.ndarray  # (n,) fraction of the back's rays that reach the front side of a face farther than its gap
+    back_other: np.ndarray  # (n,) fraction of the back's rays that reach the front of another object's face
+
+
+def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, rays_per_face: int = 16,
+               seed: int = 0) -> SidesView:
+    """Cast ``rays_per_face`` cosine-weighted rays from each side of every face of ``chosen``
+    ((F,) bool or face indices) against all the triangles (a FaceSet's arrays, as back_view):
+    whether the scene lies in front of a face, behind it, or both. What a back sees counts where
+    its rays reach front sides (a back that sees only other backs looks into the inside of a
+    shell); ``gap`` (scalar or per chosen face, m): a back whose rays reach a surface closer than
+    this lies against it, those rays do not count."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    triangle_face = np.asarray(triangle_face, dtype=np.int64)
+    face_object = np.asarray(face_object, dtype=np.int64)
+    chosen = np.asarray(chosen)
+    idx = np.flatnonzero(chosen) if chosen.dtype == bool else chosen.astype(np.int64)
+    n = len(idx)
+    if n == 0:
+        z = np.zeros(0)
+        return SidesView(idx, z, z, z)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    scene = _embree_scene(vertices, triangles)
+    rng = np.random.default_rng(seed)
+    out = []
+    for side in (1, -1):
+        org, d, ray_face, _, _ = _side_rays(vertices, triangles, triangle_face, idx, len(face_object),
+                                            rays_per_face, rng, side)
+        hit = scene.run(org, d, output=1)
+        prim = np.asarray(hit["primID"], dtype=np.int64)
+        out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d))
+    ray_face, prim, _, _ = out[0]
+    front = np.bincount(ray_face[prim >= 0], minlength=n) / rays_per_face
+    ray_face, prim, tfar, d = out[1]
+    ok = prim >= 0
+    p = prim[ok]
+    fronts = np.zeros(len(prim), dtype=bool)
+    fronts[ok] = np.einsum("ij,ij->i", _hit_normals(vertices, triangles, p), d[ok]) < 0
+    far = fronts & (tfar >= np.broadcast_to(np.asarray(gap, dtype=np.float64), (n,))[ray_face])
+    other = fronts.copy()
+    other[ok] &= face_object[triangle_face[p]] != face_object[idx[ray_face[ok]]]
+    return SidesView(idx, front, np.bincount(ray_face[far], minlength=n) / rays_per_face,
+                     np.bincount(ray_face[other], minlength=n) / rays_per_face)
