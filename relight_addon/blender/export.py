@@ -1217,7 +1217,7 @@ def _faces_seen_from_behind(b) -> list:
     """Cycles shades both sides of a mesh face alike; the radiosity model's faces are one-sided
     (a ray reaching a back side is absorbed). Rays from both sides of the faces that may be seen
     from behind (engine.backs.sides_view: a front sees the scene where its rays reach any surface,
-    a back where they reach front sides farther than BACK_GAP x its island's size; closer, it lies
+    a back where they reach front sides, farther than BACK_GAP x its island's size: closer, it lies
     against a surface; only backs in a shell's inside, it looks at its own inside) decide which
     side the scene sees:
 
@@ -1228,7 +1228,8 @@ def _faces_seen_from_behind(b) -> list:
       state and report row stay its own);
     - a face of an open island (a plane, a room without a floor, a wall with a window cut), not
       painted, whose front sees nothing and whose back sees the scene (at least SIDE_SEES of its
-      rays): turned the same way;
+      rays): turned the same way (a painted one is left as painted, and named: which side the paint
+      is meant for, only the artist knows);
     - a face of an open island whose both sides see the scene (a shelf that is a single plane, lit
       from above, seen from below): its back becomes a face of its own (Builder.add_backs:
       reflecting its reflectance, never a target or a light, not reported).
@@ -1301,7 +1302,7 @@ def _faces_seen_from_behind(b) -> list:
 
     mean = island_means(geometry)
     inside_out = (mean[0] <= SIDE_BLIND) & (mean[2] >= ENCLOSES)
-    turned, doubled = {}, {}
+    turned, doubled, painted_away = {}, {}, {}
 
     def apply(mask, count, ci, sel, act):
         if mask.any():
@@ -1337,6 +1338,7 @@ def _faces_seen_from_behind(b) -> list:
             blind = front <= SIDE_BLIND
             apply(sees & blind & ~b.tgt[ci][sel], turned, ci, sel, b.flip_faces)
             apply(sees & ~blind, doubled, ci, sel, lambda c, f: b.add_backs(c, f, offset))
+            apply(sees & blind & b.tgt[ci][sel], painted_away, ci, sel, lambda c, f: None)
     out = []
     if turned:
         out.append(f"{_counted(turned)} face away from the scene (their normals point away from where the "
@@ -1345,6 +1347,10 @@ def _faces_seen_from_behind(b) -> list:
     if doubled:
         out.append(f"{_counted(doubled)} are seen from both sides (single planes lit on one side, seen from the "
                    "other): their back sides are modelled as faces of their own (never targets or lights)")
+    if painted_away:
+        out.append(f"{_counted(painted_away)} are painted but face away from the scene (their fronts see no "
+                   "surface, their backs the scene): they are solved as painted on their fronts; if the paint is "
+                   "meant for the side the scene sees, flip them (Edit Mode: Mesh > Normals > Flip)")
     return out
 
 

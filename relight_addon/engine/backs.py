@@ -162,7 +162,7 @@ class SidesView:
     """Per face asked for (in the order of ``faces``): what each of its sides sees (sides_view)."""
 
     faces: np.ndarray  # (n,) FaceSet face indices
-    front: np.ndarray  # (n,) fraction of the front's rays that reach a face (either of its sides)
+    front: np.ndarray  # (n,) fraction of the front's rays that reach a face (either of its sides) farther than its gap
     back: np.ndarray  # (n,) fraction of the back's rays that reach the front side of a face farther than its gap
     back_other: np.ndarray  # (n,) fraction of the back's rays that reach the front of another object's face
 
@@ -173,8 +173,8 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     ((F,) bool or face indices) against all the triangles (a FaceSet's arrays, as back_view):
     whether the scene lies in front of a face, behind it, or both. What a back sees counts where
     its rays reach front sides (a back that sees only other backs looks into the inside of a
-    shell); ``gap`` (scalar or per chosen face, m): a back whose rays reach a surface closer than
-    this lies against it, those rays do not count."""
+    shell); ``gap`` (scalar or per chosen face, m): a side whose rays reach a surface closer than
+    this lies against it (a floor on a ground plane), those rays do not count."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -194,14 +194,15 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
         hit = scene.run(org, d, output=1)
         prim = np.asarray(hit["primID"], dtype=np.int64)
         out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d))
-    ray_face, prim, _, _ = out[0]
-    front = np.bincount(ray_face[prim >= 0], minlength=n) / rays_per_face
+    gap = np.broadcast_to(np.asarray(gap, dtype=np.float64), (n,))
+    ray_face, prim, tfar, _ = out[0]
+    front = np.bincount(ray_face[(prim >= 0) & (tfar >= gap[ray_face])], minlength=n) / rays_per_face
     ray_face, prim, tfar, d = out[1]
     ok = prim >= 0
     p = prim[ok]
     fronts = np.zeros(len(prim), dtype=bool)
     fronts[ok] = np.einsum("ij,ij->i", _hit_normals(vertices, triangles, p), d[ok]) < 0
-    far = fronts & (tfar >= np.broadcast_to(np.asarray(gap, dtype=np.float64), (n,))[ray_face])
+    far = fronts & (tfar >= gap[ray_face])
     other = fronts.copy()
     other[ok] &= face_object[triangle_face[p]] != face_object[idx[ray_face[ok]]]
     return SidesView(idx, front, np.bincount(ray_face[far], minlength=n) / rays_per_face,

@@ -457,6 +457,11 @@ def live_mode(scene, settings, floor):
     if s is None:
         return
     shot("11e_live_on")
+    # Live reads the paint at the first tick after a stroke, unless a brush's modal operator runs
+    # (live.stroke_running): the window lists its modal operators, Live's own among them
+    running = [op.bl_idname for win in bpy.context.window_manager.windows for op in win.modal_operators]
+    check("the window lists its modal operators (Live's own: not a stroke)",
+          "RELIGHT_OT_live" in running and not live.stroke_running(bpy.context, time.monotonic()), running)
     found = yield from probe_sidebar()
     yield from press(found, "bpy.ops.relight.paint_targets()", settle=1.5)
     changed, waits, pauses, how = [], [], [], []
