@@ -10,6 +10,7 @@ the prediction's spread over seeds at a low ray count shrinks while its mean sta
 high-ray reference.
 """
 import numpy as np
+import pytest
 
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors
@@ -84,3 +85,32 @@ def test_the_correction_per_emitting_patch_adds_up_to_the_lights():
     (m,) = prob.lights.members(j)
     np.testing.assert_allclose(X[:, m].toarray().ravel(), prob.direct_correction[:, j].toarray().ravel())
     assert prob.emitter_direct_correction(np.zeros_like(s)) is None
+
+
+def test_the_curve_never_rises_after_its_configurations_are_refitted():
+    """jobs.carry_refined: a configuration refitted worse than the one before it (after the
+    kernel's direct light changed some of its columns) takes the one before plus one of its own
+    lights when all stay on, or else the one before itself -- fewer lights are allowed at k."""
+    from types import SimpleNamespace as NS
+
+    from relight_addon.engine.reduction import CurvePoint, ReductionResult
+    from relight_addon.pipeline import jobs
+
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0.0, 1.0, (6, 4))
+    t[:, 3] = -t[:, 0]  # light 3 only ever takes light 0's light away: NNLS leaves it off beside 0
+    problem = NS(transfer=[t, t, t], b_target=np.repeat(t[:, :1] * 2.0, 3, axis=1), target_norm=1.0, colour=None)
+
+    def point(ids, error):
+        ids = np.asarray(ids, dtype=np.int64)
+        return CurvePoint(len(ids), error, error, 0, ids, np.ones((len(ids), 3)), -1)
+
+    e1, err1 = jobs._fit(problem, [0])
+    assert err1 < 1e-9  # light 0 alone meets the targets
+    curve = [point([0], err1), point([1, 3], 0.5)]  # (the second refitted worse: lights 1 and 3)
+    red = ReductionResult(curve=curve, final_index=0, selection="greedy-swap", distribution="none", seconds=0.0)
+    jobs.carry_refined(problem, red, {}, every=True)
+    second = red.curve[1]
+    assert second.error <= red.curve[0].error + 1e-12
+    assert second.n_lights == len(second.lights) and np.all(second.exitance.max(axis=1) > 0)
+    assert second.error == pytest.approx(jobs._fit(problem, second.lights)[1], abs=1e-12)

@@ -688,8 +688,9 @@ def carry_refined(problem, red: ReductionResult, carried: dict, every=False) -> 
     """The configurations with more lights than the final one hold its lamps as offered (they are
     not refined): each takes the final one's refined lamps in their place (``carried``: candidate
     light -> refined light), or else the configuration before it and one of its own lights, its
-    strengths re-fitted (NNLS per channel), when that lowers its error -- so that the curve never
-    rises after a refined configuration (NNLS on more lights is never worse). ``every``: all the
+    strengths re-fitted (NNLS per channel), when that lowers its error, or else the configuration
+    before it (as the selections' own curves do) -- so that the curve never rises after a refined
+    configuration (NNLS on more lights is never worse). ``every``: all the
     configurations, not only those above the final one (after direct_stage re-fitted them all)."""
     norm = problem.target_norm or 1.0
 
@@ -717,6 +718,10 @@ def carry_refined(problem, red: ReductionResult, carried: dict, every=False) -> 
                 best = (error, on, e)
         if best is not None:
             red.curve[i] = replace(pt, lights=best[1], exitance=best[2], error=best[0], relative_error=best[0] / norm)
+        elif pt.error > prev.error and prev.n_negative == 0 and prev.n_lights < pt.n_lights:
+            # no such fit keeps all its lights on: the configuration before it (fewer lights do)
+            red.curve[i] = replace(pt, n_lights=prev.n_lights, lights=prev.lights.copy(), exitance=prev.exitance.copy(),
+                                   error=prev.error, relative_error=prev.relative_error)
 
 
 #: the certificate (lower bounds) covers the curve up to this many lights; above, the NNLS bound
