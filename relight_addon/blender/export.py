@@ -1282,16 +1282,15 @@ def _faces_seen_from_behind(b) -> list:
     # 1. each island from ISLAND_FACES of its faces (by area): the inside-out ones, and those
     # whose backs see the scene at all (their faces are cast one by one)
     label = np.concatenate([ci * (1 << 32) + isl for ci, _, isl, _ in where])
+    keys, inv, count = np.unique(label, return_inverse=True, return_counts=True)
+    order = np.argsort(inv, kind="stable")
+    bounds = np.concatenate([[0], np.cumsum(count)])
     rng = np.random.default_rng(0)
-    keys, start = np.unique(label, return_index=True)
-    inv = np.searchsorted(keys, label)
-    sample = []
-    for j in range(len(keys)):
-        rows = np.flatnonzero(inv == j)
-        if len(rows) > ISLAND_FACES:
-            rows = rng.choice(rows, ISLAND_FACES, replace=False, p=areas[rows] / areas[rows].sum())
-        sample.append(rows)
-    sample = np.concatenate(sample)
+    sample = [order[np.isin(inv[order], np.flatnonzero(count <= ISLAND_FACES))]]  # small islands: every face
+    for j in np.flatnonzero(count > ISLAND_FACES):
+        rows = order[bounds[j]:bounds[j + 1]]
+        sample.append(rng.choice(rows, ISLAND_FACES, replace=False, p=areas[rows] / areas[rows].sum()))
+    sample = np.sort(np.concatenate(sample))
     faces_all, gaps = np.concatenate(chosen), np.concatenate(gaps)
     n_isl = len(keys)
 
