@@ -347,6 +347,23 @@ def add_mesh_object(name, verts, faces, material):
     return obj
 
 
+def solve_cli(scene, report, out, *args) -> dict:
+    """``python -m relight_addon solve SCENE --report REPORT --out OUT ARGS...`` (the real command
+    line, in a child process); its report."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "-m", "relight_addon", "solve", str(scene), "--report", str(report), "--out", str(out),
+           *map(str, args)]
+    proc = subprocess.run(cmd, cwd=root, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(root)})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(Path(report).read_text())
+
+
 def reset_blender():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 

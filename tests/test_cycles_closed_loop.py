@@ -15,10 +15,6 @@ check: it is printed and recorded in docs/validation.md, "Closed loop: solve -> 
 """
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +24,6 @@ bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender
 
 import cycles_reference as cr  # noqa: E402  (tests/ is on sys.path: pytest's rootdir-relative import)
 
-ROOT = Path(__file__).resolve().parents[1]
 
 # Settings and tolerances (measurements: docs/validation.md, "Closed loop: solve -> Cycles").
 RAYS_PER_PATCH = 8192  # engine side (x 4 patches per polygon: the same rays as 32768 per polygon)
@@ -97,14 +92,9 @@ def build_room(path: Path) -> None:
 
 
 def run_solve(scene: Path, report: Path, out: Path, patch_model: str) -> dict:
-    cmd = [sys.executable, "-m", "relight_addon", "solve", str(scene), "--report", str(report),
-           "--out", str(out), "--rays-per-patch", str(RAYS_PER_PATCH), "--seed", "1", "--patch-model", patch_model]
-    if MAX_PATCH_SIZE is not None:
-        cmd += ["--max-patch-size", str(MAX_PATCH_SIZE)]
-    proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(report.read_text())
+    args = ["--rays-per-patch", RAYS_PER_PATCH, "--seed", 1, "--patch-model", patch_model]
+    return cr.solve_cli(scene, report, out, *args, *([] if MAX_PATCH_SIZE is None else
+                                                      ["--max-patch-size", MAX_PATCH_SIZE]))
 
 
 def emissive_materials() -> list[str]:

@@ -13,10 +13,6 @@ most, Cycles' noise 0.2 %).
 """
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +22,6 @@ bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender
 
 import cycles_reference as cr  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 W, D, H, N = 3.0, 3.0, 2.4, 6  # the room (m); the floor an N x N grid
 TARGET = (0.3, 0.28, 0.25)  # radiance of the painted floor (W/m^2/sr)
 RAYS_PER_PATCH = 8192
@@ -56,12 +51,8 @@ def spread(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("spread_lights")
     scene, report_path, out = tmp / "room.blend", tmp / "report.json", tmp / "room_lit.blend"
     build_room(scene)
-    proc = subprocess.run([sys.executable, "-m", "relight_addon", "solve", str(scene), "--report", str(report_path),
-                           "--out", str(out), "--rays-per-patch", str(RAYS_PER_PATCH), "--seed", "1",
-                           "--patch-model", "adaptive"],
-                          cwd=ROOT, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    report = json.loads(report_path.read_text())
+    report = cr.solve_cli(scene, report_path, out, "--rays-per-patch", RAYS_PER_PATCH, "--seed", 1,
+                          "--patch-model", "adaptive")
     try:
         bpy.ops.wm.open_mainfile(filepath=str(out))
         cycles = cr.cycles_face_radiance(samples=SAMPLES, seed=1, cell_px=CELL_PX, objects=[bpy.data.objects["Floor"]])
