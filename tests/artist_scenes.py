@@ -63,6 +63,14 @@ def paint(ob, faces, rgb):
     attr.data.foreach_set("color", col.ravel())
 
 
+def forbid(ob, faces):
+    """Forbid lights on polygons ``faces`` of ``ob`` (relight_forbidden, a new Face BOOLEAN layer)."""
+    me = ob.data
+    values = np.zeros(len(me.polygons), dtype=bool)
+    values[np.asarray(faces, dtype=np.int64)] = True
+    me.attributes.new("relight_forbidden", "BOOLEAN", "FACE").data.foreach_set("value", values)
+
+
 def living_room(detail=2, target=(0.35, 0.33, 0.3)):
     """Build the living room in the current (empty) scene; returns {name: object}."""
     W, D, H = ROOM

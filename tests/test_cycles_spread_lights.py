@@ -20,6 +20,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender as a Python module)")
 
+import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
 
 W, D, H, N = 3.0, 3.0, 2.4, 6  # the room (m); the floor an N x N grid
@@ -37,11 +38,9 @@ def build_room(path: Path) -> None:
     cr.add_mesh_object("Room", v, f, cr._material("walls", (0.7, 0.7, 0.7), lambertian=True))
     gv, gf = cr.grid_quads((0, 0, 0), (W, 0, 0), (0, D, 0), N, N)
     floor = cr.add_mesh_object("Floor", gv, gf, cr._material("floor", (0.5, 0.45, 0.4), lambertian=True))
-    me = floor.data
-    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
-    layer.data.foreach_set("color", np.tile(np.array((*TARGET, 1.0), dtype=np.float32), len(me.loops)))
-    forb = me.attributes.new("relight_forbidden", "BOOLEAN", "FACE")
-    forb.data.foreach_set("value", np.ones(len(me.polygons), dtype=bool))
+    every = range(len(floor.data.polygons))
+    artist_scenes.paint(floor, every, TARGET)
+    artist_scenes.forbid(floor, every)
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     cr.reset_blender()
 

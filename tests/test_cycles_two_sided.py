@@ -19,6 +19,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender as a Python module)")
 
+import artist_scenes  # noqa: E402
 import bmesh  # noqa: E402
 import cycles_reference as cr  # noqa: E402
 
@@ -47,16 +48,9 @@ def build(path: Path) -> None:
     box.data.materials.append(cr._material("box", (0.5, 0.3, 0.2), lambertian=True))
     for ob in (shelf, box):
         ob["relight_no_lights"] = True
-    me = room.data
-    floor = [p.index for p in me.polygons if p.normal.z < -0.5]  # its normal points down, out of the room
-    col = np.zeros((len(me.loops), 4), dtype=np.float32)
-    for i in floor:
-        p = me.polygons[i]
-        col[p.loop_start:p.loop_start + p.loop_total] = (*TARGET, 1.0)
-    layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
-    layer.data.foreach_set("color", col.ravel())
-    forb = me.attributes.new("relight_forbidden", "BOOLEAN", "FACE")
-    forb.data.foreach_set("value", np.array([i in floor for i in range(len(me.polygons))]))
+    floor = [p.index for p in room.data.polygons if p.normal.z < -0.5]  # its normal points down, out of the room
+    artist_scenes.paint(room, floor, TARGET)
+    artist_scenes.forbid(room, floor)
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
     cr.reset_blender()
 
