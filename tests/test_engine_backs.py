@@ -48,3 +48,16 @@ def test_a_side_against_a_surface_sees_nothing_closer_than_its_gap():
     near = sides_view(v, tris, tri_face, obj, np.array([0]), gap=0.0, rays_per_face=RAYS, seed=2).front[0]
     far = sides_view(v, tris, tri_face, obj, np.array([0]), gap=2 * H, rays_per_face=RAYS, seed=2).front[0]
     assert 0 < far < 0.5 * near
+
+
+def test_a_back_counts_only_the_fronts_outside_its_box():
+    """The top square facing away from the floor: its back sees the floor; given a box around it
+    alone (a shelf's), the floor lies outside and counts; given one holding the floor too (a block
+    standing on a floor, looking at the floor inside it), nothing counts."""
+    v, tris, tri_face, obj = _two_squares(False)
+    own = np.array([[[0.0, 0.0, H - 0.01], [1.0, 1.0, H + 0.01]]])
+    both = np.array([[[-0.01, -0.01, -0.01], [1.01, 1.01, H + 0.01]]])
+    plain = sides_view(v, tris, tri_face, obj, np.array([1]), gap=0.0, rays_per_face=2048, seed=4)
+    alone = sides_view(v, tris, tri_face, obj, np.array([1]), gap=0.0, rays_per_face=2048, seed=4, box=own)
+    closed = sides_view(v, tris, tri_face, obj, np.array([1]), gap=0.0, rays_per_face=2048, seed=4, box=both)
+    assert plain.back[0] > 0.3 and alone.back[0] == plain.back[0] and closed.back[0] == 0.0

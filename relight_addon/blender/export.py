@@ -919,6 +919,9 @@ ENCLOSES = 0.01
 #: when at least ISLAND_SEES of those backs' rays see the scene
 ISLAND_FACES = 64
 ISLAND_SEES = 0.02
+#: a back sees the scene where its rays reach fronts outside its island's box, grown by this
+#: fraction of the box's largest side (a block standing on a floor looks at the floor inside it)
+ISLAND_BOX_PAD = 0.01
 
 
 def _painted_not_rendered(context, renderable) -> str | None:
@@ -1234,13 +1237,17 @@ def _faces_seen_from_behind(b) -> list:
       from above, seen from below): its back becomes a face of its own (Builder.add_backs:
       reflecting its reflectance, never a target or a light, not reported).
 
+    What a back sees counts outside its island's box: the inside of a block open at the bottom
+    and standing on a floor looks at the floor under it, a cavity no light enters (modelled, the
+    floor's patches straddling the block's edge would carry light into it).
+
     Closed islands (solids) face their inside with their backs: rays are cast only for those
     whose box holds another object's centre. Emitting faces keep their orientation
     (_emitting_backs models their backs). Returns the warnings that name what was turned or
     doubled, per object."""
     from ..engine.backs import sides_view
 
-    chosen, gaps, where, areas = [], [], [], []
+    chosen, gaps, where, areas, boxes_of = [], [], [], [], []
     islands, boxes = {}, {}
     for ci in range(len(b.e)):
         if len(b.verts[ci]):
@@ -1275,6 +1282,8 @@ def _faces_seen_from_behind(b) -> list:
             gaps.append(BACK_GAP * size[island[sel]])
             where.append((ci, sel, island[sel], is_open[sel]))
             areas.append(area[sel])
+            pad = ISLAND_BOX_PAD * (hi - lo).max(axis=1, keepdims=True)
+            boxes_of.append(np.stack([lo - pad, hi + pad], axis=1)[island[sel]])
     if not chosen:
         return []
     geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
@@ -1291,11 +1300,11 @@ def _faces_seen_from_behind(b) -> list:
         rows = order[bounds[j]:bounds[j + 1]]
         sample.append(rng.choice(rows, ISLAND_FACES, replace=False, p=areas[rows] / areas[rows].sum()))
     sample = np.sort(np.concatenate(sample))
-    faces_all, gaps = np.concatenate(chosen), np.concatenate(gaps)
+    faces_all, gaps, boxes_of = np.concatenate(chosen), np.concatenate(gaps), np.concatenate(boxes_of)
     n_isl = len(keys)
 
     def island_means(geometry):
-        coarse = sides_view(*geometry, faces_all[sample], gaps[sample], SIDE_RAYS)
+        coarse = sides_view(*geometry, faces_all[sample], gaps[sample], SIDE_RAYS, box=boxes_of[sample])
         return [np.bincount(inv[sample], weights=x, minlength=n_isl) / np.bincount(inv[sample], minlength=n_isl)
                 for x in (coarse.front, coarse.back, coarse.back_other)]
 
@@ -1324,7 +1333,7 @@ def _faces_seen_from_behind(b) -> list:
     fine = np.flatnonzero(~inside_out[inv] & opened_all & (mean[1][inv] >= ISLAND_SEES))
     if len(fine):
         rays = int(np.clip(SIDE_RAY_BUDGET // (2 * len(fine)), 4, SIDE_RAYS))
-        view = sides_view(*geometry, faces_all[fine], gaps[fine], rays, seed=1)
+        view = sides_view(*geometry, faces_all[fine], gaps[fine], rays, seed=1, box=boxes_of[fine])
         V = geometry[0]
         offset = BACK_OFFSET * max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-9)
         front_all, back_all, cast_all = np.zeros(len(faces_all)), np.zeros(len(faces_all)), np.zeros(len(faces_all), bool)

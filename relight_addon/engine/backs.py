@@ -164,17 +164,20 @@ class SidesView:
     faces: np.ndarray  # (n,) FaceSet face indices
     front: np.ndarray  # (n,) fraction of the front's rays that reach a face (either of its sides) farther than its gap
     back: np.ndarray  # (n,) fraction of the back's rays that reach the front side of a face farther than its gap
+    #: (and outside its box, when given)
     back_other: np.ndarray  # (n,) fraction of the back's rays that reach the front of another object's face
 
 
 def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, rays_per_face: int = 16,
-               seed: int = 0) -> SidesView:
+               seed: int = 0, box=None) -> SidesView:
     """Cast ``rays_per_face`` cosine-weighted rays from each side of every face of ``chosen``
     ((F,) bool or face indices) against all the triangles (a FaceSet's arrays, as back_view):
     whether the scene lies in front of a face, behind it, or both. What a back sees counts where
     its rays reach front sides (a back that sees only other backs looks into the inside of a
     shell); ``gap`` (scalar or per chosen face, m): a side whose rays reach a surface closer than
-    this lies against it (a floor on a ground plane), those rays do not count."""
+    this lies against it (a floor on a ground plane), those rays do not count. ``box`` ((n, 2, 3):
+    per chosen face the corners of a box, its island's): a back counts only the fronts it reaches
+    outside it (the inside of a block standing on a floor, closed by the floor, is not the scene's)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -191,6 +194,7 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     for side in (1, -1):
         org, d, ray_face, _, _ = _side_rays(vertices, triangles, triangle_face, idx, len(face_object),
                                             rays_per_face, rng, side)
+        org_back = org.astype(np.float64)
         hit = scene.run(org, d, output=1)
         prim = np.asarray(hit["primID"], dtype=np.int64)
         out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d))
@@ -203,6 +207,10 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     fronts = np.zeros(len(prim), dtype=bool)
     fronts[ok] = np.einsum("ij,ij->i", _hit_normals(vertices, triangles, p), d[ok]) < 0
     far = fronts & (tfar >= gap[ray_face])
+    if box is not None:
+        box = np.asarray(box, dtype=np.float64)
+        q = org_back + d.astype(np.float64) * np.where(ok, tfar, 0.0)[:, None]
+        far &= ~np.all((q >= box[ray_face, 0]) & (q <= box[ray_face, 1]), axis=1)
     other = fronts.copy()
     other[ok] &= face_object[triangle_face[p]] != face_object[idx[ray_face[ok]]]
     return SidesView(idx, front, np.bincount(ray_face[far], minlength=n) / rays_per_face,
