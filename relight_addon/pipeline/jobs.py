@@ -1010,16 +1010,13 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     if mode == "inverse":  # of the candidate lights (the refined lamps are found after, outside them)
         bounds = red.certificate = certificate(model.problem, red)  # (of the T the curve is measured on)
         positive = positive_bound(model.problem, inv, red.final, bounds)
-        covered = model.problem.n_lights  # (the refined lamps come after: not the certificate's)
     t_refine = time.perf_counter()
     model.lamp_refinement = None if live else refine_stage(model, red, options, progress, cancel)
     t_refine = time.perf_counter() - t_refine
     t_reduce = time.perf_counter() - t2 - t_refine - t_direct
     warnings = list(model.warnings)
     if mode == "inverse":
-        # a configuration holding a refined lamp is not one the certificate bounds (it may go below)
-        point_bounds = np.array([bounds.at(p.n_lights) if not len(p.lights) or int(np.max(p.lights)) < covered
-                                 else np.nan for p in red.curve])
+        point_bounds = np.array([bounds.at(p.n_lights) for p in red.curve])
         warnings.extend(_positivity_notes(positive, red.final, model.problem.colour))
         warnings.extend(certificate_notes(model.problem, bounds, red.final, refined=model.lamp_refinement))
     fixed = None

@@ -214,7 +214,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "light_colour": light_colour_record(problem, options),
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
                    "n_negative": p.n_negative, "power": _power(problem, p),
-                   "bound_relative_error": _bound(point_bounds, i, norm)}
+                   "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
                   for i, p in enumerate(red.curve)],
         "certificate": None if bounds is None else {
             # relative to the painted targets' norm, as every relative error of the report (the bounds'
@@ -224,7 +224,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                           for k, r, x in zip(bounds.k, bounds.bound / norm, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
                   "n_negative": final.n_negative, "power": _power(problem, final),
-                  "bound_relative_error": _bound(point_bounds, red.final_index, norm),
+                  "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": light_records(model, curve, fi)},
         "fixed_light": fixed_light,
         "targets_photometric": photometric,
@@ -351,14 +351,6 @@ def kinds_text(report) -> str:
 def _power(problem, point) -> float:
     """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
     return float(np.sum(point.exitance.sum(axis=1) * problem.light_watts[point.lights]))
-
-
-def _bound(point_bounds, i, norm):
-    """The certificate's relative bound of curve point ``i`` (None: none, or a configuration it
-    does not bound: one holding a refined lamp)."""
-    if point_bounds is None or not np.isfinite(point_bounds[i]):
-        return None
-    return float(point_bounds[i] / norm)
 
 
 def _nan_to_none(rows):
