@@ -1296,7 +1296,7 @@ def _faces_seen_from_behind(b) -> list:
     areas = np.concatenate(areas)
     # 1. each island from ISLAND_FACES of its faces (by area): the inside-out ones, and those
     # whose backs see the scene at all (their faces are cast one by one)
-    label = np.concatenate([ci * (1 << 32) + isl for ci, _, isl, _ in where])
+    label = np.concatenate([isl.astype(np.int64) + ci * (1 << 32) for ci, _, isl, _ in where])
     keys, inv, count = np.unique(label, return_inverse=True, return_counts=True)
     order = np.argsort(inv, kind="stable")
     bounds = np.concatenate([[0], np.cumsum(count)])
