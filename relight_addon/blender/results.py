@@ -133,7 +133,7 @@ def packed_result(outcome, fingerprints=None) -> tuple:
     any thread; Live's worker packs a stroke's answer, the main thread then only writes it).
     ValueError on non-finite values."""
     data = _stored_data(outcome, fingerprints)
-    return data, data.pack(), data.as_stored()
+    return (data, *data.pack_and_view())
 
 
 def store_result(scene, text, view=None) -> str:

@@ -176,8 +176,15 @@ class StoredResult:
         return arrays, {name: json.dumps(getattr(self, name) or _JSON[name]()) for name in _JSON}
 
     def pack(self) -> str:
-        buf = io.BytesIO()
+        return self._pack(*self._stored_fields())
+
+    def pack_and_view(self) -> tuple:
+        """(``pack()``, ``as_stored()``), the stored fields converted once for both."""
         arrays, texts = self._stored_fields()
+        return self._pack(dict(arrays), texts), self._view(arrays, texts)
+
+    def _pack(self, arrays, texts) -> str:
+        buf = io.BytesIO()
         for name, text in texts.items():
             arrays[name + "_json"] = np.frombuffer(text.encode(), dtype=np.uint8)
         arrays["format"] = np.array(FORMAT)
@@ -189,7 +196,9 @@ class StoredResult:
         """What ``unpack(pack())`` gives, without the round trip (the result just stored, shown at
         once: Live writes one at every stroke): the fields as ``pack`` stores them, the JSON ones
         read back."""
-        arrays, texts = self._stored_fields()
+        return self._view(*self._stored_fields())
+
+    def _view(self, arrays, texts) -> "StoredResult":
         out = {k: a if a.dtype.kind == "f" else a.copy() for k, a in arrays.items()}  # (float32: new arrays)
         out.update({name: json.loads(text) for name, text in texts.items()})
         return type(self)(**out)
