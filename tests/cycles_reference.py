@@ -364,6 +364,20 @@ def solve_cli(scene, report, out, *args) -> dict:
     return json.loads(Path(report).read_text())
 
 
+def built_and_solved(tmp_path_factory, name, build, *args) -> tuple:
+    """The scene ``build()`` makes in an empty Blender, saved into a new temporary folder and
+    solved by the command line (solve_cli, ``args``) with --out: (its report, the written copy)."""
+    tmp = tmp_path_factory.mktemp(name)
+    scene, out = tmp / "scene.blend", tmp / "scene_lit.blend"
+    reset_blender()
+    try:
+        build()
+        bpy.ops.wm.save_as_mainfile(filepath=str(scene))
+    finally:
+        reset_blender()
+    return solve_cli(scene, tmp / "report.json", out, *args), out
+
+
 def reset_blender():
     bpy.ops.wm.read_factory_settings(use_empty=True)
 

@@ -13,8 +13,6 @@ most, Cycles' noise 0.2 %).
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -30,8 +28,7 @@ SAMPLES, CELL_PX = 512, 12
 TOL, MEAN_TOL, NOISE_TOL = 0.05, 0.02, 0.03  # as the closed loop's (tests/test_cycles_closed_loop.py)
 
 
-def build_room(path: Path) -> None:
-    cr.reset_blender()
+def build_room() -> None:
     bpy.context.scene.world = cr.black_world()
     v = [(0, 0, 0), (W, 0, 0), (W, D, 0), (0, D, 0), (0, 0, H), (W, 0, H), (W, D, H), (0, D, H)]
     f = [(7, 6, 5, 4), (4, 5, 1, 0), (5, 6, 2, 1), (6, 7, 3, 2), (7, 4, 0, 3)]  # ceiling and walls, inward
@@ -41,17 +38,12 @@ def build_room(path: Path) -> None:
     every = range(len(floor.data.polygons))
     artist_scenes.paint(floor, every, TARGET)
     artist_scenes.forbid(floor, every)
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    cr.reset_blender()
 
 
 @pytest.fixture(scope="module")
 def spread(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("spread_lights")
-    scene, report_path, out = tmp / "room.blend", tmp / "report.json", tmp / "room_lit.blend"
-    build_room(scene)
-    report = cr.solve_cli(scene, report_path, out, "--rays-per-patch", RAYS_PER_PATCH, "--seed", 1,
-                          "--patch-model", "adaptive")
+    report, out = cr.built_and_solved(tmp_path_factory, "spread_lights", build_room, "--rays-per-patch",
+                                      RAYS_PER_PATCH, "--seed", 1, "--patch-model", "adaptive")
     try:
         bpy.ops.wm.open_mainfile(filepath=str(out))
         cycles = cr.cycles_face_radiance(samples=SAMPLES, seed=1, cell_px=CELL_PX, objects=[bpy.data.objects["Floor"]])

@@ -12,8 +12,6 @@ rendered the floor 2.3 x brighter than predicted.
 """
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -29,8 +27,7 @@ SAMPLES, CELL_PX = 1024, 12
 TOL, MEAN_TOL, NOISE_TOL = 0.05, 0.02, 0.03  # as the closed loop's
 
 
-def build(path: Path) -> None:
-    cr.reset_blender()
+def build() -> None:
     bpy.context.scene.world = cr.black_world()
     bpy.ops.mesh.primitive_cube_add(size=2.0, location=(0.0, 0.0, 1.25))  # normals out, as added
     room = bpy.context.active_object
@@ -51,16 +48,12 @@ def build(path: Path) -> None:
     floor = [p.index for p in room.data.polygons if p.normal.z < -0.5]  # its normal points down, out of the room
     artist_scenes.paint(room, floor, TARGET)
     artist_scenes.forbid(room, floor)
-    bpy.ops.wm.save_as_mainfile(filepath=str(path))
-    cr.reset_blender()
 
 
 @pytest.fixture(scope="module")
 def two_sided(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("two_sided")
-    scene, report_path, out = tmp / "room.blend", tmp / "report.json", tmp / "room_lit.blend"
-    build(scene)
-    report = cr.solve_cli(scene, report_path, out, "--rays-per-patch", RAYS_PER_PATCH, "--seed", 1)
+    report, out = cr.built_and_solved(tmp_path_factory, "two_sided", build, "--rays-per-patch", RAYS_PER_PATCH,
+                                      "--seed", 1)
     try:
         bpy.ops.wm.open_mainfile(filepath=str(out))
         obs = [bpy.data.objects[n] for n in ("Room", "Shelf", "Box")]
