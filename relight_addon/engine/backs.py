@@ -194,14 +194,13 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     for side in (1, -1):
         org, d, ray_face, _, _ = _side_rays(vertices, triangles, triangle_face, idx, len(face_object),
                                             rays_per_face, rng, side)
-        org_back = org.astype(np.float64)
         hit = scene.run(org, d, output=1)
         prim = np.asarray(hit["primID"], dtype=np.int64)
-        out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d))
+        out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d, org))
     gap = np.broadcast_to(np.asarray(gap, dtype=np.float64), (n,))
-    ray_face, prim, tfar, _ = out[0]
+    ray_face, prim, tfar, _, _ = out[0]
     front = np.bincount(ray_face[(prim >= 0) & (tfar >= gap[ray_face])], minlength=n) / rays_per_face
-    ray_face, prim, tfar, d = out[1]
+    ray_face, prim, tfar, d, org = out[1]
     ok = prim >= 0
     p = prim[ok]
     fronts = np.zeros(len(prim), dtype=bool)
@@ -209,7 +208,7 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     far = fronts & (tfar >= gap[ray_face])
     if box is not None:
         box = np.asarray(box, dtype=np.float64)
-        q = org_back + d.astype(np.float64) * np.where(ok, tfar, 0.0)[:, None]
+        q = org.astype(np.float64) + d.astype(np.float64) * np.where(ok, tfar, 0.0)[:, None]
         far &= ~np.all((q >= box[ray_face, 0]) & (q <= box[ray_face, 1]), axis=1)
     other = fronts.copy()
     other[ok] &= face_object[triangle_face[p]] != face_object[idx[ray_face[ok]]]
