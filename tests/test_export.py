@@ -298,3 +298,41 @@ def test_faces_seen_from_behind_are_turned_or_doubled(bpy_clean):
     bpy.ops.mesh.primitive_plane_add(size=1.0, location=(1.0, 1.0, 0.01))
     faces = export.export_scene().faces
     assert not any("are seen from both sides" in w for w in faces.warnings), faces.warnings
+
+
+def test_an_island_of_mostly_zero_area_faces_is_sampled_by_its_real_faces(bpy_clean):
+    """An artist's room whose mesh holds more zero-area faces than the island sample draws (a
+    bathroom of Blender 2.90 had hundreds): the sides' sampling draws only faces with an area and
+    the room is still turned to face its inside (numpy's "Fewer non-zero entries in p than size"
+    reached the user before)."""
+    bpy = bpy_clean
+    bpy.ops.mesh.primitive_cube_add(size=4.0, location=(0, 0, 2))
+    room = bpy.context.active_object
+    room.name = "Room"
+    me = room.data
+    v = [tuple(x.co) for x in me.vertices]
+    f = [tuple(p.vertices) for p in me.polygons]
+    a, b = f[0][0], f[0][1]
+    mid = tuple((np.array(v[a]) + np.array(v[b])) / 2)
+    for _ in range(export.ISLAND_FACES + 6):  # collinear triangles on one of the room's edges
+        v.append(mid)
+        f.append((a, len(v) - 1, b))
+    new = bpy.data.meshes.new("Room")
+    new.from_pydata(v, [], f)
+    new.update()
+    room.data = new
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-1.0, -1.0, 0.25))
+    exp = export.export_scene()
+    faces = exp.faces
+    names = faces.object_names
+    rows = np.flatnonzero(np.array([names[o] for o in faces.face_object]) == "Room")
+    centre = np.array([faces.vertices[faces.loop_vertices[s:s + t]].mean(axis=0)
+                       for s, t in zip(faces.loop_start[rows], faces.loop_total[rows])])
+    v = faces.vertices[faces.triangles]
+    n = np.zeros((faces.n_faces, 3))
+    np.add.at(n, faces.triangle_face, np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]))
+    n = n[rows]
+    real = np.linalg.norm(n, axis=1) > 1e-9
+    assert real.sum() == 6
+    inward = np.einsum("ij,ij->i", n[real], np.array([0.0, 0.0, 2.0]) - centre[real])
+    assert np.all(inward > 0), inward

@@ -1304,7 +1304,11 @@ def _faces_seen_from_behind(b) -> list:
     sample = [order[np.isin(inv[order], np.flatnonzero(count <= ISLAND_FACES))]]  # small islands: every face
     for j in np.flatnonzero(count > ISLAND_FACES):
         rows = order[bounds[j]:bounds[j + 1]]
-        sample.append(rng.choice(rows, ISLAND_FACES, replace=False, p=areas[rows] / areas[rows].sum()))
+        drawn = rows[areas[rows] > 0]  # zero-area faces are never drawn (an artist's file has hundreds)
+        if len(drawn) <= ISLAND_FACES:
+            sample.append(drawn if len(drawn) else rows[:ISLAND_FACES])
+            continue
+        sample.append(rng.choice(drawn, ISLAND_FACES, replace=False, p=areas[drawn] / areas[drawn].sum()))
     sample = np.sort(np.concatenate(sample))
     faces_all, gaps, boxes_of = np.concatenate(chosen), np.concatenate(gaps), np.concatenate(boxes_of)
     n_isl = len(keys)
