@@ -17,6 +17,7 @@ from relight_addon.engine import lamp_refinement as lr
 from relight_addon.engine.lamps import lamp_irradiance
 from relight_addon.engine.lights.placed import frame
 from relight_addon.engine.lights.spot import spot_lamp
+from relight_addon.engine.extent import decisive_region
 from relight_addon.engine.options import JobOptions
 from relight_addon.pipeline.jobs import run_solve
 
@@ -81,9 +82,11 @@ def test_refinement_lowers_the_error_and_says_so(solved):
 
 
 def test_the_refined_spot_stays_valid(solved):
-    _, refined, _ = solved
+    faces, refined, _ = solved
     lamp, _ = _final_lamp(refined)
-    drop = 0.02 * math.sqrt(4.0 ** 2 + 3.0 ** 2 + H ** 2)  # candidate_lamps.DROP_FRACTION of the diagonal
+    region = decisive_region(faces)  # the room, as the painting sees it
+    assert region.diagonal == pytest.approx(math.sqrt(4.0 ** 2 + 3.0 ** 2 + H ** 2), rel=0.01)
+    drop = 0.02 * region.diagonal  # candidate_lamps.DROP_FRACTION of the region's diagonal
     assert lamp.position[2] == pytest.approx(H - drop, abs=1e-9)  # it slid along the ceiling, no lower
     assert 0.0 <= lamp.position[0] <= 4.0 and 0.0 <= lamp.position[1] <= 3.0
     assert 0.0 < lamp.spot_size <= math.pi and 0.0 <= lamp.spot_blend <= 1.0

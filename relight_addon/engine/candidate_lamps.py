@@ -103,7 +103,10 @@ def offered_kinds(options) -> tuple:
 
 
 def default_drop(patches) -> float:
-    """DROP_FRACTION x the bounding-box diagonal of the patches (m)."""
+    """DROP_FRACTION x the diagonal of the region that decides the answer (engine.extent), else
+    of the patches' bounding box (m)."""
+    if patches.region is not None:
+        return DROP_FRACTION * patches.region.diagonal
     v = patches.tri_vertices.reshape(-1, 3)
     return DROP_FRACTION * float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
 

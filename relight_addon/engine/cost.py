@@ -54,6 +54,7 @@ from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
 from .patch_models.adaptive import CLUSTER_BELOW
 from .registry import SOLVERS
+from .extent import decisive_region, face_sizes, is_beyond, quad_cells
 from .scene import default_max_patch_size as scene_patch_size
 
 __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_memory", "check_memory",
@@ -286,12 +287,13 @@ def estimate_patch_count(faces, options, default_max_patch_size=None,
     are clustered: ``certain`` counts those as none (a lower bound), else one each (an upper one)."""
     size = options.max_patch_size if options.max_patch_size is not None else default_max_patch_size
     if size is None:
-        size = scene_patch_size(faces.vertices)
+        size = scene_patch_size(faces)
     F = faces.n_faces
     s = np.full(F, float(size))
     if options.patch_model == "adaptive":
         cand = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
         s[cand] = float(options.light_size or size)
+    s = face_sizes(faces, s)
     V = faces.vertices
     with np.errstate(over="ignore", invalid="ignore"):
         T = V[faces.triangles]
@@ -311,4 +313,9 @@ def estimate_patch_count(faces, options, default_max_patch_size=None,
             nu = np.maximum(np.ceil(np.minimum(np.maximum(d(1, 0), d(2, 3)) / s[quad], _MAX_COUNT)), 1.0)
             nv = np.maximum(np.ceil(np.minimum(np.maximum(d(3, 0), d(2, 1)) / s[quad], _MAX_COUNT)), 1.0)
             count[quad] = np.minimum(nu * nv, _MAX_COUNT)
+            region = decisive_region(faces)
+            for i in np.flatnonzero(np.maximum(np.maximum(d(1, 0), d(2, 3)), np.maximum(d(3, 0), d(2, 1)))
+                                    > region.diagonal):  # larger than the region: its quadtree
+                if is_beyond(region, p[i]):
+                    count[quad[i]] = len(quad_cells(region, p[i], s[quad[i]]))
     return float(min(max(count.sum(), 1.0), _MAX_COUNT))

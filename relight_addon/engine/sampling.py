@@ -83,7 +83,7 @@ class SceneSampler:
         self.key = tri_patch + self.cdf_hi  # global monotone search key
 
         lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
-        diag = float(np.linalg.norm(hi - lo))
+        diag = float(np.linalg.norm(hi - lo)) if patches.region is None else patches.region.diagonal
         self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
         # each triangle shrunk about its incentre: edges moved inward by 2 * offset (the shift,
         # <= 2 * offset, is of the order of the normal offset)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .extent import decisive_region, face_sizes, is_beyond, quad_cells
 from .geometry import group_mean, group_sum, triangle_areas, triangle_cross, unit
 
 __all__ = [
@@ -158,6 +159,8 @@ class PatchSet:
     light_size: float | None = None  # the adaptive model's light-cell size (m)
     passes: np.ndarray = None  # (P,) bool: light passes through it (FaceSet.passes), None: none does
     level: np.ndarray = None  # (P,) int, the adaptive model's refinement level of each patch
+    #: the region that decides the answer (engine.extent.Region): the scale of every automatic length
+    region: object = None
 
     @property
     def n_patches(self) -> int:
@@ -172,19 +175,19 @@ class PatchSet:
         return v.min(axis=0), v.max(axis=0)
 
 
-def default_max_patch_size(vertices: np.ndarray, divisions: float = 20.0) -> float:
-    """Default patch size: the scene's bounding-box diagonal / 20.
+def default_max_patch_size(faces: FaceSet) -> float:
+    """Default patch size: the diagonal of the region that decides the answer / 20
+    (engine.extent: the targets and what they see, not a ground plane kilometres wide).
 
     A 0.55 m Cornell box then gets patches of about 4.8 cm (roughly 12 x 12 per
     wall); faces already smaller than that are kept whole.
     """
-    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    if len(v) == 0:
+    if len(faces.vertices) == 0 or len(faces.triangles) == 0:
         raise SceneError("the scene has no geometry")
-    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    if not np.isfinite(diag) or diag <= 0:
+    size = decisive_region(faces).patch_size
+    if not np.isfinite(size) or size <= 0:
         raise SceneError("the scene's geometry has no extent")
-    return diag / divisions
+    return size
 
 
 def _grid_quad(p, nu, nv):
@@ -257,6 +260,7 @@ def split_faces(faces: FaceSet, T, fids, size):
     degenerate sub-triangles are dropped."""
     V = faces.vertices
     tf = faces.triangle_face
+    region = decisive_region(faces)
     min_area = (1e-10 * scene_scale(faces)) ** 2
     tri_of = np.argsort(tf, kind="stable")
     starts = np.searchsorted(tf[tri_of], np.arange(faces.n_faces + 1))
@@ -265,9 +269,12 @@ def split_faces(faces: FaceSet, T, fids, size):
         s = float(size[f])
         if faces.loop_total[f] == 4:
             p = V[faces.loop_vertices[faces.loop_start[f]:faces.loop_start[f] + 4]]
-            nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / s))
-            nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / s))
-            sub = _grid_quad(p, max(nu, 1), max(nv, 1))  # (patches, 2, 3, 3)
+            if is_beyond(region, p):  # a ground plane under the room: fine over the region only
+                sub = quad_cells(region, p, s)
+            else:
+                nu = int(np.ceil(max(np.linalg.norm(p[1] - p[0]), np.linalg.norm(p[2] - p[3])) / s))
+                nv = int(np.ceil(max(np.linalg.norm(p[3] - p[0]), np.linalg.norm(p[2] - p[1])) / s))
+                sub = _grid_quad(p, max(nu, 1), max(nv, 1))  # (patches, 2, 3, 3)
             local = np.repeat(np.arange(len(sub)), 2)
             sub = sub.reshape(-1, 3, 3)
         else:
@@ -320,6 +327,7 @@ def build_patches(faces: FaceSet, tri, tri_face, key, max_patch_size, **extra) -
         passes=None if faces.passes is None or not faces.passes.any() else faces.passes[patch_face].copy(),
         n_faces=faces.n_faces,
         max_patch_size=max_patch_size,
+        region=decisive_region(faces),
         **extra,
     )
 
@@ -336,13 +344,14 @@ def mesh_patches(faces: FaceSet, max_patch_size: float | None = None) -> PatchSe
     """
     scene_scale(faces)
     if max_patch_size is None:
-        max_patch_size = default_max_patch_size(faces.vertices)
+        max_patch_size = default_max_patch_size(faces)
     max_patch_size = check_size(max_patch_size)
     T, ok, face_edge = face_triangles(faces)
     tf = faces.triangle_face
-    whole = face_edge <= max_patch_size
+    size = face_sizes(faces, max_patch_size)
+    whole = face_edge <= size
     sel = whole[tf] & ok  # faces kept whole (the common case, vectorised): one patch each
-    st, sf, sl = split_faces(faces, T, np.flatnonzero(~whole), np.full(faces.n_faces, max_patch_size))
+    st, sf, sl = split_faces(faces, T, np.flatnonzero(~whole), size)
     tri = np.concatenate([T[sel], st])
     face = np.concatenate([tf[sel], sf])
     local = np.concatenate([np.zeros(int(sel.sum()), dtype=np.int64), sl])

@@ -41,6 +41,7 @@ from scipy.sparse.csgraph import connected_components
 from ..geometry import group_sum, triangle_cross, unit
 from ..lights import LightSet, kind_code
 from ..registry import PATCH_MODELS, Param
+from ..extent import face_sizes
 from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
 
 __all__ = ["AdaptiveModel", "DIRECTIONS", "normal_bucket"]
@@ -118,7 +119,7 @@ class AdaptiveModel:
     # -- patches -------------------------------------------------------------------------
     def _sizes(self, faces):
         if self.patch_size is None:
-            self.patch_size = default_max_patch_size(faces.vertices)
+            self.patch_size = default_max_patch_size(faces)
         self.patch_size = check_size(self.patch_size)
         if self.light_size is None:
             self.light_size = self.patch_size
@@ -130,7 +131,7 @@ class AdaptiveModel:
         reflector = ~cand & ~faces.target & ~emit
         size = np.where(cand, self.light_size, self.patch_size)
         size = np.where(reflector, self.patch_size * 2.0 ** (1 - self.level), size)
-        return size, cand, emit, reflector
+        return face_sizes(faces, size), cand, emit, reflector
 
     def mesh(self, faces):
         size, cand, emit, reflector = self._sizes(faces)
