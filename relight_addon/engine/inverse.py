@@ -75,6 +75,52 @@ class InverseError(SceneError):
     """The inverse problem cannot be set up or solved; the message is for the user."""
 
 
+class DivergentTransport(InverseError):
+    """The transport I - rho F would create light: a bound of its growth per bounce ``rate`` >= 1,
+    from the patches ``rows`` ((P,) bool) where it grows."""
+
+    def __init__(self, rate, rows, names=None):
+        self.rate, self.rows, self.names = float(rate), rows, names
+        where = f" ({names})" if names else ""
+        super().__init__(f"the form factors of {int(np.sum(rows))} patch(es){where} send back more light than they "
+                         f"receive ({self.rate:.3g} per bounce): their faces overlap, coincide or lie inside other "
+                         "faces; remove the duplicate faces (Merge by Distance, Delete Loose) or hide those objects")
+
+
+    def named(self, object_names, patch_object):
+        """The same error naming the objects of its patches (``patch_object`` (P,) indices into
+        ``object_names``), the most patches first."""
+        obj, count = np.unique(np.asarray(patch_object)[self.rows], return_counts=True)
+        order = np.argsort(-count, kind="stable")
+        names = ", ".join(f"{count[i]} of '{object_names[obj[i]]}'" for i in order[:4])
+        return DivergentTransport(self.rate, self.rows, names + (", ..." if len(obj) > 4 else ""))
+
+
+#: power sweeps of growth_bound (each a product with F)
+GROWTH_SWEEPS = 40
+
+
+def growth_bound(F, rho, sweeps: int = GROWTH_SWEEPS):
+    """(bound, rows): an upper bound of the spectral radius of M = diag(rho) F (non-negative), the
+    rate at which the radiosity iteration converges, and the rows (P,) bool where it is >= 1 at the
+    end. The Collatz-Wielandt bound max_i (M x)_i / x_i holds for every positive x: x = 1 gives
+    the largest row sum (kept when it is below 1), power sweeps of x tighten it towards the
+    spectral radius (a patch that sees half-buried patches has a row sum above 1, the whole scene
+    still loses light at every bounce)."""
+    rho = np.asarray(rho, dtype=np.float64)
+    x = np.ones(F.shape[0])
+    best, rows = np.inf, None
+    for _ in range(max(int(sweeps), 1)):
+        y = rho * np.asarray(F @ x, dtype=np.float64).reshape(-1)
+        ratio = y / x
+        if float(ratio.max()) < best:
+            best, rows = float(ratio.max()), ratio >= 1.0
+        if best < 1.0:
+            break
+        x = y / max(float(y.max()), 1e-300) + 1e-12  # (kept positive)
+    return best, rows
+
+
 class _Factor:
     """LU factorisation of A for one channel, with its 1-norm condition estimate."""
 
@@ -124,12 +170,10 @@ class _Iterative:
         self.F = F.tocsr() if sp.issparse(F) else np.asarray(F)
         self.FT = self.F.T.tocsr() if sp.issparse(F) else self.F.T
         self.rho = np.asarray(rho, dtype=np.float64)
-        rows = np.asarray(self.F.sum(axis=1)).reshape(-1)
-        self.rate = float(np.max(self.rho * rows))
+        self.rate, growing = growth_bound(self.F, self.rho)
         if not self.rate < 1.0:
-            raise InverseError(f"the radiosity system does not converge (reflectance x form-factor row sum "
-                               f"reaches {self.rate:.4g}); a closed scene with reflectance 1?")
-        self.cond = float((1 + self.rate) / (1 - self.rate))  # bound on cond_inf(A) for row sums <= 1
+            raise DivergentTransport(self.rate, growing)
+        self.cond = float((1 + self.rate) / (1 - self.rate))  # (a bound on cond_inf(A) when rows sum to <= 1)
         self.sparse = True
         self.max_iter = int(np.ceil(np.log(ITERATIVE_TOL) / np.log(max(self.rate, 1e-3)))) + 10
 

@@ -905,6 +905,37 @@ def lights_direct_correction(patches: PatchSet, F, lights, members, send=None, s
 
 # storing the estimates in a form-factor matrix
 
+#: a row the kernel's pairs bring above 1 + ROW_SLACK is scaled back to 1 (below it: the
+#: estimators' noise in a closed scene)
+ROW_SLACK = 0.01
+
+
+def _within_unit_rows(F, ui, uj, val):
+    """The kernel's values ``val`` at (ui, uj), scaled down in each row that they would bring above
+    1 + ROW_SLACK (the share of a patch's light that reaches the scene is at most 1): coincident or
+    overlapping faces (tiles laid on a wall, a decal on its own plane) are each seen whole by the
+    point-to-polygon kernel, where the rays see one of them; the row's other entries are kept and
+    the kernel's share takes what is left of 1."""
+    P = F.shape[0]
+    rows = np.unique(ui)
+    if sp.issparse(F):
+        Fr = F.tocsr()[rows]
+        total = np.asarray(Fr.sum(axis=1), dtype=np.float64).ravel()
+        old = np.asarray(F.tocsr()[ui, uj], dtype=np.float64).ravel()
+    else:
+        total = F[rows].sum(axis=1, dtype=np.float64)
+        old = F[ui, uj].astype(np.float64)
+    at = np.searchsorted(rows, ui)
+    kept = total - np.bincount(at, weights=old, minlength=len(rows))
+    new = np.bincount(at, weights=val, minlength=len(rows))
+    over = kept + new > 1.0 + ROW_SLACK
+    if not over.any():
+        return val
+    f = np.ones(len(rows))
+    f[over] = np.clip(1.0 - kept[over], 0.0, None) / new[over] * (1 - 2.0 ** -20)
+    return val * f[at]
+
+
 def apply_kernel_pairs(F, area, rows, cols, values):
     """Replace F[rows, cols] by ``values`` (len(rows), len(cols)) (receiver x source form
     factors, e.g. from kernel_form_factors) and, by reciprocity, F[cols, rows] by
@@ -914,7 +945,8 @@ def apply_kernel_pairs(F, area, rows, cols, values):
     modified in place, a scipy.sparse matrix is replaced by a new CSR matrix; the result
     is returned either way (same dtype). ``area``: (P,) patch areas (or a PatchSet).
     A pair estimated in both directions (a patch in both rows and cols) gets the mean of
-    the two power estimates A_r F_rs. Diagonal entries (r, r) are left as they are.
+    the two power estimates A_r F_rs. Diagonal entries (r, r) are left as they are. A row the
+    values would bring above 1 + ROW_SLACK keeps its sum at 1 (``_within_unit_rows``).
     ``rows``, ``cols``: patch indices or boolean masks over the patches.
     """
     holder = None
@@ -944,6 +976,7 @@ def apply_kernel_pairs(F, area, rows, cols, values):
     cnt = np.bincount(inv)
     ui, uj = np.divmod(uk, P)
     val = gsum / cnt / area[ui]
+    val = _within_unit_rows(F, ui, uj, val)
     if sp.issparse(F):
         dtype = F.dtype
         F = F.tocsr()

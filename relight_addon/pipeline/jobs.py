@@ -11,6 +11,7 @@ warning (the form factors are then not computed).
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -24,7 +25,8 @@ from ..engine.cost import DIRECT_LIGHTS, DIRECT_SPREAD_PATCHES, check_memory, es
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.kernel_transfer import lights_direct_correction
 from ..engine.incidence import first_bounce_matrices, incidence_tables, lamp_albedo_excess, lamp_excess
-from ..engine.inverse import InverseError, InverseProblem, InverseResult, direct_lighting_problem, solve_inverse
+from ..engine.inverse import (DivergentTransport, InverseError, InverseProblem, InverseResult, direct_lighting_problem,
+                              solve_inverse)
 from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, append_lamps, candidate_mask
@@ -374,27 +376,28 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
         e_start = None
         lamp_lights = None
-        if mode == "inverse":
-            emitting = np.any(patches.exitance > 0, axis=1)
-            if emitting.any():
-                background = patches.exitance.copy()
-            lamp_H, lamp_names = scene_light(faces, patches, F, options.seed)
-            problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
-                                     mask, patches.center, patches.normal, lights=lights,
-                                     first_bounce=first_bounce(faces, patches, F, mask | emitting),
-                                     background=background, background_irradiance=lamp_H.sum(axis=1),
-                                     lamp_excess=lights_excess(faces, patches, lights),
-                                     background_excess=scene_light_excess(faces, patches, lamp_H))
-        else:
-            lights, lamp_lights, lamp_H, lamp_names, notes = direct_lights(faces, patches, F, lights, options.seed)
-            warnings.extend(n for n in notes if n not in warnings)
-            problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
-                                                       patches.center, patches.normal, lights=lights,
-                                                       first_bounce=first_bounce(faces, patches, F, mask),
-                                                       strength=np.array([faces.lamps[i].power for i in lamp_lights[1]])
-                                                       .reshape(-1, 3),
-                                                       background_irradiance=lamp_H.sum(axis=1) if lamp_names else None,
-                                                       lamp_excess=lights_excess(faces, patches, lights))
+        with transport_named(patches, faces):  # (the radiosity system is factorised here)
+            if mode == "inverse":
+                emitting = np.any(patches.exitance > 0, axis=1)
+                if emitting.any():
+                    background = patches.exitance.copy()
+                lamp_H, lamp_names = scene_light(faces, patches, F, options.seed)
+                problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                                         mask, patches.center, patches.normal, lights=lights,
+                                         first_bounce=first_bounce(faces, patches, F, mask | emitting),
+                                         background=background, background_irradiance=lamp_H.sum(axis=1),
+                                         lamp_excess=lights_excess(faces, patches, lights),
+                                         background_excess=scene_light_excess(faces, patches, lamp_H))
+            else:
+                lights, lamp_lights, lamp_H, lamp_names, notes = direct_lights(faces, patches, F, lights, options.seed)
+                warnings.extend(n for n in notes if n not in warnings)
+                problem, e_start = direct_lighting_problem(F, patches.area, patches.reflectance, patches.exitance,
+                                                           patches.center, patches.normal, lights=lights,
+                                                           first_bounce=first_bounce(faces, patches, F, mask),
+                                                           strength=np.array([faces.lamps[i].power for i in lamp_lights[1]])
+                                                           .reshape(-1, 3),
+                                                           background_irradiance=lamp_H.sum(axis=1) if lamp_names else None,
+                                                           lamp_excess=lights_excess(faces, patches, lights))
         t_problem += time.perf_counter() - t1
         if p == passes:
             break
@@ -942,7 +945,19 @@ FEW_RAYS = 256
 def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches, estimate):
     t0 = time.perf_counter()
     model = build_model(faces, options, mode, default_max_patch_size, progress, cancel, patches, estimate)
-    return solve_model(model, options, polygon_counts, progress, cancel, t0)
+    with transport_named(model.patches, faces):
+        return solve_model(model, options, polygon_counts, progress, cancel, t0)
+
+
+@contextmanager
+def transport_named(patches: PatchSet, faces: FaceSet):
+    """A DivergentTransport raised inside names the objects of its patches."""
+    try:
+        yield
+    except DivergentTransport as exc:
+        if exc.names:
+            raise
+        raise exc.named(faces.object_names, patches.object) from None
 
 
 #: a live re-solve's curve covers the Max Lights and this many more (the chart's neighbourhood)
