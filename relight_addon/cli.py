@@ -191,23 +191,24 @@ BLENDER_PATH_MAX = 1024
 
 
 def _check_writable(option, path):
-    """UsageError unless ``path`` can be written: not a directory, its file (if any) writable,
-    its nearest existing folder a writable directory (missing folders are made when writing); a
-    symbolic link is written through, to its target; a path Blender writes (--out, --render) must
+    """UsageError unless ``path`` can be written: nothing there or a regular file (never a FIFO, a
+    device node, a socket, a directory or a symbolic link: an output replaces only a regular file,
+    pipeline.files.not_regular), its file (if any) writable, its nearest existing folder a writable
+    directory (missing folders are made when writing); a path Blender writes (--out, --render) must
     fit in Blender's path length."""
+    from .pipeline.files import not_regular
+
     full = os.path.abspath(path)
-    if os.path.islink(full):
-        target = os.path.realpath(full)
-        if not os.path.isdir(os.path.dirname(target)):
-            raise UsageError(f"cannot write --{option} {path}: it is a symbolic link to {target}, whose folder "
-                             f"{os.path.dirname(target)} does not exist")
-        full = target
     n = len(os.fsencode(full))
     if option in ("out", "render") and n >= BLENDER_PATH_MAX:
         raise UsageError(f"cannot write --{option}: its path is {n} bytes long, and Blender keeps paths of at most "
                          f"{BLENDER_PATH_MAX - 1} bytes: choose a shorter one")
-    if os.path.isdir(full):
+    if os.path.isdir(full) and not os.path.islink(full):
         raise UsageError(f"cannot write --{option} {path}: it is a directory")
+    kind = not_regular(full)
+    if kind:
+        raise UsageError(f"cannot write --{option} {path}: it is {kind}, not a regular file, and Relight replaces "
+                         "only regular files: give another path")
     if os.path.lexists(full):
         if not os.access(full, os.W_OK):
             raise UsageError(f"cannot write --{option} {path}: permission denied")
@@ -251,6 +252,20 @@ def _check_paths(args):
             raise UsageError(f"--render {args.render}: the picture's format is read from its extension, and "
                              f"{ext or 'no extension'} is not one Relight writes ({', '.join(RENDER_FORMATS)})")
     return scene_path
+
+
+def _check_not_read(args):
+    """After the scene is open, before any work: no output may replace a file the scene reads (a
+    library it links from, an image, font or sound it uses: export.files_read)."""
+    from .blender.export import files_read
+
+    read = files_read()
+    for name in ("report", "out", "render"):
+        path = getattr(args, name, None)
+        for what, p in read if path else ():
+            if _same_file(path, p):
+                raise UsageError(f"--{name} {path} is a file the scene reads ({what}): Relight never replaces "
+                                 "it; give another path")
 
 
 # --------------------------------------------------------------------------- feedback on stderr
@@ -429,6 +444,7 @@ def run_radiosity_command(args, progress=None, cancel=None):
     t0 = time.perf_counter()
     _check_paths(args)
     export.open_blend(args.scene)
+    _check_not_read(args)
     exp = export.export_scene()
     options = _options(args)
     inputs = export.job_inputs(exp)
@@ -489,6 +505,7 @@ def run_solve_command(args, progress=None, cancel=None):
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     export.open_blend(args.scene)
+    _check_not_read(args)
     names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
                           target_scale=getattr(args, "target_scale", None))
