@@ -38,11 +38,45 @@ def build(name, d):
     if name == "room_camera":
         _room()
         _camera()
+    elif name in LAMP_SCENES:  # reduce: two lamps under the ceiling, one animated as named
+        _room(paint=False)
+        lamps = [_lamp("Key", (0.3, 0.5, 0.8), 20.0), _lamp("Fill", (0.7, 0.5, 0.8), 5.0)]
+        LAMP_SCENES[name](lamps[0])
     else:
         raise KeyError(name)
     _save(path)
     _reset()
     return path
+
+
+def _lamp(name, location, energy):
+    ob = bpy.data.objects.new(name, bpy.data.lights.new(name, "POINT"))
+    ob.data.energy = energy
+    ob.location = location
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
+def _driver(idb, path, expression):
+    fc = idb.driver_add(path)
+    fc.driver.type = "SCRIPTED"
+    fc.driver.expression = expression
+    return fc
+
+
+def _keyframes(idb, path, values):
+    for frame, v in enumerate(values, start=1):
+        setattr(idb, path, v)
+        idb.keyframe_insert(path, frame=frame)
+    setattr(idb, path, values[0])
+
+
+LAMP_SCENES = {
+    "lamps": lambda key: None,
+    "power_driven": lambda key: _driver(key.data, "energy", "20.0"),
+    "colour_keyed": lambda key: _keyframes(key.data, "color", [(1.0, 1.0, 1.0), (1.0, 0.2, 0.2)]),
+    "disable_keyed": lambda key: _keyframes(key, "hide_render", [False, True]),
+}
 
 
 @pytest.fixture(scope="module")
@@ -178,3 +212,132 @@ def test_atomic_output_refuses_what_appeared_during_the_write(tmp_path):
     with pytest.raises(OSError, match="it is a FIFO"):
         atomic_output(path, write)
     assert stat.S_ISFIFO(os.lstat(path).st_mode) and os.listdir(tmp_path) == ["r.json"]
+
+
+# ============================================================================ the lamps' collection: its contents checked
+
+def _open_placed(scenes):
+    """room_camera solved in the add-on with point lamps and no cells: the answer is lamps Relight
+    placed, in its collection "Relight Lamps". Returns (scene, the placed lamps)."""
+    bpy.ops.wm.open_mainfile(filepath=scenes("room_camera"))
+    s = bpy.context.scene.relight
+    s.rays_per_patch, s.surface_lights, s.point_lamps = 256, False, True
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    scene = bpy.context.scene
+    placed = [o for o in scene.objects if o.type == "LIGHT" and "relight_owner" in o]
+    assert placed and all(c.name.startswith("Relight Lamps") for o in placed for c in o.users_collection)
+    return scene, placed
+
+
+def _artist_copy(ob, share_data=False):
+    """What Shift-D (its own data) or Alt-D (``share_data``) makes: a copy in the same collections."""
+    copy = ob.copy()
+    if not share_data:
+        copy.data = ob.data.copy()
+    for coll in ob.users_collection:
+        coll.objects.link(copy)
+    return copy
+
+
+def _lights(scene):
+    return sorted(o.name for o in scene.objects if o.type == "LIGHT")
+
+
+def test_a_renamed_relight_lamp_is_the_artists(addon, scenes):
+    """Case 2: a Relight lamp the artist renamed is theirs (export.owner_of): the next row click
+    deleted it with the "Relight Lamps" collection. It stays, in the scene, as they left it; the
+    collection that holds it stays too (then theirs); Clear Results leaves it as well."""
+    scene, placed = _open_placed(scenes)
+    mine = placed[0]
+    mine.name = "Key light"
+    mine.location.x += 0.1
+    bpy.context.view_layer.update()
+    where = np.array(mine.matrix_world)
+    k = scene.relight.curve_index
+    assert bpy.ops.relight.apply_configuration(index=k) == {"FINISHED"}
+    assert "Key light" in scene.objects and np.allclose(np.array(mine.matrix_world), where)
+    assert [c.name for c in mine.users_collection] == ["Relight Lamps"] and "relight_owner" not in mine.users_collection[0]
+    shown = [o for o in scene.objects if o.type == "LIGHT" and "relight_owner" in o and o.name != "Key light"]
+    assert len(shown) == len(placed)  # the row's own lamps, shown again
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    assert _lights(scene) == ["Key light"] and mine.data is not None and mine.data.users == 1
+    assert_scene_finite()
+
+
+@pytest.mark.parametrize("share_data", [False, True], ids=["shift-d", "alt-d"])
+def test_a_copy_of_a_relight_lamp_is_the_artists(addon, scenes, share_data):
+    """Case 2: a Shift-D copy of a Relight lamp lands in Relight's collection: Clear Results orphaned
+    it (the collection removed under it). It stays in the scene with its light (an Alt-D copy shares
+    the data of Relight's lamp: the data stays with the copy)."""
+    scene, placed = _open_placed(scenes)
+    copy = _artist_copy(placed[0], share_data)
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    assert _lights(scene) == [copy.name] and copy.data is not None and copy.data.name in bpy.data.lights
+    assert copy.users_collection and copy.users_collection[0].name in scene.collection.children
+    assert not [o for o in bpy.data.objects if o.get("relight_owner") and o.name == o.get("relight_owner_name")]
+    assert_scene_finite()
+
+
+def test_make_area_lights_copies_the_lamps_as_edited(addon, scenes):
+    """Case 3: Make Area Lights copied the solved records, not the lamp as the artist edited it
+    (moved, another Power), and Clear Results then deleted the edited one: the edit was lost. The
+    copies are the lamps as they are in the scene, and stay after Clear."""
+    scene, placed = _open_placed(scenes)
+    lamp = placed[0]
+    lamp.location.x += 0.4
+    lamp.data.energy *= 3.0
+    lamp.data.color = (1.0, 0.5, 0.25)
+    bpy.context.view_layer.update()
+    edited = (np.array(lamp.matrix_world), lamp.data.energy, tuple(lamp.data.color), lamp.data.type)
+    assert bpy.ops.relight.make_area_lights() == {"FINISHED"}
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    copies = [o for o in scene.objects if o.type == "LIGHT"]
+    assert len(copies) == len(placed)
+    copy = next(o for o in copies if o.data.type == edited[3] and np.allclose(o.matrix_world.translation,
+                                                                              edited[0][:3, 3]))
+    assert np.allclose(np.array(copy.matrix_world), edited[0])
+    assert copy.data.energy == pytest.approx(edited[1]) and np.allclose(tuple(copy.data.color), edited[2])
+    assert "relight_owner" not in copy and "relight_owner" not in copy.data
+    assert_scene_finite()
+
+
+def test_keep_lamps_then_the_same_row_places_no_twin(addon, scenes):
+    """Case 5: after Keep Lamps, clicking the same row again recreated every Relight lamp beside its
+    kept twin: twice the light the row predicts. The kept lamp stands for its lamp of that row: the
+    scene's lights and their power are what the row predicts; Clear Results keeps the kept lamps."""
+    scene, placed = _open_placed(scenes)
+    power = sum(o.data.energy for o in placed)
+    assert bpy.ops.relight.keep_lamps() == {"FINISHED"}
+    kept = _lights(scene)
+    assert len(kept) == len(placed) and all(n.endswith(" (kept)") for n in kept)
+    k = scene.relight.curve_index
+    assert bpy.ops.relight.apply_configuration(index=k) == {"FINISHED"}
+    assert _lights(scene) == kept
+    assert sum(o.data.energy for o in scene.objects if o.type == "LIGHT") == pytest.approx(power)
+    scene.relight.curve_index = k  # a click on the list (its update callback applies the row)
+    assert _lights(scene) == kept and scene.relight.apply_error == ""
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    assert _lights(scene) == kept
+    assert_scene_finite()
+
+
+def test_keep_lamps_then_a_moved_kept_lamp_is_named(addon, scenes):
+    """Case 5, a kept lamp moved or given another Power (Keep Lamps invites it): a row is shown
+    without a twin of it, and a warning names the kept lamp, since the row's prediction does not
+    hold for the scene as it is (its lamps are the scene's now)."""
+    scene, placed = _open_placed(scenes)
+    assert bpy.ops.relight.keep_lamps() == {"FINISHED"}
+    kept = _lights(scene)
+    ob = bpy.data.objects[kept[0]]
+    ob.location.x -= 0.2
+    ob.data.energy *= 2
+    bpy.context.view_layer.update()
+    for j in range(len(scene.relight.curve)):
+        from relight_addon.blender import results
+
+        shown = results.apply_stored_point(scene, j)
+        assert _lights(scene) == kept
+        assert any("is kept as" in w and kept[0] in w and "Solve & Reduce" in w for w in shown["skipped"]), \
+            shown["skipped"]
+    assert_scene_finite()
+
