@@ -509,6 +509,8 @@ def run_solve_command(args, progress=None, cancel=None):
     names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
                           target_scale=getattr(args, "target_scale", None))
+    if args.command == "reduce" and (args.out or args.render):  # before the work: what apply will write
+        _check_lamps_not_animated(bpy.context.scene, job.exp.faces.lamps)
     patches, cost = _job(args, job.mesh)
     _print_estimate(args, patches, cost)
     outcome = _job(args, job.run)
@@ -526,6 +528,18 @@ def run_solve_command(args, progress=None, cancel=None):
         _match_light_paths(args, report)
 
     return _save_outputs(args, report, report["timings_s"], t0, apply)
+
+
+def _check_lamps_not_animated(scene, lamps):
+    """reduce --out/--render sets every lamp it reduces (Power and colour, or Disable in Renders):
+    refused at once when a driver or keyframes would override that (lamp_state.check_not_animated;
+    apply checks it again before writing)."""
+    from .blender import lamp_state
+
+    for lamp in lamps:
+        ob = scene.objects.get(lamp.name)
+        if ob is not None and ob.type == "LIGHT" and ob.library is None and ob.data.library is None:
+            lamp_state.check_not_animated(ob)
 
 
 def _summary(args, report):

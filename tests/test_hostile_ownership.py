@@ -341,3 +341,47 @@ def test_keep_lamps_then_a_moved_kept_lamp_is_named(addon, scenes):
             shown["skipped"]
     assert_scene_finite()
 
+
+# ============================================================================ what Relight writes: never overridden by animation
+
+@pytest.mark.parametrize("scene, option, message", [
+    ("power_driven", "--out", "lamp 'Key': Power (a driver) would override what Relight sets there"),  # case 8
+    ("power_driven", "--render", "lamp 'Key': Power (a driver) would override"),
+    ("colour_keyed", "--out", "lamp 'Key': Color (keyframes) would override"),
+    ("disable_keyed", "--out", "lamp 'Key': Disable in Renders (keyframes) would override"),
+])
+def test_reduce_refuses_lamps_whose_animation_overrides_it(run_cli, scenes, tmp_path, scene, option, message):
+    """Case 8: `reduce --out` set a lamp's Power, but a driver on that Power overrode it when the copy
+    was opened or rendered (keyframes alike, on its colour or on Disable in Renders). Refused before
+    any work (exit 2, one line naming the lamp and the property); nothing written; input unchanged.
+    Without --out or --render nothing is written on the lamps: the same scene is then reduced."""
+    path = scenes(scene)
+    before = file_digest(path)
+    out = tmp_path / ("o.blend" if option == "--out" else "shot.png")
+    code, _, err = _solve_argv(run_cli, ["reduce", path, "--report", tmp_path / "r.json", option, out, *RAYS])
+    assert code == 2, err
+    line = _error_line(err)
+    assert message in line and "Delete Driver / Clear Keyframes" in line, line
+    assert file_digest(path) == before and os.listdir(tmp_path) == []
+    # without --out or --render nothing is written on the lamps: the same scene is reduced as it is
+    code, _, err = _solve_argv(run_cli, ["reduce", path, "--report", tmp_path / "r.json", *RAYS])
+    assert code == 0, err
+    strict_json(tmp_path / "r.json")
+
+
+@pytest.mark.parametrize("animate, message", [
+    (lambda key: _driver(key.data, "energy", "20.0"), "lamp 'Key': Power (a driver)"),
+    (lambda key: _keyframes(key, "hide_render", [False, True]), "lamp 'Key': Disable in Renders (keyframes)"),
+], ids=["power-driver", "disable-keyframes"])
+def test_apply_refuses_a_lamp_animated_after_the_reduction(addon, run_cli, scenes, tmp_path, animate, message):
+    """Case 8 in the add-on: a reduce copy opened, the lamp given a driver or keyframes, then a row
+    applied: refused before anything is written (the operator CANCELs with one line), scene unchanged."""
+    out = tmp_path / "o.blend"
+    code, _, err = _solve_argv(run_cli, ["reduce", scenes("lamps"), "--report", tmp_path / "r.json", "--out", out,
+                                         *RAYS])
+    assert code == 0, err
+    bpy.ops.wm.open_mainfile(filepath=str(out))
+    animate(bpy.data.objects["Key"])
+    bpy.context.scene.frame_set(1)  # the animation evaluated, as opening the file does (the driver sets 20 W)
+    for k in range(len(bpy.context.scene.relight.curve)):
+        _refused(lambda: bpy.ops.relight.apply_configuration(index=k), message)

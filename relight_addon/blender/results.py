@@ -697,6 +697,7 @@ def plan_lamps(scene, data, strength) -> tuple:
                            "configuration sets it; make it local to see the reduction")
             continue
         s = np.asarray(strength[j], dtype=np.float64)
+        lamp_state.check_not_animated(ob, power=bool(np.any(s > 0)))  # a driver or keyframes would override it
         try:
             plan.append((ob, blender_values(s, rec["energy"], rec["color"], gain) if np.any(s > 0) else None))
         except ValueError as e:
