@@ -521,6 +521,9 @@ def run_solve_command(args, progress=None, cancel=None):
             {"object": n, "type": r["type"].lower(), "location": r["position"], "energy": r["energy"],
              "color": r["color"], "power": r["power"]} for n, r in zip(names, keep[0])]}
         report["warnings"].extend(keep[1])
+        report["warnings"].extend(kept.foreign_notes(
+            [(n, r["position"]) for n, r in zip(names, keep[0])], report.get("fixed_light"), job.exp.faces.vertices,
+            args.keep, solved_for=keep[2], this_input=os.path.abspath(args.scene)))
 
     def apply():
         shown = results.show_outcome(bpy.context.scene, outcome, job.exp.fingerprints)

@@ -38,6 +38,13 @@ def build(name, d):
     if name == "room_camera":
         _room()
         _camera()
+    elif name == "low_room":  # another scene: its ceiling at 0.5 m, below room_camera's lamps
+        fv, ff = _grid(2)
+        floor = _mesh("floor", fv, ff)
+        floor["relight_no_lights"] = True
+        _paint(floor)
+        cv, cf = _grid(2, z=0.5, flip=True)
+        _mesh("ceiling", cv, cf)
     elif name in LAMP_SCENES:  # reduce: two lamps under the ceiling, one animated as named
         _room(paint=False)
         lamps = [_lamp("Key", (0.3, 0.5, 0.8), 20.0), _lamp("Fill", (0.7, 0.5, 0.8), 5.0)]
@@ -385,3 +392,37 @@ def test_apply_refuses_a_lamp_animated_after_the_reduction(addon, run_cli, scene
     bpy.context.scene.frame_set(1)  # the animation evaluated, as opening the file does (the driver sets 20 W)
     for k in range(len(bpy.context.scene.relight.curve)):
         _refused(lambda: bpy.ops.relight.apply_configuration(index=k), message)
+
+
+# ============================================================================ --keep: a report of another scene
+
+LAMPS_ONLY = ["--no-surface-lights", "--point-lamps"]
+
+
+def test_keep_of_another_scenes_report_names_its_lamps(run_cli, scenes, tmp_path):
+    """Case 10: `--keep` with a report of another scene wrote its lamps (above this room's ceiling)
+    without a word, though they light no target. The solve runs (the lamps are kept as asked) and a
+    warning names them: lighting no target, outside this scene's bounds, and the scene the report
+    was solved for. Kept in its own scene, the same report gives no such warning."""
+    first = tmp_path / "first.json"
+    code, report, err = _solve_argv(run_cli, ["solve", scenes("room_camera"), "--report", first, *RAYS, *LAMPS_ONLY])
+    assert code == 0, err
+    lamps = [f"{li['object']} (kept)" for li in report["final"]["lights"] if li.get("type")]
+    assert lamps and all(li["location"][2] > 0.5 for li in report["final"]["lights"])
+    code, same, err = _solve(run_cli, scenes("room_camera"), tmp_path / "same", "--keep", first, "--max-lights", "1")
+    assert code == 0, err
+    assert not any("--keep" in w for w in same["warnings"]), same["warnings"]
+    code, other, err = _solve(run_cli, scenes("low_room"), tmp_path / "other", "--keep", first, "--max-lights", "1",
+                              out=True)
+    assert code == 0, err
+    notes = [w for w in other["warnings"] if w.startswith(f"--keep {first}")]
+    assert len(notes) == 1, other["warnings"]
+    note = notes[0]
+    assert f"{len(lamps)} light no target" in note and f"{len(lamps)} lie outside this scene's bounds" in note, note
+    assert all(repr(n) in note for n in lamps) and f"was solved for {scenes('room_camera')}, not this scene" in note
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "other" / "out.blend"))
+    assert all(n in bpy.data.objects for n in lamps)  # kept, as asked
+    from relight_addon.blender import results
+
+    assert note in results.load_result(bpy.context.scene).meta["warnings"]  # the add-on shows it too
+    assert_scene_finite()
