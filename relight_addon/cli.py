@@ -480,9 +480,17 @@ def _match_light_paths(args, report):
 
     from .blender import light_paths
 
+    from .blender.lamp_state import animated
+
     scene = bpy.context.scene
     block = report["render_settings"]
     changed = light_paths.match_light_paths(scene, block["max_reflectance"])
+    overridden = animated(scene, [f"cycles.{k}" for k in changed if "." not in k])
+    if overridden:  # what Relight wrote, overridden by animation (issue 35): said; the lights are right
+        report["warnings"].append(
+            f"the scene's Cycles light paths are animated ({', '.join(overridden)}): --out sets them for the "
+            "prediction, and the animation sets other values when the copy is opened or rendered; remove the "
+            "keyframes or drivers to render what was predicted")
     block["written"] = {"settings": light_paths.current_settings(scene),
                         "changed": {k: list(v) for k, v in changed.items()}}
 

@@ -45,6 +45,12 @@ def build(name, d):
         _paint(floor)
         cv, cf = _grid(2, z=0.5, flip=True)
         _mesh("ceiling", cv, cf)
+    elif name == "bounces_keyed":  # the scene's Total bounces keyframed at 0
+        _room()
+        scene = bpy.context.scene
+        scene.render.engine = "CYCLES"
+        scene.cycles.max_bounces = 0
+        scene.cycles.keyframe_insert("max_bounces", frame=1)
     elif name in LAMP_SCENES:  # reduce: two lamps under the ceiling, one animated as named
         _room(paint=False)
         lamps = [_lamp("Key", (0.3, 0.5, 0.8), 20.0), _lamp("Fill", (0.7, 0.5, 0.8), 5.0)]
@@ -392,6 +398,20 @@ def test_apply_refuses_a_lamp_animated_after_the_reduction(addon, run_cli, scene
     bpy.context.scene.frame_set(1)  # the animation evaluated, as opening the file does (the driver sets 20 W)
     for k in range(len(bpy.context.scene.relight.curve)):
         _refused(lambda: bpy.ops.relight.apply_configuration(index=k), message)
+
+
+def test_out_names_light_paths_that_animation_overrides(run_cli, scenes, tmp_path):
+    """Case 8, the scene's settings: --out sets the Cycles light paths the prediction needs (Total
+    bounces 0 -> more), but keyframes on Total bounces set 0 again when the copy is opened or
+    rendered. The copy's lights are right: warned (not refused), naming the setting."""
+    code, report, err = _solve(run_cli, scenes("bounces_keyed"), tmp_path, out=True)
+    assert code == 0, err
+    assert "max_bounces" in report["render_settings"]["written"]["changed"]
+    assert any("light paths are animated (cycles.max_bounces (keyframes))" in w for w in report["warnings"]), \
+        report["warnings"]
+    bpy.ops.wm.open_mainfile(filepath=str(tmp_path / "out.blend"))
+    assert bpy.context.scene.cycles.max_bounces == 0  # what the warning says: the animation wins
+    assert_scene_finite()
 
 
 # ============================================================================ --keep: a report of another scene
