@@ -7,8 +7,9 @@ written whole or not at all (a temporary beside it, then a rename), and a cancel
 code and can be called from any Python that has bpy: the PyPI ``bpy`` module or a Blender
 binary (``blender -b --python-expr``); see README.md.
 
-Order of work: every output path is checked first (not the input, not each other, writable),
-then the scene is exported and meshed, the estimate printed (stderr), the job run with a
+Order of work: every output path is checked first (not the input, not each other, writable, a
+regular file or nothing), then the scene is opened and no output may be a file it reads (its
+libraries, images, ...), then it is exported and meshed, the estimate printed (stderr), the job run with a
 progress display on stderr (lines when stderr is not a terminal, one updating line when it
 is; ``--quiet`` turns both off), the result applied to the open scene, the report written,
 and only then ``--out`` and ``--render`` (a failing save still leaves the report).
