@@ -156,6 +156,39 @@ def test_output_never_replaces_a_file_the_scene_reads(run_cli, tmp_path, option,
     assert bpy.data.objects["lib_ceiling"].library is not None and len(bpy.data.objects["lib_ceiling"].data.polygons) == 4
 
 
+def test_output_never_replaces_an_indirect_library(run_cli, tmp_path):
+    """Case 1, one level further: the scene instances a collection of sets/set.blend, which links
+    the ceiling from libs/lib.blend (its path relative to set.blend, not to the scene). --out naming
+    lib.blend is refused as well; both libraries unchanged."""
+    d = str(tmp_path)
+    os.makedirs(os.path.join(d, "libs"))
+    lib = _library(os.path.join(d, "libs"))
+    os.makedirs(os.path.join(d, "sets"))
+    with bpy.data.libraries.load(lib, link=True, relative=True) as (_, dst):
+        dst.objects = ["lib_ceiling"]
+    coll = bpy.data.collections.new("set")
+    coll.objects.link(dst.objects[0])
+    bpy.context.scene.collection.children.link(coll)
+    set_path = os.path.join(d, "sets", "set.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=set_path, relative_remap=True)
+    _reset()
+    with bpy.data.libraries.load(set_path, link=True, relative=True) as (_, dst):
+        dst.collections = ["set"]
+    inst = bpy.data.objects.new("set", None)
+    inst.instance_type, inst.instance_collection = "COLLECTION", dst.collections[0]
+    bpy.context.scene.collection.objects.link(inst)
+    fv, ff = _grid(2)
+    _paint(_mesh("floor", fv, ff))
+    scene = _save(os.path.join(d, "scene.blend"))
+    _reset()
+    digests = {p: file_digest(p) for p in (scene, lib, set_path)}
+    code, _, err = _solve_argv(run_cli, ["solve", scene, "--report", tmp_path / "r.json", "--out", lib, *RAYS])
+    assert code == 2, err
+    line = _error_line(err)
+    assert "is a file the scene reads (the library 'lib.blend' it links from)" in line, line
+    assert {p: file_digest(p) for p in digests} == digests and not (tmp_path / "r.json").exists()
+
+
 def _solve_argv(run_cli, argv):
     code, report, err = run_cli(argv)
     assert "Traceback" not in err, err

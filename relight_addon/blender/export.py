@@ -169,13 +169,13 @@ _READERS = {"Image": "image", "VectorFont": "font", "Sound": "sound", "MovieClip
 
 def files_read() -> list:
     """[(what reads it, absolute path)] of every file the open .blend reads from disk: its libraries
-    (direct and indirect, each path resolved from the file that links it) and every external file
-    of its data-blocks (images, a World's HDRI among them, fonts, sounds, clips, volumes, caches; a
-    linked data-block's paths resolved from its library). An output must never replace one."""
+    (direct and indirect) and every external file of its data-blocks (images, a World's HDRI among
+    them, fonts, sounds, clips, volumes, caches; a linked data-block's paths resolved from its
+    library). An output must never replace one."""
     out = []
     for lib in bpy.data.libraries:
-        out.append((f"the library {lib.name!r} it links from", os.path.normpath(bpy.path.abspath(lib.filepath,
-                                                                                             library=lib.parent))))
+        # (an indirect library's path too is relative to the open file: Blender remaps it when it reads it)
+        out.append((f"the library {lib.name!r} it links from", os.path.normpath(bpy.path.abspath(lib.filepath))))
     for idb, paths in bpy.data.file_path_map(include_libraries=False).items():
         if isinstance(idb, bpy.types.Library):
             continue
