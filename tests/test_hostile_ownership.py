@@ -189,6 +189,36 @@ def test_output_never_replaces_an_indirect_library(run_cli, tmp_path):
     assert {p: file_digest(p) for p in digests} == digests and not (tmp_path / "r.json").exists()
 
 
+def test_render_never_replaces_a_linked_objects_texture(run_cli, tmp_path):
+    """Case 1, an image of a library: libs/lib.blend's ceiling has a texture libs/tex.png (its path
+    relative to the library). --render naming it is refused; the picture and the library unchanged."""
+    libs = tmp_path / "libs"
+    libs.mkdir()
+    tex = libs / "tex.png"
+    tex.write_bytes(b"\x89PNG the artist's texture")
+    _reset()
+    mat = bpy.data.materials.new("plaster")
+    node = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    node.image = bpy.data.images.new("tex", 4, 4)
+    node.image.source, node.image.filepath = "FILE", str(tex)
+    cv, cf = _grid(2, z=1.0, flip=True)
+    _mesh("lib_ceiling", cv, cf, material=mat)
+    lib = str(libs / "lib.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=lib, relative_remap=True)
+    _reset()
+    fv, ff = _grid(2)
+    _paint(_mesh("floor", fv, ff))
+    _link(lib, "lib_ceiling")
+    _camera()
+    scene = _save(tmp_path / "scene.blend")
+    _reset()
+    digests = {p: file_digest(p) for p in (scene, lib, str(tex))}
+    code, _, err = _solve_argv(run_cli, ["solve", scene, "--report", tmp_path / "r.json", "--render", tex, *RAYS])
+    assert code == 2, err
+    assert "--render " in _error_line(err) and "is a file the scene reads (the image 'tex')" in _error_line(err)
+    assert {p: file_digest(p) for p in digests} == digests and not (tmp_path / "r.json").exists()
+
+
 def _solve_argv(run_cli, argv):
     code, report, err = run_cli(argv)
     assert "Traceback" not in err, err
