@@ -16,8 +16,8 @@ import pytest
 
 from conftest import file_digest
 from test_hostile import (RAYS, _grid, _library, _link, _mesh, _paint, _reset, _room, _save, addon,  # noqa: F401
-                          assert_scene_finite, scene_cache, snapshot, strict_json)
-from test_hostile_everyday import _error_line, _open_solved, _refused, _solve
+                          assert_scene_finite, scene_cache, strict_json)
+from test_hostile_everyday import _error_line, _refused, _solve
 
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 
