@@ -153,7 +153,8 @@ def test_output_never_replaces_a_file_the_scene_reads(run_cli, tmp_path, option,
     assert not (tmp_path / "r.json").exists()
     assert sorted(os.listdir(tmp_path)) == ["libs", "scene.blend", "textures"]
     bpy.ops.wm.open_mainfile(filepath=scene)  # the link still resolves
-    assert bpy.data.objects["lib_ceiling"].library is not None and len(bpy.data.objects["lib_ceiling"].data.polygons) == 4
+    ceiling = bpy.data.objects["lib_ceiling"]
+    assert ceiling.library is not None and len(ceiling.data.polygons) == 4
 
 
 def test_output_never_replaces_an_indirect_library(run_cli, tmp_path):
@@ -290,7 +291,7 @@ def test_atomic_output_refuses_what_appeared_during_the_write(tmp_path):
     assert stat.S_ISFIFO(os.lstat(path).st_mode) and os.listdir(tmp_path) == ["r.json"]
 
 
-# ============================================================================ the lamps' collection: its contents checked
+# ============================================================================ the lamps' collection: contents checked
 
 def _open_placed(scenes):
     """room_camera solved in the add-on with point lamps and no cells: the answer is lamps Relight
@@ -332,7 +333,8 @@ def test_a_renamed_relight_lamp_is_the_artists(addon, scenes):
     k = scene.relight.curve_index
     assert bpy.ops.relight.apply_configuration(index=k) == {"FINISHED"}
     assert "Key light" in scene.objects and np.allclose(np.array(mine.matrix_world), where)
-    assert [c.name for c in mine.users_collection] == ["Relight Lamps"] and "relight_owner" not in mine.users_collection[0]
+    assert [c.name for c in mine.users_collection] == ["Relight Lamps"]
+    assert "relight_owner" not in mine.users_collection[0]  # the collection that holds it is the artist's now
     shown = [o for o in scene.objects if o.type == "LIGHT" and "relight_owner" in o and o.name != "Key light"]
     assert len(shown) == len(placed)  # the row's own lamps, shown again
     assert bpy.ops.relight.clear_results() == {"FINISHED"}
@@ -418,7 +420,7 @@ def test_keep_lamps_then_a_moved_kept_lamp_is_named(addon, scenes):
     assert_scene_finite()
 
 
-# ============================================================================ what Relight writes: never overridden by animation
+# ============================================================================ what Relight writes: not overridden
 
 @pytest.mark.parametrize("scene, option, message", [
     ("power_driven", "--out", "lamp 'Key': Power (a driver) would override what Relight sets there"),  # case 8

@@ -612,13 +612,14 @@ def keep_placed(scene) -> list:
     return names
 
 
-def _remove_objects(obs) -> int:
-    """Remove objects ``obs`` (Relight's) and their data left without a user (a Shift-D copy has its own
-    data; an Alt-D copy shares it, and then the data stays with it)."""
+def _remove_objects(obs, data_ours=lambda d: True) -> int:
+    """Remove objects ``obs`` (Relight's) and their data that ``data_ours`` says is Relight's too, when
+    no user is left (a Shift-D copy has its own data; an Alt-D copy shares it, and then the data stays
+    with it)."""
     for ob in obs:
         d = ob.data
         bpy.data.objects.remove(ob)
-        if d is not None and d.users == 0 and not d.use_fake_user:
+        if d is not None and d.users == 0 and not d.use_fake_user and data_ours(d):
             getattr(bpy.data, {"LIGHT": "lights", "MESH": "meshes"}[d.id_type]).remove(d)
     return len(obs)
 
@@ -642,7 +643,7 @@ def empty_collection(coll, ours) -> bool:
 def _remove_placed(rid) -> int:
     """Remove the lamps (objects, their Light data) that result ``rid`` placed, and its collection
     unless the artist's objects are in it (``empty_collection``)."""
-    n = _remove_objects([o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)])
+    n = _remove_objects([o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)], lambda d: _owned(d, rid))
     for coll in [c for c in bpy.data.collections if _owned(c, rid)]:
         empty_collection(coll, lambda o: False)
     return n
