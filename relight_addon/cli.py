@@ -7,8 +7,9 @@ written whole or not at all (a temporary beside it, then a rename), and a cancel
 code and can be called from any Python that has bpy: the PyPI ``bpy`` module or a Blender
 binary (``blender -b --python-expr``); see README.md.
 
-Order of work: every output path is checked first (not the input, not each other, writable),
-then the scene is exported and meshed, the estimate printed (stderr), the job run with a
+Order of work: every output path is checked first (not the input, not each other, writable, a
+regular file or nothing), then the scene is opened and no output may be a file it reads (its
+libraries, images, ...), then it is exported and meshed, the estimate printed (stderr), the job run with a
 progress display on stderr (lines when stderr is not a terminal, one updating line when it
 is; ``--quiet`` turns both off), the result applied to the open scene, the report written,
 and only then ``--out`` and ``--render`` (a failing save still leaves the report).
@@ -191,23 +192,24 @@ BLENDER_PATH_MAX = 1024
 
 
 def _check_writable(option, path):
-    """UsageError unless ``path`` can be written: not a directory, its file (if any) writable,
-    its nearest existing folder a writable directory (missing folders are made when writing); a
-    symbolic link is written through, to its target; a path Blender writes (--out, --render) must
+    """UsageError unless ``path`` can be written: nothing there or a regular file (never a FIFO, a
+    device node, a socket, a directory or a symbolic link: an output replaces only a regular file,
+    pipeline.files.not_regular), its file (if any) writable, its nearest existing folder a writable
+    directory (missing folders are made when writing); a path Blender writes (--out, --render) must
     fit in Blender's path length."""
+    from .pipeline.files import not_regular
+
     full = os.path.abspath(path)
-    if os.path.islink(full):
-        target = os.path.realpath(full)
-        if not os.path.isdir(os.path.dirname(target)):
-            raise UsageError(f"cannot write --{option} {path}: it is a symbolic link to {target}, whose folder "
-                             f"{os.path.dirname(target)} does not exist")
-        full = target
     n = len(os.fsencode(full))
     if option in ("out", "render") and n >= BLENDER_PATH_MAX:
         raise UsageError(f"cannot write --{option}: its path is {n} bytes long, and Blender keeps paths of at most "
                          f"{BLENDER_PATH_MAX - 1} bytes: choose a shorter one")
-    if os.path.isdir(full):
+    if os.path.isdir(full) and not os.path.islink(full):
         raise UsageError(f"cannot write --{option} {path}: it is a directory")
+    kind = not_regular(full)
+    if kind:
+        raise UsageError(f"cannot write --{option} {path}: it is {kind}, not a regular file, and Relight replaces "
+                         "only regular files: give another path")
     if os.path.lexists(full):
         if not os.access(full, os.W_OK):
             raise UsageError(f"cannot write --{option} {path}: permission denied")
@@ -251,6 +253,20 @@ def _check_paths(args):
             raise UsageError(f"--render {args.render}: the picture's format is read from its extension, and "
                              f"{ext or 'no extension'} is not one Relight writes ({', '.join(RENDER_FORMATS)})")
     return scene_path
+
+
+def _check_not_read(args):
+    """After the scene is open, before any work: no output may replace a file the scene reads (a
+    library it links from, an image, font or sound it uses: export.files_read)."""
+    from .blender.export import files_read
+
+    read = files_read()
+    for name in ("report", "out", "render"):
+        path = getattr(args, name, None)
+        for what, p in read if path else ():
+            if _same_file(path, p):
+                raise UsageError(f"--{name} {path} is a file the scene reads ({what}): Relight never replaces "
+                                 "it; give another path")
 
 
 # --------------------------------------------------------------------------- feedback on stderr
@@ -429,6 +445,7 @@ def run_radiosity_command(args, progress=None, cancel=None):
     t0 = time.perf_counter()
     _check_paths(args)
     export.open_blend(args.scene)
+    _check_not_read(args)
     exp = export.export_scene()
     options = _options(args)
     inputs = export.job_inputs(exp)
@@ -464,9 +481,17 @@ def _match_light_paths(args, report):
 
     from .blender import light_paths
 
+    from .blender.lamp_state import animated
+
     scene = bpy.context.scene
     block = report["render_settings"]
     changed = light_paths.match_light_paths(scene, block["max_reflectance"])
+    overridden = animated(scene, [f"cycles.{k}" for k in changed if "." not in k])
+    if overridden:  # what Relight wrote, overridden by animation (issue 35): said; the lights are right
+        report["warnings"].append(
+            f"the scene's Cycles light paths are animated ({', '.join(overridden)}): --out sets them for the "
+            "prediction, and the animation sets other values when the copy is opened or rendered; remove the "
+            "keyframes or drivers to render what was predicted")
     block["written"] = {"settings": light_paths.current_settings(scene),
                         "changed": {k: list(v) for k, v in changed.items()}}
 
@@ -489,9 +514,12 @@ def run_solve_command(args, progress=None, cancel=None):
         except ValueError as exc:
             raise UsageError(str(exc)) from None
     export.open_blend(args.scene)
+    _check_not_read(args)
     names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
                           target_scale=getattr(args, "target_scale", None))
+    if args.command == "reduce" and (args.out or args.render):  # before the work: what apply will write
+        _check_lamps_not_animated(bpy.context.scene, job.exp.faces.lamps)
     patches, cost = _job(args, job.mesh)
     _print_estimate(args, patches, cost)
     outcome = _job(args, job.run)
@@ -502,6 +530,9 @@ def run_solve_command(args, progress=None, cancel=None):
             {"object": n, "type": r["type"].lower(), "location": r["position"], "energy": r["energy"],
              "color": r["color"], "power": r["power"]} for n, r in zip(names, keep[0])]}
         report["warnings"].extend(keep[1])
+        report["warnings"].extend(kept.foreign_notes(
+            [(n, r["position"]) for n, r in zip(names, keep[0])], report.get("fixed_light"), job.exp.faces.vertices,
+            args.keep, solved_for=keep[2], this_input=os.path.abspath(args.scene)))
 
     def apply():
         shown = results.show_outcome(bpy.context.scene, outcome, job.exp.fingerprints)
@@ -509,6 +540,18 @@ def run_solve_command(args, progress=None, cancel=None):
         _match_light_paths(args, report)
 
     return _save_outputs(args, report, report["timings_s"], t0, apply)
+
+
+def _check_lamps_not_animated(scene, lamps):
+    """reduce --out/--render sets every lamp it reduces (Power and colour, or Disable in Renders):
+    refused at once when a driver or keyframes would override that (lamp_state.check_not_animated;
+    apply checks it again before writing)."""
+    from .blender import lamp_state
+
+    for lamp in lamps:
+        ob = scene.objects.get(lamp.name)
+        if ob is not None and ob.type == "LIGHT" and ob.library is None and ob.data.library is None:
+            lamp_state.check_not_animated(ob)
 
 
 def _summary(args, report):

@@ -162,6 +162,30 @@ def open_blend(path: str):
         raise BlendFileError(f"cannot open {path}: {msg}") from None
 
 
+#: Blender's names of the data-blocks that read files (for messages)
+_READERS = {"Image": "image", "VectorFont": "font", "Sound": "sound", "MovieClip": "movie clip", "Volume": "volume",
+            "CacheFile": "cache file", "Text": "text", "Library": "library"}
+
+
+def files_read() -> list:
+    """[(what reads it, absolute path)] of every file the open .blend reads from disk: its libraries
+    (direct and indirect) and every external file of its data-blocks (images, a World's HDRI among
+    them, fonts, sounds, clips, volumes, caches; a linked data-block's paths resolved from its
+    library). An output must never replace one."""
+    out = []
+    for lib in bpy.data.libraries:
+        # (an indirect library's path too is relative to the open file: Blender remaps it when it reads it)
+        out.append((f"the library {lib.name!r} it links from", os.path.normpath(bpy.path.abspath(lib.filepath))))
+    for idb, paths in bpy.data.file_path_map(include_libraries=False).items():
+        if isinstance(idb, bpy.types.Library):
+            continue
+        what = _READERS.get(type(idb).__name__, type(idb).__name__.lower())
+        for p in paths:
+            if p:
+                out.append((f"the {what} {idb.name!r}", os.path.normpath(bpy.path.abspath(p, library=idb.library))))
+    return out
+
+
 # ------------------------------------------------------------------ materials
 def material_properties(mat):
     """(reflectance (3,), radiance (3,), note or None) of a material: its white-furnace albedo

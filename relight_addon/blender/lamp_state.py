@@ -15,12 +15,68 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-__all__ = ["STATE_PROP", "DATA_PROP", "before", "world_matrix", "visible_before", "set_power", "disable", "restore"]
+__all__ = ["STATE_PROP", "DATA_PROP", "before", "world_matrix", "visible_before", "set_power", "disable", "restore",
+           "animated", "check_not_animated"]
 
 STATE_PROP = "relight_lamp_original"
 DATA_PROP = "relight_lamp_original_data"
 #: the owner property of everything Relight makes (export.RELIGHT_OWNER_PROP)
 OWNER_PROP = "relight_owner"
+
+
+#: what Relight writes on a lamp (set_power, disable): on its object, and on its Light
+WRITTEN_OBJECT = ("hide_render", "hide_viewport")
+WRITTEN_LIGHT = ("energy", "color")
+_LABELS = {"energy": "Power", "color": "Color", "hide_render": "Disable in Renders",
+           "hide_viewport": "Disable in Viewports"}
+
+
+def _fcurves(action, slot):
+    """The F-curves of ``action`` that animate the data-block of ``slot`` (Blender 4.4 on: slotted
+    actions; before: the action's own F-curves)."""
+    if action is None:
+        return []
+    if hasattr(action, "fcurves"):
+        return list(action.fcurves)
+    from bpy_extras import anim_utils
+
+    bag = anim_utils.action_get_channelbag_for_slot(action, slot) if slot is not None else None
+    return list(bag.fcurves) if bag is not None else []
+
+
+def animated(idb, props) -> list:
+    """The properties of ``props`` on ``idb`` that animation sets when the file is opened, the frame
+    changes or it renders -- a driver, or keyframes (its action's F-curves, or an unmuted NLA strip's)
+    -- each as "Power (a driver)", "Color (keyframes)": what Relight writes there would be overridden."""
+    ad = getattr(idb, "animation_data", None)
+    if ad is None:
+        return []
+    found = {}
+    for fc in ad.drivers:
+        if fc.data_path in props and not fc.mute:
+            found.setdefault(fc.data_path, "a driver")
+    actions = [(ad.action, getattr(ad, "action_slot", None))]
+    actions += [(strip.action, getattr(strip, "action_slot", None)) for track in ad.nla_tracks if not track.mute
+                for strip in track.strips if not strip.mute]
+    for action, slot in actions:
+        for fc in _fcurves(action, slot):
+            if fc.data_path in props and not fc.mute:
+                found.setdefault(fc.data_path, "keyframes")
+    return [f"{_LABELS.get(p, p)} ({found[p]})" for p in props if p in found]
+
+
+def check_not_animated(ob, power=True) -> None:
+    """SceneError, before anything is written, when animation would override what Relight writes on
+    the lamp ``ob`` (issue 35, case 8): its Disable in Renders/Viewports, and with ``power`` its
+    Power and Color. Refused, not warned: the copy or the scene would render another light than
+    the configuration shown and reported, whatever the warning said."""
+    from ..engine.scene import SceneError
+
+    what = animated(ob, WRITTEN_OBJECT) + (animated(ob.data, WRITTEN_LIGHT) if power and ob.data else [])
+    if what:
+        raise SceneError(f"lamp {ob.name!r}: {', '.join(what)} would override what Relight sets there: nothing "
+                         "written; remove them (right-click the property: Delete Driver / Clear Keyframes) or "
+                         "leave the lamp out")
 
 
 def before(ob) -> dict | None:

@@ -514,6 +514,12 @@ def add_kept_lamps(scene, records) -> list:
     return names
 
 
+#: on a placed lamp: the name of the stored lamp record it shows (its object may be named otherwise)
+PLACED_LAMP_PROP = "relight_lamp"
+#: on a kept lamp: {"result": the result's id, "lamp": its record's name, "name": the kept object's name}
+KEPT_PROP = "relight_kept"
+
+
 def write_placed(scene, rid, plan) -> None:
     """Write ``plan_placed``'s plan: the lamps, owned by the result ``rid``, in a collection of their own."""
     if not plan:
@@ -522,7 +528,61 @@ def write_placed(scene, rid, plan) -> None:
     tag_owned(coll, rid)
     scene.collection.children.link(coll)
     for rec, energy, color in plan:
-        coll.objects.link(new_lamp(rec, energy, color, owner=rid))
+        ob = new_lamp(rec, energy, color, owner=rid)
+        ob[PLACED_LAMP_PROP] = rec["name"]
+        coll.objects.link(ob)
+
+
+def _disown(*idbs) -> None:
+    """The artist's from now on: Relight's owner marks removed (no result removes it)."""
+    for idb in idbs:
+        for prop in (RELIGHT_OWNER_PROP, RELIGHT_NAME_PROP, PLACED_LAMP_PROP):
+            if prop in idb:
+                del idb[prop]
+
+
+def kept_twins(scene, rid) -> dict:
+    """{record name: kept object} of the lamps of result ``rid`` kept by Keep Lamps (``keep_placed``)
+    still in the scene under the name they were kept with (a copy or a renamed one is the artist's
+    like any other lamp)."""
+    out = {}
+    for ob in scene.objects:
+        mark = ob.get(KEPT_PROP) if ob.type == "LIGHT" else None
+        if mark is not None and rid is not None and mark.get("result") == rid and mark.get("name") == ob.name:
+            out[str(mark.get("lamp"))] = ob
+    return out
+
+
+def without_kept(scene, rid, plan) -> tuple:
+    """(plan, notes): ``plan_placed``'s plan without the lamps a kept twin stands for (issue 35,
+    case 5: Keep Lamps then the same row clicked again recreated every lamp beside its kept twin,
+    twice the light). A kept lamp is the scene's from then on: it is never placed again; where it
+    differs from the row (another Power, colour, place, or off in this row) a note names it, since
+    the row's prediction then does not hold for the scene as it is."""
+    kept = kept_twins(scene, rid)
+    if not kept:
+        return plan, []
+    out, notes, seen = [], [], set()
+    for rec, energy, color in plan:
+        ob = kept.get(rec["name"])
+        if ob is None:
+            out.append((rec, energy, color))
+            continue
+        seen.add(rec["name"])
+        ld, M = ob.data, lamp_state.world_matrix(ob)
+        same = (ld.type == rec["type"] and np.isclose(ld.energy, energy, rtol=1e-5, atol=1e-9)
+                and np.allclose(np.array(ld.color)[:3], color, rtol=1e-5, atol=1e-6)
+                and np.allclose(M[:3, 3], rec["position"], atol=1e-6)
+                and np.allclose(-M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300), rec["direction"], atol=1e-6))
+        if not same:
+            notes.append(f"lamp {rec['name']!r} is kept as {ob.name!r}, which differs from this configuration's "
+                         f"(Power {ld.energy:.4g} W, {energy:.4g} W here, or moved): it is not placed again, and "
+                         "the prediction holds only after Solve & Reduce")
+    for name, ob in kept.items():
+        if name not in seen:
+            notes.append(f"lamp {name!r} is kept as {ob.name!r} and lights the scene, though this configuration has "
+                         "it off: the prediction holds only after Solve & Reduce")
+    return out, notes
 
 
 def keep_placed(scene) -> list:
@@ -539,11 +599,10 @@ def keep_placed(scene) -> list:
                          "nothing is solved yet)")
     names = []
     for ob in obs:
-        for idb in (ob, ob.data):
-            for prop in (RELIGHT_OWNER_PROP, RELIGHT_NAME_PROP):
-                if prop in idb:
-                    del idb[prop]
+        lamp = ob.get(PLACED_LAMP_PROP, ob.name)
+        _disown(ob, ob.data)
         ob.name = ob.name + KEPT_SUFFIX
+        ob[KEPT_PROP] = {"result": rid, "lamp": lamp, "name": ob.name}  # its row shows it, never a twin
         if ob.name not in scene.collection.objects:
             scene.collection.objects.link(ob)
         for coll in list(ob.users_collection):
@@ -553,17 +612,41 @@ def keep_placed(scene) -> list:
     return names
 
 
-def _remove_placed(rid) -> int:
-    """Remove the lamps (objects, their Light data) and the collection that result ``rid`` placed."""
-    obs = [o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)]
+def _remove_objects(obs, data_ours=lambda d: True) -> int:
+    """Remove objects ``obs`` (Relight's) and their data that ``data_ours`` says is Relight's too, when
+    no user is left (a Shift-D copy has its own data; an Alt-D copy shares it, and then the data stays
+    with it)."""
     for ob in obs:
-        ld = ob.data
+        d = ob.data
         bpy.data.objects.remove(ob)
-        if ld is not None and ld.users == 0 and _owned(ld, rid):
-            bpy.data.lights.remove(ld)
-    for coll in [c for c in bpy.data.collections if _owned(c, rid)]:
-        bpy.data.collections.remove(coll)
+        if d is not None and d.users == 0 and not d.use_fake_user and data_ours(d):
+            getattr(bpy.data, {"LIGHT": "lights", "MESH": "meshes"}[d.id_type]).remove(d)
     return len(obs)
+
+
+def empty_collection(coll, ours) -> bool:
+    """Ownership of a collection's *contents*, checked before any removal (issue 35): remove the
+    objects of ``coll`` that ``ours(object)`` says Relight made, then the collection itself only if
+    nothing else is left in it. What the artist put there (a lamp of their own, a Shift-D copy of
+    Relight's, a Relight lamp they renamed: export.owner_of) stays, and so does the collection, then
+    theirs (its owner marks removed). Returns True when the collection was removed."""
+    _remove_objects([o for o in coll.objects if ours(o)])
+    if len(coll.objects) or len(coll.children):
+        for prop in (RELIGHT_OWNER_PROP, RELIGHT_NAME_PROP):
+            if prop in coll:
+                del coll[prop]
+        return False
+    bpy.data.collections.remove(coll)
+    return True
+
+
+def _remove_placed(rid) -> int:
+    """Remove the lamps (objects, their Light data) that result ``rid`` placed, and its collection
+    unless the artist's objects are in it (``empty_collection``)."""
+    n = _remove_objects([o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)], lambda d: _owned(d, rid))
+    for coll in [c for c in bpy.data.collections if _owned(c, rid)]:
+        empty_collection(coll, lambda o: False)
+    return n
 
 
 def plan_lamps(scene, data, strength) -> tuple:
@@ -615,6 +698,7 @@ def plan_lamps(scene, data, strength) -> tuple:
                            "configuration sets it; make it local to see the reduction")
             continue
         s = np.asarray(strength[j], dtype=np.float64)
+        lamp_state.check_not_animated(ob, power=bool(np.any(s > 0)))  # a driver or keyframes would override it
         try:
             plan.append((ob, blender_values(s, rec["energy"], rec["color"], gain) if np.any(s > 0) else None))
         except ValueError as e:
@@ -694,7 +778,8 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
                 suppress.append((ob, polys - off[oi]))
     lamp_plan, lamp_skipped = plan_lamps(scene, data, exitance)
     skipped.extend(lamp_skipped)
-    placed = plan_placed(data, exitance)
+    placed, kept_notes = without_kept(scene, rid, plan_placed(data, exitance))
+    skipped.extend(kept_notes)
     # write
     clear_shown(scene)
     if rid != result_id(scene):
@@ -776,7 +861,8 @@ def make_area_lights(scene, index) -> int:
     one-sided area light of the cell's area at its centre (set off like the emitters object),
     facing along its normal, power = exitance x area (W), in a new collection. Rectangular cells
     (grid cells of quads) get a rectangle of their sides; others a square of their area. The
-    lamps the solve placed (Spot, Area, Point) are copied there too, as they are shown.
+    lamps the solve placed (Spot, Area, Point) are copied there too: of the row shown, as they are in the
+    scene (as the artist edited them); of another row, as solved.
     All or nothing: every light is computed and checked (finite, positive area) before the
     previous lights of this result are replaced; cells without area are left out."""
     from mathutils import Matrix, Vector
@@ -825,21 +911,19 @@ def make_area_lights(scene, index) -> int:
         # Cycles: a light emits colour x Power in each channel (intern/cycles/blender/light.cpp)
         plan.append((int(c), shape, size, float(power.max()), power / max(power.max(), 1e-30),
                      center + offset * n, rot))
-    placed = plan_placed(data, exitance)  # the placed lamps: copies of their own type, the artist's
+    shown = scene.get("relight_shown")
+    if shown is not None and int(shown) == int(index):  # the placed lamps as they are in the scene: as the
+        # artist edited them (moved, another Power: issue 35, case 3), not as solved; kept or renamed ones are
+        # already the artist's, and a deleted one is not brought back
+        placed = [o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)]
+    else:  # another row: its lamps as solved (a kept twin stands for its lamp: not copied again)
+        placed = without_kept(scene, rid, plan_placed(data, exitance))[0]
     # write: replace this result's own earlier lights (by identity), then add the new ones
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
     coll = None
     for c in old:  # Make Area Lights again replaces its own lights of this result, and only those
-        for o in list(c.objects):
-            if _made_area_light(o, rid):
-                d = o.data
-                bpy.data.objects.remove(o)
-                if d is not None and d.users == 0:
-                    bpy.data.lights.remove(d)
-        if len(c.objects) or len(c.children):  # what the user put there stays, and so does the collection
+        if not empty_collection(c, lambda o: _made_area_light(o, rid)):  # what the user put there stays
             coll = coll or c
-        else:
-            bpy.data.collections.remove(c)
     if coll is None:
         coll = bpy.data.collections.new("Relight Lights")
         coll[AREA_LIGHTS_PROP] = rid or ""
@@ -857,8 +941,13 @@ def make_area_lights(scene, index) -> int:
         obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
         coll.objects.link(obj)
         _mark_area_light(obj, rid)
-    for rec, energy, color in placed:
-        obj = new_lamp(rec, energy, color)
+    for p in placed:
+        if isinstance(p, bpy.types.Object):
+            obj = p.copy()
+            obj.data = p.data.copy()
+            _disown(obj, obj.data)
+        else:
+            obj = new_lamp(*p)
         coll.objects.link(obj)
         _mark_area_light(obj, rid)
     return len(plan) + len(placed)

@@ -15,10 +15,11 @@ kept, and named.
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 
-__all__ = ["KEPT_SUFFIX", "kept_lamps", "read_kept"]
+__all__ = ["KEPT_SUFFIX", "kept_lamps", "read_kept", "foreign_notes"]
 
 #: the kept lamps' names: the answer's name and this
 KEPT_SUFFIX = " (kept)"
@@ -88,7 +89,8 @@ def kept_lamps(report: dict, source: str = "the report") -> tuple:
 
 
 def read_kept(path: str) -> tuple:
-    """kept_lamps of the JSON report at ``path`` (ValueError with the cause when it cannot be read)."""
+    """kept_lamps of the JSON report at ``path`` and the scene it was solved for (its ``input``, or
+    None): (records, notes, input). ValueError with the cause when it cannot be read."""
     try:
         with open(path) as fh:
             report = json.load(fh)
@@ -98,4 +100,36 @@ def read_kept(path: str) -> tuple:
         raise ValueError(f"--keep: {path} is not JSON ({exc.msg}, line {exc.lineno})") from None
     except UnicodeDecodeError:
         raise ValueError(f"--keep: {path} is not JSON (not text: a .blend? give the report of a solve)") from None
-    return kept_lamps(report, path)
+    records, notes = kept_lamps(report, path)
+    return records, notes, report.get("input") if isinstance(report.get("input"), str) else None
+
+
+def foreign_notes(kept, fixed_light, vertices, source, solved_for=None, this_input=None) -> list:
+    """Warnings about kept lamps that do not belong to this scene (issue 35, case 10: a report of
+    another scene kept, its lamps above this room's ceiling, written without a word). ``kept``:
+    [(the kept lamp's name, its position)]; ``fixed_light``: the solve report's rows (a lamp's
+    ``share`` of the targets' light); ``vertices`` (V, 3): the scene's geometry. Named: the kept
+    lamps that light no target (share 0), and those outside the scene's bounding box; with the
+    scene the report was solved for when it is not this one. They are kept all the same (the
+    user asked for them, and a lamp may light what is not painted): warned, not refused."""
+    share = {r.get("name"): r.get("share") for r in fixed_light or []}
+    dark = [name for name, _ in kept if share.get(name) is not None and not share[name] > 0]
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    outside = []
+    if len(v):
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        tol = 1e-6 * max(float(np.max(hi - lo)), 1e-12)
+        outside = [name for name, p in kept
+                   if np.any(np.asarray(p, dtype=np.float64) < lo - tol) or np.any(np.asarray(p) > hi + tol)]
+    if not (dark or outside):
+        return []
+
+    def names(xs):
+        return ", ".join(repr(x) for x in xs[:5]) + (" ..." if len(xs) > 5 else "")
+
+    parts = ([f"{len(dark)} light no target ({names(dark)})"] if dark else []) + \
+        ([f"{len(outside)} lie outside this scene's bounds ({names(outside)})"] if outside else [])
+    other = (f"; {source} was solved for {solved_for}, not this scene"
+             if solved_for and this_input and os.path.abspath(solved_for) != os.path.abspath(this_input) else "")
+    return [f"--keep {source}: of its {len(kept)} kept lamp(s), {' and '.join(parts)}{other}: they are written as "
+            "this scene's lamps all the same; delete them, or keep a report of this scene"]
