@@ -97,6 +97,7 @@ import numpy as np
 
 from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
+from ..engine.paint import neutral_as_brightness
 from ..engine.units import MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, irradiance_from_lux
 from ..engine.world import sees_sky
 from .lamps import export_lamps, hidden_warning
@@ -571,11 +572,13 @@ def _lux_values(ob, n) -> np.ndarray:
 
 
 def illuminance_targets(target, target_b, lux, reflectance, face_object, names):
-    """The faces' targets with their illuminance targets (``lux`` (F,), lx, 0: none) among them:
+    """The faces' targets (neutral paint read as a brightness: engine.paint) with their
+    illuminance targets (``lux`` (F,), lx, 0: none) among them:
     a face of illuminance E_v lx is a target of radiosity reflectance x E (engine.units.
     irradiance_from_lux: white light of that illuminance), the illuminance arriving there whatever
     its reflectance. A face that reflects too little for its radiosity to tell its illuminance
     (a channel below MIN_REFLECTANCE_LUX) is refused, naming its object."""
+    target_b = neutral_as_brightness(target, target_b, reflectance)  # (grey paint: a brightness, engine.paint)
     on = lux > 0
     if not on.any():
         return target, target_b

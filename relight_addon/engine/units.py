@@ -17,7 +17,8 @@ import math
 import numpy as np
 
 __all__ = ["MAX_REFLECTANCE", "MIN_REFLECTANCE_LUX", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
-           "radiance_from_exitance", "illuminance_lux", "irradiance_from_lux", "luminous_flux_lm"]
+           "radiance_from_exitance", "illuminance_lux", "irradiance_from_lux", "luminous_flux_lm", "luminance_cd",
+           "luminance_weighted"]
 
 #: reflectance of an exported material is clamped to [0, MAX_REFLECTANCE] (with a warning):
 #: a reflectance of 1 or more creates energy; the engine's forward solver clamps to the same value
@@ -58,3 +59,13 @@ def irradiance_from_lux(lux) -> np.ndarray:
 def illuminance_lux(irradiance_rgb) -> np.ndarray:
     """Illuminance (lx) of an RGB irradiance (..., 3) in W/m^2 per channel."""
     return LUMENS_PER_WATT * (np.asarray(irradiance_rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE))
+
+
+def luminance_cd(radiance_rgb) -> np.ndarray:
+    """Luminance (cd/m^2) of an RGB radiance (..., 3) in W/(m^2 sr) per channel."""
+    return LUMENS_PER_WATT * luminance_weighted(radiance_rgb)
+
+
+def luminance_weighted(rgb) -> np.ndarray:
+    """The Rec.709 luminance-weighted mean of RGB values (..., 3) (the weights sum to 1)."""
+    return np.asarray(rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE)

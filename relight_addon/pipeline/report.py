@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from ..engine.light_colour import blackbody_rec709
+from ..engine.plausibility import implausible_notes
 from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
 
 __all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
@@ -177,6 +178,9 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
     warnings = list(warnings) + [f"lamp {r['name']!r}: {r['problem']}: the written copy cannot show this configuration "
                                  "(turn its Temperature off, or raise it, and reduce again)"
                                  for r in lamps or [] if "problem" in r]
+    final_lights = light_records(model, curve, fi)
+    if model.mode == "inverse":  # (each record gets its utilisation; the implausible ones named)
+        warnings += implausible_notes(problem, final_lights, np.flatnonzero(np.any(curve.exitance[fi] != 0, axis=1)))
     return {
         "command": "solve" if model.mode == "inverse" else "reduce",
         "units": {"radiosity": "W/m^2", "exitance": "W/m^2", "power": "W", "length": "m"},
@@ -225,7 +229,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
                   "n_negative": final.n_negative, "power": _power(problem, final),
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
-                  "lights": light_records(model, curve, fi)},
+                  "lights": final_lights},
         "fixed_light": fixed_light,
         "targets_photometric": photometric,
         "lamps": lamps,

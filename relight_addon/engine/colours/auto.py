@@ -3,7 +3,8 @@ targets ask for colours no blackbody light of the range gives. Measured on the p
 selection: the every-light NNLS with free colours against the blackbody relaxation's
 (engine.light_colour.relaxed_bound), both lower bounds on any number of lights. When blackbody
 lights cannot come within AUTO_GAP of what free colours can (relative error), the targets ask for
-coloured light (grey painted on a warm wood, say: only a bluish light gives it): free colours,
+coloured light (blue painted on a warm wood, say: only a bluish light gives it; grey paint is a
+brightness, engine/paint.py): free colours,
 and a note says so and what blackbody lights can reach. docs/benchmarks.md, "Light colour".
 """
 from __future__ import annotations

@@ -1,0 +1,58 @@
+"""Lights a designer would hang (engine/plausibility.py). References: the utilisation of a light
+computed by hand from its radiosity on the targets (sum of A_t B_t / rho_t over its power), and a
+room whose desk sees the only allowed surfaces (walls 20 m away) at grazing angles."""
+import numpy as np
+import pytest
+
+from relight_addon.engine.options import JobOptions
+from relight_addon.engine.plausibility import MIN_UTILISATION, utilisation
+from relight_addon.engine.scene import polygon_faceset
+from relight_addon.pipeline.jobs import run_solve
+
+
+def _quad(a, b, c, d):
+    return np.array([a, b, c, d], dtype=np.float64)
+
+
+def hall(ceiling_allowed):
+    """A hall of 40 x 40 x 3 m (faces in), a 1 x 1 m desk top 0.75 m high in its middle painted
+    grey; the floor and the desk may hold no light, the ceiling only when ``ceiling_allowed``."""
+    X = Y = 40.0
+    Z = 3.0
+    polys = [_quad((0, 0, 0), (X, 0, 0), (X, Y, 0), (0, Y, 0)), _quad((0, 0, 0), (0, 0, Z), (X, 0, Z), (X, 0, 0)),
+             _quad((0, Y, 0), (X, Y, 0), (X, Y, Z), (0, Y, Z)), _quad((0, 0, 0), (0, Y, 0), (0, Y, Z), (0, 0, Z)),
+             _quad((X, 0, 0), (X, 0, Z), (X, Y, Z), (X, Y, 0)), _quad((0, 0, Z), (0, Y, Z), (X, Y, Z), (X, 0, Z)),
+             _quad((19.5, 19.5, 0.75), (20.5, 19.5, 0.75), (20.5, 20.5, 0.75), (19.5, 20.5, 0.75))]
+    faces = polygon_faceset(polys, reflectance=0.5, object_names=["Hall", "Desk"],
+                            face_object=np.array([0, 0, 0, 0, 0, 0, 1]))
+    faces.target[6] = True
+    faces.target_radiosity[6] = np.pi * 0.35
+    faces.forbidden[[0, 6]] = True
+    if not ceiling_allowed:
+        faces.forbidden[5] = True
+    return faces
+
+
+OPTIONS = dict(spot_lamps=False, max_lights=1, max_patch_size=2.0, seed=1)
+
+
+def test_a_light_that_sends_almost_nothing_to_the_targets_is_named_with_the_cause():
+    out = run_solve(hall(ceiling_allowed=False), JobOptions(**OPTIONS))
+    (rec,) = out.report["final"]["lights"]
+    problem, j = out.problem, out.reduction.final.lights[0]
+    t = problem.targets
+    by_hand = sum(float(problem.area[t] @ (problem.transfer[c][:, j] / problem.reflectance[t, c])) * w
+                  for c, w in enumerate((0.2126, 0.7152, 0.0722))) / problem.light_watts[j]
+    assert rec["utilisation"] == pytest.approx(by_hand, rel=1e-9)
+    assert rec["utilisation"] < MIN_UTILISATION
+    notes = [w for w in out.report["warnings"] if "of its light to the painted targets" in w]
+    assert len(notes) == 1 and rec["object"] in notes[0] and "grazing angles" in notes[0], out.report["warnings"]
+    # the best any candidate reaches is low too: the note says no light of the scene reaches them well
+    assert utilisation(problem).max() < 10 * MIN_UTILISATION
+
+
+def test_a_ceiling_above_the_desk_is_not_named():
+    out = run_solve(hall(ceiling_allowed=True), JobOptions(**OPTIONS))
+    (rec,) = out.report["final"]["lights"]
+    assert rec["utilisation"] > 10 * MIN_UTILISATION
+    assert not [w for w in out.report["warnings"] if "of its light to the painted targets" in w]
