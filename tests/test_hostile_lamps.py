@@ -83,3 +83,23 @@ def test_uniformity_without_illuminance_targets_is_said(run_cli, scenes, tmp_pat
                                "0.3", "--uniformity", "0.6")
     assert code == 0, err
     _warned(report, "uniformity goal applies to illuminance targets", "there are none")
+
+
+def test_automatic_light_colour_takes_the_blackbody_range(run_cli, scenes, tmp_path):
+    """Case 20: the automatic light colour solves with blackbody lights when the targets allow
+    them: the range set (--temperature-min / --temperature-max) is theirs, not refused and then
+    replaced by the default range."""
+    code, report, err = _solve(run_cli, scenes("room"), tmp_path, "--temperature-min", "6000",
+                               "--temperature-max", "7000")
+    assert code == 0, err
+    _warned(report, "light colour: blackbody (6000-7000 K), chosen automatically")
+    temps = [lt["temperature_K"] for lt in report["final"]["lights"]]
+    assert temps and all(6000 - 1e-6 <= t <= 7000 + 1e-6 for t in temps), temps
+    assert report["options"]["temperature_min"] == 6000
+
+
+def test_reversed_range_refused_before_work_under_automatic(run_cli, scenes, tmp_path):
+    code, _, err = _solve(run_cli, scenes("room"), tmp_path, "--temperature-min", "7000", "--temperature-max", "3000")
+    assert code == 2
+    assert "the blackbody range must lie within 800-12000 K" in _error_line(err)
+    assert not os.listdir(tmp_path)
