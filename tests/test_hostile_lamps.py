@@ -11,8 +11,9 @@ import os
 import numpy as np
 import pytest
 
-from test_hostile import RAYS, _grid, _mesh, _paint, _reset, _room, _save, assert_scene_finite, scene_cache, snapshot
-from test_hostile_everyday import _error_line, _solve
+from test_hostile import (RAYS, _grid, _mesh, _paint, _reset, _room, _save, addon, assert_scene_finite,  # noqa: F401
+                          scene_cache, snapshot)
+from test_hostile_everyday import _error_line, _refused, _solve
 
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 
@@ -103,3 +104,26 @@ def test_reversed_range_refused_before_work_under_automatic(run_cli, scenes, tmp
     assert code == 2
     assert "the blackbody range must lie within 800-12000 K" in _error_line(err)
     assert not os.listdir(tmp_path)
+
+
+def test_every_candidate_kind_off_names_them_on_the_cli(run_cli, scenes, tmp_path):
+    """Case 18: the cells off and no lamp kind on: refused before any work, naming both."""
+    code, _, err = _solve(run_cli, scenes("room"), tmp_path, "--no-surface-lights", "--no-spot-lamps")
+    assert code == 2
+    line = _error_line(err)
+    assert "no candidate light: every kind is off" in line and "--no-surface-lights" in line, line
+    assert "--no-spot-lamps given" in line and "--area-lamps and --point-lamps not given" in line, line
+    assert not os.listdir(tmp_path)
+
+
+def test_every_candidate_kind_off_names_the_sidebars_buttons(addon, scenes):
+    """Case 18 in the add-on: the message names the Offer row's buttons, not the CLI's flags."""
+    bpy.ops.wm.open_mainfile(filepath=scenes("room"))
+    s = bpy.context.scene.relight
+    s.rays_per_patch = 256
+    s.surface_lights = s.spot_lamps = s.area_lamps = s.point_lamps = False
+    _refused(lambda: bpy.ops.relight.solve(),
+             "no candidate light: every kind under Offer is off (Cells, Spots, Area Lamps, Points): turn one on")
+    with pytest.raises(RuntimeError) as info:
+        bpy.ops.relight.solve()
+    assert "--" not in str(info.value)

@@ -29,7 +29,7 @@ from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, append_lamps, candidate_mask
 from ..engine.lights.lamp import add_lamps
-from ..engine.options import REFINE_RAY_FRACTION, JobOptions
+from ..engine.options import REFINE_RAY_FRACTION, JobOptions, OptionError, check_light_kinds
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
@@ -367,8 +367,10 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             if cancel is not None and cancel():
                 raise Cancelled("solve cancelled")
         if lights is not None and lights.n_lights == 0:
-            raise SceneError("no candidate light: the surface lights are off (--no-surface-lights) and no candidate "
-                             "lamp lights any face")
+            raise OptionError("no candidate light: the cells are off (--no-surface-lights) and no candidate lamp "
+                              f"({', '.join(offered_kinds(options))}) lights any face",
+                              f"no candidate light: Cells is off under Offer and no candidate lamp "
+                              f"({', '.join(offered_kinds(options))}) lights any face")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
@@ -923,6 +925,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
     """
     options = (options or JobOptions()).validate()
     check_solvable(faces, mode, notes)
+    if mode == "inverse":
+        check_light_kinds(options)
     try:
         return _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches,
                           estimate)
