@@ -236,7 +236,8 @@ class ExportedScene:
     face_material: np.ndarray = None  # (F,) index into ``material_lobes`` of every FaceSet face
     material_lobes: list = field(default_factory=list)  # per material: its BSDFs (materials.Closure.lobes)
     #: what an error about the scene should also say (jobs.check_solvable): "target": target layers
-    #: found but not used, the target scale 0; "candidates": objects not exported, without area
+    #: found but not used, the target scale 0; "candidates": objects not exported, without area;
+    #: "emitters": the lamps that render but emit nothing ("'Key' (0 W)": blender/lamps.export_lamps)
     notes: dict = field(default_factory=dict)
     #: the emitters whose back side lies against a surface (not modelled: export._emitting_backs),
     #: one dict each: object, power (W), leak (low, high) W, emitted (W), distance (m), near (objects)
@@ -987,7 +988,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         settings["target_scale"] = float(target_scale)
     renderable = render_visible_objects(context)
     objs = exported_objects(context)
-    notes = {"target": [], "candidates": []}
+    notes = {"target": [], "candidates": [], "emitters": []}
     warnings = []
     newer = newer_file_warning()
     if newer:
@@ -1085,7 +1086,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     if np.any(e < 0):
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
-    lamps, lamp_warnings = export_lamps(context, renderable, owner_of)
+    lamps, lamp_warnings = export_lamps(context, renderable, owner_of, notes["emitters"])
     warnings.extend(w for w in lamp_warnings if w not in warnings)
     lux = np.concatenate(b.lux)
     planes = [oi for oi, ob in enumerate(objs) if work_plane(ob)]
