@@ -219,3 +219,12 @@ def test_reduce_names_the_lamps_that_emit_nothing(run_cli, scenes, tmp_path, sce
     assert "no emitter to reduce: no material emits" in line and "emit nothing" in line, line
     assert all(n in line for n in names), line
     assert file_digest(path) == before and not os.listdir(tmp_path)
+
+
+def test_engine_area_lamp_without_area_is_refused_by_name():
+    """Case 15 in the engine: an area Lamp of no area (its radiance P / A) is refused naming it,
+    not turned into NaN irradiance."""
+    from relight_addon.engine.lamps import Lamp
+
+    with pytest.raises(ValueError, match="lamp 'Panel': an area lamp of size 0.0 x 0.5 m has no area"):
+        Lamp("Panel", "AREA", (0, 0, 1), (0, 0, -1), (1, 0, 0), (0, 1, 0), (10, 10, 10), size_u=0.0, size_v=0.5)

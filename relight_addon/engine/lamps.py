@@ -117,6 +117,9 @@ class Lamp:
             raise ValueError(f"lamp {self.name!r}: its spread (Blender's Spread, the full angle) must be in [0, pi] "
                              f"radians, got {self.spread!r}")
         self.spread = math.pi if spread >= math.pi - SPREAD_TOLERANCE else spread
+        if self.kind == "AREA" and not self.area > 0:  # (its radiance P / A: Cycles gives it no light)
+            raise ValueError(f"lamp {self.name!r}: an area lamp of size {self.size_u!r} x {self.size_v!r} m has no area "
+                             "(Cycles renders no light from it): leave it out, or give it a size")
         self.gain = np.ones(3) if self.gain is None else np.asarray(self.gain, dtype=np.float64).reshape(3)
         if not np.all(np.isfinite(self.gain) & (self.gain >= 0)):
             raise ValueError(f"lamp {self.name!r}: its gain (what Cycles multiplies colour x Power by) must be finite "
