@@ -228,3 +228,31 @@ def test_engine_area_lamp_without_area_is_refused_by_name():
 
     with pytest.raises(ValueError, match="lamp 'Panel': an area lamp of size 0.0 x 0.5 m has no area"):
         Lamp("Panel", "AREA", (0, 0, 1), (0, 0, -1), (1, 0, 0), (0, 1, 0), (10, 10, 10), size_u=0.0, size_v=0.5)
+
+
+# ============================================================================ work planes
+
+def test_only_candidate_a_work_plane_is_named(run_cli, scenes, tmp_path):
+    """Case 17: the only surface that may hold lights is a work plane: the message names it as
+    the reason (it said only "every face is forbidden (relight_forbidden, relight_no_lights)")."""
+    code, _, err = _solve(run_cli, scenes("only_work_plane"), tmp_path)
+    assert code == 2
+    line = _error_line(err)
+    assert "no candidate light" in line and "a work plane holds no light" in line and ": 'ceiling'" in line, line
+    assert not os.listdir(tmp_path)
+
+
+def test_only_candidate_a_work_plane_in_the_add_on(addon, scenes):
+    bpy.ops.wm.open_mainfile(filepath=scenes("only_work_plane"))
+    bpy.context.scene.relight.rays_per_patch = 256
+    _refused(lambda: bpy.ops.relight.solve(), "a work plane holds no light (light passes through it): 'ceiling'")
+
+
+def test_radiosity_paint_on_a_work_plane_is_said(run_cli, scenes, tmp_path):
+    """Case 19: radiosity paint (relight_target) on a work plane is read as the light a white
+    (0.99) surface reflects there, an illuminance: said, naming the plane and that illuminance
+    (0.3 painted: a radiosity of 0.3 pi W/m^2, so 0.3 pi / 0.99 W/m^2 x 683 lm/W = 650 lx)."""
+    code, report, err = _solve(run_cli, scenes("painted_work_plane"), tmp_path)
+    assert code == 0, err
+    hit = _warned(report, "work plane(s) 'desk': 1 face(s) painted with a radiosity target", "takes illuminance")[0]
+    assert "an illuminance of 650-650 lx" in hit, hit

@@ -97,7 +97,8 @@ import numpy as np
 
 from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
-from ..engine.units import MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, irradiance_from_lux
+from ..engine.units import (MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, illuminance_lux,
+                            irradiance_from_lux)
 from ..engine.world import sees_sky
 from .lamps import export_lamps, hidden_warning
 from .world import world_light
@@ -641,6 +642,19 @@ WORK_PLANE_NOTE = ("work plane(s) {}: light passes through them and they reflect
                    "Visibility is off: Match Cycles Light Paths (--out) turns it off in the copy")
 
 
+def painted_work_plane_warning(painted, target_b, face_object, names) -> str:
+    """The warning for faces of work planes painted with a radiosity (relight_target), not given
+    an illuminance: a work plane reflects no light into the scene, so its paint is read as what a
+    white surface (MAX_REFLECTANCE) would reflect there, the illuminance paint / MAX_REFLECTANCE."""
+    objs = sorted({names[o] for o in face_object[painted]})
+    lx = illuminance_lux(target_b[painted] / MAX_REFLECTANCE)
+    return (f"work plane(s) {', '.join(map(repr, objs[:5]))}{' ...' if len(objs) > 5 else ''}: "
+            f"{int(painted.sum())} face(s) painted with a radiosity target (relight_target) are read as the light "
+            f"that a white surface ({MAX_REFLECTANCE:g}) would reflect there, an illuminance of "
+            f"{lx.min():.3g}-{lx.max():.3g} lx; a work plane takes illuminance targets: give them in lx (Fill "
+            "Selected, lx), or turn Work Plane off to paint the radiosity of the surface itself")
+
+
 def work_plane(ob) -> bool:
     """The object's "work plane" switch (the add-on's property, or a custom property of that name;
     a boolean or a number): light passes through its faces and they reflect none into the scene
@@ -1095,6 +1109,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         rho, e = rho.copy(), e.copy()
         rho[passes], e[passes] = MAX_REFLECTANCE, 0.0
         warnings.append(WORK_PLANE_NOTE.format(", ".join(repr(objs[oi].name) for oi in planes)))
+        painted = passes & np.concatenate(b.tgt) & ~(lux > 0)
+        if painted.any():
+            warnings.append(painted_work_plane_warning(painted, np.concatenate(b.tgt_b), np.concatenate(b.f_obj), names))
     target, target_b = illuminance_targets(np.concatenate(b.tgt), np.concatenate(b.tgt_b), lux, rho,
                                            np.concatenate(b.f_obj), names)
     faces = FaceSet(

@@ -165,11 +165,16 @@ def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = N
                                          "0): there is nothing to light", notes.get("target")))
         free = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
         if not np.any(free):
-            owners = sorted({faces.object_names[o] for o in np.unique(faces.face_object[faces.face_index >= 0])})
+            real = faces.face_index >= 0
+            owners = sorted({faces.object_names[o] for o in np.unique(faces.face_object[real])})
+            planes = [] if faces.passes is None else \
+                sorted({faces.object_names[o] for o in np.unique(faces.face_object[real & faces.passes])})
+            why = (f", on a work plane or already emits; a work plane holds no light (light passes through it): "
+                   f"{', '.join(map(repr, planes[:10]))}{' ...' if len(planes) > 10 else ''}; give the lights another "
+                   "surface (turn Work Plane off, or allow an object's faces)") if planes else " or already emits"
             raise SceneError(_with_notes(
-                "no candidate light: every face is forbidden (relight_forbidden, relight_no_lights) or already "
-                f"emits; objects: {', '.join(owners[:10])}{' ...' if len(owners) > 10 else ''}",
-                notes.get("candidates")))
+                f"no candidate light: every face is forbidden (relight_forbidden, relight_no_lights){why}; objects: "
+                f"{', '.join(owners[:10])}{' ...' if len(owners) > 10 else ''}", notes.get("candidates")))
         if not np.any(free & has_area):
             raise SceneError(_with_notes("no candidate light: the faces that may hold lights have no area",
                                          notes.get("candidates")))
