@@ -285,3 +285,84 @@ def test_narrow_spots_light_the_floor_with_their_cones_flux(bpy_clean, scenes):
         flux = float(np.sum(H[floor, i, 0] * patches.area[floor]))
         ref = 50.0 / (4 * math.pi) * 2 * math.pi * (1 - math.cos(lamp.spot_size / 2))
         assert flux == pytest.approx(ref, rel=5e-3), lamp.name
+
+
+# ============================================================================ missing images
+
+def _missing_image(d, name):
+    """An image read from a file that is then deleted (as a moved or renamed texture is)."""
+    path = os.path.join(d, f"{name}.png")
+    img = bpy.data.images.new(name, 4, 4)
+    img.filepath_raw = path
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    img = bpy.data.images.load(path, check_existing=False)
+    img.name = name
+    return img, path
+
+
+def _world_with_image(img):
+    w = bpy.data.worlds.new("Sky")
+    bpy.context.scene.world = w
+    if bpy.app.version < (5, 0, 0):
+        w.use_nodes = True
+    nt = w.node_tree
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.image = img
+    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+
+
+def _texture_material(img, socket):
+    m = bpy.data.materials.new("Poster")
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    p = next(n for n in m.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    tex = m.node_tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    m.node_tree.links.new(tex.outputs["Color"], p.inputs[socket])
+    if socket == "Emission Color":
+        p.inputs["Emission Strength"].default_value = 1.0
+    return m
+
+
+def build_missing(name, d):
+    path = os.path.join(d, f"{name}.blend")
+    _reset()
+    floor, ceiling = _room()
+    img, file = _missing_image(d, f"{name}_tex")
+    if name == "missing_world_image":
+        _world_with_image(img)
+    else:
+        socket = "Emission Color" if name == "missing_emission_image" else "Base Color"
+        v, f = _grid(1, size=0.3, z=0.95, x0=0.35, y0=0.35, flip=True)
+        _mesh("poster", v, f, material=_texture_material(img, socket))["relight_no_lights"] = True
+    _save(path)
+    os.remove(file)
+    _reset()
+    return path
+
+
+@pytest.fixture(scope="module")
+def missing(tmp_path_factory):
+    return scene_cache(tmp_path_factory, "missing", build_missing)
+
+
+@pytest.mark.parametrize("scene,who", [("missing_world_image", "the World ('Sky')"),
+                                       ("missing_emission_image", "material 'Poster'"),
+                                       ("missing_base_colour_image", "material 'Poster'")])
+def test_missing_image_is_named_with_what_it_becomes(run_cli, missing, tmp_path, scene, who):
+    """Case 9: an image file that the World or a material reads and that is missing renders
+    magenta in Cycles, and is read so (the World's map and an emission bake are Cycles' own): a
+    warning names who reads it, the image and its path, and says it is magenta."""
+    code, report, err = _solve(run_cli, missing(scene), tmp_path)
+    assert code == 0, err
+    hit = _warned(report, who, "image file(s) missing, which Cycles renders magenta", f"'{scene}_tex'",
+                  f"{scene}_tex.png")[0]
+    if scene == "missing_emission_image":
+        assert "its emission is baked as Cycles renders it (magenta light)" in hit, hit
+    if scene == "missing_base_colour_image":
+        assert "its linked colour is read as the viewport colour, where Cycles renders magenta" in hit, hit
+    if scene == "missing_world_image":
+        assert "its light is read as Cycles renders it, magenta" in hit, hit
