@@ -66,6 +66,27 @@ def _zero_size_area():
     _lamp("Panel", "AREA", energy=50.0, location=(0.5, 0.5, 0.9), size=0.0)
 
 
+def _floor_under_the_sky():
+    v, f = _grid(2)
+    _mesh("floor", v, f)
+
+
+def _negative_sun():  # +2 and -1 W/m^2 straight down on an open floor: Cycles renders 1 W/m^2
+    _floor_under_the_sky()
+    _lamp("Sun", "SUN", energy=2.0, location=(0, 0, 3), angle=0.0)
+    _lamp("Shade", "SUN", energy=-1.0, location=(0, 0, 3), angle=0.0)
+
+
+def _one_sun():
+    _floor_under_the_sky()
+    _lamp("Sun", "SUN", energy=1.0, location=(0, 0, 3), angle=0.0)
+
+
+def _zero_height_rectangle():  # a rectangle area lamp of Size Y 0
+    _room()
+    _lamp("Strip", "AREA", energy=50.0, location=(0.5, 0.5, 0.9), shape="RECTANGLE", size=0.5, size_y=0.0)
+
+
 def _zero_watts():
     _room()
     _lamp("Key", energy=0.0)
@@ -86,6 +107,9 @@ SCENES = {
     "ten_watts": _ten_watts,
     "zero_size_area": _zero_size_area,
     "zero_watts": _zero_watts,
+    "negative_sun": _negative_sun,
+    "one_sun": _one_sun,
+    "zero_height_rectangle": _zero_height_rectangle,
     "only_work_plane": _only_work_plane,
     "painted_work_plane": lambda: _room_lux_plane(paint=True),
 }
@@ -184,6 +208,15 @@ def test_negative_lamp_is_negative_light(run_cli, scenes, tmp_path):
     assert np.allclose(floor, ref["objects"]["floor"]["radiosity"], rtol=1e-3)
 
 
+def test_negative_sun_is_negative_light(run_cli, scenes, tmp_path):
+    """Case 6, a Sun: -1 W/m^2 beside +2 W/m^2 is Cycles' 1 W/m^2."""
+    neg = _radiosity(run_cli, scenes("negative_sun"), tmp_path / "a")
+    ref = _radiosity(run_cli, scenes("one_sun"), tmp_path / "b")
+    _warned(neg, "lamp 'Shade' has a negative Power (-1 W)")
+    assert np.min(ref["objects"]["floor"]["radiosity"]) > 0
+    assert np.allclose(neg["objects"]["floor"]["radiosity"], ref["objects"]["floor"]["radiosity"], rtol=1e-6)
+
+
 def test_negative_lamp_is_fixed_light_of_a_solve(run_cli, scenes, tmp_path):
     code, report, err = _solve(run_cli, scenes("negative_lamp"), tmp_path)
     assert code == 0, err
@@ -203,15 +236,17 @@ def test_negative_lamp_is_left_as_it_is_by_reduce(run_cli, scenes, tmp_path):
 
 
 @pytest.mark.parametrize("command", ["solve", "radiosity"])
-def test_zero_size_area_lamp_is_named(run_cli, scenes, tmp_path, command):
-    """Case 15: an area lamp of size 0 gives no light in Cycles (Light::has_contribution): left
-    out with a warning naming it (it was "background irradiance contains NaN or infinite values")."""
+@pytest.mark.parametrize("scene,name", [("zero_size_area", "Panel"), ("zero_height_rectangle", "Strip")])
+def test_zero_size_area_lamp_is_named(run_cli, scenes, tmp_path, command, scene, name):
+    """Case 15: an area lamp of size 0 (or a rectangle of Size Y 0) gives no light in Cycles
+    (Light::has_contribution): left out with a warning naming it (it was "background irradiance
+    contains NaN or infinite values", or "reflectance or exitance contains NaN")."""
     if command == "solve":
-        code, report, err = _solve(run_cli, scenes("zero_size_area"), tmp_path)
+        code, report, err = _solve(run_cli, scenes(scene), tmp_path)
         assert code == 0, err
     else:
-        report = _radiosity(run_cli, scenes("zero_size_area"), tmp_path)
-    _warned(report, "lamp 'Panel' is an area lamp of size 0", "Cycles renders no light from it")
+        report = _radiosity(run_cli, scenes(scene), tmp_path)
+    _warned(report, f"lamp '{name}' is an area lamp of size 0", "Cycles renders no light from it")
 
 
 @pytest.mark.parametrize("scene,names", [("zero_watts", ["'Key' (0 W)", "'Fill' (0 W)"]),
