@@ -8,7 +8,10 @@ intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (vi
 view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
 (Cast Shadow). Named in a warning, and not modelled: light node trees, light and shadow
 linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
-exact where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
+exact where the whole sphere is seen) and instanced lamps. As Cycles renders them (issue 35): a
+lamp of negative Power is negative light (named; fixed light), an area lamp of size 0 gives none
+(named, left out: ``Light::has_contribution``, intern/cycles/scene/light.cpp). The World:
+blender/world.py.
 
 What a lamp emits (``cycles_gain``, the one place Blender's light values become the engine's
 Lamp.power, and through Lamp.gain back: engine.lights.lamp.blender_values): Cycles'
