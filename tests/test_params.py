@@ -193,7 +193,10 @@ def test_panel_rows_follow_the_chosen_methods(addon):
     s.selection = "exitance-elimination"
     assert "distribution" in drawn(panels.RELIGHT_PT_solve_advanced)
     # the light colour (issue 21) and, for blackbody lights, their range
-    assert "light_colour" in drawn(panels.RELIGHT_PT_solve) and "temperature_min" not in drawn(panels.RELIGHT_PT_solve)
+    # (Automatic solves with blackbody lights of the range set, unless the targets ask for colours: issue 35)
+    assert {"light_colour", "temperature_min", "temperature_max"} <= set(drawn(panels.RELIGHT_PT_solve))
+    s.light_colour = "free"
+    assert "temperature_min" not in drawn(panels.RELIGHT_PT_solve)
     s.light_colour = "blackbody"
     assert {"light_colour", "temperature_min", "temperature_max"} <= set(drawn(panels.RELIGHT_PT_solve))
     s.selection = "least-power"

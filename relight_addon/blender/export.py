@@ -98,7 +98,8 @@ import numpy as np
 from ..engine.sampling import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
 from ..engine.paint import neutral_as_brightness
-from ..engine.units import MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, irradiance_from_lux
+from ..engine.units import (MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, illuminance_lux,
+                            irradiance_from_lux)
 from ..engine.world import sees_sky
 from .lamps import export_lamps, hidden_warning
 from .world import world_light
@@ -261,7 +262,8 @@ class ExportedScene:
     face_material: np.ndarray = None  # (F,) index into ``material_lobes`` of every FaceSet face
     material_lobes: list = field(default_factory=list)  # per material: its BSDFs (materials.Closure.lobes)
     #: what an error about the scene should also say (jobs.check_solvable): "target": target layers
-    #: found but not used, the target scale 0; "candidates": objects not exported, without area
+    #: found but not used, the target scale 0; "candidates": objects not exported, without area;
+    #: "emitters": the lamps that render but emit nothing ("'Key' (0 W)": blender/lamps.export_lamps)
     notes: dict = field(default_factory=dict)
     #: the emitters whose back side lies against a surface (not modelled: export._emitting_backs),
     #: one dict each: object, power (W), leak (low, high) W, emitted (W), distance (m), near (objects)
@@ -667,6 +669,19 @@ WORK_PLANE_NOTE = ("work plane(s) {}: light passes through them and they reflect
                    "Visibility is off: Match Cycles Light Paths (--out) turns it off in the copy")
 
 
+def painted_work_plane_warning(painted, target_b, face_object, names) -> str:
+    """The warning for faces of work planes painted with a radiosity (relight_target), not given
+    an illuminance: a work plane reflects no light into the scene, so its paint is read as what a
+    white surface (MAX_REFLECTANCE) would reflect there, the illuminance paint / MAX_REFLECTANCE."""
+    objs = sorted({names[o] for o in face_object[painted]})
+    lx = illuminance_lux(target_b[painted] / MAX_REFLECTANCE)
+    return (f"work plane(s) {', '.join(map(repr, objs[:5]))}{' ...' if len(objs) > 5 else ''}: "
+            f"{int(painted.sum())} face(s) painted with a radiosity target (relight_target) are read as the light "
+            f"that a white surface ({MAX_REFLECTANCE:g}) would reflect there, an illuminance of "
+            f"{lx.min():.3g}-{lx.max():.3g} lx; a work plane takes illuminance targets: give them in lx (Fill "
+            "Selected, lx), or turn Work Plane off to paint the radiosity of the surface itself")
+
+
 def work_plane(ob) -> bool:
     """The object's "work plane" switch (the add-on's property, or a custom property of that name;
     a boolean or a number): light passes through its faces and they reflect none into the scene
@@ -1014,7 +1029,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         settings["target_scale"] = float(target_scale)
     renderable = render_visible_objects(context)
     objs = exported_objects(context)
-    notes = {"target": [], "candidates": []}
+    notes = {"target": [], "candidates": [], "emitters": []}
     warnings = []
     newer = newer_file_warning()
     if newer:
@@ -1112,7 +1127,7 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     if np.any(e < 0):
         warnings.append(f"negative emission of {int(np.sum(np.any(e < 0, axis=1)))} face(s) set to 0")
         e = np.maximum(e, 0.0)
-    lamps, lamp_warnings = export_lamps(context, renderable, owner_of)
+    lamps, lamp_warnings = export_lamps(context, renderable, owner_of, notes["emitters"])
     warnings.extend(w for w in lamp_warnings if w not in warnings)
     lux = np.concatenate(b.lux)
     planes = [oi for oi, ob in enumerate(objs) if work_plane(ob)]
@@ -1121,6 +1136,9 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
         rho, e = rho.copy(), e.copy()
         rho[passes], e[passes] = MAX_REFLECTANCE, 0.0
         warnings.append(WORK_PLANE_NOTE.format(", ".join(repr(objs[oi].name) for oi in planes)))
+        painted = passes & np.concatenate(b.tgt) & ~(lux > 0)
+        if painted.any():
+            warnings.append(painted_work_plane_warning(painted, np.concatenate(b.tgt_b), np.concatenate(b.f_obj), names))
     target, target_b = illuminance_targets(np.concatenate(b.tgt), np.concatenate(b.tgt_b), lux, rho,
                                            np.concatenate(b.f_obj), names)
     faces = FaceSet(

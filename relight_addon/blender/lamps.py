@@ -8,7 +8,10 @@ intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (vi
 view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
 (Cast Shadow). Named in a warning, and not modelled: light node trees, light and shadow
 linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
-exact where the whole sphere is seen) and instanced lamps. The World: blender/world.py.
+exact where the whole sphere is seen) and instanced lamps. As Cycles renders them (issue 35): a
+lamp of negative Power is negative light (named; fixed light), an area lamp of size 0 gives none
+(named, left out: ``Light::has_contribution``, intern/cycles/scene/light.cpp). The World:
+blender/world.py.
 
 What a lamp emits (``cycles_gain``, the one place Blender's light values become the engine's
 Lamp.power, and through Lamp.gain back: engine.lights.lamp.blender_values): Cycles'
@@ -112,12 +115,22 @@ def _light_linking(ob) -> bool:
                                or getattr(ll, "blocker_collection", None) is not None)
 
 
-def export_lamps(context, renderable, owner_of) -> tuple:
+def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
     """(lamps, warnings): the scene's lamps as engine.lamps.Lamp, and what is not modelled.
     ``renderable``: the names of the objects that render (export.render_visible_objects);
-    ``owner_of(ob)``: the result that made ``ob`` (export.owner_of: its lamps are not scene light)."""
+    ``owner_of(ob)``: the result that made ``ob`` (export.owner_of: its lamps are not scene light).
+    ``dark``: a list that gets, for each lamp that renders but emits nothing in Cycles, its name
+    and why ("'Key' (0 W)"): a lamp of Power 0 or a black colour, an area lamp of size 0
+    (``Light::has_contribution``, intern/cycles/scene/light.cpp: "Area light with a size of zero
+    does not contribute to the scene"), a lamp scaled to zero.
+
+    A lamp of negative Power is kept, negative: Cycles renders it so (``has_contribution`` only
+    leaves out a strength of exactly 0; the kernel adds its negative light), so its light is
+    taken away where it shines; named in a warning (a solve keeps it as fixed light, a reduction
+    leaves it as it is)."""
     scene, view_layer = context.scene, context.view_layer
     lamps, warnings, hidden = [], [], []
+    dark = [] if dark is None else dark
     for ob in scene.objects:
         if ob.type != "LIGHT":
             continue
@@ -140,22 +153,36 @@ def export_lamps(context, renderable, owner_of) -> tuple:
         energy = float(ld.energy if was is None else was["energy"])
         if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
             raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
-        if not np.any(color * energy > 0):
+        if not np.any(color * energy != 0):
+            dark.append(f"{name!r} ({'0 W' if energy == 0 else 'colour black'})")
             continue
         M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
         X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
         sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
         if min(sx, sy, sz) <= 0:
             warnings.append(f"lamp {name!r} is scaled to zero: left out")
+            dark.append(f"{name!r} (scaled to zero)")
+            continue
+        if ld.type == "AREA" and min(_area_size(ld, M)[:2]) <= 0:
+            warnings.append(f"lamp {name!r} is an area lamp of size 0 ({ld.size:g} x "
+                            f"{(ld.size_y if ld.shape in ('RECTANGLE', 'ELLIPSE') else ld.size):g} m): Cycles renders "
+                            "no light from it (an area light of size zero does not contribute): left out; give it a "
+                            "size, or make it a Point lamp")
+            dark.append(f"{name!r} (an area lamp of size 0)")
             continue
         gain = cycles_gain(ld, M)
         power = color * energy * gain  # what Cycles emits
-        if not np.all(np.isfinite(power)) or float(np.max(power)) > MAX_LAMP_POWER:
+        if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
             raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
                              "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
                              "finite values")
-        if not np.any(power > 0):
+        if not np.any(power != 0):
+            dark.append(f"{name!r} (0 W after its Exposure, Temperature or Normalize)")
             continue
+        if energy < 0:
+            warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
+                            "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
+                            "reduction leaves it as it is)")
         kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
                   power=power, energy=energy, color=color, gain=gain,
                   cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))

@@ -25,6 +25,9 @@ All or Cycles), read through reroutes and muted nodes:
   BSDF's Base Color), with a note. Other linked inputs (a texture on Roughness, ...) use the
   socket's own unlinked value, with a note.
 - A material without a node tree: its viewport colour. No material: handled by the caller.
+- An image that an Image or Environment Texture node feeding the output reads from a file that
+  is not there (``missing_images``): Cycles renders it magenta (1, 0, 1); named in the note (a
+  baked emission is then magenta, as Cycles renders it; a linked colour is the viewport colour).
 
 Linked emission (an Emission Color / Strength or Emission shader Color / Strength fed by a
 texture, a procedural, an attribute..., or a Mix Shader with a linked factor over a branch that
@@ -36,6 +39,7 @@ Emission Strength 0) emits nothing and is not listed.
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
 
 import bpy
@@ -247,13 +251,66 @@ def _fallback(mat, note=None):
 
 
 def surface_closure(mat) -> Closure:
-    """The material's Closure (see the module docstring); ``mat`` must not be None."""
+    """The material's Closure (see the module docstring); ``mat`` must not be None. A missing
+    image it reads is named in its notes (``missing_images``)."""
     node = surface_node(mat)
     if node is None:
         if getattr(mat, "node_tree", None) is None:
             return _fallback(mat)  # a plain (non-node) material: its colour
         return _fallback(mat, "no surface shader, using the viewport colour")
-    return _eval(node, mat)
+    c = _eval(node, mat)
+    missing = missing_images(mat.node_tree, active_output(mat))
+    if missing:
+        colour = any("linked, using the viewport colour" in n for n in c.notes)
+        c.notes = _merge(c.notes, [
+            f"{MISSING_IMAGE.format(', '.join(missing))}: "
+            + ("its emission is baked as Cycles renders it (magenta light); " if c.linked_emission else "")
+            + ("its linked colour is read as the viewport colour, where Cycles renders magenta; " if colour else "")
+            + "find the file (File > External Data > Find Missing Files) or remove the texture"])
+    return c
+
+
+#: what a missing image becomes in Cycles (its magenta, 1, 0, 1): the start of every warning naming one
+MISSING_IMAGE = "image file(s) missing, which Cycles renders magenta (1, 0, 1): {}"
+
+
+def _image_missing(img) -> bool:
+    """Whether Cycles finds no pixels for ``img``: read from a file (not packed, not generated)
+    that is not there."""
+    if img is None or img.packed_file is not None or img.source not in ("FILE", "SEQUENCE", "MOVIE"):
+        return False
+    path = bpy.path.abspath(img.filepath, library=img.library)
+    return not os.path.exists(path)
+
+
+def missing_images(tree, output=None) -> list:
+    """"'name' (path)" of each image an Image or Environment Texture node feeding ``output`` (a
+    node of ``tree``; None: any node) reads from a file that is not there, through reroutes and
+    node groups (a group's nodes that feed its Group Output)."""
+    found, seen = [], set()
+
+    def visit(tree, starts, depth=0):
+        stack = list(starts)
+        while stack:
+            node = stack.pop()
+            if (id(tree), node.name) in seen or depth > _MAX_DEPTH:
+                continue
+            seen.add((id(tree), node.name))
+            img = getattr(node, "image", None) if node.bl_idname in ("ShaderNodeTexImage",
+                                                                     "ShaderNodeTexEnvironment") else None
+            if _image_missing(img):
+                text = f"{img.name!r} ({img.filepath})"
+                if text not in found:
+                    found.append(text)
+            sub = getattr(node, "node_tree", None)
+            if node.bl_idname == "ShaderNodeGroup" and sub is not None:
+                visit(sub, [n for n in sub.nodes if n.bl_idname == "NodeGroupOutput"], depth + 1)
+            for sock in node.inputs:
+                stack.extend(link.from_node for link in sock.links if not link.is_muted)
+
+    if tree is not None:
+        visit(tree, [output] if output is not None else list(tree.nodes))
+    return found
 
 
 def material_properties(mat):

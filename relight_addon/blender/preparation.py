@@ -23,6 +23,7 @@ import bpy
 import numpy as np
 
 from . import export, light_paths
+from ..engine.options import check_light_kinds
 from ..pipeline import jobs, prepared, report, viewing
 
 __all__ = ["SolveJob", "PREPARED", "PREPARED_JOBS", "LOCKS"]
@@ -50,6 +51,8 @@ class SolveJob:
     def export(cls, context, options, mode="inverse", target_scale=None, session=False) -> "SolveJob":
         """Export the scene and check, from the faces alone, that the job can be solved.
         ``session``: keep and re-use the scene's prepared state (see the module docstring)."""
+        if mode == "inverse":
+            check_light_kinds(options)  # (the options alone: before the export's work)
         exp = export.export_scene(context, target_scale=target_scale)
         jobs.check_solvable(exp.faces, mode, exp.notes)
         name = (context or bpy.context).scene.name if session else None

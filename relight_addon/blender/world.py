@@ -7,9 +7,10 @@ equirectangular map (``render_world_map``): a temporary scene holding only a pan
 and a copy of the World (the user's World and scene are not touched, everything temporary is
 removed), box-filtered pixels, so each texel is the mean radiance over its solid angle.
 
-Named in a warning: a World whose diffuse visibility is off (it lights nothing, as in Cycles), a
-World tree with a Light Path node (the map is what camera rays see; diffuse rays may see
-something else), a World volume (not modelled).
+Named in a warning: an image file that its tree reads and that is missing (Cycles renders it
+magenta, and so it is read: materials.missing_images), a World whose diffuse visibility is off
+(it lights nothing, as in Cycles), a World tree with a Light Path node (the map is what camera
+rays see; diffuse rays may see something else), a World volume (not modelled).
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..engine.world import Detail, EnvironmentMap, _solid_angles
 from .lamps import uses_nodes
-from .materials import tree_output
+from .materials import MISSING_IMAGE, missing_images, tree_output
 
 __all__ = ["world_light", "render_world_map", "MAP_WIDTH", "MAP_SAMPLES", "SUN_SCALE", "SUN_SAMPLES"]
 
@@ -191,6 +192,11 @@ def world_light(scene, sees_sky=None) -> tuple:
             if any(n.type == "LIGHT_PATH" for n in tree.nodes):
                 notes.append(f"the World ({world.name!r}) uses a Light Path node: its light is read as camera rays "
                              "see it; if diffuse rays see something else, Cycles renders a different light")
+            missing = missing_images(tree, out)
+            if missing:
+                notes.append(f"the World ({world.name!r}): {MISSING_IMAGE.format(', '.join(missing))}: its light is "
+                             "read as Cycles renders it, magenta; find the file (File > External Data > Find Missing "
+                             "Files) or remove the texture")
             if sees_sky is not None and not sees_sky():
                 notes.append(f"the World ({world.name!r}) is seen from no face (the scene is closed): it adds no "
                              "light, and its texture was not rendered")

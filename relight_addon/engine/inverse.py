@@ -346,7 +346,7 @@ class InverseProblem:
         ``excess``), 0 without any."""
         n = self.n_patches
         if not ((background is not None and np.any(background > 0)) or
-                (irradiance is not None and np.any(irradiance > 0))):
+                (irradiance is not None and np.any(irradiance != 0))):  # (a lamp of negative power: negative)
             return np.zeros((n, 3))
         e = np.zeros((n, 3)) if background is None else background
         return self.forward_radiosity(e, irradiance, excess)

@@ -86,6 +86,29 @@ NO_LAMPS = {name: False for name in LAMP_OPTIONS}
 #: candidate lamps at most (measured: docs/benchmarks.md, "Candidate lamps")
 DEFAULT_MAX_LAMPS = 96
 
+class OptionError(ValueError):
+    """A refusal about the options, worded for where it is shown: ``str()`` names them by the
+    CLI's flags, ``panel`` by the names the add-on's sidebar shows."""
+
+    def __init__(self, cli: str, panel: str):
+        super().__init__(cli)
+        self.panel = panel
+
+
+def check_light_kinds(options) -> None:
+    """Refuse, before any work, an inverse solve that offers no kind of candidate light: the cells
+    off and no lamp kind on (OptionError naming the flags, or the sidebar's Offer buttons)."""
+    if not options.uses("surface_lights") or options.surface_lights or any(getattr(options, n) for n in LAMP_OPTIONS):
+        return
+    given = [PARAM_FLAGS[n] for n in LAMP_OPTIONS if DEFAULT_LAMPS[n]]  # the flags that turned them off
+    not_given = [PARAM_FLAGS[n] for n in LAMP_OPTIONS if not DEFAULT_LAMPS[n]]  # those that would turn them on
+    titles = [PARAMS[n].title for n in ("surface_lights",) + LAMP_OPTIONS]
+    raise OptionError(
+        f"no candidate light: every kind is off: the cells (--no-surface-lights) and every lamp kind "
+        f"({', '.join(given)} given; {' and '.join(not_given)} not given); leave the cells on or offer a lamp kind",
+        f"no candidate light: every kind under Offer is off ({', '.join(titles)}): turn one on")
+
+
 JOB_PARAMS = (
     Param("rays_per_patch", int, None, min=1, label="Rays per Patch", ui="zero", soft_max=65536, none="automatic",
           description="Form-factor quality: rays cast from every patch (automatic: about 4 million rays in "

@@ -31,7 +31,7 @@ from ..engine.lamps import lamp_irradiance
 from ..engine.world import world_irradiance
 from ..engine.lights import LightSet, append_lamps, candidate_mask
 from ..engine.lights.lamp import add_lamps
-from ..engine.options import REFINE_RAY_FRACTION, JobOptions
+from ..engine.options import REFINE_RAY_FRACTION, JobOptions, OptionError, check_light_kinds
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
@@ -167,15 +167,25 @@ def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = N
                                          "0): there is nothing to light", notes.get("target")))
         free = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)
         if not np.any(free):
-            owners = sorted({faces.object_names[o] for o in np.unique(faces.face_object[faces.face_index >= 0])})
+            real = faces.face_index >= 0
+            owners = sorted({faces.object_names[o] for o in np.unique(faces.face_object[real])})
+            planes = [] if faces.passes is None else \
+                sorted({faces.object_names[o] for o in np.unique(faces.face_object[real & faces.passes])})
+            why = (f", on a work plane or already emits; a work plane holds no light (light passes through it): "
+                   f"{', '.join(map(repr, planes[:10]))}{' ...' if len(planes) > 10 else ''}; give the lights another "
+                   "surface (turn Work Plane off, or allow an object's faces)") if planes else " or already emits"
             raise SceneError(_with_notes(
-                "no candidate light: every face is forbidden (relight_forbidden, relight_no_lights) or already "
-                f"emits; objects: {', '.join(owners[:10])}{' ...' if len(owners) > 10 else ''}",
-                notes.get("candidates")))
+                f"no candidate light: every face is forbidden (relight_forbidden, relight_no_lights){why}; objects: "
+                f"{', '.join(owners[:10])}{' ...' if len(owners) > 10 else ''}", notes.get("candidates")))
         if not np.any(free & has_area):
             raise SceneError(_with_notes("no candidate light: the faces that may hold lights have no area",
                                          notes.get("candidates")))
     elif not np.any(faces.exitance > 0) and not faces.lamps:
+        dark = notes.get("emitters")
+        if dark:
+            raise SceneError(f"the scene has no emitter to reduce: no material emits, and its {len(dark)} lamp(s) "
+                             f"emit nothing: {', '.join(dark[:10])}{' ...' if len(dark) > 10 else ''}; give them a "
+                             "Power (a reduction lowers or switches off the lamps that emit)")
         raise SceneError("the scene has no emitter to reduce (no lamp, no material with emission)")
 
 
@@ -369,8 +379,10 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
             if cancel is not None and cancel():
                 raise Cancelled("solve cancelled")
         if lights is not None and lights.n_lights == 0:
-            raise SceneError("no candidate light: the surface lights are off (--no-surface-lights) and no candidate "
-                             "lamp lights any face")
+            raise OptionError("no candidate light: the cells are off (--no-surface-lights) and no candidate lamp "
+                              f"({', '.join(offered_kinds(options))}) lights any face",
+                              f"no candidate light: Cells is off under Offer and no candidate lamp "
+                              f"({', '.join(offered_kinds(options))}) lights any face")
         t1 = time.perf_counter()
         background = np.zeros_like(patches.exitance)
         lamp_H, lamp_names = np.zeros((patches.n_patches, 0, 3)), []
@@ -423,15 +435,20 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         warnings.append(BACKGROUND_NOTE.format(n=int(len(np.unique(patches.face[emitting]))), lamps=len(faces.lamps),
                                                world=", the World" if faces.world_radiance is not None else ""))
     if mode == "direct" and lamp_names:
-        warnings.append(DIRECT_FIXED_NOTE.format(", ".join(n for n, _, _ in lamp_names)))
+        warnings.append(DIRECT_FIXED_NOTE.format(_fixed_names(lamp_names)))
     refinement = {"passes": len(history), "target_change": [h[2] for h in history[1:]]}
     return Model(mode, faces, patches, lights, F, problem, background, e_start, warnings, cost,
                  {"meshing": t_mesh, "form_factors": t_ff, "problem": t_problem, "lamps": t_lamps}, refinement,
                  lamp_H, lamp_names, lamp_lights)
 
 
-DIRECT_FIXED_NOTE = ("the World ({}) is kept as fixed light: a reduction cannot switch it off; its light is part of "
-                     "the scene's radiosity and of every configuration's")
+DIRECT_FIXED_NOTE = ("kept as fixed light, which a reduction cannot switch off: {}; its light is part of the scene's "
+                     "radiosity and of every configuration's")
+
+
+def _fixed_names(names) -> str:
+    """The direct mode's fixed light in words: the World, the lamps of negative power."""
+    return ", ".join(f"the World ({n})" if kind == "world" else f"lamp {n!r} (negative power)" for n, kind, _ in names)
 
 
 def direct_lights(faces: FaceSet, patches: PatchSet, F, surface, seed=0) -> tuple:
@@ -439,28 +456,34 @@ def direct_lights(faces: FaceSet, patches: PatchSet, F, surface, seed=0) -> tupl
     or None without any) followed by the scene's lamps (engine/lights/lamp.py: each a light whose
     source is its direct irradiance per unit of its power) -- and the fixed light (the World).
     Returns (lights, (light indices, faces.lamps indices) of the lamps, H (P, n, 3) W/m^2 and
-    [(name, "world", None)] of the fixed light, warnings). A lamp that lights no face is left out
-    of the reduction (named; the written copy leaves it as it is)."""
+    [(name, kind, power)] of the fixed light, warnings). A lamp that lights no face is left out
+    of the reduction (named; the written copy leaves it as it is); a lamp of negative power
+    (Cycles renders it as negative light: blender/lamps.py) is fixed light, as the World is."""
     P = patches.n_patches
     H, names = scene_light(faces, patches, F, seed) if has_scene_light(faces) else (np.zeros((P, 0, 3)), [])
     n = len(faces.lamps)
+    negative = [i for i, lamp in enumerate(faces.lamps) if np.any(lamp.power < 0)]
     unit = np.zeros((P, n))
     for i, lamp in enumerate(faces.lamps):  # H is the lamp's irradiance per W times its power per channel
-        c = int(np.argmax(lamp.power))
-        unit[:, i] = H[:, i, c] / lamp.power[c]
+        if i not in negative:
+            c = int(np.argmax(lamp.power))
+            unit[:, i] = H[:, i, c] / lamp.power[c]
     lit = np.flatnonzero(unit.max(axis=0) > 0) if n else np.zeros(0, dtype=np.int64)
     notes = []
-    dark = [faces.lamps[i].name for i in range(n) if i not in set(lit.tolist())]
+    dark = [faces.lamps[i].name for i in range(n) if i not in set(lit.tolist()) and i not in negative]
     if dark:
         notes.append(f"{len(dark)} lamp(s) light no face ({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''}): "
                      "left out of the reduction, and left as they are in the written copy")
     if surface is None and not len(lit):
-        raise SceneError(f"nothing to reduce: no material emits and no lamp lights any face "
-                         f"({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''})")
+        neg = [repr(faces.lamps[i].name) for i in negative]
+        raise SceneError("nothing to reduce: no material emits and no lamp lights any face"
+                         + (f" ({', '.join(dark[:5])}{' ...' if len(dark) > 5 else ''})" if dark else "")
+                         + (f"; lamp(s) of negative power are not reduced: {', '.join(neg[:5])}" if neg else ""))
     C = np.flatnonzero(candidate_mask(patches, "direct"))
     n0 = 0 if surface is None else surface.n_lights
     lights = add_lamps(surface, C, P, [faces.lamps[i] for i in lit], unit[:, lit], patches.area)
-    return lights, (n0 + np.arange(len(lit)), lit), H[:, n:], names[n:], notes
+    fixed = negative + list(range(n, H.shape[1]))
+    return lights, (n0 + np.arange(len(lit)), lit), H[:, fixed], [names[k] for k in fixed], notes
 
 
 def scene_light_at(model: Model, strength) -> np.ndarray:
@@ -474,7 +497,12 @@ def scene_light_at(model: Model, strength) -> np.ndarray:
     H = sp.csc_matrix(model.lights.irradiance)
     for j, i in zip(*model.lamp_lights):
         cols[:, i] = H[:, j].toarray() * np.asarray(strength, dtype=np.float64)[j][None, :]
-    return np.concatenate([cols, model.lamp_irradiance], axis=1)
+    index = {lamp.name: i for i, lamp in enumerate(faces.lamps)}
+    fixed = [(k, index[name]) for k, (name, kind, _) in enumerate(model.lamp_names or []) if kind != "world"]
+    for k, i in fixed:  # a lamp of negative power: fixed light, in its own column
+        cols[:, i] = model.lamp_irradiance[:, k]
+    rest = [k for k in range(model.lamp_irradiance.shape[1]) if k not in {k for k, _ in fixed}]
+    return np.concatenate([cols, model.lamp_irradiance[:, rest]], axis=1)
 
 
 def solve_stage(model: Model, options: JobOptions) -> tuple:
@@ -926,6 +954,8 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
     """
     options = (options or JobOptions()).validate()
     check_solvable(faces, mode, notes)
+    if mode == "inverse":
+        check_light_kinds(options)
     try:
         return _run_solve(faces, options, polygon_counts, default_max_patch_size, progress, cancel, mode, patches,
                           estimate)

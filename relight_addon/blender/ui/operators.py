@@ -54,7 +54,10 @@ def _mesh_objects(context, selected_only=False):
 
 
 def _message(exc) -> str:
-    """The user's message of an exception (a KeyError's without the quotes str() adds)."""
+    """The user's message of an exception (a KeyError's without the quotes str() adds; an
+    OptionError's worded for the sidebar, naming its options as it shows them)."""
+    if getattr(exc, "panel", None):
+        return exc.panel
     if isinstance(exc, KeyError) and exc.args:
         return str(exc.args[0])
     return str(exc)
@@ -407,7 +410,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             outcome = job.run()
         except (SceneError, ValueError) as exc:
             _restore_mode(context, getattr(self, "_mode", None))
-            self.report({"ERROR"}, str(exc))
+            self.report({"ERROR"}, _message(exc))
             return {"CANCELLED"}
         return self._finish(context, job, outcome)
 
@@ -416,7 +419,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             warnings = show_solve(context, job, outcome)
         except (SceneError, ValueError) as exc:
             _restore_mode(context, getattr(self, "_mode", None))
-            self.report({"ERROR"}, str(exc))
+            self.report({"ERROR"}, _message(exc))
             return {"CANCELLED"}
         # the status bar shows the last report: the summary first, then the warnings
         self.report({"INFO"}, "Relight: " + context.scene.relight.last_summary)
@@ -433,7 +436,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         try:
             job = self._prepare(context)
         except (SceneError, ValueError) as exc:
-            self.report({"ERROR"}, str(exc))
+            self.report({"ERROR"}, _message(exc))
             return {"CANCELLED"}
         if job.cost["warnings"] and not self.confirmed:
             # a large solve: ask first. "Solve Anyway" invokes this operator again with
@@ -518,7 +521,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             if exc is None or isinstance(exc, jobs.Cancelled):
                 self.report({"WARNING"}, "Relight: solve cancelled, the scene is unchanged")
             else:
-                self.report({"ERROR"}, f"Relight: {exc}")
+                self.report({"ERROR"}, f"Relight: {_message(exc)}")
             return {"CANCELLED"}
         return self._finish(context, self._job, self._result["outcome"])
 

@@ -9,21 +9,12 @@ import numpy as np
 
 from ..light_colour import (blackbody_rec709, fit_colours, relaxed_bound, solo_temperatures,
                             temperature_grid, temperature_of)
-from ..registry import LIGHT_COLOURS, Param
-
-#: the default range: warm white (2,700 K, an incandescent or warm LED) to daylight (6,500 K)
-DEFAULT_RANGE = (2700.0, 6500.0)
-
+from ..registry import LIGHT_COLOURS
+from .blackbody_range import DEFAULT_RANGE, RANGE_PARAMS
 
 @LIGHT_COLOURS.register("blackbody", "Blackbody", "Each light is a power times a blackbody colour, its "
                         "temperature in the range set (Blender's Blackbody colours)",
-                        params=(Param("temperature_min", float, DEFAULT_RANGE[0], min=800.0, max=12000.0,
-                                      label="Min Temperature", soft_max=12000.0,
-                                      description="Blackbody lights: the lowest colour temperature, K"),
-                                Param("temperature_max", float, DEFAULT_RANGE[1], min=800.0, max=12000.0,
-                                      label="Max Temperature", soft_max=12000.0,
-                                      description="Blackbody lights: the highest colour temperature, K")),
-                        relaxation=True)  # (its certificate: light_colour.relaxed_bound; engine/cost.py)
+                        params=RANGE_PARAMS, relaxation=True)  # (its certificate: light_colour.relaxed_bound; engine/cost.py)
 class Blackbody:
     name = "blackbody"
     free = False

@@ -17,11 +17,25 @@ def refit(problem, ids, tolerance, uniformity=None):
     uniformity goal) holds on the T the configuration is measured on: (exitance (len(ids), 3), the
     programme's message)."""
     ids = np.asarray(ids, dtype=np.int64)
-    regions = uniformity_regions(problem) if uniformity else None
+    goal, notes = uniformity_goal(problem, uniformity)
     res = least_power_within_tolerance([t[:, ids] for t in problem.transfer], problem.b_target,
-                                       np.asarray(problem.light_watts)[ids], tolerance,
-                                       uniformity=(float(uniformity), regions) if regions else None)
-    return res.exitance, res.message
+                                       np.asarray(problem.light_watts)[ids], tolerance, uniformity=goal)
+    return res.exitance, "; ".join(notes + ([res.message] if res.message else []))
+
+
+#: the note of a uniformity goal set without illuminance targets (the goal is then left out)
+NO_UNIFORMITY_REGION = "the uniformity goal applies to illuminance targets (Fill Selected in lx), and there are none"
+
+
+def uniformity_goal(problem, uniformity) -> tuple:
+    """(the programme's uniformity goal (U0, regions) or None, [notes]): none without a goal, and
+    none, with a note, when the problem has no illuminance target to hold it."""
+    if not uniformity:
+        return None, []
+    regions = uniformity_regions(problem)
+    if regions is None:
+        return None, [NO_UNIFORMITY_REGION]
+    return (float(uniformity), regions), []
 
 
 @SELECTIONS.register("least-power", "Least Power within Tolerance",
@@ -43,14 +57,7 @@ def least_power(s):
     if s.tolerance is None:
         raise ValueError("the least-power selection needs a tolerance (e.g. --tolerance 0.1 for +-10 %)")
     s.step(0, 1)
-    notes = []
-    goal = None
-    if s.uniformity:
-        regions = uniformity_regions(p)
-        if regions is None:
-            notes.append("the uniformity goal applies to illuminance targets (Fill Selected in lx), and there are none")
-        else:
-            goal = (float(s.uniformity), regions)
+    goal, notes = uniformity_goal(p, s.uniformity)
     res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, s.tolerance, uniformity=goal)
     on = np.flatnonzero(res.exitance.max(axis=1) > 0)
     s.record(on, res.exitance[on])
