@@ -402,7 +402,16 @@ def _cone_sample(axis, cos_max, u):
     return cz[:, None] * axis + (sz * np.cos(phi))[:, None] * t1 + (sz * np.sin(phi))[:, None] * t2
 
 
-def _spot_footprint(lamp: Lamp, g, s, m, rng):
+def _footprint_grid(m, rng) -> np.ndarray:
+    """(m', 2) a jittered grid of m' = floor(sqrt(m))^2 uniforms, drawn once per lamp: every patch of
+    a spot's edge gets the same directions whichever patches are asked for (a stroke's few rows are
+    those of a whole solve)."""
+    side = int(math.isqrt(m))
+    return (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), axis=-1).reshape(-1, 2)
+            + rng.random((side * side, 2))) / side
+
+
+def _spot_footprint(lamp: Lamp, g, s, grid):
     """(len(s),) mean irradiance per unit power of a spot on patches ``s`` (those its cone's edge
     crosses), as the integral over the directions from the lamp: a patch of area A gets
     E = (1 / A) int I a(w) r(w) dw over the directions w that reach its front (its solid angle,
@@ -426,11 +435,8 @@ def _spot_footprint(lamp: Lamp, g, s, m, rng):
     cone = math.cos(half) > cos_patch  # the cone is the smaller cap
     axis = np.where(cone[:, None], lamp.direction, c)
     cos_max = np.where(cone, math.cos(half), cos_patch)
-    side = int(math.isqrt(m))
-    m = side * side
-    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), axis=-1).reshape(-1, 2)
-            + rng.random((1, m, 2))) / side  # (1, m, 2) jittered, the same for every patch: the patches sampling
-    grid = np.broadcast_to(grid, (n, m, 2))  # the cone share its directions, each landing on one of them
+    m = len(grid)  # the same directions for every patch: the patches sampling the cone share them
+    grid = np.broadcast_to(grid[None], (n, m, 2))
     w = _cone_sample(np.repeat(axis, m, axis=0), np.repeat(cos_max, m), grid.reshape(-1, 2))
     pid = np.repeat(s, m)
     # the first front hit of each direction on its patch's triangles (Moller-Trumbore)
@@ -513,11 +519,14 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
         if lamp.kind == "SPOT":  # the patches the cone's edge (its blend ring) crosses: its footprint integrated
             edge = _cone_edge(lamp, g, todo)
             run(np.setdiff1d(todo, edge), k)
-            m = int(np.clip(FOOTPRINT_DIRECTIONS // max(len(edge), 1), k * EDGE_POINTS, 16 * k * EDGE_POINTS))
-            step = max(1, CHUNK_PATCHES * k // m)
+            # the directions per patch from the whole edge's count, whichever patches are asked for
+            every = len(edge) if sel is None else len(_cone_edge(lamp, g, np.arange(P)))
+            m = int(np.clip(FOOTPRINT_DIRECTIONS // max(every, 1), k * EDGE_POINTS, 16 * k * EDGE_POINTS))
+            grid = _footprint_grid(m, np.random.default_rng([int(seed), 8, li]))
+            step = max(1, CHUNK_PATCHES * k // len(grid))
             for c0 in range(0, len(edge), step):
                 s = edge[c0:c0 + step]
-                out[s, li] = _spot_footprint(lamp, g, s, m, rng)[:, None] * lamp.power[None, :]
+                out[s, li] = _spot_footprint(lamp, g, s, grid)[:, None] * lamp.power[None, :]
         elif lamp.kind == "AREA" and lamp.spread < math.pi:  # a beam: SPREAD_POINTS x the points, and
             run(run(todo, k * SPREAD_POINTS), k * EDGE_POINTS)  # EDGE_POINTS x on the patches its edge crosses
         else:
