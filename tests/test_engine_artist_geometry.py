@@ -87,3 +87,55 @@ def test_growth_bound_is_the_spectral_radius_not_the_largest_row():
     assert exc.value.rows[:5].all()
     named = exc.value.named(["Tiles", "Wall"], np.where(np.arange(P) < 5, 0, 1))
     assert "'Tiles'" in str(named) and "overlap, coincide" in str(named)
+
+
+def test_a_reduce_whose_lights_are_all_lamps_solves_without_surface_columns():
+    """The iterative solver of a large model given no right-hand side (a reduce whose only lights
+    are lamps has no surface column): numpy's 'zero-size array to reduction operation maximum'
+    reached the user on an artist's temple lit by a Sun."""
+    rng = np.random.default_rng(2)
+    F = rng.random((8, 8))
+    F /= 2 * F.sum(axis=1, keepdims=True)
+    out = _Iterative(F, np.full(8, 0.5)).solve(np.zeros((8, 0)))
+    assert out.shape == (8, 0)
+
+
+def test_targets_no_light_reaches_are_named_by_object():
+    """Two rooms: the first's ceiling may hold lights, the second (closed, every face forbidden)
+    has its floor painted too: its targets are named by the object, not by patch numbers."""
+    from relight_addon.engine.options import JobOptions
+    from relight_addon.pipeline.jobs import run_solve
+
+    def box(x0):
+        return [_quad((x0, 0, 0), (x0 + 2, 0, 0), (x0 + 2, 2, 0), (x0, 2, 0)),
+                _quad((x0, 0, 0), (x0, 0, 2), (x0 + 2, 0, 2), (x0 + 2, 0, 0)),
+                _quad((x0, 2, 0), (x0 + 2, 2, 0), (x0 + 2, 2, 2), (x0, 2, 2)),
+                _quad((x0, 0, 0), (x0, 2, 0), (x0, 2, 2), (x0, 0, 2)),
+                _quad((x0 + 2, 0, 0), (x0 + 2, 0, 2), (x0 + 2, 2, 2), (x0 + 2, 2, 0)),
+                _quad((x0, 0, 2), (x0, 2, 2), (x0 + 2, 2, 2), (x0 + 2, 0, 2))]
+    faces = polygon_faceset(box(0.0) + box(5.0), reflectance=0.5, object_names=["Lit", "Closed"],
+                            face_object=np.repeat([0, 1], 6))
+    faces.target[[0, 6]] = True
+    faces.target_radiosity[[0, 6]] = 1.0
+    faces.forbidden[:5] = True
+    faces.forbidden[6:] = True
+    out = run_solve(faces, JobOptions(spot_lamps=False, max_lights=1, max_patch_size=1.0, seed=1))
+    notes = [w for w in out.report["warnings"] if "cannot be met" in w]
+    assert len(notes) == 1 and "4 of 'Closed'" in notes[0] and "patches [" not in notes[0], notes
+
+
+def test_a_kernel_value_that_is_not_finite_is_left_to_the_rays():
+    """A kernel pair that comes out NaN (a receiver point on a source's edge: collision helpers laid
+    over a door made "form factors contain NaN" refuse the solve) takes the rays' estimate, and
+    the objects are recorded for the report."""
+    from relight_addon.engine.formfactors import _finite_kernel
+
+    patches = mesh_patches(tiled_room("coincident"), 1.0)
+    M = np.full((patches.n_patches, patches.n_patches), 0.01, dtype=np.float32)
+    rec, src = np.array([0, 1]), np.array([2, 3, 110])
+    K = np.full((2, 3), 0.02)
+    K[1, 2] = np.nan
+    out, (n, objs) = _finite_kernel(K, M, patches, rec, src)
+    assert np.isfinite(out).all() and out[1, 2] == pytest.approx(0.01) and out[0, 0] == 0.02 and n == 1
+    assert set(objs.tolist()) == {int(patches.object[1]), int(patches.object[110])}
+    assert _finite_kernel(out, M, patches, rec, src)[1] is None

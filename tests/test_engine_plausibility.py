@@ -56,3 +56,18 @@ def test_a_ceiling_above_the_desk_is_not_named():
     (rec,) = out.report["final"]["lights"]
     assert rec["utilisation"] > 10 * MIN_UTILISATION
     assert not [w for w in out.report["warnings"] if "of its light to the painted targets" in w]
+
+
+def test_the_positivity_note_never_advises_the_selection_already_used():
+    """The note on a final configuration far from what positive lights reach advised 'use the
+    greedy-swap selection' to a solve that used it (an artist's castle, chess board, temple)."""
+    from types import SimpleNamespace
+
+    from relight_addon.pipeline.jobs import BEST_SELECTION, _positivity_notes
+
+    bound = SimpleNamespace(relative_error=0.02, exitance=np.ones((96, 3)))
+    final = SimpleNamespace(relative_error=0.376, n_lights=3)
+    (used,) = _positivity_notes(bound, final, selection=BEST_SELECTION)
+    assert "allow more lights" in used and BEST_SELECTION not in used and "with 96" in used
+    (other,) = _positivity_notes(bound, final, selection="exitance-elimination")
+    assert f"use the {BEST_SELECTION} selection" in other

@@ -143,6 +143,9 @@ class FormFactors:
     send: object = None
     #: the solve's SceneSampler (its one Embree scene), for the lamps' shadow rays (engine.lamps)
     sampler: object = field(default=None, repr=False, compare=False)
+    #: (count, object indices) of the kernel's pairs left to the rays' estimate (non-finite: a
+    #: receiver point on a source's edge), None when there is none
+    kernel_unfit: object = None
 
     @property
     def n_patches(self) -> int:
@@ -661,8 +664,9 @@ def compute_form_factors(
                                 progress=None if user_progress is None else (lambda f: user_progress(0.5 + 0.5 * f)),
                                 **(kernel_options or {}))
         n_kernel = K.size
+        K, unfit = _finite_kernel(K, matrix, patches, rec, src)
     else:
-        rec = src = K = None
+        rec = src = K = unfit = None
     send = sending_scale(visible)
     matrix = pairs_then_sending_scale(matrix, patches.area, send, rec, src, K)
     data = matrix if dense else matrix.data
@@ -679,4 +683,21 @@ def compute_form_factors(
         visible=visible,
         send=send,
         sampler=sampler,
+        kernel_unfit=unfit,
     )
+
+
+def _finite_kernel(K, matrix, patches, rec, src):
+    """The kernel's pairs (receivers ``rec`` x sources ``src``) with any non-finite value (a
+    receiver point on a source's edge or inside it: coincident or degenerate faces, collision
+    helpers laid over a mesh) left to the rays' estimate; (K, None or (their count, their objects))."""
+    bad = ~np.isfinite(K)
+    if not bad.any():
+        return K, None
+    rec = np.flatnonzero(rec) if np.asarray(rec).dtype == bool else np.asarray(rec, dtype=np.int64)
+    src = np.flatnonzero(src) if np.asarray(src).dtype == bool else np.asarray(src, dtype=np.int64)
+    i, j = np.nonzero(bad)
+    rays = matrix[rec[i], src[j]]
+    K = K.copy()
+    K[i, j] = np.asarray(rays, dtype=np.float64).reshape(-1)
+    return K, (int(bad.sum()), np.unique(np.concatenate([patches.object[rec[i]], patches.object[src[j]]])))

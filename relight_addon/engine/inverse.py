@@ -181,6 +181,8 @@ class _Iterative:
         R = np.asarray(rhs, dtype=np.float64)
         one = R.ndim == 1
         R = R.reshape(len(R), -1)
+        if R.size == 0:  # (no right-hand side: a reduce whose lights are all lamps has no surface column)
+            return R[:, 0] if one and R.shape[1] else R
         rho = self.rho[:, None]
         X = R.copy()
         scale = max(float(np.abs(R).max()), 1e-300)
@@ -707,10 +709,7 @@ class InverseProblem:
             raise InverseError(
                 "no candidate light reaches any target (" + self._why_unreached() + "); "
                 f"target patches {bad[:20].tolist()}")
-        if len(bad):
-            self.warnings.append(
-                f"{len(bad)} target(s) cannot be met, no candidate light reaches them: patches "
-                f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
+        self.unmet = bad  # (the report names their objects: pipeline.jobs.unmet_note)
 
     def _why_unreached(self) -> str:
         """Why no light reaches a target, as far as the geometry tells: the candidates' or the

@@ -180,6 +180,10 @@ def check_solvable(faces: FaceSet, mode: str = "inverse", notes: dict | None = N
         if not np.any(free & has_area):
             raise SceneError(_with_notes("no candidate light: the faces that may hold lights have no area",
                                          notes.get("candidates")))
+        if not np.any(free & has_area & ~faces.target):
+            raise SceneError(_with_notes("no candidate light: every face that may hold lights is painted, and a "
+                                         "painted face asks for light, it does not hold it; allow a surface that "
+                                         "is not painted (a ceiling, a wall)", notes.get("candidates")))
     elif not np.any(faces.exitance > 0) and not faces.lamps:
         dark = notes.get("emitters")
         if dark:
@@ -366,6 +370,11 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
         F = (estimate or ESTIMATORS[options.estimator])(patches, opts, progress=_stage(progress, "form factors", lo, hi),
                                                         cancel=cancel, pairs=pairs)
         t_ff += F.seconds
+        if getattr(F, "kernel_unfit", None):
+            n, objs = F.kernel_unfit
+            warnings.append(f"{n} light-to-target form factor(s) could not be computed by the kernel (a point on a "
+                            f"face's edge: coincident or degenerate faces of {', '.join(repr(faces.object_names[o]) for o in objs[:6])}"
+                            f"{' ...' if len(objs) > 6 else ''}): taken from the rays' estimate")
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
         if mode == "inverse" and offered_kinds(options):  # the candidate lamps, beside the cells
@@ -979,6 +988,18 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
         return solve_model(model, options, polygon_counts, progress, cancel, t0)
 
 
+def unmet_note(model: Model) -> list:
+    """The painted targets no candidate light reaches (InverseProblem.unmet), by object."""
+    bad = getattr(model.problem, "unmet", None)
+    if bad is None or not len(bad):
+        return []
+    obj, count = np.unique(model.patches.object[bad], return_counts=True)
+    order = np.argsort(-count, kind="stable")
+    names = ", ".join(f"{count[i]} of {model.faces.object_names[obj[i]]!r}" for i in order[:5])
+    return [f"{len(bad)} target patch(es) cannot be met, no candidate light reaches them ({names}"
+            f"{', ...' if len(obj) > 5 else ''}): no allowed surface or candidate lamp sends them light"]
+
+
 @contextmanager
 def transport_named(patches: PatchSet, faces: FaceSet):
     """A DivergentTransport raised inside names the objects of its patches."""
@@ -1062,14 +1083,14 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     warnings = list(model.warnings)
     if mode == "inverse":
         point_bounds = np.array([bounds.at(p.n_lights) for p in red.curve])
-        warnings.extend(_positivity_notes(positive, red.final, model.problem.colour))
+        warnings.extend(_positivity_notes(positive, red.final, model.problem.colour, red.selection))
         warnings.extend(certificate_notes(model.problem, bounds, red.final, refined=model.lamp_refinement))
     fixed = None
     if mode == "inverse" or model.lamp_names:
         fixed, notes = fixed_light(model)
         warnings.extend(notes)
-    warnings.extend(w for w in model.problem.warnings + (inv.warnings if inv else []) + red.warnings
-                    if w not in warnings)
+    warnings.extend(w for w in model.problem.warnings + unmet_note(model) + (inv.warnings if inv else [])
+                    + red.warnings if w not in warnings)
     curve = assemble_curve(model, red, polygon_counts)
     timings = {"export": 0.0, "meshing": model.seconds["meshing"], "form_factors": model.seconds["form_factors"],
                "lamps": model.seconds["lamps"], "inverse": t_inverse, "reduction": t_reduce, "direct_light": t_direct,
@@ -1129,10 +1150,15 @@ def colour_text(colour) -> str:
     return rec["mode"] + (f" {rec['range_K'][0]:.0f}-{rec['range_K'][1]:.0f} K" if "range_K" in rec else "")
 
 
-def _positivity_notes(bound, final, colour=None):
+#: the selection the positivity note advises (the best configurations the project finds)
+BEST_SELECTION = "greedy-swap"
+
+
+def _positivity_notes(bound, final, colour=None, selection=None):
     """Say so when the final configuration misses the targets by much: whether no positive
     lighting can do better (targets brighter or darker than light can make them) or whether
-    more lights / another selection would. ``bound``: positive_bound's."""
+    more lights / another selection would (never the selection already used). ``bound``:
+    positive_bound's."""
     if bound is None or not final.relative_error > POSITIVE_GAP:
         return []
     n_pos = int((bound.exitance.max(axis=1) > 0).sum())
@@ -1141,6 +1167,7 @@ def _positivity_notes(bound, final, colour=None):
                 f"no non-negative set of the candidate lights, {colour_text(colour)}, goes below")
         return [f"no positive lighting meets these targets: {best} a relative error of {bound.relative_error:.3g} "
                 f"(NNLS, {n_pos} lights); the final configuration's is {final.relative_error:.3g}"]
-    return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error); positive "
-            f"lights can reach {bound.relative_error:.3g} (NNLS, {n_pos} lights): allow more lights, or use the "
-            "greedy-swap selection (Best k Lights)"]
+    other = "" if selection == BEST_SELECTION else f", or use the {BEST_SELECTION} selection (Best k Lights)"
+    return [f"the final configuration misses the targets by {final.relative_error:.3g} (relative error) with "
+            f"{final.n_lights} light(s); positive lights can reach {bound.relative_error:.3g} with {n_pos}: allow "
+            f"more lights{other}"]

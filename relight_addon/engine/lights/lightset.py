@@ -29,16 +29,18 @@ def kind_code(name: str) -> int:
 def candidate_mask(patches, mode: str = "inverse") -> np.ndarray:
     """(P,) bool: the patches that may emit.
 
-    inverse ("solve"): every patch that is not forbidden and not already emitting (the
-    scene's own emitters stay fixed background light). direct ("reduce"): the scene's
-    emitters (patches with a positive exitance in any channel).
+    inverse ("solve"): every patch that is not forbidden, not already emitting (the scene's own
+    emitters stay fixed background light) and not painted: a painted face asks for light, it does
+    not hold it (the paper lets a painted patch emit; on artists' files the answer was then the
+    painted floor, lane or desk glowing). direct ("reduce"): the scene's emitters (patches with a
+    positive exitance in any channel).
     """
     emitting = np.any(patches.exitance > 0, axis=1)
     if mode == "direct":
         return emitting
     if mode != "inverse":
         raise ValueError(f"unknown mode {mode!r}; use 'inverse' or 'direct'")
-    return ~patches.forbidden & ~emitting
+    return ~patches.forbidden & ~emitting & ~patches.target
 
 
 @dataclass
