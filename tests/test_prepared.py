@@ -101,8 +101,8 @@ def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeyp
 
 def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     """Live mode's re-solve (PreparedScene.live): the last solve's model retargeted on its transfer
-    to every patch, without a ray, a kernel row or a factorisation, gives a cold solve's error
-    within 10 %, and changes nothing kept."""
+    to every patch, without a ray, a kernel row or a factorisation, gives an answer no more than 10 %
+    worse than a cold solve's, and changes nothing kept."""
     from relight_addon.engine import inverse
 
     export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
@@ -163,10 +163,14 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     monkeypatch.undo()
     d, want = block["estimated_difference"], plain[0]["estimated_difference"]
     assert want is not None and d["reflections"] == want["reflections"]
-    assert d["mean"] == pytest.approx(want["mean"], rel=1e-6) and d["min"] == pytest.approx(want["min"], rel=1e-6)
+    # (the tables are float32, their sums over the lights' columns too: 1e-5, ten float32 epsilons x the lights)
+    assert d["mean"] == pytest.approx(want["mean"], rel=1e-5) and d["min"] == pytest.approx(want["min"], rel=1e-5)
     assert warns == plain[1] and not calls  # (no product with F in the stroke)
+    # as good as a cold solve of the same paint: not worse than it by more than 10 % (here, on an AMD
+    # EPYC, Live's answer is better: 0.148 against the cold solve's 0.188, whose lamps, refined for the
+    # stroked paint, end in a worse optimum than the ones Live kept; issue 37)
     cold = jobs.run_solve(exp2.faces, options, default_max_patch_size=size)
-    assert abs(_final(live)[1] - _final(cold)[1]) <= 0.1 * _final(cold)[1], (_final(live), _final(cold))
+    assert _final(live)[1] <= 1.1 * _final(cold)[1], (_final(live), _final(cold))
     moved = replace(exp2.faces, vertices=exp2.faces.vertices * 1.01)
     assert state.live(moved) is None and state.reason == "the geometry changed since it was prepared"
 
