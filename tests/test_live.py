@@ -344,13 +344,26 @@ def test_live_follows_undo_by_name(addon):
     live._on_undo(scene)
     _run(s, lambda: s.updates == 3, pause=True)
     assert s.paused is None and s.status == "up to date"
-    # a data-block of that name that is another one (Undo of the mesh's creation, then a new one)
+    # a wall deleted (Live pauses), then brought back by Undo: another data-block of that name,
+    # the same mesh in the same place (what Undo reads back): followed, Live goes on
     old = bpy.data.objects["wall_east"]
     me = old.data
     bpy.data.objects.remove(old)
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east' deleted: Solve & Reduce prepares again", s.paused
     new = bpy.data.objects.new("wall_east", me)
     scene.collection.objects.link(new)
     live._on_undo(scene)
+    _run(s, lambda: s.updates == 4, pause=True)
+    assert s.paused is None and job.exp.objects[job.exp.faces.object_names.index("wall_east")] == new
+    # brought back elsewhere: the geometry digest pauses Live; as something else than a mesh: named
+    new.location.x += 0.5
+    live._on_undo(scene)
     _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east' moved or edited: Solve & Reduce prepares again", s.paused
+    bpy.data.objects.remove(new)
+    scene.collection.objects.link(bpy.data.objects.new("wall_east", None))
+    live._on_undo(scene)
+    _run(s, lambda: s.paused is not None and "replaced" in s.paused, timeout=30, pause=True)
     assert s.paused == "object 'wall_east' replaced: Solve & Reduce prepares again", s.paused
     live.stop(scene.name)

@@ -1298,6 +1298,15 @@ def _faces_seen_from_behind(b) -> list:
     and standing on a floor looks at the floor under it, a cavity no light enters (modelled, the
     floor's patches straddling the block's edge would carry light into it).
 
+    A closed island whose box holds another object whole, with targets (that object's or its
+    own): a room and its furniture. It is judged by what its sides see inside its own box
+    (sides_view's ``front_in``, ``back_in``): a ground plane or a garden around a room whose
+    normals point out is not what its fronts are meant to see (issue 35, case 12). Such a room
+    turned in part by hand (its floor and a wall in, the rest out): the faces whose fronts see
+    nothing of its inside while their backs see some are turned (painted or not). A closed island
+    with faces turned against their neighbours (``mixed_orientation``) that is no such room (an
+    empty room, a crate with a face flipped) is named in a warning, modelled as it is.
+
     Closed islands (solids) face their inside with their backs: rays are cast only for those
     whose box holds another object's centre. Emitting faces keep their orientation
     (_emitting_backs models their backs). Returns the warnings that name what was turned or

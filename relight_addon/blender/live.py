@@ -26,7 +26,8 @@ operator's timer):
   pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
   prepares again;
 - Undo and Redo (Blender reads the scene back): the exported objects found again by name (Live
-  follows the scene as reverted), or Live pauses naming the one that is gone;
+  follows the scene as reverted, its geometry checked), or Live pauses naming the one that is
+  gone; what paused Live on an object is looked at again (an undone deletion resumes it);
 - ``stop()`` (the toggle, ESC, another file): a re-solve running is asked to stop and its answer
   dropped; the scene keeps the last answer written, whole.
 """
@@ -202,18 +203,22 @@ class LiveSession:
         again): into ``changed``; the lamps a render shows, added, deleted, hidden or shown: into
         ``lamps_moved`` (re-read and followed). After Undo or Redo, the exported objects that are
         still the same are found again by name (the scene read back: Blender's Python objects of
-        the ones before may be stale)."""
+        the ones before may be stale; one deleted and brought back by Undo is another data-block)."""
         names = list(self.exported)
         if self.reloaded:
             self.reloaded, self.shown, self.touched_all = False, None, True  # (the answer shown may be undone)
             self.lamps_moved.add("(Undo)")
             found = [bpy.data.objects.get(n) for n in names]
             gone = [f"object {n!r} deleted" if ob is None else f"object {n!r} replaced"
-                    for n, ob in zip(names, found) if ob is None or ob.as_pointer() != self.exported[n]]
+                    for n, ob in zip(names, found) if ob is None or ob.type != "MESH"]
             if gone:
                 self.changed.update(gone)
                 return
-            job.exp.objects[:] = found  # (the same data-blocks: their Python objects anew)
+            # the objects of those names (Undo reads back at another address what it deleted or
+            # changed): followed, the geometry digest (every object, at this read) says whether
+            # they are still the ones prepared
+            job.exp.objects[:] = found
+            self.exported = {n: ob.as_pointer() for n, ob in zip(names, found)}
         gone = _gone(context, names, job.exp.objects, self.exported)
         if gone:
             self.changed.update(gone)
