@@ -1323,6 +1323,9 @@ def _faces_seen_from_behind(b) -> list:
             boxes[o] = (np.minimum(lo, W.min(axis=0)), np.maximum(hi, W.max(axis=0)))
     centres = {o: 0.5 * (lo + hi) for o, (lo, hi) in boxes.items()}
     painted = {int(o) for ci in range(len(b.e)) if len(b.tgt[ci]) for o in np.unique(b.f_obj[ci][b.tgt[ci]])}
+    obj_ids = np.array(list(boxes), dtype=np.int64)
+    obj_lo, obj_hi = (np.array([boxes[o][j] for o in obj_ids]).reshape(-1, 3) for j in (0, 1))
+    obj_painted = np.isin(obj_ids, list(painted))
     for ci in range(len(b.e)):
         if b.geos[ci] is None or not len(b.e[ci]):
             continue
@@ -1358,11 +1361,10 @@ def _faces_seen_from_behind(b) -> list:
             # ground plane or a garden around it is outside (a pierced slab, a sunk pillow: held in
             # part; a casing round a hidden part: no target; judged as before)
             own = int(b.f_obj[ci][0])
-            held = [o for o in boxes if o != own]
-            olo, ohi = (np.array([boxes[o][j] for o in held]).reshape(-1, 3) for j in (0, 1))
-            whole = np.all((olo[None] >= (lo - pad)[:, None]) & (ohi[None] <= (hi + pad)[:, None]), axis=2)
-            whole &= np.isin(np.array(held, dtype=np.int64), list(painted))[None] | (
-                np.bincount(island, weights=b.tgt[ci], minlength=k) > 0)[:, None]
+            held = obj_ids != own
+            whole = np.all((obj_lo[held][None] >= (lo - pad)[:, None]) & (obj_hi[held][None] <= (hi + pad)[:, None]),
+                           axis=2)
+            whole &= obj_painted[held][None] | (np.bincount(island, weights=b.tgt[ci], minlength=k) > 0)[:, None]
             enclosing.append(whole.any(axis=1)[island[sel]] & ~is_open[sel])
             # a closed island partly turned (some faces in, the others out): turned when it is a
             # room (above), named otherwise (a solid with a face flipped: which side is meant?)

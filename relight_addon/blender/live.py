@@ -400,8 +400,9 @@ def _gone(context, names, objects, pointers=None) -> list:
 
 def _watched(context) -> tuple:
     """(meshes, lamps) a render of the view layer shows, the user's (not Relight's results):
-    the meshes' names (export.exported_objects); the lamps' (name, hide_render) pairs, as
-    lamps.export_lamps reads them (a lamp a shown reduction turned off: as the user set it)."""
+    the meshes' names (export.exported_objects); the lamps' (name, data-block address) pairs,
+    hidden from renders as lamps.export_lamps reads it (a lamp a shown reduction turned off: as
+    the user set it)."""
     renderable = export.render_visible_objects(context)
     meshes = {ob.name for ob in export.exported_objects(context)}
     lamps = set()
