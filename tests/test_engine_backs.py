@@ -61,3 +61,20 @@ def test_a_back_counts_only_the_fronts_outside_its_box():
     alone = sides_view(v, tris, tri_face, obj, np.array([1]), gap=0.0, rays_per_face=2048, seed=4, box=own)
     closed = sides_view(v, tris, tri_face, obj, np.array([1]), gap=0.0, rays_per_face=2048, seed=4, box=both)
     assert plain.back[0] > 0.3 and alone.back[0] == plain.back[0] and closed.back[0] == 0.0
+    # what it sees inside the box: the floor, counted by back_in (and nothing by front_in, the front
+    # facing away); outside, nothing
+    assert closed.back_in[0] == plain.back[0] and alone.back_in[0] == 0.0
+    assert closed.front_in[0] == 0.0 and plain.front_in[0] == 0.0
+
+
+def test_a_front_counts_what_it_reaches_inside_its_box():
+    """Issue 35, case 12: front_in counts the front's rays that reach a face inside the box (a
+    room's fronts see its inside; a ground plane or a garden outside its box does not count),
+    front everything it reaches."""
+    v, tris, tri_face, obj = _two_squares(True)
+    both = np.array([[[-0.01, -0.01, -0.01], [1.01, 1.01, H + 0.01]]])
+    own = np.array([[[-0.01, -0.01, -0.01], [1.01, 1.01, 0.01]]])  # the floor square's alone
+    inside = sides_view(v, tris, tri_face, obj, np.array([0]), gap=0.0, rays_per_face=2048, seed=5, box=both)
+    outside = sides_view(v, tris, tri_face, obj, np.array([0]), gap=0.0, rays_per_face=2048, seed=5, box=own)
+    assert inside.front[0] > 0.3 and inside.front_in[0] == inside.front[0]
+    assert outside.front[0] == inside.front[0] and outside.front_in[0] == 0.0

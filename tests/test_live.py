@@ -243,3 +243,127 @@ def test_the_paint_is_read_once_the_stroke_ends():
     old = NS(windows=[NS()])  # a Blender without Window.modal_operators: the brush at rest after QUIET
     assert live.stroke_running(NS(window_manager=old), now)
     assert not live.stroke_running(NS(window_manager=old), now - 2 * live.QUIET)
+
+
+def test_live_pauses_naming_an_object_deleted_or_hidden_and_follows_lamps(addon):
+    """Issue 35, cases 13 and 14: an exported object deleted (no ReferenceError) or hidden from
+    renders (its own hide_render, its collection excluded) pauses Live naming it, the scene as last
+    written; a lamp added, hidden from renders or deleted is followed (counted, then not)."""
+    from relight_addon.blender import live, preparation, results
+    from relight_addon.blender.ui import operators
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
+    _run(s, lambda: s.status == "up to date" and s.updates == 1)
+    state = preparation.PREPARED[scene.name]
+    avoid = _clustered_polygons(state, "flight_1")
+
+    # a lamp added with Live on: counted (the scene's light), followed without a full solve
+    ld = bpy.data.lights.new("desk lamp", "POINT")
+    ld.energy = 60.0
+    lamp = bpy.data.objects.new("desk lamp", ld)
+    lamp.location = (2.0, 6.0, 8.5)  # (under the ceiling, z = 9, of the 4 x 8 m stairwell)
+    scene.collection.objects.link(lamp)
+    _run(s, lambda: s.updates == 2)
+    assert "desk lamp" in scene.relight.last_fixed_light and state.live_solves == 1
+    bg = state.model.problem.background_radiosity.copy()
+    assert np.any(bg > 0)
+    lamp.hide_render = True  # hidden from renders: no longer counted
+    _run(s, lambda: s.updates == 3)
+    assert "desk lamp" not in scene.relight.last_fixed_light
+    assert not np.any(state.model.problem.background_radiosity > 0)
+    lamp.hide_render = False
+    _run(s, lambda: s.updates == 4)
+    assert "desk lamp" in scene.relight.last_fixed_light
+    bpy.data.objects.remove(lamp)  # deleted: no longer counted
+    _run(s, lambda: s.updates == 5)
+    assert "desk lamp" not in scene.relight.last_fixed_light and s.paused is None
+    assert not np.any(state.model.problem.background_radiosity > 0)
+
+    # the ceiling hidden from renders: Live pauses naming it, writes nothing
+    written = results.result_id(scene)
+    ceiling = bpy.data.objects["ceiling"]
+    ceiling.hide_render = True
+    _stroke(4, "flight_1", avoid)
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'ceiling' hidden from renders: Solve & Reduce prepares again", s.paused
+    for _ in range(5):
+        bpy.context.view_layer.update()
+        s.tick(bpy.context)
+    assert s.worker is None and results.result_id(scene) == written
+    ceiling.hide_render = False
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    _run(s, lambda: s.paused is None and s.status == "up to date", timeout=60, pause=True)
+
+    # a wall deleted: paused, named, no ReferenceError (bpy.data.objects.remove, as Delete does)
+    written = results.result_id(scene)
+    bpy.data.objects.remove(bpy.data.objects["wall_west"])
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_west' deleted: Solve & Reduce prepares again", s.paused
+    assert results.result_id(scene) == written
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    _run(s, lambda: s.paused is None and s.status == "up to date", timeout=60, pause=True)
+
+    # a collection excluded from the view layer: its meshes named
+    coll = bpy.data.collections.new("stairs")
+    scene.collection.children.link(coll)
+    coll.objects.link(bpy.data.objects["flight_2"])
+    scene.collection.objects.unlink(bpy.data.objects["flight_2"])
+    _run(s, lambda: s.status == "up to date", timeout=60)
+    bpy.context.view_layer.layer_collection.children["stairs"].exclude = True
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert "object 'flight_2' hidden from renders" in s.paused, s.paused
+    live.stop(scene.name)
+
+
+def test_live_follows_undo_by_name(addon):
+    """Issue 35, case 14: Undo or Redo with Live on (Blender reads the scene back; the undo_post
+    handler): the exported objects found again by name, Live goes on; one that Undo takes away
+    pauses it, named (never an exception)."""
+    from relight_addon.blender import live, preparation
+    from relight_addon.blender.ui import operators
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
+    _run(s, lambda: s.status == "up to date" and s.updates == 1)
+    job = preparation.PREPARED_JOBS[scene.name]
+    # the scene read back with the same data-blocks (what Undo does to the ones it keeps)
+    live._on_undo(scene)
+    _run(s, lambda: s.updates == 2)
+    assert s.paused is None and all(ob.name for ob in job.exp.objects)
+    # Undo of what paused Live (a wall hidden from renders): Live goes on, and says nothing stale
+    wall = bpy.data.objects["wall_north"]
+    wall.hide_render = True
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert "object 'wall_north' hidden from renders" in s.paused
+    wall.hide_render = False
+    live._on_undo(scene)
+    _run(s, lambda: s.updates == 3, pause=True)
+    assert s.paused is None and s.status == "up to date"
+    # a wall deleted (Live pauses), then brought back by Undo: another data-block of that name,
+    # the same mesh in the same place (what Undo reads back): followed, Live goes on
+    old = bpy.data.objects["wall_east"]
+    me = old.data
+    bpy.data.objects.remove(old)
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east' deleted: Solve & Reduce prepares again", s.paused
+    new = bpy.data.objects.new("wall_east", me)
+    scene.collection.objects.link(new)
+    live._on_undo(scene)
+    _run(s, lambda: s.updates == 4, pause=True)
+    assert s.paused is None and job.exp.objects[job.exp.faces.object_names.index("wall_east")] == new
+    # brought back elsewhere: the geometry digest pauses Live; as something else than a mesh: named
+    new.location.x += 0.5
+    live._on_undo(scene)
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east' moved or edited: Solve & Reduce prepares again", s.paused
+    bpy.data.objects.remove(new)
+    scene.collection.objects.link(bpy.data.objects.new("wall_east", None))
+    live._on_undo(scene)
+    _run(s, lambda: s.paused is not None and "replaced" in s.paused, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east' replaced: Solve & Reduce prepares again", s.paused
+    live.stop(scene.name)

@@ -178,7 +178,7 @@ def files_read() -> list:
     for lib in bpy.data.libraries:
         # (an indirect library's path too is relative to the open file: Blender remaps it when it reads it)
         out.append((f"the library {lib.name!r} it links from", os.path.normpath(bpy.path.abspath(lib.filepath))))
-    for idb, paths in bpy.data.file_path_map(include_libraries=False).items():
+    for idb, paths in _file_paths():
         if isinstance(idb, bpy.types.Library):
             continue
         what = _READERS.get(type(idb).__name__, type(idb).__name__.lower())
@@ -186,6 +186,18 @@ def files_read() -> list:
             if p:
                 out.append((f"the {what} {idb.name!r}", os.path.normpath(bpy.path.abspath(p, library=idb.library))))
     return out
+
+
+def _file_paths():
+    """[(data-block, its file paths)]: bpy.data.file_path_map (Blender 4.4+); before (4.2, and
+    Debian's 4.3), the data-blocks that keep a ``filepath``."""
+    fpm = getattr(bpy.data, "file_path_map", None)
+    if fpm is not None:
+        return list(fpm(include_libraries=False).items())
+    return [(idb, {idb.filepath}) for kind in ("images", "fonts", "sounds", "movieclips", "volumes", "cache_files",
+                                               "texts")
+            for idb in getattr(bpy.data, kind, ()) if getattr(idb, "filepath", "") not in ("", "<builtin>")
+            and getattr(idb, "source", "FILE") not in ("GENERATED", "VIEWER")]
 
 
 # ------------------------------------------------------------------ materials
@@ -934,6 +946,21 @@ def open_faces(geo) -> tuple:
     return is_open[label[:npoly]], label[:npoly]
 
 
+def mixed_orientation(geo, island) -> np.ndarray:
+    """(islands,) bool: the islands (``island``: open_faces' labels) some of whose faces are turned
+    against their neighbours (an edge that two faces run along the same way: normals flipped on
+    some faces by hand, a room partly turned in)."""
+    le, lp, lv = geo["loop_edge"], geo["loop_poly"], geo["loop_vert"]
+    k = int(island.max()) + 1 if len(island) else 0
+    if not len(le):
+        return np.zeros(k, dtype=bool)
+    order = np.lexsort((lv, le))  # the loops of each edge together, by their first vertex
+    same = (le[order][1:] == le[order][:-1]) & (lv[order][1:] == lv[order][:-1])
+    out = np.zeros(k, dtype=bool)
+    out[island[lp[order][1:][same]]] = True
+    return out
+
+
 #: how far behind its front the back side of an open emitter is set (``Builder.add_backs``),
 #: relative to the scene's bounding-box diagonal: 10 x the rays' origin offset
 #: (engine.sampling.RAY_OFFSET), so that a ray reaching the front hits the front first
@@ -1292,13 +1319,23 @@ def _faces_seen_from_behind(b) -> list:
     and standing on a floor looks at the floor under it, a cavity no light enters (modelled, the
     floor's patches straddling the block's edge would carry light into it).
 
+    A closed island whose box holds another object whole, with targets (that object's or its
+    own): a room and its furniture. It is judged by what its sides see inside its own box
+    (sides_view's ``front_in``, ``back_in``): a ground plane or a garden around a room whose
+    normals point out is not what its fronts are meant to see (issue 35, case 12). Such a room
+    turned in part by hand (its floor and a wall in, the rest out): the faces whose fronts see
+    nothing of its inside while their backs see some are turned (painted or not). A closed island
+    with faces turned against their neighbours (``mixed_orientation``) that is no such room (an
+    empty room, a crate with a face flipped) is named in a warning, modelled as it is.
+
     Closed islands (solids) face their inside with their backs: rays are cast only for those
     whose box holds another object's centre. Emitting faces keep their orientation
     (_emitting_backs models their backs). Returns the warnings that name what was turned or
     doubled, per object."""
     from ..engine.backs import sides_view
 
-    chosen, gaps, where, areas, boxes_of = [], [], [], [], []
+    chosen, gaps, where, areas, boxes_of, enclosing = [], [], [], [], [], []
+    muddled = set()  # the objects with a closed island partly turned
     islands, boxes = {}, {}
     for ci in range(len(b.e)):
         if len(b.verts[ci]):
@@ -1306,13 +1343,18 @@ def _faces_seen_from_behind(b) -> list:
             lo, hi = boxes.get(o, (W.min(axis=0), W.max(axis=0)))
             boxes[o] = (np.minimum(lo, W.min(axis=0)), np.maximum(hi, W.max(axis=0)))
     centres = {o: 0.5 * (lo + hi) for o, (lo, hi) in boxes.items()}
+    painted = {int(o) for ci in range(len(b.e)) if len(b.tgt[ci]) for o in np.unique(b.f_obj[ci][b.tgt[ci]])}
+    obj_ids = np.array(list(boxes), dtype=np.int64)
+    obj_lo, obj_hi = (np.array([boxes[o][j] for o in obj_ids]).reshape(-1, 3) for j in (0, 1))
+    obj_painted = np.isin(obj_ids, list(painted))
     for ci in range(len(b.e)):
         if b.geos[ci] is None or not len(b.e[ci]):
             continue
         geo = b.geos[ci][0]
         if id(geo) not in islands:  # instances share their mesh's arrays
             islands[id(geo)] = open_faces(geo)
-        is_open, island = islands[id(geo)]
+            islands[id(geo)] += (mixed_orientation(geo, islands[id(geo)][1]),)
+        is_open, island, mixed = islands[id(geo)]
         back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
         still = ~(np.any(b.e[ci] > 0, axis=1) | np.any(back > 0, axis=1) | b.linked[ci])
         k = int(island.max()) + 1
@@ -1327,7 +1369,7 @@ def _faces_seen_from_behind(b) -> list:
         lo, hi = np.minimum.reduceat(P, first, axis=0), np.maximum.reduceat(P, first, axis=0)
         others = np.array([c for o, c in centres.items() if o != int(b.f_obj[ci][0])]).reshape(-1, 3)
         holds = np.any(np.all((others[None] > lo[:, None]) & (others[None] < hi[:, None]), axis=2), axis=1)
-        sel = np.flatnonzero(still & (is_open | holds[island]))
+        sel = np.flatnonzero(still & (is_open | holds[island] | mixed[island]))
         if len(sel):
             chosen.append(nf0 + sel)
             gaps.append(BACK_GAP * size[island[sel]])
@@ -1335,6 +1377,20 @@ def _faces_seen_from_behind(b) -> list:
             areas.append(area[sel])
             pad = ISLAND_BOX_PAD * (hi - lo).max(axis=1, keepdims=True)
             boxes_of.append(np.stack([lo - pad, hi + pad], axis=1)[island[sel]])
+            # a closed island whose box holds another object whole (a room and its furniture), and
+            # targets (its own or that object's), is judged by what its sides see inside that box: a
+            # ground plane or a garden around it is outside (a pierced slab, a sunk pillow: held in
+            # part; a casing round a hidden part: no target; judged as before)
+            own = int(b.f_obj[ci][0])
+            held = obj_ids != own
+            whole = np.all((obj_lo[held][None] >= (lo - pad)[:, None]) & (obj_hi[held][None] <= (hi + pad)[:, None]),
+                           axis=2)
+            whole &= obj_painted[held][None] | (np.bincount(island, weights=b.tgt[ci], minlength=k) > 0)[:, None]
+            enclosing.append(whole.any(axis=1)[island[sel]] & ~is_open[sel])
+            # a closed island partly turned (some faces in, the others out): turned when it is a
+            # room (above), named otherwise (a solid with a face flipped: which side is meant?)
+            if (mixed[island[sel]] & ~is_open[sel]).any():
+                muddled.add(b.names[own])
     if not chosen:
         return []
     geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
@@ -1356,15 +1412,18 @@ def _faces_seen_from_behind(b) -> list:
         sample.append(rng.choice(drawn, ISLAND_FACES, replace=False, p=areas[drawn] / areas[drawn].sum()))
     sample = np.sort(np.concatenate(sample))
     faces_all, gaps, boxes_of = np.concatenate(chosen), np.concatenate(gaps), np.concatenate(boxes_of)
+    enclosing = np.concatenate(enclosing)
     n_isl = len(keys)
+    inner = np.zeros(n_isl, dtype=bool)  # the islands judged by their own inside (the rooms)
+    inner[inv] = enclosing
 
     def island_means(geometry):
         coarse = sides_view(*geometry, faces_all[sample], gaps[sample], SIDE_RAYS, box=boxes_of[sample])
         return [np.bincount(inv[sample], weights=x, minlength=n_isl) / np.bincount(inv[sample], minlength=n_isl)
-                for x in (coarse.front, coarse.back, coarse.back_other)]
+                for x in (coarse.front, coarse.back, coarse.back_other, coarse.front_in, coarse.back_in)]
 
     mean = island_means(geometry)
-    inside_out = (mean[0] <= SIDE_BLIND) & (mean[2] >= ENCLOSES)
+    inside_out = (np.where(inner, mean[3], mean[0]) <= SIDE_BLIND) & ((mean[2] >= ENCLOSES) | inner)
     turned, doubled, painted_away = {}, {}, {}
 
     def apply(mask, count, ci, sel, act):
@@ -1385,23 +1444,32 @@ def _faces_seen_from_behind(b) -> list:
         geometry = (np.concatenate(b.verts), np.concatenate(b.tris), geometry[2], geometry[3])
         if (opened_all & ~inside_out[inv]).any():
             mean = island_means(geometry)
-    fine = np.flatnonzero(~inside_out[inv] & opened_all & (mean[1][inv] >= ISLAND_SEES))
+    # (and the faces of a room partly turned by hand, some facing in, some out: what each sees in its box)
+    partly = ~inside_out[inv] & enclosing & (mean[4][inv] >= ISLAND_SEES)
+    fine = np.flatnonzero(~inside_out[inv] & opened_all & (mean[1][inv] >= ISLAND_SEES) | partly)
     if len(fine):
         rays = int(np.clip(SIDE_RAY_BUDGET // (2 * len(fine)), 4, SIDE_RAYS))
         view = sides_view(*geometry, faces_all[fine], gaps[fine], rays, seed=1, box=boxes_of[fine])
         V = geometry[0]
         offset = BACK_OFFSET * max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-9)
         front_all, back_all, cast_all = np.zeros(len(faces_all)), np.zeros(len(faces_all)), np.zeros(len(faces_all), bool)
-        front_all[fine], back_all[fine], cast_all[fine] = view.front, view.back, True
+        front_all[fine] = np.where(partly[fine], view.front_in, view.front)
+        back_all[fine] = np.where(partly[fine], view.back_in, view.back)
+        cast_all[fine] = True
         k = 0
         for ci, sel, _, _ in where:
-            front, back, cast = (x[k:k + len(sel)] for x in (front_all, back_all, cast_all))
+            front, back, cast, room = (x[k:k + len(sel)] for x in (front_all, back_all, cast_all, partly))
             k += len(sel)
             sees = cast & (back >= SIDE_SEES)
             blind = front <= SIDE_BLIND
+            # a room's faces that face out while the rest face in: their fronts see nothing of its
+            # inside, their backs some of it (not all: what lies within the gap of their edges does
+            # not count); turned, painted or not (a closed island's inside is what the scene in it sees)
+            apply(cast & room & blind & (back >= ISLAND_SEES), turned, ci, sel, b.flip_faces)
+            sees &= ~room
             # both sides: the whole island's backs see the scene (a plane seen from below), not a
             # few of its faces (a staircase's landings, whose tops see the flights' backs)
-            both = cast & ~blind & (mean[1][inv[k - len(sel):k]] >= ISLAND_BOTH)
+            both = cast & ~blind & ~room & (mean[1][inv[k - len(sel):k]] >= ISLAND_BOTH)
             apply(sees & blind & ~b.tgt[ci][sel], turned, ci, sel, b.flip_faces)
             apply(both, doubled, ci, sel, lambda c, f: b.add_backs(c, f, offset))
             apply(sees & blind & b.tgt[ci][sel], painted_away, ci, sel, lambda c, f: None)
@@ -1413,6 +1481,11 @@ def _faces_seen_from_behind(b) -> list:
     if doubled:
         out.append(f"{_counted(doubled)} are seen from both sides (single planes lit on one side, seen from the "
                    "other): their back sides are modelled as faces of their own (never targets or lights)")
+    muddled -= set(turned)
+    if muddled:
+        out.append(f"{', '.join(repr(n) for n in sorted(muddled))}: some faces of a closed part face one way, their "
+                   "neighbours the other (normals flipped by hand?), and what they see does not tell which side the "
+                   "scene is on: modelled as they are; Mesh > Normals > Recalculate Outside (or Inside) makes them agree")
     if painted_away:
         out.append(f"{_counted(painted_away)} are painted but face away from the scene (their fronts see no "
                    "surface, their backs the scene): they are solved as painted on their fronts; if the paint is "

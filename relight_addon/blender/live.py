@@ -19,9 +19,15 @@ operator's timer):
 - a lamp of the scene moved, turned or set to another power (a kept one, say): its light is cast
   again on the kept scene and taken through the kept factorisation (PreparedScene.move_lamps),
   and the rest re-solved around it, without a full solve;
+- a lamp added, deleted, hidden from or shown to renders (its object, a collection, the view
+  layer) is followed the same way (``_watch``: the depsgraph's updates do not name what is gone);
 - a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
-  the World, options) pauses Live with the reason, the scene as last written, until Solve &
-  Reduce prepares again;
+  the World, options; an exported object deleted or hidden from renders, or a mesh shown to them)
+  pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
+  prepares again;
+- Undo and Redo (Blender reads the scene back): the exported objects found again by name (Live
+  follows the scene as reverted, its geometry checked), or Live pauses naming the one that is
+  gone; what paused Live on an object is looked at again (an undone deletion resumes it);
 - ``stop()`` (the toggle, ESC, another file): a re-solve running is asked to stop and its answer
   dropped; the scene keeps the last answer written, whole.
 """
@@ -35,7 +41,7 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from . import export, light_paths, preparation, results
+from . import export, lamp_state, light_paths, preparation, results
 from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import scene_lamps_differ
@@ -83,6 +89,9 @@ class LiveSession:
         self.lamps_moved = set()  # the lamps whose placement or settings changed (followed, not paused)
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
+        self.exported = {}  # name -> as_pointer() of the base's exported objects (the deletion watch)
+        self.watched = None  # (_watched: the meshes and lamps a render shows) when the base was taken
+        self.reloaded = False  # Undo or Redo read the scene back since the last read
         self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
         self.prewarm_seconds = None  # the transfer to every patch and the check's products: their time (before the first stroke)
 
@@ -108,6 +117,13 @@ class LiveSession:
                 return  # (a stroke's full solve: collected first)
             self.base, self.changed, self.paused, self.dirty = job, set(), None, True
             self._faces, self.touched_all = None, True
+            names = job.exp.faces.object_names[:len(job.exp.objects)]
+            gone = _gone(context, names, job.exp.objects)
+            if gone:  # (deleted while the first solve ran)
+                self.changed.update(gone)
+                return
+            self.exported = {n: ob.as_pointer() for n, ob in zip(names, job.exp.objects)}
+            self.watched = _watched(context)
             self.geometry = _geometry_digest(job.exp.objects)
             self.status = "preparing the transfer to every patch"
             faces = job.exp.faces
@@ -123,22 +139,29 @@ class LiveSession:
             self._run(prewarm, job)
             self.result["prewarm"] = True
             return
+        if self.reloaded and self.changed:  # Undo or Redo: what the watch and the digests tell anew is read again
+            undone = {c for c in self.changed if not c.startswith("object ")}
+            if undone != self.changed:
+                self.changed, self.dirty = undone, True
+                if not undone:
+                    self.paused, self.status = None, "up to date"
         if not self.changed and self.options_fn(context.scene.relight).to_dict() != state.options.to_dict():
-            self.changed.add("the options")
+            self.changed.add("the options changed")
         if self.changed:
-            self.paused = f"{', '.join(sorted(self.changed))} changed: Solve & Reduce prepares again"
+            self.paused = f"{', '.join(sorted(self.changed))}: Solve & Reduce prepares again"
             self.status = "paused"
             return
+        if self.dirty:
+            self._read_paint(context, job)  # (and the watch: what was deleted, hidden, added)
+            if self.changed:
+                return
         if self.lamps_moved and self.worker is None:  # the scene's lamps read again: re-solved around them
             self.lamps_moved = set()
             lamps, _ = export.export_lamps(context, export.render_visible_objects(context), export.owner_of)
             self.lamps = lamps
             self.shown = None  # the answer shown is of the lamps before
-            self.dirty = True
-        if self.dirty:
-            self._read_paint(job)
-            if self.changed:
-                return
+            if self._faces is not None:
+                self._faces = replace(self._faces, lamps=lamps)
         if self.worker is not None or self.paused or self.paint is None:
             return
         if self.shown is not None and _same(self.paint, self.shown):
@@ -146,10 +169,14 @@ class LiveSession:
             return
         self._start_live(job, state, self._faces)
 
-    def _read_paint(self, job) -> None:
+    def _read_paint(self, context, job) -> None:
         """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that
-        moved or was edited is added to ``changed`` (the prepared state cannot follow it)."""
+        moved or was edited, deleted, hidden from or shown to renders is added to ``changed`` (the
+        prepared state cannot follow it)."""
         self.dirty = False
+        self._watch(context, job)
+        if self.changed:
+            return
         # only the objects the depsgraph updated are read again and digested (a stroke's: a
         # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
         touched, every = self.touched, self.touched_all or self._faces is None
@@ -163,11 +190,48 @@ class LiveSession:
         now = _geometry_digest(objs)
         moved = sorted(name for name in now if now[name] != self.geometry.get(name))
         if moved:
-            self.changed.update(f"object {name!r} (moved or edited)" for name in moved)
+            self.changed.update(f"object {name!r} moved or edited" for name in moved)
             return
         self._faces = faces
         if self.paint is None or not _same((faces.target, faces.target_radiosity), self.paint):
             self.paint = (faces.target, faces.target_radiosity)
+
+    def _watch(self, context, job) -> None:
+        """What the depsgraph's updates do not say object by object: an exported object deleted
+        (or, after Undo or Redo, not the same object any more), hidden from renders (its own
+        ``hide_render``, a collection's, the view layer's), a mesh shown to them (added, or shown
+        again): into ``changed``; the lamps a render shows, added, deleted, hidden or shown: into
+        ``lamps_moved`` (re-read and followed). After Undo or Redo, the exported objects that are
+        still the same are found again by name (the scene read back: Blender's Python objects of
+        the ones before may be stale; one deleted and brought back by Undo is another data-block)."""
+        names = list(self.exported)
+        if self.reloaded:
+            self.reloaded, self.shown, self.touched_all = False, None, True  # (the answer shown may be undone)
+            self.lamps_moved.add("(Undo)")
+            found = [bpy.data.objects.get(n) for n in names]
+            gone = [f"object {n!r} deleted" if ob is None else f"object {n!r} replaced"
+                    for n, ob in zip(names, found) if ob is None or ob.type != "MESH"]
+            if gone:
+                self.changed.update(gone)
+                return
+            # the objects of those names (Undo reads back at another address what it deleted or
+            # changed): followed, the geometry digest (every object, at this read) says whether
+            # they are still the ones prepared
+            job.exp.objects[:] = found
+            self.exported = {n: ob.as_pointer() for n, ob in zip(names, found)}
+        gone = _gone(context, names, job.exp.objects, self.exported)
+        if gone:
+            self.changed.update(gone)
+            return
+        meshes, lamps = _watched(context)
+        was_meshes, was_lamps = self.watched
+        self.changed.update(f"object {n!r} hidden from renders" for n in was_meshes - meshes if n in names)
+        self.changed.update(f"object {n!r} deleted or hidden from renders" for n in was_meshes - meshes
+                            if n not in names)
+        self.changed.update(f"object {n!r} added or shown in renders" for n in meshes - was_meshes)
+        if lamps != was_lamps:  # (their placement and settings: the depsgraph's updates, _on_depsgraph)
+            self.lamps_moved.update(n for n, _ in lamps ^ was_lamps)
+            self.watched = (was_meshes, lamps)
 
     def _start_live(self, job, state, faces):
         self.solving = self.paint
@@ -246,11 +310,11 @@ class LiveSession:
         if result.get("first"):
             self.prepared = result["job"]
         if self.dirty and self.base is not None and self.base is preparation.PREPARED_JOBS.get(self.scene):
-            self._read_paint(self.base)  # (a change since the last read: is this answer's paint still the newest?)
+            self._read_paint(context, self.base)  # (a change since the last read: is this answer's paint still the newest?)
             if self.changed:
                 return  # (the scene moved on: the next tick pauses and says why)
-        if self.paint is not None and not _same(solving, self.paint):
-            self.superseded += 1  # a newer stroke: its re-solve comes next
+        if (self.paint is not None and not _same(solving, self.paint)) or self.lamps_moved:
+            self.superseded += 1  # a newer stroke, or the lamps changed: its re-solve comes next
             return
         t0 = time.perf_counter()
         mode = None
@@ -317,6 +381,39 @@ def _geometry_digest(objects) -> dict:
     return out
 
 
+def _gone(context, names, objects, pointers=None) -> list:
+    """The exported objects (``names``, their bpy ``objects``) deleted since: no longer in
+    bpy.data, not the same data-block (``pointers``: name -> as_pointer()), or no longer linked to
+    the scene, each as the pause names it. Never touches a removed object's Python object."""
+    out = []
+    scene_objects = context.scene.objects
+    for name, ob in zip(names, objects):
+        now = bpy.data.objects.get(name)
+        try:
+            same = now is not None and now.as_pointer() == (ob.as_pointer() if pointers is None else pointers[name])
+        except ReferenceError:  # (its Python object: removed with it)
+            same = False
+        if not same or scene_objects.get(name) is None:
+            out.append(f"object {name!r} deleted")
+    return out
+
+
+def _watched(context) -> tuple:
+    """(meshes, lamps) a render of the view layer shows, the user's (not Relight's results):
+    the meshes' names (export.exported_objects); the lamps' (name, data-block address) pairs,
+    hidden from renders as lamps.export_lamps reads it (a lamp a shown reduction turned off: as
+    the user set it)."""
+    renderable = export.render_visible_objects(context)
+    meshes = {ob.name for ob in export.exported_objects(context)}
+    lamps = set()
+    for ob in context.scene.objects:
+        if ob.type == "LIGHT" and ob.name in renderable and export.owner_of(ob) is None:
+            was = lamp_state.before(ob)
+            if not (ob.hide_render if was is None else was["hide_render"]):
+                lamps.add((ob.name, ob.as_pointer()))
+    return meshes, lamps
+
+
 def stroke_running(context, last_change: float) -> bool:
     """Whether a brush stroke may still be painting: a modal operator of STROKE_OPERATORS runs in
     a window; where Blender cannot say (no ``Window.modal_operators``), a depsgraph update less
@@ -344,8 +441,9 @@ def start(context, options_fn, show_fn) -> LiveSession:
     s = SESSIONS.get(context.scene.name)
     if s is None:
         s = SESSIONS[context.scene.name] = LiveSession(context, options_fn, show_fn)
-    if _on_depsgraph not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph)
+    for handlers, fn in _handlers():
+        if fn not in handlers:
+            handlers.append(fn)
     return s
 
 
@@ -355,8 +453,21 @@ def stop(scene_name=None) -> None:
         s = SESSIONS.pop(name, None)
         if s is not None:
             s.stop()
-    if not SESSIONS and _on_depsgraph in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph)
+    for handlers, fn in _handlers() if not SESSIONS else ():
+        if fn in handlers:
+            handlers.remove(fn)
+
+
+def _handlers():
+    h = bpy.app.handlers
+    return [(h.depsgraph_update_post, _on_depsgraph), (h.undo_post, _on_undo), (h.redo_post, _on_undo)]
+
+
+def _on_undo(scene, _arg=None):
+    """Undo or Redo read the scene back: every session's exported objects are found again by name
+    at its next tick (LiveSession._watch)."""
+    for s in SESSIONS.values():
+        s.reloaded, s.dirty, s.touched_all = True, True, True
 
 
 #: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
@@ -390,7 +501,7 @@ def _on_depsgraph(scene, depsgraph=None):
         if kind == "lamp" or (kind == "object" and idb.type == "LIGHT"):
             s.lamps_moved.add(idb.name)  # (a kept lamp moved or resized: Live follows it)
             continue
-        s.changed.add(f"{kind} {idb.name!r}" if kind != "the World" else kind)
+        s.changed.add(f"{kind} {idb.name!r} changed" if kind != "the World" else "the World changed")
 
 
 def status_text(s: LiveSession) -> str:

@@ -166,6 +166,11 @@ class SidesView:
     back: np.ndarray  # (n,) fraction of the back's rays that reach the front side of a face farther than its gap
     #: (and outside its box, when given)
     back_other: np.ndarray  # (n,) fraction of the back's rays that reach the front of another object's face
+    #: with ``box``: the fractions of the front's rays reaching a face, and of the back's reaching a
+    #: front side, farther than its gap and inside its box (what a closed island's sides see of its
+    #: own inside: a room's, whatever lies around it); without, zeros
+    front_in: np.ndarray = None
+    back_in: np.ndarray = None
 
 
 def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, rays_per_face: int = 16,
@@ -177,7 +182,8 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     shell); ``gap`` (scalar or per chosen face, m): a side whose rays reach a surface closer than
     this lies against it (a floor on a ground plane), those rays do not count. ``box`` ((n, 2, 3):
     per chosen face the corners of a box, its island's): a back counts only the fronts it reaches
-    outside it (the inside of a block standing on a floor, closed by the floor, is not the scene's)."""
+    outside it (the inside of a block standing on a floor, closed by the floor, is not the scene's),
+    and ``front_in``, ``back_in`` count what each side reaches inside it."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -186,7 +192,7 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     n = len(idx)
     if n == 0:
         z = np.zeros(0)
-        return SidesView(idx, z, z, z)
+        return SidesView(idx, z, z, z, z, z)
     triangles = np.asarray(triangles, dtype=np.int64)
     scene = _embree_scene(vertices, triangles)
     rng = np.random.default_rng(seed)
@@ -198,19 +204,28 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
         prim = np.asarray(hit["primID"], dtype=np.int64)
         out.append((ray_face, prim, np.asarray(hit["tfar"], dtype=np.float64), d, org))
     gap = np.broadcast_to(np.asarray(gap, dtype=np.float64), (n,))
-    ray_face, prim, tfar, _, _ = out[0]
-    front = np.bincount(ray_face[(prim >= 0) & (tfar >= gap[ray_face])], minlength=n) / rays_per_face
+    box = None if box is None else np.asarray(box, dtype=np.float64)
+
+    def inside(ray_face, prim, tfar, d, org):  # (rays,) whether the point a ray reaches lies in its face's box
+        if box is None:
+            return np.zeros(len(prim), dtype=bool)
+        q = org.astype(np.float64) + d.astype(np.float64) * np.where(prim >= 0, tfar, 0.0)[:, None]
+        return (prim >= 0) & np.all((q >= box[ray_face, 0]) & (q <= box[ray_face, 1]), axis=1)
+
+    def frac(mask):
+        return np.bincount(ray_face[mask], minlength=n) / rays_per_face
+
+    ray_face, prim, tfar, d, org = out[0]
+    reach = (prim >= 0) & (tfar >= gap[ray_face])
+    front, front_in = frac(reach), frac(reach & inside(ray_face, prim, tfar, d, org))
     ray_face, prim, tfar, d, org = out[1]
     ok = prim >= 0
     p = prim[ok]
     fronts = np.zeros(len(prim), dtype=bool)
     fronts[ok] = np.einsum("ij,ij->i", _hit_normals(vertices, triangles, p), d[ok]) < 0
     far = fronts & (tfar >= gap[ray_face])
-    if box is not None:
-        box = np.asarray(box, dtype=np.float64)
-        q = org.astype(np.float64) + d.astype(np.float64) * np.where(ok, tfar, 0.0)[:, None]
-        far &= ~np.all((q >= box[ray_face, 0]) & (q <= box[ray_face, 1]), axis=1)
+    within = inside(ray_face, prim, tfar, d, org)
     other = fronts.copy()
     other[ok] &= face_object[triangle_face[p]] != face_object[idx[ray_face[ok]]]
-    return SidesView(idx, front, np.bincount(ray_face[far], minlength=n) / rays_per_face,
-                     np.bincount(ray_face[other], minlength=n) / rays_per_face)
+    return SidesView(idx, front, frac(far & ~within) if box is not None else frac(far), frac(other),
+                     front_in, frac(far & within))

@@ -532,6 +532,84 @@ def live_mode(scene, settings, floor):
     yield 1.0
 
 
+def wait_for(cond, timeout):
+    t0 = time.monotonic()
+    while not cond() and time.monotonic() - t0 < timeout:
+        yield 0.2
+    return cond()
+
+
+def live_watch(scene):
+    """Issue 35 (cases 13, 14): with Live on, a candidate hidden from renders and an object deleted
+    with the Delete key pause Live, the object named in the sidebar's line and the status bar, the
+    scene as last written; Ctrl+Z leaves Live running or paused with a reason, never an exception."""
+    m = mods()
+    live, operators, results = m["blender.live"], m["blender.ui.operators"], m["blender.results"]
+    set_active(scene.objects["floor_0"])
+    found = yield from probe_sidebar()
+    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
+    s = live.session(scene)
+    if not check("Live turns on again (after Clear: a full solve first)", s is not None and (
+            yield from wait_for(lambda: s.base is not None and s.worker is None and s.status == "up to date", 300)),
+            None if s is None else live.status_text(s)):
+        return
+
+    def said(text, name):
+        return any("Live paused" in t and name in t for t in text)
+
+    # the ceiling (a candidate) hidden from renders (the Outliner's camera icon: hide_render)
+    rid = results.result_id(scene)
+    scene.objects["ceiling"].hide_render = True
+    yield from wait_for(lambda: s.paused, 30)
+    yield 1.0
+    shot("11h_live_paused_hidden")
+    text = yield from reports()
+    check("a candidate hidden from renders pauses Live, named in the sidebar and the status bar",
+          s.paused == "object 'ceiling' hidden from renders: Solve & Reduce prepares again"
+          and results.result_id(scene) == rid and said(text, "'ceiling' hidden from renders"),
+          f"{live.status_text(s)}; reports {text[-2:]}")
+    scene.objects["ceiling"].hide_render = False
+    yield 0.5
+    found = yield from probe_sidebar()
+    yield from press(found, "bpy.ops.relight.solve()", settle=1.0)
+    yield from wait_for(lambda: operators.solve_state(scene) is None, 300)
+    check("Solve & Reduce prepares again and Live goes on", (
+        yield from wait_for(lambda: s.paused is None and s.worker is None and s.status == "up to date", 120)),
+        live.status_text(s))
+
+    # a wall deleted with the Delete key in the viewport
+    set_active(scene.objects["wall_west"])
+    rid = results.result_id(scene)
+    yield from key_in_viewport("Delete")
+    yield from wait_for(lambda: s.paused, 30)
+    yield 1.0
+    shot("11i_live_paused_deleted")
+    text = yield from reports()
+    check("an object deleted with Live on pauses it, named, without an exception",
+          "wall_west" not in scene.objects
+          and s.paused == "object 'wall_west' deleted: Solve & Reduce prepares again"
+          and results.result_id(scene) == rid and said(text, "'wall_west' deleted")
+          and not any("Relight Live:" in t for t in text), f"{live.status_text(s)}; reports {text[-2:]}")
+
+    # Ctrl+Z: the wall back; Live runs on (the objects found again by name) or pauses with a reason
+    name = s.scene
+    yield from key_in_viewport("ctrl+z")
+    yield 3.0
+    sc = bpy.data.scenes[name]
+    running = [op.bl_idname for win in bpy.context.window_manager.windows for op in win.modal_operators]
+    yield from wait_for(lambda: s.worker is None and (s.paused or s.status == "up to date"), 120)
+    shot("11j_live_after_undo")
+    text = yield from reports()
+    check("Ctrl+Z with Live on: the wall back, Live running or paused with a reason, no exception",
+          "wall_west" in sc.objects and live.session(sc) is s and "RELIGHT_OT_live" in running
+          and (s.paused is None or "Solve & Reduce" in s.paused) and not any("Relight Live:" in t for t in text),
+          f"{live.status_text(s)}; modal operators {running}; reports {text[-2:]}")
+    move(*viewport_center())
+    xdo("key", "Escape")
+    yield 2.0
+    check("ESC turns Live off after the undo", live.session(sc) is None, live.status_text(s))
+
+
 def scenario():
     yield 3.0
     prefs = bpy.context.preferences
@@ -902,6 +980,9 @@ def scenario():
           f"{env.shape}, {len(suns)} sun(s), {dt:.1f} s, data {before} -> {after}")
     bpy.data.worlds.remove(sky_world)
     yield 0.5
+
+    # 12. Live's watch (issue 35): a candidate hidden from renders, an object deleted, Ctrl+Z
+    yield from live_watch(scene)
 
 
 def finish(code=None):

@@ -571,15 +571,19 @@ class RELIGHT_OT_live(bpy.types.Operator):
             self.report({"INFO"}, "Relight: Live off; the scene keeps the last answer")
             return {"FINISHED"}
         if event.type == "TIMER" and context.scene.name == s.scene and not _SOLVING:
-            before = (s.status, s.updates, s.paused)
+            before, said = (s.status, s.updates, s.paused), False
             try:
                 s.tick(context)
             except (SceneError, ValueError) as exc:  # e.g. a target layer made unreadable: said, Live waits
                 s.paused, s.status = _message(exc), "paused"
+            except ReferenceError:  # (an object deleted between two of Live's checks: said as they say it)
+                s.paused, s.status = "an object Live reads was deleted: Solve & Reduce prepares again", "paused"
             except Exception as exc:  # noqa: BLE001  (a defect: said once, Live waits; never a dead modal)
                 if s.paused is None:
                     self.report({"ERROR"}, f"Relight Live: {type(exc).__name__}: {exc}")
-                s.paused, s.status = f"{type(exc).__name__}: {exc}", "paused"
+                s.paused, s.status, said = f"{type(exc).__name__}: {exc}", "paused", True
+            if s.paused and s.paused != before[2] and not said:  # (the status bar names the cause, once)
+                self.report({"WARNING"}, f"Relight {live.status_text(s)}")
             if (s.status, s.updates, s.paused) != before:
                 results.redraw_sidebars()
         return {"PASS_THROUGH"}
