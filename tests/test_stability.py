@@ -115,10 +115,8 @@ def test_occluded_targets_are_named():
     hidden = np.flatnonzero(cube & (p.normal[:, 2] > 0.5))  # from the geometry, not from T
     assert len(hidden) > 0 and set(hidden) <= set(prob.targets)
     rows = check_rows(prob, [c for c in COMBOS if c[2] == "distance" or c[1] == "nnls-greedy"])
-    msg = rows[0]["message"]
-    assert f"{len(hidden)} target(s) cannot be met" in msg
-    for i in hidden[:20]:
-        assert str(int(i)) in msg
+    # the problem records them (the report names their objects: tests/test_engine_artist_geometry.py)
+    assert rows[0]["ok"] and sorted(prob.unmet.tolist()) == sorted(hidden.tolist())
     # the hidden targets stay dark whatever the configuration
     _, B = forward_targets(prob, rows[0]["reduction"].patch_exitance(prob))
     assert np.abs(B[hidden]).max() < 1e-9 * np.abs(B).max()
