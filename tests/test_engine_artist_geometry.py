@@ -9,13 +9,10 @@ from relight_addon.engine.formfactors import compute_form_factors
 from relight_addon.engine.kernel_transfer import ROW_SLACK
 from relight_addon.engine.inverse import DivergentTransport, _Iterative, growth_bound
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
+from test_engine_extent import _quad  # (a quad of 4 corners)
 
 X, Y, Z = 5.0, 4.0, 3.0
 TILE = 0.2
-
-
-def _quad(a, b, c, d):
-    return np.array([a, b, c, d], dtype=np.float64)
 
 
 def tiled_room(kind):

@@ -9,13 +9,10 @@ from relight_addon.engine.paint import neutral_as_brightness
 from relight_addon.engine.scene import polygon_faceset
 from relight_addon.engine.units import luminance_weighted
 from relight_addon.pipeline.jobs import run_solve
+from test_engine_extent import _quad  # (a quad of 4 corners)
 
 ORANGE = (0.8, 0.4, 0.15)
 GREY = 0.35
-
-
-def _quad(a, b, c, d):
-    return np.array([a, b, c, d], dtype=np.float64)
 
 
 def desk_room():

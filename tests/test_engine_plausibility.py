@@ -8,10 +8,7 @@ from relight_addon.engine.options import JobOptions
 from relight_addon.engine.plausibility import MIN_UTILISATION, utilisation
 from relight_addon.engine.scene import polygon_faceset
 from relight_addon.pipeline.jobs import run_solve
-
-
-def _quad(a, b, c, d):
-    return np.array([a, b, c, d], dtype=np.float64)
+from test_engine_extent import _quad  # (a quad of 4 corners)
 
 
 def hall(ceiling_allowed):
