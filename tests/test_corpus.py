@@ -16,6 +16,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="the corpus is painted and solved with bpy (Blender as a Python module)")
@@ -83,7 +84,7 @@ def test_an_artists_file_solves_with_a_sane_answer(scene, tmp_path):
         if li.get("exitance") is not None:
             from relight_addon.engine.units import luminance_cd, radiance_from_exitance
 
-            sane &= float(luminance_cd(radiance_from_exitance(li["exitance"]))) <= MAX_LUMINANCE
+            sane &= float(luminance_cd(radiance_from_exitance(np.asarray(li["exitance"])))) <= MAX_LUMINANCE
         assert sane or f"{li['object']} ({li['kind']}" in warned, (li, r["warnings"])
     estimate = r["estimate"]["seconds"]
     assert seconds / ESTIMATE_FACTOR <= estimate + 5.0 and estimate <= ESTIMATE_FACTOR * seconds + 5.0, \

@@ -752,18 +752,20 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
     cell_b = patch_b[data.cell_patch][cell]
     poly_b = polygon_rows(data, patch_b)
     off = data.polygon_offset
-    layers, skipped, seen_mesh = [], [], {}
+    layers, skipped, seen_mesh, sharing = [], [], {}, {}
     for oi, ob in objs.items():
         why = linked_message(ob)
         if why:
             skipped.append(why)
             continue
         if ob.data.name in seen_mesh:
-            skipped.append(f"{ob.name} shares its mesh with {seen_mesh[ob.data.name]}: the radiosity layer shows "
-                           f"{seen_mesh[ob.data.name]}'s values")
+            sharing.setdefault(seen_mesh[ob.data.name], []).append(ob.name)
             continue
         seen_mesh[ob.data.name] = ob.name
         layers.append((ob, poly_b[off[oi]:off[oi + 1]]))
+    for first, others in sharing.items():  # one line per shared mesh, not one per duplicate (a chess set's pieces)
+        skipped.append(f"{len(others)} object(s) share their mesh with {first} ({', '.join(others[:3])}"
+                       f"{', ...' if len(others) > 3 else ''}): the radiosity layer shows {first}'s values")
     suppress = []
     if data.meta.get("command") == "reduce":
         lp_ptr, lp = data.light_polygons_indptr, data.light_polygons
