@@ -44,7 +44,6 @@ import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
 from .lights import LightSet, candidate_mask, kind_code
-from .plausibility import implausible_lights
 from .radiosity import lossless_patches, radiosity_matrix
 from . import solvers  # noqa: F401  (registers the solvers that solve_inverse dispatches to)
 from .registry import SOLVERS
@@ -517,20 +516,9 @@ class InverseProblem:
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[key] = T[c]
             self._transfer = T
-            self._leave_out_implausible()
             self.transfer_seconds = time.perf_counter() - t0
             self._check_reachable()
         return self._transfer
-
-    def _leave_out_implausible(self):
-        """Candidate lights that send less than MIN_UTILISATION of their light to the targets, while
-        others send at least 10 x that, are left out (their transfer columns 0: no selection takes
-        them, the certificate bounds the others): to reach the targets they would need a power far
-        beyond what the targets receive (engine.plausibility). ``implausible`` (n_lights,) bool."""
-        self.implausible = implausible_lights(self)
-        if self.implausible.any():
-            for t in {id(t): t for t in self._transfer}.values():  # (channels may share one array)
-                t[:, self.implausible] = 0.0
 
     def all_rows_transfer(self):
         """T with every patch as a target: 3 arrays (P, n_lights), each patch's radiosity per unit
