@@ -44,6 +44,7 @@ import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
 from .lights import LightSet, candidate_mask, kind_code
+from .plausibility import implausible_lights
 from .radiosity import lossless_patches, radiosity_matrix
 from . import solvers  # noqa: F401  (registers the solvers that solve_inverse dispatches to)
 from .registry import SOLVERS
@@ -516,9 +517,20 @@ class InverseProblem:
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[key] = T[c]
             self._transfer = T
+            self._leave_out_implausible()
             self.transfer_seconds = time.perf_counter() - t0
             self._check_reachable()
         return self._transfer
+
+    def _leave_out_implausible(self):
+        """Candidate lights that send less than MIN_UTILISATION of their light to the targets, while
+        others send at least 10 x that, are left out (their transfer columns 0: no selection takes
+        them, the certificate bounds the others): to reach the targets they would need a power far
+        beyond what the targets receive (engine.plausibility). ``implausible`` (n_lights,) bool."""
+        self.implausible = implausible_lights(self)
+        if self.implausible.any():
+            for t in {id(t): t for t in self._transfer}.values():  # (channels may share one array)
+                t[:, self.implausible] = 0.0
 
     def all_rows_transfer(self):
         """T with every patch as a target: 3 arrays (P, n_lights), each patch's radiosity per unit
@@ -529,6 +541,7 @@ class InverseProblem:
         n_lights right-hand sides per channel. Its rows of the targets are ``transfer`` (the
         other route: rows of A^-1, for few targets). Computed once; ``retarget`` reads it."""
         if self._all_rows is None:
+            self.transfer  # (its rows first: they decide which lights are left out, ``implausible``)
             facs = self.factors()
             n, C, D = self.n_patches, self.candidates, self.first_bounce
             H = self.lights.irradiance
@@ -553,6 +566,11 @@ class InverseProblem:
                         raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                     done[key] = X
                 out[c] = done[key]
+            left = getattr(self, "implausible", None)  # (the lights the transfer leaves out: the same here)
+            if left is not None and left.any():
+                cols = np.flatnonzero(left)
+                for t in {id(t): t for t in out}.values():
+                    t[:, cols] = 0.0
             self._all_rows = out
         return self._all_rows
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from .units import luminance_cd, luminance_weighted, radiance_from_exitance
 
-__all__ = ["MIN_UTILISATION", "MAX_LUMINANCE", "utilisation", "implausible_notes"]
+__all__ = ["MIN_UTILISATION", "MAX_LUMINANCE", "utilisation", "implausible_lights", "implausible_notes"]
 
 #: below this share of its flux arriving on the targets, a light is named
 MIN_UTILISATION = 1e-3
@@ -43,6 +43,16 @@ def utilisation(problem, lights=None) -> np.ndarray:
     flux = np.stack([w[:, c] @ problem.transfer[c][:, idx] for c in range(3)], axis=1)  # (n, 3) W per unit strength
     watts = np.asarray(problem.light_watts, dtype=np.float64)[idx]
     return np.where(watts > 0, luminance_weighted(flux) / np.where(watts > 0, watts, 1.0), 0.0)
+
+
+def implausible_lights(problem) -> np.ndarray:
+    """(n_lights,) bool: the candidate lights a solve leaves out, those that send less than
+    MIN_UTILISATION of their light to the targets while another sends at least 10 x that (when
+    none does, none is left out, and the final lights are named with the cause instead)."""
+    u = utilisation(problem)
+    if not len(u) or u.max() < 10 * MIN_UTILISATION:
+        return np.zeros(len(u), dtype=bool)
+    return u < MIN_UTILISATION
 
 
 def implausible_notes(problem, records, chosen) -> list:

@@ -33,6 +33,7 @@ from ..engine.lights import LightSet, append_lamps, candidate_mask
 from ..engine.lights.lamp import add_lamps
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions, OptionError, check_light_kinds
 from ..engine.patch_models.adaptive import refinement_measure
+from ..engine.plausibility import MIN_UTILISATION
 from ..engine.radiosity import solve_radiosity
 from ..engine.reduction import ReductionResult, reduce_lights
 from ..engine.registry import ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS
@@ -989,14 +990,21 @@ def _run_solve(faces, options, polygon_counts, default_max_patch_size, progress,
 
 
 def unmet_note(model: Model) -> list:
-    """The painted targets no candidate light reaches (InverseProblem.unmet), by object."""
+    """The painted targets no candidate light reaches (InverseProblem.unmet), by object, and the
+    candidate lights left out as implausible (InverseProblem.implausible)."""
+    out = []
+    left = getattr(model.problem, "implausible", None)
+    if left is not None and left.any():
+        out.append(f"{int(left.sum())} candidate light(s) left out: each would reach the painted targets with "
+                   f"less than {MIN_UTILISATION:.1%} of its light (others reach them with more than ten times that), "
+                   "so lighting them would take a power far beyond what they receive")
     bad = getattr(model.problem, "unmet", None)
     if bad is None or not len(bad):
-        return []
+        return out
     obj, count = np.unique(model.patches.object[bad], return_counts=True)
     order = np.argsort(-count, kind="stable")
     names = ", ".join(f"{count[i]} of {model.faces.object_names[obj[i]]!r}" for i in order[:5])
-    return [f"{len(bad)} target patch(es) cannot be met, no candidate light reaches them ({names}"
+    return out + [f"{len(bad)} target patch(es) cannot be met, no candidate light reaches them ({names}"
             f"{', ...' if len(obj) > 5 else ''}): no allowed surface or candidate lamp sends them light"]
 
 
