@@ -17,9 +17,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
 import bpy  # noqa: E402
-import mathutils  # noqa: E402
 
-from artist_scenes import living_room  # noqa: E402
+from artist_scenes import living_room, scale_scene  # noqa: E402
 from relight_addon.blender import export  # noqa: E402
 from relight_addon.engine.extent import decisive_region  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
@@ -39,12 +38,7 @@ def run(ground=0.0, scale=1.0):
         ob = bpy.data.objects.new("Ground", me)
         bpy.context.scene.collection.objects.link(ob)
         ob["relight_no_lights"] = True
-    if scale != 1.0:
-        S = mathutils.Matrix.Scale(scale, 4)
-        for ob in bpy.data.objects:
-            if ob.parent is None:
-                ob.matrix_world = S @ ob.matrix_world
-    bpy.context.view_layer.update()
+    scale_scene(scale)
     exp = export.export_scene()
     region = decisive_region(exp.faces)
     t0 = time.perf_counter()

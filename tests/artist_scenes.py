@@ -224,3 +224,15 @@ def gallery(painting=1.2, band=0.08, floor=0.1):
     bpy.context.scene.world = None
     bpy.context.scene.render.engine = "CYCLES"
     return {"Room": room, "Painting": pic, "Floor": fl}
+
+
+def scale_scene(scale):
+    """Scale every top-level object of the scene about the origin by ``scale`` (the same scene in
+    other units: tests/test_scale.py, benchmarks/bench_extent.py)."""
+    import mathutils
+
+    S = mathutils.Matrix.Scale(scale, 4)
+    for ob in bpy.data.objects:
+        if ob.parent is None:
+            ob.matrix_world = S @ ob.matrix_world
+    bpy.context.view_layer.update()

@@ -14,17 +14,10 @@ from relight_addon.pipeline import jobs  # noqa: E402
 
 
 def _solve(scale):
-    import bpy
-    import mathutils
-
     cr.reset_blender()
     try:
         artist_scenes.living_room(1)
-        S = mathutils.Matrix.Scale(scale, 4)
-        for ob in bpy.data.objects:
-            if ob.parent is None:
-                ob.matrix_world = S @ ob.matrix_world
-        bpy.context.view_layer.update()
+        artist_scenes.scale_scene(scale)
         exp = export.export_scene()
     finally:
         cr.reset_blender()
