@@ -95,7 +95,7 @@ from dataclasses import dataclass, field, replace
 import bpy
 import numpy as np
 
-from ..engine.sampling import RAY_OFFSET
+from ..engine.rays import RAY_OFFSET
 from ..engine.scene import FaceSet, SceneError
 from ..engine.paint import neutral_as_brightness
 from ..engine.units import (MAX_REFLECTANCE, MIN_REFLECTANCE_LUX, exitance_from_radiance, illuminance_lux,

@@ -24,9 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .formfactors import _cosine_directions
-from .geometry import group_sum, triangle_cross, unit
-from .sampling import RAY_OFFSET
+from .geometry import triangle_cross, unit
+from .rays import embree_scene, side_rays
 
 __all__ = ["BackView", "SidesView", "back_view", "sides_view"]
 
@@ -43,52 +42,6 @@ class BackView:
     ray_length: np.ndarray  # (n x rays,) how far each ray goes to a front side, inf when it reaches none
     over: np.ndarray  # (n x rays,) the front side it reaches lies over the chosen faces of its object
     ray_hit: np.ndarray  # (n x rays,) the face whose front side it reaches, -1 when none
-
-
-def _embree_scene(vertices, triangles):
-    """An Embree scene of the triangles (indexed: half the time of one built from their corners)."""
-    from embreex import rtcore as rtc
-    from embreex import rtcore_scene as rtcs
-    from embreex.mesh_construction import TriangleMesh
-
-    scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-    TriangleMesh(scene, np.ascontiguousarray(vertices, dtype=np.float32), np.ascontiguousarray(triangles, dtype=np.int32))
-    return scene
-
-
-def _side_rays(vertices, triangles, triangle_face, idx, n_faces, rays_per_face, rng, side):
-    """Cosine-weighted rays leaving one side (``side`` +1: the front, -1: the back) of each face
-    ``idx`` from points uniform by area on it: (origins float32, directions float32, the rank in
-    ``idx`` of each ray's face, the ray offset (m), each face's unit normal)."""
-    n = len(idx)
-    rank = np.full(n_faces, -1, dtype=np.int64)
-    rank[idx] = np.arange(n)
-    tri = np.flatnonzero(rank[triangle_face] >= 0)
-    tri = tri[np.argsort(rank[triangle_face[tri]], kind="stable")]
-    tv = vertices[triangles[tri]]
-    cross = triangle_cross(tv)
-    area = 0.5 * np.linalg.norm(cross, axis=1)
-    trank = rank[triangle_face[tri]]
-    face_area = group_sum(trank, area, n)
-    normal = unit(group_sum(trank, cross, n))
-    # a triangle of each ray's face, chosen by area: the global key rank + within-face CDF
-    cdf = np.cumsum(area) - np.repeat(np.cumsum(face_area) - face_area, np.bincount(trank, minlength=n))
-    key = trank + cdf / np.where(face_area > 0, face_area, 1.0)[trank]
-    ray_face = np.repeat(np.arange(n), rays_per_face)
-    u = rng.random((len(ray_face), 4))
-    pick = np.minimum(np.searchsorted(key, ray_face + u[:, 0], side="right"), len(tri) - 1)
-    a, b = u[:, 1], u[:, 2]
-    flip = a + b > 1
-    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
-    p = tv[pick, 0] + a[:, None] * (tv[pick, 1] - tv[pick, 0]) + b[:, None] * (tv[pick, 2] - tv[pick, 0])
-    out = side * normal[ray_face]
-    t1 = unit(np.cross(out, np.where(np.abs(out[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])))
-    t2 = np.cross(out, t1)
-    local = _cosine_directions(u[:, 3].astype(np.float32), rng.random(len(ray_face)).astype(np.float32))
-    d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * out
-    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
-    offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(vertices).max())
-    return (p + offset * out).astype(np.float32), d.astype(np.float32), ray_face, offset, normal
 
 
 def _hit_normals(vertices, triangles, prim):
@@ -115,10 +68,10 @@ def back_view(vertices, triangles, triangle_face, face_object, chosen, rays_per_
     triangles = np.asarray(triangles, dtype=np.int64)
     rank = np.full(n_faces, -1, dtype=np.int64)
     rank[idx] = np.arange(n)
-    org, d, ray_face, offset, normal = _side_rays(vertices, triangles, triangle_face, idx, n_faces, rays_per_face,
+    org, d, ray_face, offset, normal = side_rays(vertices, triangles, triangle_face, idx, n_faces, rays_per_face,
                                                   np.random.default_rng(seed), -1)
     back = -normal[ray_face]
-    scene = _embree_scene(vertices, triangles)
+    scene = embree_scene(vertices, triangles)
     hit = scene.run(org, d, output=1)
     prim = np.asarray(hit["primID"], dtype=np.int64)
     tfar = np.asarray(hit["tfar"], dtype=np.float64)
@@ -194,11 +147,11 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
         z = np.zeros(0)
         return SidesView(idx, z, z, z, z, z)
     triangles = np.asarray(triangles, dtype=np.int64)
-    scene = _embree_scene(vertices, triangles)
+    scene = embree_scene(vertices, triangles)
     rng = np.random.default_rng(seed)
     out = []
     for side in (1, -1):
-        org, d, ray_face, _, _ = _side_rays(vertices, triangles, triangle_face, idx, len(face_object),
+        org, d, ray_face, _, _ = side_rays(vertices, triangles, triangle_face, idx, len(face_object),
                                             rays_per_face, rng, side)
         hit = scene.run(org, d, output=1)
         prim = np.asarray(hit["primID"], dtype=np.int64)

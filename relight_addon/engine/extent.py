@@ -93,7 +93,7 @@ def decisive_region(faces, rays: int = REGION_RAYS, seed: int = 0) -> Region:
 
 
 def _region(faces, rays, seed):
-    from .backs import _embree_scene, _side_rays
+    from .rays import embree_scene, side_rays
 
     V = np.asarray(faces.vertices, dtype=np.float64)
     scene_lo, scene_hi = V.min(axis=0), V.max(axis=0)
@@ -110,11 +110,11 @@ def _region(faces, rays, seed):
     if len(idx) > rays:  # the rays' faces drawn by area
         idx = np.sort(rng.choice(idx, rays, replace=False, p=area[idx] / area[idx].sum()))
     per_face = max(1, rays // len(idx))
-    org, d, _, _, _ = _side_rays(V, faces.triangles, faces.triangle_face, idx, faces.n_faces, per_face, rng, 1)
+    org, d, _, _, _ = side_rays(V, faces.triangles, faces.triangle_face, idx, faces.n_faces, per_face, rng, 1)
     keep = None if faces.passes is None else ~faces.passes[faces.triangle_face]  # work planes let light through
     tris = faces.triangles if keep is None else faces.triangles[keep]
     if len(tris):
-        hit = _embree_scene(V, tris).run(org, d, output=1)
+        hit = embree_scene(V, tris).run(org, d, output=1)
         t = np.asarray(hit["tfar"], dtype=np.float64)[np.asarray(hit["primID"]) >= 0]
         if len(t):
             reach = np.quantile(t, REACH_QUANTILE)

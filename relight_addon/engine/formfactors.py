@@ -73,6 +73,7 @@ from scipy.stats import qmc
 
 from .kernel_transfer import _sample_patches, apply_kernel_pairs, kernel_form_factors, kernel_geometry
 from .lamps import _tangents
+from .rays import cosine_directions
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
 
@@ -283,23 +284,6 @@ def _over(sums, target):
     return f.astype(np.float32)
 
 
-def _cosine_directions(u2, u3) -> np.ndarray:
-    """(n, 3) float32 cosine-weighted directions about +z from two uniform samples:
-    Shirley's concentric map of the unit square to the disk, lifted to the hemisphere."""
-    a = 2.0 * u2 - 1.0
-    b = 2.0 * u3 - 1.0
-    first = np.abs(a) > np.abs(b)
-    r = np.where(first, a, b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        phi = np.where(first, np.float32(np.pi / 4) * (b / a), np.float32(np.pi / 2) - np.float32(np.pi / 4) * (a / b))
-    phi[~np.isfinite(phi)] = 0.0  # a = b = 0: r = 0, any angle
-    out = np.empty((len(a), 3), dtype=np.float32)
-    out[:, 0] = r * np.cos(phi)
-    out[:, 1] = r * np.sin(phi)
-    out[:, 2] = np.sqrt(np.maximum(np.float32(0.0), 1.0 - out[:, 0] ** 2 - out[:, 1] ** 2))
-    return out
-
-
 class _Tracer:
     """Per-patch hemisphere sampling data for a PatchSet, on a SceneSampler's triangles and
     Embree scene (``sampler``: built here when not given; internal: the benchmark uses it to
@@ -392,7 +376,7 @@ class _Tracer:
         if N >= 2 and N & (N - 1) == 0:
             self.pool_tri = coef(u[:, 0])
             self.pool_half = coef(np.clip(2 * u[:, 0] - (u[:, 0] >= 0.5), 0.0, 1.0))
-        self.pool_dir = _cosine_directions(u[:, 2], u[:, 3]).reshape(R, N, 3)
+        self.pool_dir = cosine_directions(u[:, 2], u[:, 3]).reshape(R, N, 3)
         self.R = R
 
     def unit_samples(self, ci: int, rng) -> np.ndarray:
@@ -444,7 +428,7 @@ class _Tracer:
         if self.sampling != "sobol":
             u = self.unit_samples(ci, rng)
             src = np.repeat(np.arange(p0, p1), N)
-            self._general(src, u[:, 0], u[:, 1], _cosine_directions(u[:, 2], u[:, 3]),
+            self._general(src, u[:, 0], u[:, 1], cosine_directions(u[:, 2], u[:, 3]),
                           org.reshape(-1, 3), d.reshape(-1, 3))
             return org.reshape(-1, 3), d.reshape(-1, 3), src
         # Sobol: patch p0 + j uses pool copy off + j and a random turn about its normal
@@ -522,7 +506,7 @@ def visible_fraction(patches: PatchSet, sampler: SceneSampler, seed: int = 0, po
         ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
         t1, t2 = _tangents(ny)
         u = rng.random((len(y), rays, 2))
-        loc = _cosine_directions(u[..., 0].ravel(), u[..., 1].ravel()).reshape(len(y), rays, 3).astype(np.float64)
+        loc = cosine_directions(u[..., 0].ravel(), u[..., 1].ravel()).reshape(len(y), rays, 3).astype(np.float64)
         d = loc[..., 0:1] * t1[:, None] + loc[..., 1:2] * t2[:, None] + loc[..., 2:3] * ny[:, None]
         org = np.repeat(y + sampler.offset * ny, rays, axis=0).astype(np.float32)
         d = d.reshape(-1, 3).astype(np.float32)

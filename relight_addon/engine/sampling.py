@@ -32,12 +32,11 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
+from .rays import RAY_OFFSET
 from .scene import PatchSet, SceneError, patch_triangles
 
-__all__ = ["RAY_OFFSET", "Cancelled", "SceneSampler", "run_chunks"]
+__all__ = ["Cancelled", "SceneSampler", "run_chunks"]
 
-#: origin offset along the normal, relative to the scene's bounding-box diagonal.
-RAY_OFFSET = 1e-5
 
 
 class Cancelled(Exception):

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .formfactors import _cosine_directions
+from .rays import cosine_directions
 from .kernel_transfer import _sample_patches, kernel_geometry
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
 from .sampling import SceneSampler
@@ -259,7 +259,7 @@ def world_irradiance(patches, world, sampler: SceneSampler | None = None, seed: 
             cells = rng.permuted(np.broadcast_to(cell, (m, k)), axis=1)
             u[..., 0] = (u[..., 0] + cells // gk) / gk
             u[..., 1] = (u[..., 1] + cells % gk) / gk
-        local = _cosine_directions(u[..., 0].ravel(), u[..., 1].ravel())
+        local = cosine_directions(u[..., 0].ravel(), u[..., 1].ravel())
         t1, t2 = _tangents(ny)
         d = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:3] * ny
         o = (y + ny * sm.offset).astype(np.float32)
