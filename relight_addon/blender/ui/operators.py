@@ -150,8 +150,11 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
                 layer = bm.loops.layers.color.get(TARGET)
                 if not self.unpaint:
                     value = tuple(export.linear_to_srgb(color[:3])) + (1.0,)
-            if layer is None:
+            if layer is None:  # BMesh starts a new colour layer white and opaque: "painted" to Relight
                 layer = bm.loops.layers.float_color.new(TARGET)
+                for f in bm.faces:
+                    for loop in f.loops:
+                        loop[layer] = (0.0, 0.0, 0.0, 0.0)
             for f in bm.faces:
                 if f.select:
                     for loop in f.loops:
