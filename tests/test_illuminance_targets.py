@@ -120,28 +120,6 @@ def test_fill_selected_writes_one_kind_per_face(addon, gallery):
     assert np.all(lux[chosen] == 0.0)
 
 
-@pytest.mark.parametrize("illuminance", [False, True])
-def test_fill_selected_on_a_mesh_without_layers_marks_only_the_selection(addon, illuminance):
-    """Issue 36 item 1: the first Fill Selected on an object with no target layer made every face a
-    target (BMesh starts a new colour layer at (1, 1, 1, 1), read as painted white): 2 faces of a
-    cube filled gave 6 targets, with the lux or the colour."""
-    cr.reset_blender()
-    try:
-        bpy.ops.mesh.primitive_cube_add()
-        cube = bpy.context.active_object
-        bpy.ops.object.mode_set(mode="EDIT")
-        bpy.ops.mesh.select_all(action="DESELECT")
-        bpy.ops.object.mode_set(mode="OBJECT")
-        for p in (0, 3):
-            cube.data.polygons[p].select = True
-        bpy.ops.object.mode_set(mode="EDIT")
-        assert bpy.ops.relight.fill_targets(illuminance=illuminance) == {"FINISHED"}
-        bpy.ops.object.mode_set(mode="OBJECT")
-        assert list(np.flatnonzero(export.face_flags(cube, "target"))) == [0, 3]
-    finally:
-        cr.reset_blender()
-
-
 def test_a_solve_meets_a_lux_target(gallery, tmp_path):
     """The floor strip at 300 lx (the painting and its band painted as before): the predicted mean
     illuminance there is 300 lx within the solve's relative error (twice it: the error is over
