@@ -250,6 +250,11 @@ R["chart"] = None if drawn is None else {
     "shape": list(drawn[0].shape), "marker": drawn[1]["marker"] is not None,
     "current": results.chart_data(scene)["current"], "final_curve_index": int(data.point_index[k_final])}
 R["summary"] = [settings.last_summary, settings.last_warnings]
+# the automatic options' labels give the value the solve used (issue 36 item 5)
+params = sys.modules[pkg + ".engine.options"].PARAMS
+R["auto"] = {"stored": {k: data.meta["options"].get(k) for k in ("max_patch_size", "rays_per_patch")},
+             "labels": {k: panels.auto_label(settings, params[k]) for k in ("max_patch_size", "rays_per_patch")},
+             "settings": [settings.max_patch_size, settings.rays_per_patch]}
 
 # 6. area lights (one per emitting cell, the same power), then clear: the area lights stay (they
 # are the artist's, as the button says), so do the artist's own objects in a collection that

@@ -157,3 +157,15 @@ def test_solving_again_and_after_an_edit(scenario):
     assert extra > 0
     assert scenario["target_norm_after"] > scenario["target_norm_before"]
     assert scenario["clear2"][0] == ["FINISHED"] and scenario["clear2_restores"]
+
+
+def test_automatic_options_show_the_value_the_solve_used(scenario):
+    """Issue 36 item 5: "Lamp Drop: Auto 0 m" while the solve used 188 m. The sidebar's label of
+    an option left automatic gives the value the last solve used (its stored result's options)."""
+    auto = scenario["auto"]
+    assert auto["settings"][0] == 0.0  # Max Patch Size left automatic (the scenario sets 512 rays)
+    size, rays = auto["stored"]["max_patch_size"], auto["stored"]["rays_per_patch"]
+    assert size > 0 and rays > 0
+    text = f"{size * 100:.3g} cm" if size < 1 else f"{size:.3g} m"
+    assert auto["labels"]["max_patch_size"] == f"Max Patch Size: Auto ({text})", auto
+    assert auto["labels"]["rays_per_patch"] == f"Rays per Patch: Auto ({rays:g})", auto

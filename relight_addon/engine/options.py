@@ -114,7 +114,8 @@ JOB_PARAMS = (
           description="Form-factor quality: rays cast from every patch (automatic: about 4 million rays in "
                       "all, 1024 to 16384 per patch)"),
     Param("max_patch_size", float, None, min=0.0, min_exclusive=True, unit="LENGTH", label="Max Patch Size",
-          ui="zero", none="the scene's relight_max_patch_size, else the bounding-box diagonal / 20",
+          ui="zero", none="the scene's relight_max_patch_size, else the diagonal of the region that decides the "
+          "answer / 20",
           description="Largest patch edge in metres: larger faces are split into patches"),
     Param("seed", int, 0, min=0, max=2 ** 63 - 1, label="Seed", error="must be a non-negative integer "
           "(0 to 2^63 - 1), got {}", description="Random seed: results are reproducible"),
@@ -163,7 +164,8 @@ JOB_PARAMS = (
           inverse_only=True, unused=_unused_by_single_scale,
           description="Candidate lights: point lamps mounted in front of the candidate surfaces"),
     Param("lamp_drop", float, None, min=0.0, min_exclusive=True, unit="LENGTH", label="Lamp Drop", ui="zero",
-          inverse_only=True, unused=_unused_without_lamps, none="2 % of the scene's bounding-box diagonal",
+          inverse_only=True, unused=_unused_without_lamps,
+          none="2 % of the diagonal of the region that decides the answer",
           description="Distance in metres in front of the candidate surfaces at which the candidate lamps hang"),
     Param("refine_lamps", bool, True, label="Refine Lamps", flag="--no-lamp-refinement", invert=True,
           inverse_only=True, unused=_unused_without_lamps,

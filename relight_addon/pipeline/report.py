@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from ..engine.candidate_lamps import default_drop, offered_kinds
 from ..engine.light_colour import blackbody_rec709
 from ..engine.plausibility import implausible_notes
 from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
@@ -151,6 +152,14 @@ def _one_light(model, curve, lights, lamps, lamp_of, e, j, info) -> dict:
             "area": float(lights.area[j]), "exitance": e[j], "power": float(e[j].sum() * watts[j])}
 
 
+def _lamp_drop(options, patches, model):
+    """The distance (m) the candidate lamps hung at (the option, else its automatic value), None
+    when none were offered."""
+    if model.mode != "inverse" or not offered_kinds(options):
+        return None
+    return float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches))
+
+
 def solve_report(model, options, inv, red, curve, warnings: list, timings: dict, bounds=None, point_bounds=None,
                  fixed_light=None, per_face=True) -> dict:
     """Stage 5: the JSON report of a solve or a reduce (see README.md), from jobs.Model, the job's
@@ -190,7 +199,8 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "estimate": {"memory_bytes": model.cost["memory_bytes"], "seconds": model.cost["seconds"]},
         "options": {**options.to_dict(), "rays_per_patch": int(model.form_factors.rays_per_patch),
                     "max_patch_size": float(patches.max_patch_size),
-                    "light_size": None if patches.light_size is None else float(patches.light_size)},
+                    "light_size": None if patches.light_size is None else float(patches.light_size),
+                    "lamp_drop": _lamp_drop(options, patches, model)},
         "model": {"patch_model": options.patch_model, "estimator": options.estimator,
                   "lights_by_kind": (model.lamp_refinement or {}).get("offered") or model.lights.count_by_kind(),
                   "refinement": model.refinement, "lamp_refinement": model.lamp_refinement,

@@ -2,6 +2,7 @@
 work in ``jobs`` (the same code path as the CLI)."""
 from __future__ import annotations
 
+import json
 import textwrap
 import threading
 
@@ -298,6 +299,16 @@ def _fill_curve_list(settings, rows, current):
     set_curve_index(settings, current)
 
 
+#: the options whose 0 means automatic, whose value a solve reports (pipeline.report: options)
+AUTO_OPTIONS = ("rays_per_patch", "max_patch_size", "light_size", "lamp_drop")
+
+
+def auto_values(options) -> str:
+    """The last_auto property's JSON: {option: the value a solve used} for the automatic options
+    (a report's or a stored result's ``options``)."""
+    return json.dumps({k: float(options[k]) for k in AUTO_OPTIONS if isinstance(options.get(k), (int, float))})
+
+
 def sync_curve_list(scene):
     """Fill the UI list, the summary and the warnings from the stored result when they are not
     that result's: a file written by the CLI, or re-solved by it after the add-on showed another
@@ -316,6 +327,7 @@ def sync_curve_list(scene):
     final = int(np.searchsorted(data.point_index, int(data.final)))
     _fill_curve_list(settings, rows, int(shown) if shown is not None and 0 <= int(shown) < len(rows) else final)
     settings.last_summary = data.meta.get("summary", "")
+    settings.last_auto = auto_values(data.meta.get("options") or {})
     settings.last_warnings = "\n".join(data.meta.get("warnings", []))
     settings.last_fixed_light = data.meta.get("fixed_light", "")
     settings.last_photometric = data.meta.get("photometric", "")
@@ -349,6 +361,7 @@ def show_solve(context, job, outcome, finished=False, trusted=False, show=True, 
     warnings = list(outcome.warnings) + list(skipped or [])
     settings = context.scene.relight
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))
+    settings.last_auto = auto_values(outcome.report.get("options") or {})
     settings.last_fixed_light = fixed_light_rows(outcome.report)
     settings.last_photometric = photometric_rows(outcome.report)
     settings.last_lights = light_rows(outcome.report)

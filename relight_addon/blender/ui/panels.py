@@ -6,6 +6,7 @@ the rows stay in place when a mesh becomes active. Every count also works in Edi
 from the edit BMesh). The error chart is rasterised by ``relight_addon.pipeline.chart`` at the panel's
 width into a preview icon (never a data-block) and drawn with ``template_icon``.
 """
+import json
 import math
 import re
 import textwrap
@@ -14,7 +15,6 @@ import bmesh
 import bpy
 import bpy.utils.previews
 import numpy as np
-from mathutils import Vector
 
 from ...pipeline import chart
 from .. import export, results
@@ -91,22 +91,30 @@ def _counts(context):
 
 def effective_max_patch_size(scene):
     """(metres, source) the solve uses when Max Patch Size is 0: the scene's
-    ``relight_max_patch_size``, else the rendered meshes' bounding-box diagonal / 20."""
+    ``relight_max_patch_size`` ("scene"), else the last solve's automatic value ("last solve": the
+    diagonal of the region that decides the answer / 20, engine.extent), else (None, "auto")."""
     size = export.scene_settings(scene).get("max_patch_size")
     if size:
         return float(size), "scene"
-    lo = [math.inf] * 3
-    hi = [-math.inf] * 3
-    for obj in scene.objects:
-        if obj.type != "MESH" or obj.hide_render or export.owner_of(obj) is not None:
-            continue
-        for corner in obj.bound_box:
-            p = obj.matrix_world @ Vector(corner)
-            lo = [min(a, b) for a, b in zip(lo, p)]
-            hi = [max(a, b) for a, b in zip(hi, p)]
-    if lo[0] == math.inf:
-        return None, "auto"
-    return math.dist(lo, hi) / 20.0, "auto"
+    used = last_auto(scene.relight).get("max_patch_size")
+    return (float(used), "last solve") if used else (None, "auto")
+
+
+def last_auto(settings) -> dict:
+    """{option: the value the last solve used} for the options left automatic (``last_auto``)."""
+    try:
+        out = json.loads(settings.last_auto or "{}")
+    except ValueError:
+        return {}
+    return out if isinstance(out, dict) else {}
+
+
+def auto_label(settings, p) -> str:
+    """An automatic option's label: the value the last solve used when there is one."""
+    v = last_auto(settings).get(p.name)
+    if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        return f"{p.title}: Auto"
+    return f"{p.title}: Auto ({_fmt_length(v) if p.unit == 'LENGTH' else f'{v:g}'})"
 
 
 def _fmt_length(m):
@@ -296,7 +304,7 @@ def draw_option(layout, settings, p):
         sub.active = getattr(settings, "use_" + p.name)
         sub.prop(settings, p.name)
     elif p.ui == "zero" and getattr(settings, p.name) == 0:
-        layout.prop(settings, p.name, text=f"{p.title}: Auto")
+        layout.prop(settings, p.name, text=auto_label(settings, p))
     else:
         layout.prop(settings, p.name)
 
@@ -391,14 +399,15 @@ class RELIGHT_PT_solve_advanced(RELIGHT_PT_base, bpy.types.Panel):
         layout = self.layout
         s = context.scene.relight
         col = layout.column(align=True)
-        if s.rays_per_patch == 0:
-            f = _counts(context)[2]
-            col.prop(s, "rays_per_patch", text=f"Rays: Auto (~{auto_rays_per_patch(max(f, 1), kernel=True)})")  # solves: kernel pairs
+        if s.rays_per_patch == 0:  # the last solve's, else the estimate for a solve (kernel pairs)
+            used = last_auto(s).get("rays_per_patch")
+            rays = f"{used:g}" if used else f"~{auto_rays_per_patch(max(_counts(context)[2], 1), kernel=True)}"
+            col.prop(s, "rays_per_patch", text=f"Rays: Auto ({rays})")
         else:
             col.prop(s, "rays_per_patch")
         if s.max_patch_size == 0:
             size, _source = effective_max_patch_size(context.scene)
-            col.prop(s, "max_patch_size", text=f"Max Patch: Auto ({_fmt_length(size)})")
+            col.prop(s, "max_patch_size", text="Max Patch: Auto" + (f" ({_fmt_length(size)})" if size else ""))
         else:
             col.prop(s, "max_patch_size")
         col.prop(s, "seed")

@@ -169,6 +169,9 @@ _SETTINGS = {
     # display: what the panel shows about the last solve, and the viewport shading to give back
     "last_summary": StringProperty(name="Last Solve", default="",
                                    description="Summary of the last Solve & Reduce (shown in the Results panel)"),
+    "last_auto": StringProperty(name="Automatic Values", default="",
+                                description="The values the last Solve & Reduce used for the options left "
+                                            "automatic (JSON: option -> value, lengths in metres)"),
     "last_warnings": StringProperty(name="Warnings", default="",
                                     description="Warnings of the last Solve & Reduce, one per line"),
     "last_lights": StringProperty(name="Lights", default="",
