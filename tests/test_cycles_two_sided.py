@@ -23,7 +23,7 @@ import cycles_reference as cr  # noqa: E402
 
 TARGET = (0.3, 0.28, 0.25)  # radiance painted on the floor (W/m^2/sr)
 RAYS_PER_PATCH = 8192
-SAMPLES, CELL_PX = 1024, 12
+SAMPLES, CELL_PX = 1024, 24
 TOL, MEAN_TOL, NOISE_TOL = 0.05, 0.02, 0.03  # as the closed loop's
 
 

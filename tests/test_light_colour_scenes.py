@@ -97,13 +97,27 @@ def test_auto_takes_blackbody_on_grey_and_free_on_red(solved):
     assert any("the targets ask for coloured light" in w for w in red["warnings"])
 
 
+def _unrefined(report):
+    """{n_lights: relative error} of the configurations as the selection chose them, before the
+    lamp refinement moved their lamps (the report's lamp_refinement), else as final."""
+    out = {c["n_lights"]: c["relative_error"] for c in report["curve"]}
+    for p in (report["model"]["lamp_refinement"] or {}).get("points", []):
+        out[p["n_lights"]] = p["relative_error_before"]
+    return out
+
+
 def test_free_is_no_worse_than_the_constrained(solved):
-    """Free colours never do worse than white or blackbody lights (they are constraints of it), and
-    the constrained solves' certificates are below their own answers."""
-    free = solved["free"][0]["final"]["relative_error"]
+    """Free colours never do worse than white or blackbody lights over the same candidates (they
+    are constraints of it): the final configurations the selection chose, before the lamp refinement
+    (a local search from each solve's own answer, over lamps no longer the candidates: after it,
+    free colours' 3 lights were 0.242 and white's 0.241 on the same three lights, 0.263 and 0.265
+    before). The constrained solves' certificates are below their own answers."""
+    free = _unrefined(solved["free"][0])
     for mode in ("white", "blackbody"):
         r = solved[mode][0]
-        assert free <= r["final"]["relative_error"] * (1 + 1e-6)
+        mine = _unrefined(r)
+        n = r["final"]["n_lights"]  # (other rows: the selection's own heuristic choices may differ)
+        assert free[n] <= mine[n] * (1 + 1e-6), (mode, n, free[n], mine[n])
         assert r["final"]["bound_relative_error"] <= r["final"]["relative_error"] * (1 + 1e-9)
 
 
