@@ -89,3 +89,18 @@ def test_far_weak_candidates_are_left_out_when_others_light_the_targets_well():
     assert not left[out.reduction.final.lights].any()
     assert np.all(u[left] == 0.0)
     assert any("candidate light(s) left out" in w for w in out.report["warnings"])
+
+
+def test_the_results_list_marks_an_implausible_light():
+    """The Results panel's list marks a light that sends under 0.1 % of its light to the targets,
+    or whose surface is brighter than 10^7 cd/m^2 (exitance M: L = M / pi, cd = 683 x luminance),
+    and leaves a plausible one unmarked."""
+    import math
+
+    from relight_addon.engine.plausibility import implausible_mark
+
+    assert implausible_mark({"utilisation": 0.0004, "exitance": [1.0, 1.0, 1.0]}) == "0.04% reaches the targets"
+    assert implausible_mark({"utilisation": 0.2, "exitance": [10.0, 10.0, 10.0]}) == ""
+    m = 2e7 * math.pi / 683.0  # W/m^2 of white light: 2 x 10^7 cd/m^2
+    assert implausible_mark({"utilisation": 0.2, "exitance": [m, m, m]}) == "2e+07 cd/m\u00b2"
+    assert implausible_mark({"utilisation": 0.2, "exitance": None}) == ""  # a lamp: no surface

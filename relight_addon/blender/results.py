@@ -797,7 +797,9 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
     scene["relight_shown"] = index
     neg = np.any(exitance < 0, axis=1)
     lit = np.any(exitance > 0, axis=1) & ~neg
-    return {"lights": int(lit.sum()), "negative": int(neg.sum()), "negative_cells": n_neg_cells, "skipped": skipped}
+    rows = data.meta.get("rows") or []  # what the Results panel lists for this row (results written before: none)
+    return {"lights": int(lit.sum()), "negative": int(neg.sum()), "negative_cells": n_neg_cells, "skipped": skipped,
+            "panel": rows[index] if index < len(rows) else None}
 
 
 def clear_shown(scene) -> int:

@@ -20,7 +20,8 @@ import numpy as np
 
 from .units import luminance_cd, luminance_weighted, radiance_from_exitance
 
-__all__ = ["MIN_UTILISATION", "MAX_LUMINANCE", "utilisation", "implausible_lights", "implausible_notes"]
+__all__ = ["MIN_UTILISATION", "MAX_LUMINANCE", "utilisation", "implausible_lights", "implausible_notes",
+           "implausible_mark"]
 
 #: below this share of its flux arriving on the targets, a light is named
 MIN_UTILISATION = 1e-3
@@ -76,9 +77,25 @@ def implausible_notes(problem, records, chosen) -> list:
                    "or only through reflections; allow lights nearer the targets" if best < 10 * MIN_UTILISATION else
                    f"other candidate lights send up to {best:.2%} of theirs")
             notes.append(f"{what} sends {share:.3%} of its light to the painted targets: {why}")
-        if rec.get("exitance") is not None:
-            cd = float(luminance_cd(radiance_from_exitance(np.asarray(rec["exitance"], dtype=np.float64))))
-            if cd > MAX_LUMINANCE:
-                notes.append(f"{what} is {cd:.3g} cd/m^2 bright, more than any luminaire's emitting surface "
-                             f"({MAX_LUMINANCE:.0e} cd/m^2): a small light asked for much light")
+        cd = _luminance(rec)
+        if cd > MAX_LUMINANCE:
+            notes.append(f"{what} is {cd:.3g} cd/m^2 bright, more than any luminaire's emitting surface "
+                         f"({MAX_LUMINANCE:.0e} cd/m^2): a small light asked for much light")
     return notes
+
+
+def _luminance(rec) -> float:
+    """A surface light's luminance (cd/m^2) from its report record; 0 for a lamp."""
+    if rec.get("exitance") is None:
+        return 0.0
+    return float(luminance_cd(radiance_from_exitance(np.asarray(rec["exitance"], dtype=np.float64))))
+
+
+def implausible_mark(rec) -> str:
+    """A few words marking a light whose record (with its ``utilisation``, implausible_notes') is
+    implausible, for a list of lights; "" when it is not."""
+    share = rec.get("utilisation")
+    if share is not None and share < MIN_UTILISATION:
+        return f"{share:.2%} reaches the targets"
+    cd = _luminance(rec)
+    return f"{cd:.2g} cd/m\u00b2" if cd > MAX_LUMINANCE else ""

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..engine.candidate_lamps import default_drop, offered_kinds
 from ..engine.light_colour import blackbody_rec709
-from ..engine.plausibility import implausible_notes
+from ..engine.plausibility import implausible_mark, implausible_notes
 from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
 
 __all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
@@ -268,7 +268,7 @@ def target_photometry(model, radiosity, exitance) -> dict:
         sel = obj == o
         a = patches.area[tg][sel]
         rec = {"radiosity_mean": (radiosity[tg][sel] * a[:, None]).sum(axis=0) / a.sum(),
-               "unread_patches": int(np.sum(~ok[sel]))}
+               "unread_patches": int(np.sum(~ok[sel])), "patches": int(np.sum(sel & ok))}
         lux_target = None if model.faces.target_lux is None else model.faces.target_lux[patches.face[tg][sel]]
         if lux_target is not None and np.any(lux_target > 0):  # its illuminance targets (lx), area-weighted
             w = a * (lux_target > 0)
@@ -335,21 +335,49 @@ def fixed_light_rows(report) -> str:
 
 def photometric_rows(report) -> str:
     """The Results panel's predicted light on the targets: one line per target object whose
-    illuminance is read, "object<TAB>mean lx<TAB>min lx<TAB>U0"."""
+    illuminance is read, "object<TAB>mean lx<TAB>min lx<TAB>U0<TAB>target lx or empty<TAB>patches"
+    (U0 over one patch says nothing: the panel says so)."""
+    return _photometric_text(report.get("targets_photometric") or {})
+
+
+def _photometric_text(photometric) -> str:
     rows = []
-    for name, rec in (report.get("targets_photometric") or {}).items():
+    for name, rec in photometric.items():
         lx = rec.get("illuminance_lx")
         if lx:
-            rows.append(f"{name}\t{lx['mean']:.6g}\t{lx['min']:.6g}\t{(lx['u0'] or 0.0):.6g}")
+            target = "" if rec.get("target_lx") is None else f"{rec['target_lx']:.6g}"
+            rows.append(f"{name}\t{lx['mean']:.6g}\t{lx['min']:.6g}\t{(lx['u0'] or 0.0):.6g}\t{target}\t"
+                        f"{rec.get('patches', 0)}")
     return "\n".join(rows)
 
 
 def light_rows(report) -> str:
     """The Results panel's lights of the final configuration: one line per light,
-    "name<TAB>kind<TAB>power W<TAB>luminous flux lm<TAB>temperature K or empty"."""
+    "name<TAB>kind<TAB>power W<TAB>luminous flux lm<TAB>temperature K or empty<TAB>mark" (mark:
+    why the light is implausible, engine.plausibility.implausible_mark, or empty)."""
+    return _light_text(report["final"]["lights"])
+
+
+def _light_text(records) -> str:
     return "\n".join(f"{li['object']}\t{li['kind']}\t{li['power']:.6g}\t{li.get('luminous_flux_lm', 0.0):.6g}\t"
-                     f"{'' if li.get('temperature_K') is None else format(li['temperature_K'], '.0f')}"
-                     for li in report["final"]["lights"])
+                     f"{'' if li.get('temperature_K') is None else format(li['temperature_K'], '.0f')}\t"
+                     f"{implausible_mark(li)}" for li in records)
+
+
+def row_panels(model, curve) -> list:
+    """What the Results panel lists for each kept configuration (``curve``'s rows): {"lights": its
+    lights (light_rows' lines, each marked when implausible), "photometric": its predicted light on
+    the targets (photometric_rows' lines)}, so the panel follows the row shown."""
+    out = []
+    for k in range(len(curve.exitance)):
+        records = light_records(model, curve, k)
+        photometric = {}
+        if model.mode == "inverse":
+            implausible_notes(model.problem, records, np.flatnonzero(np.any(curve.exitance[k] != 0, axis=1)))
+            e = model.lights.patch_exitance(curve.exitance[k], model.patches.n_patches) + model.background
+            photometric = target_photometry(model, curve.radiosity[k], e)
+        out.append({"lights": _light_text(records), "photometric": _photometric_text(photometric)})
+    return out
 
 
 def kinds_text(report) -> str:

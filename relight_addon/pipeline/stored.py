@@ -84,7 +84,7 @@ class StoredResult:
     @classmethod
     def from_solve(cls, model, red, curve, report: dict) -> "StoredResult":
         """From the solve's stages (jobs.Model, the ReductionResult, jobs.Curve) and its report."""
-        from .report import json_safe
+        from .report import json_safe, row_panels
 
         keep, pts = curve.keep, red.curve
         lights, patches, pmap = model.lights, model.patches, curve.polygons
@@ -138,7 +138,8 @@ class StoredResult:
             target_value=patches.target_radiosity[model.problem.targets],
             target_norm=np.array(model.problem.target_norm),
             meta={"command": report["command"], "options": json_safe(report["options"]),
-                  "light_colour": json_safe(report.get("light_colour") or {"mode": "free"})},
+                  "light_colour": json_safe(report.get("light_colour") or {"mode": "free"}),
+                  "rows": row_panels(model, curve)},
             lamps=lamps, light_lamp=light_lamp,
         )
 

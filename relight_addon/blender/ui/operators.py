@@ -16,7 +16,7 @@ from ...pipeline import jobs
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
 from ..preparation import SolveJob
 from . import viewport
-from .properties import set_curve_index, ui_value
+from .properties import set_curve_index, show_row_panel, ui_value
 from ...engine.options import JobOptions
 from ...engine.scene import SceneError
 
@@ -325,13 +325,16 @@ def sync_curve_list(scene):
              "curve_index": data.point_index[k]} for k in range(len(data.n_lights))]
     shown = scene.get("relight_shown")
     final = int(np.searchsorted(data.point_index, int(data.final)))
-    _fill_curve_list(settings, rows, int(shown) if shown is not None and 0 <= int(shown) < len(rows) else final)
+    shown = int(shown) if shown is not None and 0 <= int(shown) < len(rows) else final
+    _fill_curve_list(settings, rows, shown)
     settings.last_summary = data.meta.get("summary", "")
     settings.last_auto = auto_values(data.meta.get("options") or {})
     settings.last_warnings = "\n".join(data.meta.get("warnings", []))
     settings.last_fixed_light = data.meta.get("fixed_light", "")
     settings.last_photometric = data.meta.get("photometric", "")
     settings.last_lights = data.meta.get("lights", "")
+    panels = data.meta.get("rows") or []
+    show_row_panel(settings, panels[shown] if shown < len(panels) else None)
     settings.curve_result = rid or ""
     results.update_chart(scene)
 
@@ -644,6 +647,7 @@ class RELIGHT_OT_apply_configuration(bpy.types.Operator):
         except (ValueError, KeyError) as exc:
             return _refuse(self, exc)
         set_curve_index(settings, k)
+        show_row_panel(settings, shown["panel"])
         settings.apply_error = ""
         results.update_chart(context.scene)
         for w in shown["skipped"]:  # e.g. linked meshes: the lights show, the radiosity layer cannot

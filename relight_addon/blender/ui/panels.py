@@ -184,6 +184,14 @@ def draw_warning(layout, settings, index, text):
             row.prop(settings, name, text=label)
 
 
+def photometric_line(name, mean, low, u0, target, patches) -> str:
+    """A target object's predicted illuminance as the Results panel lists it: mean (and the lux
+    asked beside it), min and U0; U0 over a single patch says nothing, so it is not given."""
+    asked = f" (asked {float(target):.0f})" if target else ""
+    spread = f", min {float(low):.0f}, U0 {float(u0):.2f}" if int(patches) > 1 else ", 1 patch: no U0"
+    return f"{name}: {float(mean):.0f} lx{asked}{spread}"
+
+
 class RELIGHT_PT_base:
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
@@ -513,19 +521,21 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
             for kind, name, share in rows:
                 col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
-        rows = [line.split("\t") for line in s.last_photometric.split("\n") if line.count("\t") == 3]
-        if rows:  # the predicted illuminance on the targets (the final configuration)
+        rows = [line.split("\t") for line in s.last_photometric.split("\n") if line.count("\t") == 5]
+        if rows:  # the predicted illuminance on the targets (the configuration shown)
             col = layout.box().column(align=True)
             col.label(text="Targets' illuminance (predicted)", icon="LIGHT_SUN")
-            for name, mean, low, u0 in rows:
-                col.label(text=f"{name}: {float(mean):.0f} lx, min {float(low):.0f}, U0 {float(u0):.2f}")
-        rows = [line.split("\t") for line in s.last_lights.split("\n") if line.count("\t") == 4]
-        if rows:  # the final lights: power and luminous flux (and a blackbody light's temperature)
+            for row in rows:
+                col.label(text=photometric_line(*row))
+        rows = [line.split("\t") for line in s.last_lights.split("\n") if line.count("\t") == 5]
+        if rows:  # the lights shown: power and luminous flux (a blackbody light's temperature; implausible: marked)
             col = layout.box().column(align=True)
-            col.label(text="Final lights", icon="OUTLINER_OB_LIGHT")
-            for name, kind, watts, lm, kelvin in rows[:8]:
+            col.label(text="Lights shown", icon="OUTLINER_OB_LIGHT")
+            for name, kind, watts, lm, kelvin, mark in rows[:8]:
                 col.label(text=f"{name} ({kind}): {float(watts):.3g} W, {float(lm):,.0f} lm"
-                          + (f", {kelvin} K" if kelvin else ""))
+                          + (f", {kelvin} K" if kelvin else ""), icon="ERROR" if mark else "NONE")
+                if mark:
+                    col.label(text=f"implausible: {mark}", icon="BLANK1")
             if len(rows) > 8:
                 col.label(text=f"... and {len(rows) - 8} more")
         icon = chart_icon(context)

@@ -86,6 +86,13 @@ def set_curve_index(settings, index):
         _QUIET["on"] = False
 
 
+def show_row_panel(settings, panel) -> None:
+    """The Results panel follows the row shown: its lights and its targets' light (``panel``: the
+    stored result's ``meta["rows"]`` entry of that row; None, a result written before: unchanged)."""
+    if panel is not None:
+        settings.last_lights, settings.last_photometric = panel["lights"], panel["photometric"]
+
+
 def apply_curve_point(context, index):
     """A click on a row of the list: show that configuration. When it cannot be shown (the scene
     changed since the solve, ...), the list goes back to the row the scene shows, and the panel
@@ -94,7 +101,7 @@ def apply_curve_point(context, index):
         return
     settings = context.scene.relight
     try:
-        results.apply_stored_point(context.scene, index)
+        show_row_panel(settings, results.apply_stored_point(context.scene, index)["panel"])
         settings.apply_error = ""
         results.update_chart(context.scene)
     except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale
