@@ -212,24 +212,44 @@ def test_panel_rows_follow_the_chosen_methods(addon):
         drawn(panels.RELIGHT_PT_candidates))
 
 
-def test_sidebar_warnings_are_short_lines_with_their_fix(addon):
-    """Issue 19: a warning in the sidebar is one short line (the whole text its tooltip), without
-    command-line flags, with the button that fixes it where there is one."""
+def test_sidebar_warnings_are_three_short_lines_with_their_fix(addon):
+    """Issues 19 and 36 (item 4): the sidebar shows at most three warnings, the most consequential
+    first, each a short line holding its number (the whole text its tooltip), without
+    command-line flags, with the button that fixes it under it; the plain facts of the solve are
+    not among them; Details lists all."""
     bpy = addon
     from relight_addon.blender.ui import panels
+    from relight_addon.pipeline.notes import LINE_CHARS, for_addon, sidebar_lines
 
-    long_ = ("indirect clamping at 10: the lights' radiance reaches 613 W/m^2/sr, so Cycles may render darker "
+    clamp = ("indirect clamping at 10: the lights' radiance reaches 613 W/m^2/sr, so Cycles may render darker "
              "than predicted (clamping effects are not estimated); use Match Cycles Light Paths (--out turns "
              "clamping off)")
-    assert panels.short_warning(long_) == "Indirect clamping at 10"
-    assert panels.short_warning("3 light(s): relative error 0.0685; no 3 non-negative lights can go below "
-                                "0.0264") == "3 light(s): relative error 0.0685"
     paths = ("Cycles would render the targets about 1.4 % darker than predicted with the scene's light paths "
              "(Diffuse bounces 4, Total 12; up to 3.1 % on a patch); use Match Cycles Light Paths (--out writes them)")
-    assert panels.short_warning(paths) == "Cycles would render the targets about 1.4 % darker than\u2026"
-    for w in (long_, paths):
-        short = panels.short_warning(w)
-        assert len(short) <= panels.SHORT_WARNING and "--" not in short
+    fact = "3 light(s): relative error 0.0685; no 3 non-negative lights can go below 0.0264"
+    colour = "light colour: blackbody (2700-6500 K), chosen automatically: any number of them can reach 0.787"
+    far = ("Relight Spot 18 (spot, 1.69e+07 W) sends 0.007% of its light to the painted targets: other candidate "
+           "lights send up to 43.53% of theirs")
+    bright = ("Cube.002: its targets are already 45 % brighter than painted without any new light (the scene's own "
+              "lamps, World and emitters)")
+    unknown = ("a warning no rule knows about, long enough to be cut somewhere in its middle, with its number "
+               "12.5 at the end")
+    warnings = [fact, clamp, colour, paths, unknown, far, bright]
+    lines = sidebar_lines(warnings)
+    assert [ln.text for ln in lines] == ["Light: 0.007 % on targets", "45 % too bright already",
+                                         "Cycles renders 1.4 % darker"], lines
+    assert [warnings[ln.index] for ln in lines] == [far, bright, paths]
+    assert [ln.fix for ln in lines] == [None, None, "light_paths"]
+    for w in warnings:  # every line fits, holds its number, names no flag
+        got = sidebar_lines([w], n=1)
+        if w in (fact, colour):
+            assert got == []  # plain facts: Details and the report only
+            continue
+        (ln,) = got
+        assert len(ln.text) <= LINE_CHARS and "--" not in ln.text, ln
+        number = {clamp: "10", paths: "1.4", far: "0.007", bright: "45", unknown: "12.5"}[w]
+        assert number in ln.text, ln
+    assert for_addon(paths).endswith("use Match Cycles Light Paths") and "--" not in for_addon(clamp)
 
     drawn = []
 
@@ -241,21 +261,21 @@ def test_sidebar_warnings_are_short_lines_with_their_fix(addon):
         def prop(self, data, name, **kw):
             drawn.append(("prop", name))
 
-    class Layout:
+    class Layout(Row):
         def row(self, **kw):
             return Row()
 
-        def split(self, **kw):  # a line with its fix: most of the width for the line
-            assert 0.5 < kw["factor"] < 1
+        def column(self, **kw):
             return Row()
 
     s = bpy.context.scene.relight
-    panels.draw_warning(Layout(), s, 0, long_)
-    assert drawn == [("relight.warning_details", "Indirect clamping at 10"), ("relight.match_light_paths", "Match")]
-    s.last_warnings = "first\n" + long_
+    panels.draw_warnings(Layout(), s, [fact, clamp])
+    assert drawn == [("relight.warning_details", "Clamping at 10 darkens"),
+                     ("relight.match_light_paths", "Match Cycles Light Paths"), ("relight.warnings_popup", "Details (2)")]
+    s.last_warnings = "first\n" + clamp
     from relight_addon.blender.ui.operators import RELIGHT_OT_warning_details
 
-    assert RELIGHT_OT_warning_details.description(bpy.context, type("P", (), {"index": 1})()) == long_
+    assert RELIGHT_OT_warning_details.description(bpy.context, type("P", (), {"index": 1})()) == for_addon(clamp)
 
 
 def test_operator_options_pass_only_the_chosen_methods_parameters(addon):

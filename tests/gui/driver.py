@@ -85,7 +85,7 @@ def override():
 def mods():
     return {k: sys.modules[f"{PKG}.{k}"] for k in ("blender.results", "blender.ui.panels", "blender.ui.operators",
                                                    "blender.ui.viewport", "blender.export", "blender.live",
-                                                   "blender.preparation")}
+                                                   "blender.preparation", "pipeline.notes")}
 
 
 # --- input ----------------------------------------------------------------------------------
@@ -827,38 +827,46 @@ def scenario():
         check("once the scene is back, the row applies and the panel's line goes",
               settings.apply_error == "" and settings.curve_index == shown, repr(settings.apply_error))
 
-    # 8c. the warnings: one short line each (the whole text in its tooltip and, clicked, in the
-    # status bar), and the button that fixes it on the same line
+    # 8c. the warnings (issue 36 item 4): at most three short lines, the most consequential first,
+    # none cut at the sidebar's default width; each with its fix under it; Details lists all; a
+    # click on a line gives its whole text (no command-line flag) in the status bar
+    notes = mods()["pipeline.notes"]
     warnings = [w for w in settings.last_warnings.split("\n") if w]
     found = yield from probe_sidebar()
-    lines = [f"bpy.ops.relight.warning_details(index={k})" for k in range(len(warnings))]
-    check("every warning is a line of the sidebar", warnings and all(c in found for c in lines),
-          f"{len(warnings)} warnings, lines found: {[c for c in lines if c in found]}")
-    long = [panels.short_warning(w) for w in warnings if len(panels.short_warning(w)) > panels.SHORT_WARNING + 1]
-    check("the lines are short, without command-line flags",
-          not long and not [w for w in warnings if "--" in panels.short_warning(w)], long)
-    fixable = [k for k, w in enumerate(warnings) if any(words in w for words, _ in panels.WARNING_FIXES)]
-    for k in fixable:
-        ys = {round(y) for _, y in LAST_HITS.get(lines[k], ())}
-        kind, name = next(fix for words, fix in panels.WARNING_FIXES if words in warnings[k])[:2]
-        cmd = f"bpy.ops.{name}()" if kind == "operator" else None
-        beside = [p for p in LAST_HITS.get(cmd, ()) if any(abs(p[1] - y) <= 8 for y in ys)] if cmd else [1]
-        check(f"warning {k} has its fix on its line", beside, f"{panels.short_warning(warnings[k])!r}: {cmd} "
-              f"at {sorted(LAST_HITS.get(cmd, ()))}, line at {sorted(ys)}")
-    if warnings:
-        yield from press(found, lines[-1], settle=1.5)
+    top = notes.sidebar_lines(warnings)
+    drawn = sorted(k for k in range(len(warnings)) if f"bpy.ops.relight.warning_details(index={k})" in found)
+    check("at most three warnings show, the most consequential ones",
+          len(drawn) <= notes.MAX_LINES and drawn == sorted(ln.index for ln in top),
+          f"{len(warnings)} warnings, drawn {drawn}, ranked {[(ln.index, ln.rank, ln.text) for ln in top]}")
+    check("Details lists every warning", not warnings or "bpy.ops.relight.warnings_popup()" in found,
+          sorted(k for k in found if "warnings_popup" in k))
+    import blf
+
+    ui = bpy.context.preferences.system.ui_scale
+    r = ui_region()
+    blf.size(0, 11 * ui)
+    room = r.width - 60 * ui  # the panel's and the box's margins, and the line's icon
+    wide = [(ln.text, round(blf.dimensions(0, ln.text)[0])) for ln in top if blf.dimensions(0, ln.text)[0] > room]
+    check(f"no warning line is cut at the sidebar's width ({r.width} px, default 220 x UI scale {ui:g})",
+          not wide and r.width <= 240 * ui, f"room {room:.0f} px: {wide}")
+    for ln in [ln for ln in top if ln.fix == "light_paths"]:
+        line_y = [y for _, y in LAST_HITS.get(f"bpy.ops.relight.warning_details(index={ln.index})", ())]
+        under = [p for p in LAST_HITS.get("bpy.ops.relight.match_light_paths()", ())
+                 if line_y and 0 < min(line_y) - p[1] <= 40 * ui]
+        check(f"warning {ln.text!r} has its fix under it", under,
+              f"line at {sorted(line_y)}, Match at {sorted(LAST_HITS.get('bpy.ops.relight.match_light_paths()', ()))}")
+    if top:
+        cmd = f"bpy.ops.relight.warning_details(index={top[0].index})"
+        yield from press(found, cmd, settle=1.5)
         text = yield from reports()
-        check("a click on a warning's line gives its whole text in the status bar",
-              text and warnings[-1][:80] in text[-1], (text[-1][:200] if text else None))
+        whole = notes.for_addon(warnings[top[0].index])
+        check("a click on a warning's line gives its whole text in the status bar, without flags",
+              text and whole[:80] in text[-1] and "--" not in text[-1], (text[-1][:200] if text else None))
         shot("11c_warnings")
-    fix = next((k for k in fixable if "Match Cycles Light Paths" in warnings[k]), None)
+    fix = next((ln for ln in top if ln.fix == "light_paths"), None)
     if fix is not None:
         before = (scene.cycles.diffuse_bounces, scene.cycles.max_bounces)
-        ys = [y for _, y in LAST_HITS[lines[fix]]]
-        x = max(p[0] for p in LAST_HITS["bpy.ops.relight.match_light_paths()"] if any(abs(p[1] - y) <= 8 for y in ys))
-        # press() hovers there first: Ctrl+C must copy the Match command at the warning's line
-        yield from press({"bpy.ops.relight.match_light_paths()": (x, ys[0])}, "bpy.ops.relight.match_light_paths()",
-                         settle=1.5, retries=0)
+        yield from press(found, "bpy.ops.relight.match_light_paths()", settle=1.5)
         after = (scene.cycles.diffuse_bounces, scene.cycles.max_bounces)
         check("the warning's Match button sets Cycles' light paths", after != before and after[0] > before[0],
               f"{before} -> {after}")

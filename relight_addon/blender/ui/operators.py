@@ -13,6 +13,7 @@ from bpy.props import BoolProperty, EnumProperty, IntProperty
 
 from .. import ADDON_PACKAGE, export, live, results
 from ...pipeline import jobs
+from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
 from ..preparation import SolveJob
 from . import viewport
@@ -442,8 +443,10 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             return {"CANCELLED"}
         # the status bar shows the last report: the summary first, then the warnings
         self.report({"INFO"}, "Relight: " + context.scene.relight.last_summary)
-        for w in warnings:
-            self.report({"WARNING"}, "Relight: " + w)
+        top = sidebar_lines(warnings)
+        first = {line.index for line in top}
+        for w in [w for k, w in enumerate(warnings) if k not in first] + [warnings[ln.index] for ln in top[::-1]]:
+            self.report({"WARNING"}, "Relight: " + for_addon(w))  # the status bar ends on the one that matters most
         return {"FINISHED"}
 
     def invoke(self, context, event):
@@ -740,13 +743,35 @@ class RELIGHT_OT_warning_details(bpy.types.Operator):
 
     @classmethod
     def description(cls, context, properties):
-        return _warning(context, properties.index) or "A warning of the last solve"
+        return for_addon(_warning(context, properties.index)) or "A warning of the last solve"
 
     def execute(self, context):
         text = _warning(context, self.index)
         if not text:
             return {"CANCELLED"}
-        self.report({"WARNING"}, text)  # the status bar and the Info editor keep it whole
+        self.report({"WARNING"}, for_addon(text))  # the status bar and the Info editor keep it whole
+        return {"FINISHED"}
+
+
+class RELIGHT_OT_warnings_popup(bpy.types.Operator):
+    """Every warning of the last solve, in full"""
+    bl_idname = "relight.warnings_popup"
+    bl_label = "Relight: the last solve's warnings"
+    bl_options = {"INTERNAL"}
+
+    def invoke(self, context, event):
+        return context.window_manager.invoke_popup(self, width=560)
+
+    def draw(self, context):
+        col = self.layout.column(align=True)
+        for w in (w for w in context.scene.relight.last_warnings.split("\n") if w):
+            for k, line in enumerate(textwrap.wrap(for_addon(w), 90) or [""]):
+                col.label(text=line, icon="DOT" if k == 0 else "BLANK1")
+            col.separator()
+
+    def execute(self, context):
+        for w in (w for w in context.scene.relight.last_warnings.split("\n") if w):
+            self.report({"INFO"}, for_addon(w))  # (headless, or from a script: the Info editor has them)
         return {"FINISHED"}
 
 
@@ -757,6 +782,7 @@ def _warning(context, index) -> str:
 
 CLASSES = (
     RELIGHT_OT_warning_details,
+    RELIGHT_OT_warnings_popup,
     RELIGHT_OT_paint_targets,
     RELIGHT_OT_fill_targets,
     RELIGHT_OT_clear_targets,

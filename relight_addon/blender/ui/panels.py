@@ -8,7 +8,6 @@ width into a preview icon (never a data-block) and drawn with ``template_icon``.
 """
 import json
 import math
-import re
 import textwrap
 
 import bmesh
@@ -17,6 +16,7 @@ import bpy.utils.previews
 import numpy as np
 
 from ...pipeline import chart
+from ...pipeline.notes import sidebar_lines
 from .. import export, results
 from ...engine.formfactors import auto_rays_per_patch
 from . import viewport
@@ -145,43 +145,29 @@ def _wrap(layout, text, context, icon="NONE", width_px=None):
     return col
 
 
-#: the warnings a button in the sidebar fixes: (words in the warning, what to draw beside it)
-WARNING_FIXES = (
-    ("Match Cycles Light Paths", ("operator", "relight.match_light_paths", "Match", "LIGHT")),
-    ("allow more lights", ("prop", "max_lights", "", None)),
-)
-SHORT_WARNING = 56  # characters
+#: how the sidebar draws each fix a warning's line names (pipeline.notes.FIXES): on the row under it
+FIX_BUTTONS = {
+    "light_paths": ("operator", "relight.match_light_paths", "Match Cycles Light Paths", "LIGHT"),
+    "more_lights": ("prop", "max_lights", None, None),
+}
 
 
-def short_warning(text) -> str:
-    """The sidebar's line of a warning: its first clause (two when the first is only a count),
-    without asides in parentheses or command-line flags, cut at a word to at most SHORT_WARNING
-    characters (the whole text is the line's tooltip, and in the report)."""
-    plain = re.sub(r"\s+\([^()]*\)", "", text)
-    plain = re.sub(r"\s*--[a-z-]+(\s+[^\s;:,]+)?", "", plain)
-    parts = re.split(r": |; ", plain)
-    head = parts[0] if len(parts[0]) >= 16 or len(parts) == 1 else f"{parts[0]}: {parts[1]}"
-    head = head.strip().rstrip(",.")
-    head = head[:1].upper() + head[1:]
-    if len(head) <= SHORT_WARNING:
-        return head
-    cut = head[:SHORT_WARNING].rsplit(" ", 1)[0].rstrip(",.;:")
-    return cut + "\u2026"
-
-
-def draw_warning(layout, settings, index, text):
-    """One warning: a short line (its tooltip the whole text; a click puts it in the status bar)
-    and, where a button fixes it, that button."""
-    fix = next((f for words, f in WARNING_FIXES if words in text), None)
-    # with a fix, the line keeps most of the width (a row would halve it)
-    row = layout.split(factor=0.7, align=True) if fix else layout.row(align=True)
-    row.operator("relight.warning_details", text=short_warning(text), icon="ERROR", emboss=False).index = index
-    if fix is not None:
-        kind, name, label, icon = fix
-        if kind == "operator":
-            row.operator(name, text=label, icon=icon)
-        else:
-            row.prop(settings, name, text=label)
+def draw_warnings(layout, settings, warnings):
+    """The solve's warnings as the sidebar shows them (pipeline.notes): at most three short lines,
+    the most consequential first, each with the button that fixes it under it (a click on a line
+    puts its whole text in the status bar; its tooltip is the whole text), and Details for all."""
+    col = layout.column(align=True)
+    for line in sidebar_lines(warnings):
+        col.operator("relight.warning_details", text=line.text, icon="ERROR", emboss=False).index = line.index
+        fix = FIX_BUTTONS.get(line.fix)
+        if fix is not None:
+            kind, name, label, icon = fix
+            if kind == "operator":
+                col.operator(name, text=label, icon=icon)
+            else:
+                col.prop(settings, name)
+    if warnings:
+        col.operator("relight.warnings_popup", text=f"Details ({len(warnings)})", icon="INFO")
 
 
 def photometric_line(name, mean, low, u0, target, patches) -> str:
@@ -513,8 +499,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             p = s.curve[s.curve_index]
             summary = f"{p.n_lights} lights, relative error {p.relative_error:.3g}"
         _wrap(box, summary, context, icon="CHECKMARK", width_px=context.region.width - 70)
-        for k, w in enumerate(filter(None, s.last_warnings.split("\n"))):
-            draw_warning(box, s, k, w)
+        draw_warnings(box, s, [w for w in s.last_warnings.split("\n") if w])
         rows = [line.split("\t") for line in s.last_fixed_light.split("\n") if line.count("\t") == 2]
         if rows:  # the scene's own light the solve kept: each lamp, the World, each emissive object
             col = layout.box().column(align=True)
