@@ -197,6 +197,25 @@ def test_lamps_are_named_after_the_surface_they_hang_from(addon, scenes):
     assert sorted(o.name for o in scene.objects if o.type == "LIGHT") == names  # Relight's own lamps are gone
 
 
+def test_a_surface_without_evaluated_mesh_is_passed_over(bpy_clean):
+    """The object a lamp hangs from: the nearest surface; an object Blender has not evaluated (not
+    in the view layer: closest_point_on_mesh raises) is passed over, not a traceback."""
+    from relight_addon.blender.results import _nearest_object
+
+    def quad(name, z, link=True):
+        me = bpy.data.meshes.new(name)
+        me.from_pydata([(0, 0, z), (1, 0, z), (1, 1, z), (0, 1, z)], [], [(0, 1, 2, 3)])
+        ob = bpy.data.objects.new(name, me)
+        if link:
+            bpy.context.scene.collection.objects.link(ob)
+        return ob
+
+    floor, ceiling, loose = quad("floor", 0.0), quad("ceiling", 1.0), quad("loose", 0.95, link=False)
+    assert _nearest_object([floor, ceiling, loose], (0.5, 0.5, 0.9)) == "ceiling"
+    assert _nearest_object([floor, ceiling], (0.5, 0.5, 0.2)) == "floor"
+    assert _nearest_object([loose], (0.5, 0.5, 0.9)) == ""
+
+
 def _baked_targets():
     """Cycles' mean outgoing radiance (W m^-2 sr^-1, per channel) of the gallery's painting and of
     its painted floor strip, as the open file renders them (cycles_reference's face bake)."""

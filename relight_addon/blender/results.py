@@ -888,7 +888,10 @@ def _nearest_object(obs, position) -> str:
     p, best = Vector(position), (math.inf, "")
     for ob in obs:
         M = ob.matrix_world
-        hit, co, _n, _i = ob.closest_point_on_mesh(M.inverted_safe() @ p)
+        try:
+            hit, co, _n, _i = ob.closest_point_on_mesh(M.inverted_safe() @ p)
+        except RuntimeError:  # no evaluated mesh (e.g. its collection excluded from the view layer)
+            continue
         if hit:
             best = min(best, ((M @ co - p).length, ob.name))
     return best[1]
