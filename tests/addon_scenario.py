@@ -260,6 +260,9 @@ R["auto"] = {"stored": {k: data.meta["options"].get(k) for k in ("max_patch_size
 # are the artist's, as the button says), so do the artist's own objects in a collection that
 # happens to be called "Relight Lights"; the rest is exactly as before the solve
 R["area_lights"] = op(bpy.ops.relight.make_area_lights)
+# Relight's own lights of the row are gone (issue 36, item 6): the new lights alone render it
+R["relight_lights_left"] = [emitting_state()[2],
+                            len([o for o in scene.objects if o.type == "LIGHT" and o.get("relight_owner")])]
 made = next(c for c in bpy.data.collections if c.get("relight_area_lights") is not None)
 area_objs = [o for o in made.objects if o.type == "LIGHT"]  # (Relight's own lamps are elsewhere)
 R["n_area_lights"] = len(area_objs)

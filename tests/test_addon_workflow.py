@@ -141,6 +141,7 @@ def test_area_lights_and_clear_restore_the_scene_exactly(scenario):
     assert scenario["area_lights"][0] == ["FINISHED"]
     assert scenario["n_area_lights"] >= scenario["final_row"][0]  # one per emitting cell
     assert scenario["area_light_power"] == pytest.approx(scenario["emitted_power"], rel=1e-4)  # per channel
+    assert scenario["relight_lights_left"] == [0, 0]  # converted: the row's light renders once, not twice
     assert scenario["clear"][0] == ["FINISHED"]
     assert scenario["area_lights_kept"] and scenario["artist_collection_kept"]
     assert scenario["emitters_after_clear"] == 0

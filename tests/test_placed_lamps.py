@@ -163,16 +163,20 @@ def test_make_area_lights_copies_the_lamps_for_keeps_and_the_export_reads_them(g
     with written(gallery) as (scene, lamps):
         assert export.export_scene().faces.lamps == []  # Relight's own lamps are not the scene's light
         n_cells = sum(li["exitance"] is not None for li in r["final"]["lights"])
-        made = results.make_area_lights(scene, int(scene["relight_shown"]))
+        made = results.make_area_lights(scene, int(scene["relight_shown"]))["names"]
         results.clear_results(scene)
         kept = {o.name: o for o in bpy.data.objects if o.type == "LIGHT"}
-        assert len(kept) == made >= len(lamps) + n_cells and not any(o.get(OWNER) for o in kept.values())
-        got = {lamp.name: lamp for lamp in export.export_scene().faces.lamps  # now the user's lamps
-               if lamp.kind != "AREA" or not lamp.name.startswith("Relight light")}  # (the cells' area lights)
-        assert len(got) == len(lamps)
+        assert sorted(kept) == sorted(made) and len(made) >= len(lamps) + n_cells
+        assert not any(o.get(OWNER) for o in kept.values())
+        exported = export.export_scene().faces.lamps  # now the user's lamps
+        assert len(exported) == len(made)
+        got = {}  # each lamp's copy, found by its type and place (it is named after the surface it hangs from)
         for name, li in lamps.items():
-            lamp = next(v for k, v in got.items() if k.startswith(name))
-            assert lamp.kind == li["type"].upper()
+            got[name] = next(v for v in exported if v.kind == li["type"].upper()
+                             and np.allclose(v.position, li["location"], atol=1e-5))
+        assert len({id(v) for v in got.values()}) == len(lamps)
+        for name, li in lamps.items():
+            lamp = got[name]
             np.testing.assert_allclose(lamp.position, li["location"], atol=1e-5)
             np.testing.assert_allclose(lamp.direction, li["direction"], atol=1e-5)
             np.testing.assert_allclose(lamp.power, li["strength"], rtol=1e-5)

@@ -19,8 +19,9 @@ artist's faces, as:
 - the lamps a solve placed (Spot, Area and Point lamps chosen among the candidates) as new Light
   objects with the solved Power, colour, cone, blend, size and orientation, in the collection
   "Relight Lamps" (``plan_placed``, ``write_placed``): Relight's own, removed by Clear and
-  replaced when another configuration is shown (Make Area Lights copies them for keeps); the
-  export does not count them as the scene's light;
+  replaced when another configuration is shown (Make Area Lights copies them for keeps, then
+  removes them and the emitters object: ``make_area_lights``); the export does not count them as
+  the scene's light;
 - the stored curve (scene property ``relight_result``) and the chart image.
 
 Everything Relight creates carries ``relight_owner`` = the result's id (scene property
@@ -421,7 +422,7 @@ def polygon_rows(data, values):
 #: make_area_lights; "lamp" lights (direct mode: the scene's own lamps) by the lamps themselves, their
 #: Power and colour set or the lamp disabled, restorably (``plan_lamps``, lamp_state.py); "placed"
 #: lights (the Spot, Area and Point lamps a solve placed) as new Light objects in a collection
-#: Relight owns (``plan_placed``, ``write_placed``), copied for keeps by make_area_lights. A new
+#: Relight owns (``plan_placed``, ``write_placed``), converted for keeps by make_area_lights. A new
 #: writer is a function here and its name in this tuple.
 WRITERS = ("surface", "lamp", "placed")
 #: the collection of the lamps a solve placed (owned: Clear removes it, by identity)
@@ -595,8 +596,8 @@ def keep_placed(scene) -> list:
     rid = result_id(scene)
     obs = [o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)]
     if not obs:
-        raise SceneError("the shown configuration has no placed lamp to keep (its lights are emissive cells, or "
-                         "nothing is solved yet)")
+        raise SceneError("the shown configuration has no placed lamp to keep (its lights are emissive cells, "
+                         "Make Area Lights made them yours, or nothing is solved yet)")
     names = []
     for ob in obs:
         lamp = ob.get(PLACED_LAMP_PROP, ob.name)
@@ -802,16 +803,20 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
             "panel": rows[index] if index < len(rows) else None}
 
 
+def _remove_shown_lights(scene, rid) -> int:
+    """Remove Relight's lights of the row shown: the emitters object and the lamps the solve placed
+    (clear_shown; make_area_lights, once it made them the artist's). Returns the objects removed."""
+    n = int(emitters_object(scene) is not None)
+    _remove_emitters(rid)
+    return n + _remove_placed(rid)
+
+
 def clear_shown(scene) -> int:
     """Remove what shows a configuration (emitters object, radiosity layers, suppressed
     emitters; the lamps it set are given back as they were), keeping the stored curve. Returns
     the number of objects cleaned."""
     rid = result_id(scene)
-    n = 0
-    if rid is not None:
-        n += int(emitters_object(scene) is not None)
-        _remove_emitters(rid)
-        n += _remove_placed(rid)
+    n = _remove_shown_lights(scene, rid) if rid is not None else 0
     for obj in scene.objects:
         if obj.type == "LIGHT" and obj.library is None:
             n += int(lamp_state.restore(obj))
@@ -821,8 +826,9 @@ def clear_shown(scene) -> int:
         a = clear_suppression(obj)
         b = remove_radiosity_layer(obj)
         n += int(a or b)
-    if "relight_shown" in scene.keys():
-        del scene["relight_shown"]
+    for key in ("relight_shown", CONVERTED_PROP):
+        if key in scene.keys():
+            del scene[key]
     return n
 
 
@@ -860,15 +866,80 @@ def shown_light_polygons(scene, obj) -> np.ndarray:
     return out
 
 
-def make_area_lights(scene, index) -> int:
-    """Real Blender area lights for configuration ``index``: one per light cell that emits, a
-    one-sided area light of the cell's area at its centre (set off like the emitters object),
-    facing along its normal, power = exitance x area (W), in a new collection. Rectangular cells
-    (grid cells of quads) get a rectangle of their sides; others a square of their area. The
-    lamps the solve placed (Spot, Area, Point) are copied there too: of the row shown, as they are in the
-    scene (as the artist edited them); of another row, as solved.
-    All or nothing: every light is computed and checked (finite, positive area) before the
-    previous lights of this result are replaced; cells without area are left out."""
+#: on the scene: the row Make Area Lights converted (Relight's emitters of it removed); deleted,
+#: with ``relight_shown``, when a row is shown again or the result cleared (clear_shown)
+CONVERTED_PROP = "relight_converted"
+#: the collection Make Area Lights puts its lights in (one per result; the artist's to keep)
+AREA_COLLECTION = "Relight Lights"
+
+
+def _cell_objects(data) -> np.ndarray:
+    """(|C|,) the index in ``data.objects`` of the object each light cell lies on (-1: none)."""
+    B = data.light_basis().tocoo()
+    out = np.full(B.shape[0], -1, dtype=np.int64)
+    out[B.row] = np.asarray(data.light_object, dtype=np.int64)[B.col]
+    return out
+
+
+def _nearest_object(obs, position) -> str:
+    """The name of the mesh object of ``obs`` whose surface is nearest ``position`` (world, m): the
+    one a lamp hangs from (the solve hangs its lamps in front of a surface that may hold lights); ""
+    when none has a surface."""
+    from mathutils import Vector
+
+    p, best = Vector(position), (math.inf, "")
+    for ob in obs:
+        M = ob.matrix_world
+        try:
+            hit, co, _n, _i = ob.closest_point_on_mesh(M.inverted_safe() @ p)
+        except RuntimeError:  # no evaluated mesh (e.g. its collection excluded from the view layer)
+            continue
+        if hit:
+            best = min(best, ((M @ co - p).length, ob.name))
+    return best[1]
+
+
+def _numbered(base, taken) -> str:
+    """``base`` + the first number from 1 that makes a name not in ``taken`` (then taken)."""
+    n = 1
+    while f"{base} {n}" in taken:
+        n += 1
+    taken.add(f"{base} {n}")
+    return f"{base} {n}"
+
+
+def make_area_lights(scene, index) -> dict:
+    """Convert configuration ``index``, the one shown, into the artist's own lights (issue 36,
+    item 6): one area light per light cell that emits, a one-sided area light of the cell's area at
+    its centre (set off like the emitters object), facing along its normal, power = exitance x area
+    (W) -- a rectangle of its sides for a rectangular cell (grid cells of quads), else a square of
+    its area -- and a copy of each lamp the solve placed as it is in the scene (as the artist
+    edited it: issue 35, case 3; a kept or renamed one is already the artist's, a deleted one is not
+    brought back), in the collection "Relight Lights".
+
+    Then Relight's own lights of the row stop rendering, so that a render shows the row's light
+    once, not twice: the emitters object and the lamps the solve placed are *removed*, as
+    clear_shown removes them. Removing, not hiding from render, because a hidden copy would stay
+    one click (the eye, the camera icon) from doubling the light again, would be copied or kept
+    by Keep Lamps beside its converted twin, and is one more thing to explain; the stored result
+    is all a row needs to be shown again. What else shows the row stays, since it still describes
+    what renders: the radiosity layer, the scene's emitters switched off and its lamps set (direct
+    lighting), and the stored curve: a click on a row shows that row again with Relight's lights
+    (beside these, which no result removes), Clear Results gives the rest back.
+
+    Names: "Relight <Kind> <object> <n>" (Area for a cell; Spot, Area, Point for a lamp, as its
+    Light's type), the object the cell lies on or the lamp hangs from (the nearest of the objects
+    holding light cells, else of the solved objects), the first number from 1 no object has yet: an
+    artist's object of that name keeps it. Converting the same row again after showing it again
+    replaces the lights this made (those it still marks: export.owner_of's rule) and so gives the
+    same names.
+
+    All or nothing: everything is computed and checked (the row is the one shown and not converted
+    already, it has a light of Relight's, finite values, positive areas; cells without area are
+    left out) before anything is
+    written. Returns {"names": the new lights' names, "collection": its name, "removed": Relight's
+    objects removed, "reduce": whether the scene's own emitters and lamps are set by the result (a
+    reduction: Clear Results gives them back as they were, beside these lights)}."""
     from mathutils import Matrix, Vector
 
     data = load_result(scene)
@@ -876,13 +947,22 @@ def make_area_lights(scene, index) -> int:
     n_points = len(data.n_lights)
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
-    check_stored(scene, data)
+    index = int(index)
+    shown = scene.get("relight_shown")
+    if shown is None or int(shown) != index:
+        raise SceneError(f"configuration {index} is not the one shown: click its row first (Make Area Lights "
+                         "converts what the scene shows)")
+    if scene.get(CONVERTED_PROP) == index:
+        raise SceneError(f"configuration {index} is already your lights (Make Area Lights made them and removed "
+                         "Relight's): nothing to convert; a click on a row shows it again with Relight's lights")
+    objs = check_stored(scene, data)
     check_writers(data)
-    exitance = data.exitance[int(index)].astype(np.float64)
+    exitance = data.exitance[index].astype(np.float64)
     if not np.all(np.isfinite(exitance)):
         raise SceneError("the stored result holds non-finite values: solve again")
     cell_e = data.light_basis() @ exitance
     cells = np.flatnonzero(np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1))
+    cell_object = _cell_objects(data)
     tc = data.cell_triangle_cell
     tri_all = data.cell_triangles.astype(np.float64)
     scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
@@ -912,28 +992,35 @@ def make_area_lights(scene, index) -> int:
         values = np.concatenate([center, n, power, size, rot.ravel()])
         if not np.all(np.isfinite(values)):
             raise SceneError(f"light cell {int(c)} of the stored result has non-finite geometry: solve again")
+        where = data.objects[cell_object[c]] if 0 <= cell_object[c] < len(data.objects) else ""
         # Cycles: a light emits colour x Power in each channel (intern/cycles/blender/light.cpp)
-        plan.append((int(c), shape, size, float(power.max()), power / max(power.max(), 1e-30),
-                     center + offset * n, rot))
-    shown = scene.get("relight_shown")
-    if shown is not None and int(shown) == int(index):  # the placed lamps as they are in the scene: as the
-        # artist edited them (moved, another Power: issue 35, case 3), not as solved; kept or renamed ones are
-        # already the artist's, and a deleted one is not brought back
-        placed = [o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)]
-    else:  # another row: its lamps as solved (a kept twin stands for its lamp: not copied again)
-        placed = without_kept(scene, rid, plan_placed(data, exitance))[0]
-    # write: replace this result's own earlier lights (by identity), then add the new ones
+        plan.append((f"Relight Area {where}".strip(), shape, size, float(power.max()),
+                     power / max(power.max(), 1e-30), center + offset * n, rot))
+    # the lamps the solve placed, as they are in the scene, in the stored order (stable names)
+    order = {rec["name"]: k for k, rec in enumerate(data.lamps)}
+    placed = sorted((o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)),
+                    key=lambda o: (order.get(o.get(PLACED_LAMP_PROP), len(order)), o.name))
+    holders = [objs[oi] for oi in sorted(set(cell_object.tolist()) & set(objs))] or list(objs.values())
+    placed = [(o, f"Relight {o.data.type.title()} {_nearest_object(holders, o.matrix_world.translation)}".strip())
+              for o in placed]
+    if not plan and not placed:
+        raise SceneError(f"configuration {index} has no light of Relight's to make yours (its lights are the "
+                         "scene's own lamps and emitters, as it sets them, or none): nothing to convert")
+    # write: replace this result's own earlier lights (by identity), add the new ones, then remove
+    # Relight's lights of the row
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
     coll = None
     for c in old:  # Make Area Lights again replaces its own lights of this result, and only those
         if not empty_collection(c, lambda o: _made_area_light(o, rid)):  # what the user put there stays
             coll = coll or c
     if coll is None:
-        coll = bpy.data.collections.new("Relight Lights")
+        coll = bpy.data.collections.new(AREA_COLLECTION)
         coll[AREA_LIGHTS_PROP] = rid or ""
         scene.collection.children.link(coll)
-    for c, shape, size, energy, color, location, rot in plan:
-        light = bpy.data.lights.new(f"Relight light {c}", "AREA")
+    taken, names = set(bpy.data.objects.keys()), []
+    for base, shape, size, energy, color, location, rot in plan:
+        name = _numbered(base, taken)
+        light = bpy.data.lights.new(name, "AREA")
         make_plain(light)  # Cycles emits colour x Power
         light.shape = shape
         light.size = size[0]
@@ -941,20 +1028,23 @@ def make_area_lights(scene, index) -> int:
             light.size_y = size[1]
         light.energy = energy  # Blender's area-light power is radiant flux (W)
         light.color = tuple(float(x) for x in color)
-        obj = bpy.data.objects.new(light.name, light)
+        obj = bpy.data.objects.new(name, light)
         obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
         coll.objects.link(obj)
         _mark_area_light(obj, rid)
-    for p in placed:
-        if isinstance(p, bpy.types.Object):
-            obj = p.copy()
-            obj.data = p.data.copy()
-            _disown(obj, obj.data)
-        else:
-            obj = new_lamp(*p)
+        names.append(obj.name)
+    for p, base in placed:
+        obj = p.copy()
+        obj.data = p.data.copy()
+        _disown(obj, obj.data)
+        obj.name = obj.data.name = _numbered(base, taken)
         coll.objects.link(obj)
         _mark_area_light(obj, rid)
-    return len(plan) + len(placed)
+        names.append(obj.name)
+    removed = _remove_shown_lights(scene, rid)
+    scene[CONVERTED_PROP] = index
+    return {"names": names, "collection": coll.name, "removed": removed,
+            "reduce": data.meta.get("command") == "reduce"}
 
 
 def _mark_area_light(ob, rid) -> None:

@@ -679,18 +679,27 @@ class RELIGHT_OT_clear_results(bpy.types.Operator):
 
 
 class RELIGHT_OT_make_area_lights(bpy.types.Operator):
-    """Turn the shown configuration into real Blender area lights (one per light face), in a
-    new collection; the emissive faces are kept, hide them or Clear Results as you like"""
+    """Turn the shown configuration into lights of your own (an area light per light face, a copy
+    of each lamp shown), in a new collection; Relight's own lights of it are removed, so a render
+    shows its light once. A click on a row shows that row again beside them"""
     bl_idname = "relight.make_area_lights"
     bl_label = "Make Area Lights"
     bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
+        k = context.scene.relight.curve_index
         try:
-            n = results.make_area_lights(context.scene, context.scene.relight.curve_index)
+            made = results.make_area_lights(context.scene, k)
         except (ValueError, KeyError) as exc:
             return _refuse(self, exc)
-        self.report({"INFO"}, f"Created {n} area light(s) in collection 'Relight Lights'")
+        names = made["names"]
+        self.report({"INFO"}, f"Configuration {k} is now {len(names)} light(s) of yours in collection "
+                              f"'{made['collection']}' ({', '.join(names[:3])}{', ...' if len(names) > 3 else ''}); "
+                              "Relight's own lights of it are removed, so a render shows it once. A click on a row "
+                              "of the list shows that row again with Relight's lights, beside these")
+        if made["reduce"]:
+            self.report({"INFO"}, "The scene's own emitters and lamps stay as this configuration sets them while "
+                                  "the result is kept; Clear Results gives them back as they were, beside your lights")
         return {"FINISHED"}
 
 
