@@ -219,3 +219,31 @@ def test_another_row_rewrites_the_layer(scene):
     assert flat and floor.data.color_attributes.active_color_name == "relight_display"
     np.testing.assert_allclose(after, want, rtol=1e-5, atol=1e-6)
     assert np.abs(after - before).max() > 1e-3  # another configuration lights the floor otherwise
+
+
+def test_a_view_that_cannot_be_shown_says_why_and_writes_nothing(scene):
+    import dataclasses
+
+    import bmesh
+
+    sc = scene
+    # a result stored before the reflectance was kept: no illuminance, the other views still
+    data = results.load_result(sc)
+    sc[results.RESULT_PROP] = dataclasses.replace(data, patch_reflectance=None).pack()
+    results._cache.clear()
+    sc.relight_view.mode = "ILLUMINANCE"
+    assert "Illuminance (lx) not shown" in sc.relight_view.message and "solve again" in sc.relight_view.message
+    assert not any("relight_display" in ob.data.color_attributes for ob in sc.objects if ob.type == "MESH")
+    sc.relight_view.mode = "LUMINANCE"
+    assert "not shown:" not in sc.relight_view.message and "relight_display" in sc.objects["Floor"].data.color_attributes
+    # a mesh changed since the solve: named, every layer off, nothing half written
+    me = sc.objects["Painting"].data
+    bm = bmesh.new()
+    bm.from_mesh(me)
+    bm.faces.ensure_lookup_table()
+    bmesh.ops.delete(bm, geom=[bm.faces[0]], context="FACES")
+    bm.to_mesh(me)
+    bm.free()
+    sc.relight_view.mode = "DIFFERENCE"
+    assert "Painting has changed since the solve" in sc.relight_view.message
+    assert not any("relight_display" in ob.data.color_attributes for ob in sc.objects if ob.type == "MESH")

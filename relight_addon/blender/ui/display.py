@@ -201,29 +201,31 @@ def refresh(scene, held=None) -> list:
     remembers). Returns the messages about objects skipped (also in ``relight_view.message``)."""
     v = scene.relight_view
     held = _held(scene) if held is None else held
-    skipped = []
+    skipped, plan = [], []
     shown = data = None
-    try:
+    try:  # everything computed and checked before anything is written
         if v.mode != "PREDICTED" or v.exposure != 0.0:
             shown, data = current_view(scene)
         objects = results.check_stored(scene, data, trusted=True) if shown else {}
+        colours = None if shown is None else export.srgb_to_linear(shown.colours) if shown.display else shown.colours
+        if colours is not None and not np.all(np.isfinite(colours)):
+            raise SceneError("the stored result gives non-finite colours: solve again")
+        seen = set()
+        for oi, ob in objects.items():
+            if results.linked_message(ob):
+                skipped.append(f"{ob.name}: its mesh is linked (read-only): not shown in this view")
+            elif ob.data.name not in seen:  # (a shared mesh: the first object's values, as the radiosity layer)
+                seen.add(ob.data.name)
+                plan.append((ob, colours[data.polygon_offset[oi]:data.polygon_offset[oi + 1]]))
     except (SceneError, ValueError, KeyError) as exc:
-        shown, objects = None, {}
+        shown, plan = None, []
         skipped.append(f"{MODE_NAMES.get(v.mode, v.mode)} not shown: "
                        f"{exc.args[0] if isinstance(exc, KeyError) and exc.args else exc}")
     if shown is None:
         _remove_layers(scene)
     else:
-        colours = export.srgb_to_linear(shown.colours) if shown.display else shown.colours
-        off, seen = data.polygon_offset, set()
-        for oi, ob in objects.items():
-            if results.linked_message(ob):
-                skipped.append(f"{ob.name}: its mesh is linked (read-only): not shown in this view")
-                continue
-            if ob.data.name in seen:  # (a shared mesh: the first object's values, as the radiosity layer)
-                continue
-            seen.add(ob.data.name)
-            write_layer(ob, colours[off[oi]:off[oi + 1]], shown.smooth)
+        for ob, values in plan:
+            write_layer(ob, values, shown.smooth)
         v.scale_used = shown.vmax
     if shown is not None and shown.display and held:
         use_standard(scene)
@@ -235,7 +237,6 @@ def refresh(scene, held=None) -> list:
             print(f"Relight: {line}")
         v.message = text
     return skipped
-
 
 
 # --- the sub-panel ---------------------------------------------------------------------------------
