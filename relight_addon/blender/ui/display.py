@@ -21,6 +21,7 @@ Results (viewport.restore), unless the artist set another view transform meanwhi
 from __future__ import annotations
 
 import json
+import textwrap
 
 import bpy
 import bpy.utils.previews
@@ -299,8 +300,10 @@ class RELIGHT_PT_view(bpy.types.Panel):
                 layout.label(text=GREY[v.mode], icon="INFO")
         else:
             layout.prop(v, "exposure")
-        for line in filter(None, v.message.split("\n")):
-            layout.label(text=line, icon="ERROR")
+        for line in filter(None, v.message.split("\n")):  # (wrapped: the sidebar's labels do not wrap)
+            col = layout.column(align=True)
+            for k, part in enumerate(textwrap.wrap(line, 44)):
+                col.label(text=part, icon="ERROR" if k == 0 else "BLANK1")
         if not _held(context.scene):
             layout.label(text="Show Radiosity to see it in the viewports", icon="HIDE_ON")
 
