@@ -106,6 +106,8 @@ from .world import world_light
 
 DEFAULT_REFLECTANCE = 0.8
 RADIOSITY_ATTRIBUTE = "relight_radiosity"
+#: the Results panel's view of the configuration shown (ui/display.py); removed with the radiosity layer
+DISPLAY_ATTRIBUTE = "relight_display"
 TARGET_ATTRIBUTE = "relight_target"
 #: illuminance targets: a Face float attribute, lx (0: none)
 LUX_ATTRIBUTE = "relight_target_lux"

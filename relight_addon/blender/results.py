@@ -53,6 +53,7 @@ from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
+from .export import DISPLAY_ATTRIBUTE
 from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
                      owner_of, tag_owned)
 
@@ -1158,6 +1159,8 @@ def write_radiosity_layer(ob, poly_radiosity, poly_area=None):
 def remove_radiosity_layer(ob) -> bool:
     """Remove ``relight_radiosity`` and give back the active and render colours it replaced."""
     me = ob.data
+    if DISPLAY_ATTRIBUTE in me.color_attributes:  # (the view made of it: ui/display.py)
+        me.color_attributes.remove(me.color_attributes[DISPLAY_ATTRIBUTE])
     attr = me.color_attributes.get(RADIOSITY_ATTRIBUTE)
     if attr is None:
         return False

@@ -79,6 +79,10 @@ class StoredResult:
     #: surface light). Results written before lamps were lights have neither (read as no lamp).
     lamps: list = field(default_factory=list)
     light_lamp: np.ndarray = None
+    #: every patch's reflectance (P, 3), as the solve modelled it: the illuminance view reads
+    #: E = (B - e) / reflectance from it (pipeline/false_colour.py). Results written before it was
+    #: kept have none (None).
+    patch_reflectance: np.ndarray = None
 
     # -- building ----------------------------------------------------------------------------
     @classmethod
@@ -140,7 +144,7 @@ class StoredResult:
             meta={"command": report["command"], "options": json_safe(report["options"]),
                   "light_colour": json_safe(report.get("light_colour") or {"mode": "free"}),
                   "rows": row_panels(model, curve)},
-            lamps=lamps, light_lamp=light_lamp,
+            lamps=lamps, light_lamp=light_lamp, patch_reflectance=patches.reflectance,
         )
 
     def with_fingerprints(self, fingerprints) -> "StoredResult":
@@ -163,7 +167,7 @@ class StoredResult:
         """(arrays, JSON texts): the fields as the text keeps them, the floating-point arrays in
         float32 (non-finite values refused), ``light_lamp`` -1 for no lamp (pack, as_stored)."""
         arrays = {f.name: np.asarray(getattr(self, f.name)) for f in dataclasses.fields(self)
-                  if f.name not in _JSON}
+                  if f.name not in _JSON and not (f.name in _OPTIONAL and getattr(self, f.name) is None)}
         if self.light_lamp is None:
             arrays["light_lamp"] = np.full(len(self.light_area), -1, dtype=np.int64)
         for k, a in arrays.items():
@@ -218,7 +222,7 @@ class StoredResult:
             out["lamps"] = []
             out["light_lamp"] = np.full(len(out["light_area"]), -1, dtype=np.int64)
         names = {f.name for f in dataclasses.fields(cls)}
-        missing = names - set(out)
+        missing = names - set(out) - _OPTIONAL
         if missing:
             raise ValueError(f"this file's Relight result lacks {', '.join(sorted(missing))}")
         return cls(**{k: v for k, v in out.items() if k in names})
@@ -226,6 +230,8 @@ class StoredResult:
 
 #: the fields kept as JSON, and their empty value
 _JSON = {"objects": list, "meta": dict, "lamps": list}
+#: the array fields a result written by an earlier version may lack (None: not stored)
+_OPTIONAL = {"patch_reflectance"}
 
 
 def lamp_record(lamp) -> dict:

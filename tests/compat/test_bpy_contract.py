@@ -81,6 +81,29 @@ def test_float_color_corner_attribute_roundtrip(empty_scene):
     np.testing.assert_array_equal(back, values)
 
 
+def test_view_settings_the_false_colour_views_set_and_give_back(empty_scene):
+    """The scene's view transform, look, exposure and gamma (ui/display.py sets Standard, None, 0, 1
+    for a false-colour view and gives back what was there) read back as written; a second colour
+    attribute made active leaves the render colour where it was."""
+    vs = empty_scene.view_settings
+    saved = (vs.view_transform, vs.look, vs.exposure, vs.gamma)
+    try:
+        for transform, look, exposure, gamma in (("AgX", "None", 1.5, 1.2), ("Standard", "None", 0.0, 1.0)):
+            vs.view_transform, vs.look, vs.exposure, vs.gamma = transform, look, exposure, gamma
+            assert (vs.view_transform, vs.look) == (transform, look)
+            assert (vs.exposure, vs.gamma) == pytest.approx((exposure, gamma))
+    finally:
+        vs.view_transform, vs.look, vs.exposure, vs.gamma = saved
+    colors = _plane().data.color_attributes
+    first = colors.new("relight_radiosity", "FLOAT_COLOR", "CORNER")
+    colors.active_color = first
+    colors.render_color_index = colors.find("relight_radiosity")
+    second = colors.new("relight_display", "FLOAT_COLOR", "CORNER")
+    colors.active_color = second
+    assert colors.active_color_name == "relight_display"
+    assert colors.render_color_index == colors.find("relight_radiosity")
+
+
 def test_cycles_emit_bake_is_emission_radiance(empty_scene):
     """Cycles bakes an emissive Principled surface to Emission Color x Strength (radiance),
     into a FLOAT_COLOR corner attribute: the convention Relight's bake comparison uses."""

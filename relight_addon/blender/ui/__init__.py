@@ -29,10 +29,12 @@ class RelightPreferences(bpy.types.AddonPreferences):
     )
 
     def _retab(self, context):
-        from . import panels
+        from . import display, panels
 
+        display.unregister_panel()  # (a sub-panel of the Results panel: off before it, on after it)
         panels.unregister()
         panels.register(self.sidebar_tab or "Relight")
+        display.register_panel(self.sidebar_tab or "Relight")
 
     def draw(self, context):
         layout = self.layout
@@ -51,7 +53,7 @@ _classes = (RelightPreferences,)
 
 
 def register():
-    from . import operators, panels, properties, render_settings
+    from . import display, operators, panels, properties, render_settings
 
     for cls in _classes:
         bpy.utils.register_class(cls)
@@ -59,18 +61,21 @@ def register():
     operators.register()
     render_settings.register()
     prefs = preferences()
-    panels.register(prefs.sidebar_tab if prefs is not None and prefs.sidebar_tab else "Relight")
+    tab = prefs.sidebar_tab if prefs is not None and prefs.sidebar_tab else "Relight"
+    panels.register(tab)
+    display.register(tab)
     bpy.app.handlers.load_post.append(_sync_curve_on_load)
 
 
 def unregister():
-    from . import operators, panels, properties, render_settings
+    from . import display, operators, panels, properties, render_settings
     from .. import live
 
     live.stop()
 
     if _sync_curve_on_load in bpy.app.handlers.load_post:
         bpy.app.handlers.load_post.remove(_sync_curve_on_load)
+    display.unregister()
     panels.unregister()
     render_settings.unregister()
     operators.unregister()

@@ -16,7 +16,7 @@ from ...pipeline import jobs
 from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
 from ..preparation import SolveJob
-from . import viewport
+from . import display, viewport
 from .properties import set_curve_index, show_row_panel, ui_value
 from ...engine.options import JobOptions
 from ...engine.scene import SceneError
@@ -651,6 +651,7 @@ class RELIGHT_OT_apply_configuration(bpy.types.Operator):
             return _refuse(self, exc)
         set_curve_index(settings, k)
         show_row_panel(settings, shown["panel"])
+        display.refresh(context.scene)  # the Results panel's View, of this row
         settings.apply_error = ""
         results.update_chart(context.scene)
         for w in shown["skipped"]:  # e.g. linked meshes: the lights show, the radiosity layer cannot

@@ -11,6 +11,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
                        IntProperty, PointerProperty, StringProperty)
 
 from .. import results
+from . import display
 from ...engine import options as engine_options
 
 INT_MAX = 2 ** 31 - 1  # Blender's IntProperty is 32-bit
@@ -102,6 +103,7 @@ def apply_curve_point(context, index):
     settings = context.scene.relight
     try:
         show_row_panel(settings, results.apply_stored_point(context.scene, index)["panel"])
+        display.refresh(context.scene)  # the view the Results panel's View asks for, of this row
         settings.apply_error = ""
         results.update_chart(context.scene)
     except (ValueError, KeyError) as exc:  # e.g. the stored result is missing or stale

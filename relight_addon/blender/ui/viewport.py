@@ -3,7 +3,8 @@
 Showing the radiosity means Solid shading with Color: Attribute (the active colour attribute,
 ``relight_radiosity`` after a solve). The shading each viewport had before is remembered in
 ``scene.relight.view_restore`` (JSON, saved with the file) and given back by Hide Radiosity
-and by Clear Results, so the artist's viewport is never left in Attribute colour.
+and by Clear Results, so the artist's viewport is never left in Attribute colour; with it, the
+scene's view transform a false-colour view replaced (display.py).
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import json
 import bpy
 
 from .. import export
+from . import display
 
 
 def _key(window, screen, area_index):
@@ -69,12 +71,14 @@ def show_radiosity(context) -> int:
     _activate_radiosity_layers(scene)
     if n:
         scene.relight.view_restore = json.dumps(memory)
+        display.refresh(scene, held=True)  # the Results panel's View (its layer; a false colour's view transform)
     return n
 
 
 def restore(context) -> int:
     """Give every remembered viewport its shading back and forget it. Returns how many."""
     scene = context.scene
+    display.give_back(scene)  # the view transform a false-colour view replaced
     memory = _memory(scene)
     if not memory:
         return 0
