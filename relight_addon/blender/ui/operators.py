@@ -174,6 +174,15 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
     bl_label = "Clear Targets"
     bl_options = {"REGISTER", "UNDO"}
 
+    @classmethod
+    def poll(cls, context):  # (greyed out when no object of the scene has targets)
+        if not any(o.type == "MESH" and (o.data.attributes.get(TARGET) is not None
+                                        or o.data.attributes.get(export.LUX_ATTRIBUTE) is not None)
+                   for o in context.scene.objects):
+            cls.poll_message_set("No object of the scene has targets")
+            return False
+        return True
+
     def execute(self, context):
         objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
         objs = [o for o in objs if o.data.attributes.get(TARGET) is not None
@@ -398,6 +407,20 @@ def _restore_mode(context, mode):
         bpy.ops.object.mode_set(mode=mode)
 
 
+def _back_to_painting(context, mode):
+    """After a solve: the user's mode given back (the solve ran in Object Mode). In Vertex Paint,
+    the target layer is made the active colour again: the solve made the radiosity layer active,
+    and the next stroke would have painted it."""
+    if mode is None or context.object is None:
+        return
+    _restore_mode(context, mode)
+    if mode == "VERTEX_PAINT" and context.object.type == "MESH":
+        colors = context.object.data.color_attributes
+        target = export.target_layer(context.object.data)
+        if target is not None:
+            colors.active_color = colors[target.name]
+
+
 class RELIGHT_OT_solve(bpy.types.Operator):
     """Solve the inverse lighting problem for the painted targets and reduce it to a few
     positive lights. ESC cancels and leaves the scene untouched"""
@@ -441,6 +464,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
             _restore_mode(context, getattr(self, "_mode", None))
             self.report({"ERROR"}, _message(exc))
             return {"CANCELLED"}
+        _back_to_painting(context, getattr(self, "_mode", None))
         # the status bar shows the last report: the summary first, then the warnings
         self.report({"INFO"}, "Relight: " + context.scene.relight.last_summary)
         top = sidebar_lines(warnings)

@@ -200,6 +200,10 @@ class RELIGHT_PT_main(RELIGHT_PT_base, bpy.types.Panel):
                   icon="TIME" if notes else "LIGHT_AREA")
 
 
+def faces_selected(n) -> str:
+    return f"{n} face selected" if n == 1 else f"{n} faces selected"
+
+
 def _mesh(context):
     obj = context.active_object
     return obj if obj is not None and obj.type == "MESH" else None
@@ -221,17 +225,17 @@ class RELIGHT_PT_targets(RELIGHT_PT_base, bpy.types.Panel):
             layout.label(text=f"{obj.name}: {'?' if t is None else t} targets", icon="MESH_DATA")
         layout.prop(settings, "target_scale")
         layout.operator("relight.paint_targets", icon="BRUSH_DATA")
-        layout.prop(settings, "paint_color", text="Fill Colour")
-        row = layout.row(align=True)
-        row.operator("relight.fill_targets", text="Fill Selected").unpaint = False
-        row.operator("relight.fill_targets", text="Unpaint").unpaint = True
-        row = layout.row(align=True)
-        row.prop(settings, "paint_lux", text="lx")
-        row.operator("relight.fill_targets", text="Fill Selected (lx)").illuminance = True
         if edit and obj is not None:
-            layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
+            layout.label(text=faces_selected(obj.data.total_face_sel), icon="FACESEL")
         else:
             layout.label(text="Edit Mode: fill selected faces", icon="EDITMODE_HLT")
+        row = layout.row(align=True)
+        row.prop(settings, "paint_color", text="")
+        row.operator("relight.fill_targets", text="Fill").unpaint = False
+        row = layout.row(align=True)
+        row.prop(settings, "paint_lux", text="lx")
+        row.operator("relight.fill_targets", text="Fill lx").illuminance = True
+        layout.operator("relight.fill_targets", text="Unpaint", icon="X").unpaint = True
         row = layout.row(align=True)
         row.operator("relight.select_faces", text="Select Targets").kind = "TARGET"
         row.operator("relight.clear_targets", text="Clear Targets")
@@ -250,17 +254,17 @@ class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
         else:  # (as many rows as with a mesh: the buttons below stay in place)
             layout.label(text="Select a mesh object", icon="INFO")
             layout.label(text="")
-        row = layout.row(align=True)
-        row.operator("relight.forbid_faces", text="Forbid Selected").allow = False
-        row.operator("relight.forbid_faces", text="Allow Selected").allow = True
         if context.mode == "EDIT_MESH" and obj is not None:
             note = object_counts(obj)[3]
             if note:
                 layout.label(text="Counted again on leaving Edit Mode", icon="TIME")
             else:
-                layout.label(text=f"{obj.data.total_face_sel} faces selected", icon="FACESEL")
+                layout.label(text=faces_selected(obj.data.total_face_sel), icon="FACESEL")
         else:
             layout.label(text="Edit Mode: forbid selected faces", icon="EDITMODE_HLT")
+        row = layout.row(align=True)
+        row.operator("relight.forbid_faces", text="Forbid").allow = False
+        row.operator("relight.forbid_faces", text="Allow").allow = True
         layout.operator("relight.select_faces", text="Select Forbidden").kind = "FORBIDDEN"
         draw_light_kinds(layout, context.scene.relight)
 
@@ -278,9 +282,11 @@ def draw_light_kinds(layout, settings):
     box.label(text="Offer" if used else "Offer (this selection: cells only)", icon="LIGHT_SPOT")
     col = box.column(align=True)
     col.active = used
-    row = col.row(align=True)
-    for name in ("surface_lights",) + LAMP_OPTIONS:
-        row.prop(settings, name, toggle=True)
+    names = ("surface_lights",) + LAMP_OPTIONS
+    for k in range(0, len(names), 2):  # two a row: four in a row are cut at the sidebar's default width
+        row = col.row(align=True)
+        for name in names[k:k + 2]:
+            row.prop(settings, name, toggle=True)
     sub = col.column(align=True)
     sub.active = used and options.uses("lamp_drop")
     draw_option(sub, settings, PARAMS["lamp_drop"])
@@ -489,10 +495,10 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
     def draw(self, context):
         layout = self.layout
         s = context.scene.relight
-        layout.operator("relight.match_light_paths", icon="LIGHT")
         if len(s.curve) == 0:
             _wrap(layout, "No result yet: paint targets, then Solve & Reduce", context, icon="INFO")
             return
+        layout.operator("relight.match_light_paths", icon="LIGHT")
         box = layout.box()
         summary = s.last_summary
         if not summary and 0 <= s.curve_index < len(s.curve):
@@ -539,9 +545,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         split.label(text="Error")
         split.label(text="Neg.")
         layout.template_list("RELIGHT_UL_curve", "", s, "curve", s, "curve_index", rows=6)
-        row = layout.row(align=True)
-        row.operator("relight.apply_configuration", text="Apply", icon="CHECKMARK").index = -1
-        row.operator("relight.clear_results", text="Clear", icon="X")
+        layout.operator("relight.clear_results", text="Clear Results", icon="X")  # (a click on a row shows it)
         col = layout.column(align=True)
         col.operator("relight.select_faces", text="Select Light Faces", icon="RESTRICT_SELECT_OFF").kind = "LIGHT"
         col.operator("relight.make_area_lights", icon="LIGHT_AREA")

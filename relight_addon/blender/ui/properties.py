@@ -157,7 +157,8 @@ _SETTINGS = {
                     "Stored as the scene custom property relight_target_scale (the CLI reads the same)"),
     "paint_color": bpy.props.FloatVectorProperty(
         name="Target Colour", subtype="COLOR", size=3, default=(1.0, 1.0, 1.0), min=0.0, soft_max=1.0,
-        description="Colour used by Fill Targets"),
+        description="The radiance Fill (Edit Mode) gives the selected faces, W/m^2/sr x Target Scale: the colour "
+                    "they should show. A grey is read as a brightness on the face's own colour"),
     "paint_lux": FloatProperty(
         name="Illuminance", default=500.0, min=0.0, soft_max=5000.0, precision=0,
         description="Illuminance target, lx, that Fill Selected (lx) gives the selected faces: the light arriving "
