@@ -41,6 +41,7 @@ SCENE = "staircase_targets.blend"
 DOCS = {  # screenshot -> (docs name, crop box (left, top, right, bottom), scale)
     "08_solved": ("gui_solved.png", (0, 40, 1340, 1000), 0.6),
     "11_results": ("gui_results.png", (1020, 60, 1340, 905), 1.0),
+    "11a_false_colour": ("gui_false_colour.png", (0, 40, 1340, 1000), 0.6),
     "04_edit_mode": ("gui_edit_mode.png", (1020, 60, 1340, 700), 1.0),
     "13_large_solve_running": ("gui_progress.png", (1020, 60, 1340, 905), 1.0),
 }

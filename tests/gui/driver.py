@@ -800,9 +800,36 @@ def scenario():
             picked.add(settings.curve_index)
             path = shot(f"10_row_{j}")
             check_marker(f"after picking row {settings.curve_index} the chart marker follows", path)
+            panel = (mods()["blender.results"].load_result(scene).meta.get("rows") or [None] * (settings.curve_index + 1))[
+                settings.curve_index]
+            check(f"after picking row {settings.curve_index} the Results list its lights and light on the targets",
+                  panel is not None and settings.last_lights == panel["lights"]
+                  and settings.last_photometric == panel["photometric"]
+                  and len([ln for ln in settings.last_lights.split("\n") if ln]) == settings.curve[
+                      settings.curve_index].n_lights,
+                  f"{settings.last_lights!r} vs {panel and panel['lights']!r}")
             log("row click", j, before, "->", settings.curve_index)
         check("clicking rows picks different configurations", len(picked) >= 3, sorted(picked))
         shot("11_results")
+
+        # 8a. the View (issue 36 item 2): the illuminance in false colour with its legend, the
+        # view transform Standard meanwhile and the artist's given back after
+        view = scene.relight_view
+        transform = scene.view_settings.view_transform
+        view.mode = "ILLUMINANCE"
+        yield 1.5
+        floor_layer = scene.objects["floor_0"].data.color_attributes.get("relight_display")
+        check("the false-colour illuminance view is shown, with Standard colours",
+              floor_layer is not None and scene.view_settings.view_transform == "Standard"
+              and shading() == ("SOLID", "VERTEX"), (floor_layer, scene.view_settings.view_transform, shading()))
+        shot("11a_false_colour")
+        check("the View sub-panel is registered under Results",
+              getattr(bpy.types, "RELIGHT_PT_view", None) is not None
+              and bpy.types.RELIGHT_PT_view.bl_parent_id == "RELIGHT_PT_results", None)
+        view.mode = "PREDICTED"
+        yield 1.0
+        check("back to the predicted view, the artist's view transform is given back",
+              scene.view_settings.view_transform == transform, (transform, scene.view_settings.view_transform))
 
         # 8b. a row clicked after the scene changed (issue 19, case 13): not applied; the list
         # goes back to the row the scene shows, and the panel says why
