@@ -269,9 +269,11 @@ def test_sidebar_warnings_are_three_short_lines_with_their_fix(addon):
             return Row()
 
     s = bpy.context.scene.relight
-    panels.draw_warnings(Layout(), s, [fact, clamp])
-    assert drawn == [("relight.warning_details", "Clamping at 10 darkens"),
-                     ("relight.match_light_paths", "Match Cycles Light Paths"), ("relight.warnings_popup", "Details (2)")]
+    panels.draw_warnings(Layout(), s, [fact, clamp, paths])
+    assert drawn == [("relight.warning_details", "Cycles renders 1.4 % darker"),
+                     ("relight.match_light_paths", "Match Cycles Light Paths"),
+                     ("relight.warning_details", "Clamping at 10 darkens"),  # (the same fix: not again)
+                     ("relight.warnings_popup", "Details (3)")]
     s.last_warnings = "first\n" + clamp
     from relight_addon.blender.ui.operators import RELIGHT_OT_warning_details
 

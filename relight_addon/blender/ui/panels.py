@@ -154,12 +154,15 @@ FIX_BUTTONS = {
 
 def draw_warnings(layout, settings, warnings):
     """The solve's warnings as the sidebar shows them (pipeline.notes): at most three short lines,
-    the most consequential first, each with the button that fixes it under it (a click on a line
-    puts its whole text in the status bar; its tooltip is the whole text), and Details for all."""
+    the most consequential first, each with the button that fixes it under it (once: two lines
+    that Match Cycles Light Paths fixes get one button, under the first; a click on a line puts
+    its whole text in the status bar; its tooltip is the whole text), and Details for all."""
     col = layout.column(align=True)
+    fixes = set()
     for line in sidebar_lines(warnings):
         col.operator("relight.warning_details", text=line.text, icon="ERROR", emboss=False).index = line.index
-        fix = FIX_BUTTONS.get(line.fix)
+        fix = FIX_BUTTONS.get(line.fix) if line.fix not in fixes else None  # (a fix once: under its first line)
+        fixes.add(line.fix)
         if fix is not None:
             kind, name, label, icon = fix
             if kind == "operator":
