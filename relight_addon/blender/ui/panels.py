@@ -525,9 +525,10 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
         if rows:  # the lights shown: power and luminous flux (a blackbody light's temperature; implausible: marked)
             col = layout.box().column(align=True)
             col.label(text="Lights shown", icon="OUTLINER_OB_LIGHT")
-            for name, kind, watts, lm, kelvin, mark in rows[:8]:
-                col.label(text=f"{name} ({kind}): {float(watts):.3g} W, {float(lm):,.0f} lm"
-                          + (f", {kelvin} K" if kelvin else ""), icon="ERROR" if mark else "NONE")
+            for name, kind, watts, lm, kelvin, mark in rows[:8]:  # two short lines each: the sidebar is narrow
+                col.label(text=f"{name} ({kind})", icon="ERROR" if mark else "DOT")
+                col.label(text=f"{float(watts):.3g} W, {float(lm):.3g} lm" + (f", {kelvin} K" if kelvin else ""),
+                          icon="BLANK1")
                 if mark:
                     col.label(text=f"implausible: {mark}", icon="BLANK1")
             if len(rows) > 8:
