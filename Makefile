@@ -6,7 +6,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-$(shell cksum < requirements.txt | cut -d' ' -f1)
 OUT    := out
 
-.PHONY: setup demo test bench extension clean
+.PHONY: setup demo test test-all bench extension clean
 
 setup: $(STAMP)
 
@@ -24,7 +24,12 @@ demo: setup
 	    --render $(OUT)/demo/staircase_relit.png
 	@echo "demo: wrote $(OUT)/demo/report.json, $(OUT)/demo/staircase_relit.blend, $(OUT)/demo/staircase_relit.png"
 
+# The fast tiers (tests/conftest.py TIERS: not the Cycles closed loops, the other Blenders'
+# runs or the slow tests); `make test-all`: every test (.ci/run runs it, then `make test-gui`).
 test: setup
+	$(PY) -m pytest -q -m "not cycles and not compat and not slow" tests
+
+test-all: setup
 	$(PY) -m pytest -q tests
 
 bench: setup

@@ -13,6 +13,20 @@ for _p in (ROOT, SAMPLES):  # the package, and sample_blends/generate.py as ``ge
         sys.path.insert(0, _p)
 
 
+#: the test tiers (issue 38): `make test` runs the tests none of these marks (about 10 min on 2
+#: cores), `make test-all` every test (.ci/run: it, then the window test)
+TIERS = {
+    "cycles": "a Cycles closed loop: bakes or renders with Cycles and compares with the prediction",
+    "compat": "runs another Blender (4.2 LTS, 4.5 LTS, 5.3 as bpy modules, each in its own venv)",
+    "slow": "over about 20 s on 2 cores (a whole solve of an artist-sized scene, a subprocess of Blender)",
+}
+
+
+def pytest_configure(config):
+    for name, why in TIERS.items():
+        config.addinivalue_line("markers", f"{name}: {why}")
+
+
 @pytest.fixture
 def addon():
     """The add-on registered in the bpy session for the test (a factory scene after it)."""

@@ -20,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.cycles  # (a Cycles closed loop: make test-all, not make test)
+
 bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender as a Python module)")
 
 import cycles_reference as cr  # noqa: E402  (tests/ is on sys.path: pytest's rootdir-relative import)

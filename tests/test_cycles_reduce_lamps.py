@@ -16,6 +16,8 @@ import math
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.cycles  # (a Cycles closed loop: make test-all, not make test)
+
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402

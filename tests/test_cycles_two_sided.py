@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.cycles  # (a Cycles closed loop: make test-all, not make test)
+
 bpy = pytest.importorskip("bpy", reason="the Cycles reference needs bpy (Blender as a Python module)")
 
 import artist_scenes  # noqa: E402

@@ -137,6 +137,7 @@ def test_a_solve_meets_a_lux_target(gallery, tmp_path):
     assert abs(rec["illuminance_lx"]["mean"] / 300.0 - 1) <= max(2 * err, 0.05)
 
 
+@pytest.mark.cycles
 def test_cycles_agrees_on_the_predicted_illuminance(gallery, tmp_path):
     """The floor strip at 300 lx, `solve --out` (its lamps blackbody lights by the default, written
     with their Temperature), the written file's floor baked by Cycles (Lambertian, no World): the
@@ -198,6 +199,7 @@ def _work_plane(path):
     cr.reset_blender()
 
 
+@pytest.mark.cycles
 def test_a_work_plane_neither_occludes_nor_reflects_and_cycles_agrees(tmp_path):
     """A work plane at 0.75 m, 500 lx, least power within +-30 % and U0 >= 0.6: the solve meets it
     or says the U0 it reaches; the --out copy has the plane's Ray Visibility off (light passes
