@@ -26,9 +26,10 @@ def snapshot():
     snap = {"materials": sorted(m.name for m in bpy.data.materials),
             "lights": sorted(o.name for o in bpy.data.objects if o.type == "LIGHT"),
             "collections": sorted(c.name for c in bpy.data.collections),
-            # the add-on's own settings group ("relight") appears in the ID properties of Blender
-            # 4.2 on first access; it holds the panel's settings, not scene content
-            "scene_keys": sorted(k for k in bpy.context.scene.keys() if k != "relight")}
+            # the add-on's own settings groups ("relight", the View's "relight_view") appear in the
+            # ID properties of Blender 4.2 and 4.5 on first access; they hold the panel's settings,
+            # not scene content (relight_view's view transform to give back: checked empty below)
+            "scene_keys": sorted(k for k in bpy.context.scene.keys() if k not in ("relight", "relight_view"))}
     for ob in bpy.context.scene.objects:
         if ob.type != "MESH":
             continue
@@ -288,6 +289,7 @@ for c in [c for c in bpy.data.collections if c.get("relight_area_lights") is not
 bpy.data.objects.remove(cube)
 bpy.data.collections.remove(mine)
 R["clear_restores"] = snapshot() == before
+R["view_transform_to_restore"] = scene.relight_view.transform_restore  # (nothing left to give back)
 if not R["clear_restores"]:
     a, b = snapshot(), before
     R["clear_diff"] = {k2: [a.get(k2), b.get(k2)] for k2 in set(a) | set(b) if a.get(k2) != b.get(k2)}

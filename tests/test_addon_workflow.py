@@ -146,6 +146,7 @@ def test_area_lights_and_clear_restore_the_scene_exactly(scenario):
     assert scenario["area_lights_kept"] and scenario["artist_collection_kept"]
     assert scenario["emitters_after_clear"] == 0
     assert scenario["clear_restores"], scenario.get("clear_diff")
+    assert scenario["view_transform_to_restore"] == ""  # the View's settings hold nothing of the scene's after Clear
 
 
 def test_solving_again_and_after_an_edit(scenario):
