@@ -297,6 +297,7 @@ def test_a_ceiling_facing_away_is_modelled_from_its_other_side(run_cli, scenes, 
     assert report["final"]["relative_error"] < 0.2, report["final"]
 
 
+@pytest.mark.slow
 def test_a_room_on_a_ground_plane_is_solved_as_without_it(run_cli, scenes, tmp_path):
     """Issue 35, case 12: the cube room (normals out) standing on a ground plane, and the same
     room with its floor and a wall turned in by hand: modelled from inside as without the ground,

@@ -14,6 +14,8 @@ import json
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # (whole solves of several scenes: make test-all, not make test)
+
 bpy = pytest.importorskip("bpy")
 
 import artist_scenes  # noqa: E402

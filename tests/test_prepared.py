@@ -55,6 +55,7 @@ def _counting(monkeypatch):
     return rows
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("model", ["polygon", pytest.param("adaptive", marks=pytest.mark.xfail(
     strict=True, reason="issue 37: on the adaptive model the warm solve after a stroke is 12.5 % worse than a cold "
     "solve of the same paint (0.167 against 0.149) since this stop's region (engine.extent) and two-sided changes; "

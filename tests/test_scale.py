@@ -5,6 +5,8 @@ relative error as it is and multiplies each light's power by s^2."""
 import numpy as np
 import pytest
 
+pytestmark = pytest.mark.slow  # (whole solves of several scenes: make test-all, not make test)
+
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
