@@ -261,14 +261,14 @@ def press(found, command, settle=1.2, retries=2):
         yield from scroll_sidebar(3 if ry < 20 else -3)
     sx, sy = to_screen(r, rx, ry)
     got = None
-    for wait in (0.3, 0.6, 1.0):
+    for wait in (0.3, 0.6, 1.0, 2.0):  # (under load the copy may come late: nothing copied yet)
         got = yield from hover_copy(sx, sy, wait)
         if got == command:
             break
     if got != command:
         RESULT.setdefault("layout_moved", []).append(command)
         log(f"at the place of {command} (region {rx}, {ry}) the sidebar has {got!r}: probing again")
-        if retries <= 0:
+        if retries <= -3:  # (a few more probes than for a button not found at all, never forever)
             raise AssertionError(f"button {command} not where the probe found it (at its place: {got!r})")
         found.update((yield from probe_sidebar()))
         return (yield from press(found, command, settle, retries - 1))
