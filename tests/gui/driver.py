@@ -256,7 +256,7 @@ def press(found, command, settle=1.2, retries=2):
     for _ in range(12):
         r = ui_region()
         rx, ry = r.view2d.view_to_region(vx, vy, clip=False)
-        if 20 <= ry <= r.height - 20:
+        if 20 <= ry <= r.height - 60:  # (not under the sticky panel header drawn atop a scrolled sidebar)
             break
         yield from scroll_sidebar(3 if ry < 20 else -3)
     sx, sy = to_screen(r, rx, ry)
