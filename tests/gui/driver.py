@@ -160,12 +160,15 @@ def hover_copy(sx, sy, wait=0.15):
 
 
 def scroll_sidebar(notches):
-    """Mouse-wheel the sidebar (positive = down)."""
-    r = ui_region()
-    move(*to_screen(r, r.width // 2, r.height // 2))
-    yield 0.3
+    """Scroll the sidebar (positive = down) by what its mouse wheel runs, View2D's scroll
+    operators (one step a notch), called on the region itself: a wheel turned over a list (the
+    Results' rows, wherever the layout puts them under the mouse) scrolls the list instead."""
+    a = area3d()
     if notches:
-        xdo("click", "--repeat", abs(notches), "--delay", "30", "5" if notches > 0 else "4")
+        step = bpy.ops.view2d.scroll_down if notches > 0 else bpy.ops.view2d.scroll_up
+        with bpy.context.temp_override(window=window(), area=a, region=region("UI", a)):
+            for _ in range(abs(notches)):
+                step()
     # Blender redraws the sidebar (software OpenGL) for each notch: wait until it has settled
     last, still = None, 0
     for _ in range(40):
@@ -259,6 +262,8 @@ def press(found, command, settle=1.2, retries=2):
         if 20 <= ry <= r.height - 60:  # (not under the sticky panel header drawn atop a scrolled sidebar)
             break
         yield from scroll_sidebar(3 if ry < 20 else -3)
+    else:
+        raise AssertionError(f"button {command} could not be scrolled into the sidebar (region y {ry:.0f})")
     sx, sy = to_screen(r, rx, ry)
     got = None
     for wait in (0.3, 0.6, 1.0, 2.0):  # (under load the copy may come late: nothing copied yet)
