@@ -18,6 +18,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
@@ -116,8 +117,7 @@ def main():
         build(scenes_dir)
     scenes = {"staircase": os.path.join(ROOT, "sample_blends", "staircase_targets.blend"),
               **{k: os.path.join(scenes_dir, k + ".blend") for k in ("living_room", "gallery", "lamp_room")}}
-    new_dir = os.path.join(args.cache, "new")
-    os.makedirs(new_dir, exist_ok=True)
+    new_dir = tempfile.mkdtemp(prefix="relight-same-results-new-")  # (several checkouts may compare at once)
     bad = 0
     for command, scene in RUNS:
         if args.only and f"{command}:{scene}" not in args.only:
