@@ -88,6 +88,7 @@ import scipy.special
 
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
+from .units import TINY
 
 __all__ = [
     "DEFAULT_POINTS_PER_PATCH",
@@ -260,7 +261,7 @@ def _triangle_rule(v, h, coarse=False):
     c = int(np.argmin(e))
     a, b, d = v[c], v[(c + 1) % 3], v[(c + 2) % 3]
     area = 0.5 * np.linalg.norm(np.cross(b - a, d - a))
-    length = 2 * area / max(e[c], 1e-300)
+    length = 2 * area / max(e[c], TINY)
     if coarse and length <= h and e[c] <= h:  # no larger than the node spacing: the centroid
         n_xi = n_eta = 1
     else:
@@ -292,7 +293,7 @@ def _triangle_rules(V, h, coarse=False):
     a, b, d = V[rows, c], V[rows, (c + 1) % 3], V[rows, (c + 2) % 3]
     area = 0.5 * np.linalg.norm(np.cross(b - a, d - a), axis=1)
     ec = e[rows, c]
-    length = 2 * area / np.maximum(ec, 1e-300)
+    length = 2 * area / np.maximum(ec, TINY)
     n_xi = np.minimum(MAX_NODES, np.maximum(2, np.ceil(length / h - 1e-9))).astype(np.int64)
     n_eta = np.where(ec < 0.25 * h, 1, np.minimum(MAX_NODES, np.maximum(2, np.ceil(ec / h - 1e-9)))).astype(np.int64)
     if coarse:
@@ -336,7 +337,7 @@ class _Geometry:
         self.tstart, self.tcount = sm.tstart, sm.tcount
         self.tn, self.ta, self.area = sm.tn, sm.ta, sm.area
         self.cdf_lo, self.key = sm.cdf_lo, sm.key
-        self.cdf_w = np.maximum(sm.cdf_hi - sm.cdf_lo, 1e-300)
+        self.cdf_w = np.maximum(sm.cdf_hi - sm.cdf_lo, TINY)
         self.offset = sm.offset
         cr = sm.cross
         self.tc = tv.mean(axis=1)
@@ -347,11 +348,11 @@ class _Geometry:
         self.radius = np.zeros(P)
         np.maximum.at(self.radius, self.tri_patch, dist)
         self.diam = 2 * self.radius
-        self.width = self.area / np.maximum(self.diam, 1e-300)
+        self.width = self.area / np.maximum(self.diam, TINY)
         nsum = np.stack([np.bincount(self.tri_patch, weights=cr[:, k], minlength=P) for k in range(3)], axis=1)
-        self.normal = nsum / np.maximum(np.linalg.norm(nsum, axis=1), 1e-300)[:, None]
+        self.normal = nsum / np.maximum(np.linalg.norm(nsum, axis=1), TINY)[:, None]
         # planar: every triangle's normal is the patch's and every vertex lies in its plane
-        tol = 1e-9 * np.maximum(self.diam, 1e-300)
+        tol = 1e-9 * np.maximum(self.diam, TINY)
         dn = np.linalg.norm(self.tn - self.normal[self.tri_patch], axis=1)
         off = np.abs(np.einsum("tkj,tj->tk", tv - self.center[self.tri_patch][:, None, :],
                                self.normal[self.tri_patch])).max(axis=1)
@@ -612,7 +613,7 @@ def kernel_form_factors(
     gap = np.maximum(dist - g.radius[pr] - g.radius[ps], 0.0)
     scale = np.maximum(gap, g.width[ps])
     with np.errstate(divide="ignore"):
-        lev = np.ceil(np.log2(g.diam[pr] / (LEVEL_SPAN * np.maximum(scale, 1e-300))))
+        lev = np.ceil(np.log2(g.diam[pr] / (LEVEL_SPAN * np.maximum(scale, TINY))))
     lev = np.where(far, 0, np.clip(lev, 0, MAX_LEVEL)).astype(np.int64)
     info["pairs"] = int(len(pr))
     info["far"] = int(far.sum())

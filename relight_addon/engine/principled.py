@@ -76,6 +76,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .units import TINY
+
 __all__ = ["F0_from_ior", "ior_from_F0", "fresnel_dielectric", "hemispherical_fresnel", "PrincipledParams",
            "PrincipledAlbedo", "principled_albedo", "ggx_albedo", "oren_nayar_directional",
            "oren_nayar_albedo", "view_brdf", "lobes_brdf", "BRDFTable", "MU_NODES"]
@@ -134,7 +136,7 @@ def hemispherical_fresnel(eta) -> float:
 
 # ------------------------------------------------------------------ GGX integrals
 def _lambda(alpha2, cos):
-    cos2 = np.clip(cos * cos, 1e-300, 1.0)
+    cos2 = np.clip(cos * cos, TINY, 1.0)
     return 0.5 * (np.sqrt(1.0 + alpha2 * np.maximum(1.0 / cos2 - 1.0, 0.0)) - 1.0)
 
 
@@ -632,7 +634,7 @@ def _ggx_eval(alpha, fres, v, l):
     mu_l = l[:, 2]
     ok = (mu_l > 0) & (v[:, 2] > 0)
     h = l + v
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), TINY)
     c_nh = np.clip(h[:, 2], 0.0, 1.0)
     D = a2 / (np.pi * ((1.0 - c_nh ** 2) + a2 * c_nh ** 2) ** 2)
     G2 = 1.0 / (1.0 + _lambda(a2, mu_v) + _lambda(a2, np.where(ok, mu_l, 1.0)))

@@ -34,6 +34,7 @@ import numpy as np
 
 from .rays import RAY_OFFSET
 from .scene import PatchSet, SceneError, patch_triangles
+from .units import TINY
 
 __all__ = ["Cancelled", "SceneSampler", "run_chunks"]
 
@@ -88,10 +89,10 @@ class SceneSampler:
         # <= 2 * offset, is of the order of the normal offset)
         el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
                         np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)  # side opposite each vertex
-        perim = np.maximum(el3.sum(axis=1), 1e-300)
+        perim = np.maximum(el3.sum(axis=1), TINY)
         incentre = np.einsum("tk,tkj->tj", el3, tv) / perim[:, None]
         r_in = 2 * ta / perim
-        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, 1e-300))
+        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, TINY))
         self.s_v0 = incentre + shrink[:, None] * (tv[:, 0] - incentre)
         self.s_e1 = e1 * shrink[:, None]
         self.s_e2 = e2 * shrink[:, None]

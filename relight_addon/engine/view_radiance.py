@@ -35,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .principled import BRDFTable
+from .units import TINY, radiance_from_exitance
 
 __all__ = ["view_radiance", "HORIZON"]
 
@@ -89,7 +90,7 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         e = e * np.asarray(emission_share, dtype=np.float64).reshape(-1, 1)  # what it sends
     tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
     frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
-    E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), 1e-300), axis=1))
+    E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), TINY), axis=1))
     rows = M[patches]
     rows = rows.tocsr() if sp.issparse(rows) else np.asarray(rows)
     nnz = rows.nnz if sp.issparse(rows) else int(np.count_nonzero(rows))
@@ -98,7 +99,7 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         FE = M[:, E]
         FE = (FE.toarray() if sp.issparse(FE) else np.asarray(FE)).astype(np.float64)  # (P, |E|)
         dE = center[None, E, :] - center[:, None, :]
-        dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), 1e-300)
+        dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), TINY)
         lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
         H_direct = FE @ e[E]  # F's gather, what the Lambertian rest below takes out of F B
         XE = None
@@ -108,7 +109,7 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         # the rest of the light, sent Lambertian: what the emitters' light leaves of F B, and the
         # lamps' and the World's direct light (in B, not in F B)
         H_lamps = sum((np.asarray(H, dtype=np.float64) for _, H in lamp_light or ()), np.zeros_like(B))
-        indirect = rho * (FB - H_direct + H_lamps) / np.pi
+        indirect = radiance_from_exitance(rho * (FB - H_direct + H_lamps))
     out = np.empty((len(patches), 3))
     for k, i in enumerate(patches):
         if sp.issparse(rows):
@@ -119,10 +120,10 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
         R = frames[i]
         v = np.array([0.0, 0.0, 1.0]) if view is None else R @ np.asarray(view[k], dtype=np.float64)
         d = center[js] - center[i]
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY)
         f = tables[int(material[i])](v, _above(d @ R.T))
         if glossy:
-            src = e[js] / np.pi + indirect[js]
+            src = radiance_from_exitance(e[js]) + indirect[js]
             vj = _above(np.einsum("jab,jb->ja", frames[js], -d))  # towards i, in each source's frame
             for m in np.unique(material[js]):
                 sel = np.flatnonzero(material[js] == m)
@@ -132,11 +133,11 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
                 if XE is not None:
                     src[sel] += np.einsum("jkc,jk,kc->jc", g, XE[js[sel]], e_own[E])
         else:
-            src = B[js] / np.pi
-        out[k] = e_own[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
+            src = radiance_from_exitance(B[js])
+        out[k] = radiance_from_exitance(e_own[i]) + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
         for towards, H in lamp_light or ():
             if towards is None:
-                out[k] += rho[i] * H[i] / np.pi
+                out[k] += radiance_from_exitance(rho[i] * H[i])
             elif np.any(H[i] > 0):
                 out[k] += tables[int(material[i])](v, _above((R @ towards[i])[None, :]))[0] * H[i]
     return out
