@@ -50,3 +50,11 @@ def test_no_copied_constants():
                 if pattern.search(line):
                     found.append(f"{path.relative_to(ROOT)}:{no}: use {name}: {line.strip()}")
     assert not found, "\n".join(found)
+
+
+def test_lamp_points_defined_once():
+    """LAMP_POINTS (receiver points per patch of a lamp's irradiance) is candidate_lamps'; the
+    others import it."""
+    where = [str(p.relative_to(ROOT)) for p in ROOT.rglob("*.py")
+             if re.search(r"^LAMP_POINTS\s*=", p.read_text(encoding="utf-8"), re.M)]
+    assert where == ["engine/candidate_lamps.py"]
