@@ -36,16 +36,15 @@ import scipy.optimize as sopt
 
 from .light_colour import fit_columns
 from .geometry import unit
-from .candidate_lamps import _reach as lamp_reach, patch_radius
+from .candidate_lamps import LAMP_POINTS, _reach as lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
 
 __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
 
-#: receiver points per patch of a lamp's irradiance while searching, and for the lamp kept
-#: (as candidate_lamps.LAMP_POINTS)
+#: receiver points per patch of a lamp's irradiance while searching (the lamp kept takes
+#: candidate_lamps.LAMP_POINTS)
 SEARCH_POINTS = 4
-LAMP_POINTS = 16
 #: Nelder-Mead evaluations per lamp and round, and rounds over the configuration's lamps
 MAX_EVALUATIONS = 60
 ROUNDS = 2
