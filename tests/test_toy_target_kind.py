@@ -123,3 +123,7 @@ def test_scene_targets_keep_the_patch_order():
     assert rows.selects and rows.patch.tolist() == [0, 1, 3, 4]
     np.testing.assert_array_equal(rows.values, patches.target_radiosity[[0, 1, 3, 4]])
     assert rows.region.tolist() == [-1, 0, -1, 2]
+    painted, lux = rows.targets  # (each kind says its values in its own unit: lx for illuminance)
+    assert (painted.unit, lux.unit) == ("W/m^2", "lx")
+    np.testing.assert_array_equal(painted.shown(), patches.target_radiosity[[0, 3]])
+    np.testing.assert_array_equal(lux.shown(), [[50.0] * 3, [20.0] * 3])

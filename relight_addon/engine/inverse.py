@@ -4,7 +4,9 @@ Per channel (R, G, B) the forward system is ``A b = e`` with
 ``A = I - diag(rho) F`` (b radiosity and e self-exitance, both W/m^2).
 The user paints radiosities ``b_P`` on a set P of m patches (targets) and
 allows lights on a set C of candidates (every patch that is not forbidden);
-forbidden patches have e = 0.
+forbidden patches have e = 0. More generally the targets are m rows ``R B = b`` of any kinds
+(engine/targets/: a painted patch's row selects it, other kinds' rows may mix patches); below, a
+selection's "rows P of A^-1" are ``R A^-1``.
 
 Two formulations of the same inverse problem, plus a physical one (each a registered
 solver in ``engine/solvers/``; see engine.registry):

@@ -34,8 +34,8 @@ __all__ = ["Target", "TargetRows", "scene_targets", "selection_rows", "PaintedRa
 class TargetRows:
     """The targets of a problem stacked into one system: ``matrix`` (m, P) CSR on B, ``values``
     (m, 3) W/m^2, ``region`` (m,), ``target`` (m,) the index in ``targets`` of each row's target.
-    ``patch`` (m,): the patch of each row when every row selects one patch (``selects``), else the
-    first patch each row reads."""
+    ``patch`` (m,): the patch of each row when every row selects one patch, each patch once
+    (``selects``: the paper's formulation substitutes them), else the first patch each row reads."""
 
     targets: list
     matrix: sp.csr_matrix
@@ -47,6 +47,9 @@ class TargetRows:
 
     @classmethod
     def stack(cls, targets, n_patches) -> "TargetRows":
+        """The rows of ``targets`` (their kinds' ``rows`` and ``values``) in one system of
+        ``n_patches`` columns, ordered by the first patch each row reads (stable: a kind's own order
+        among rows that start on one patch); ValueError on rows of another width or reading nothing."""
         targets = list(targets)
         mats = [sp.csr_matrix(t.rows(n_patches), dtype=np.float64) for t in targets]
         if any(M.shape[1] != n_patches for M in mats):
@@ -62,7 +65,8 @@ class TargetRows:
         first = M.indices[M.indptr[:-1]]
         order = np.argsort(first, kind="stable")
         M = M[order]
-        selects = bool(np.all(np.diff(M.indptr) == 1) and np.all(M.data == 1.0))
+        selects = bool(np.all(np.diff(M.indptr) == 1) and np.all(M.data == 1.0)
+                       and len(np.unique(first)) == len(first))  # (one patch per row, each patch once)
         return cls(targets, M, values[order], region[order].astype(np.int64), which[order], first[order], selects)
 
     @property
