@@ -68,16 +68,13 @@ class Transport:
 
     def __init__(self, problem, albedo_excess=None):
         facs = problem.factors()
-        m, P = problem.m, problem.n_patches
         self.rho = problem.reflectance
         self.albedo_excess = albedo_excess
         self.Y = []
         done = {}
         for c in range(3):
             if id(facs[c]) not in done:
-                Y = np.zeros((P, m))
-                Y[problem.targets, np.arange(m)] = 1.0
-                done[id(facs[c])] = facs[c].solve(Y, trans=True)  # (P, m): Y^T = rows P of A^-1
+                done[id(facs[c])] = facs[c].solve(problem.target_rows.columns(), trans=True)  # (P, m): Y^T = R A^-1
             self.Y.append(done[id(facs[c])])
 
     def column(self, h, lamp=None) -> np.ndarray:

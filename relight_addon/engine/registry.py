@@ -241,3 +241,5 @@ SELECTIONS = Registry("selection", ".selections")
 DISTRIBUTIONS = Registry("distribution", ".distributions")
 LIGHT_KINDS = Registry("light kind", ".lights")
 LIGHT_COLOURS = Registry("light colour", ".colours")
+#: what a solve is asked to meet: kinds of targets (engine/targets/), each giving rows on the radiosity
+TARGET_KINDS = Registry("target kind", ".targets")
