@@ -185,7 +185,7 @@ class PreparedScene:
                        target_radiosity=faces.target_radiosity[self.patches.face].copy())
 
     def estimate(self, patches, options, progress=None, cancel=None, pairs=None):
-        """build_model's estimator: the prepared ray-cast form factors and, for the estimators
+        """build_inverse_model's estimator: the prepared ray-cast form factors and, for the estimators
         with kernel pairs, the kernel's rows of the targets (the new ones computed, the others
         kept), applied as compute_form_factors applies them."""
         cast = 0.0
