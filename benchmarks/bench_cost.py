@@ -4,7 +4,7 @@ factor of 2; measure this").
 Each case runs in a fresh process: build or open the scene, export, then jobs.run_solve; it
 measures the job's wall time and its peak memory (peak RSS during the job minus the RSS before
 the export, from /proc/self/status VmHWM after resetting it) and compares them with
-jobs.solve_cost (the estimate the CLI prints and the add-on's confirmation uses).
+meshing.solve_cost (the estimate the CLI prints and the add-on's confirmation uses).
 
     .venv/bin/python benchmarks/bench_cost.py [--quick] [--only=NAME_PART ...]
 
@@ -35,7 +35,7 @@ import json, os, sys, time
 sys.path.insert(0, ROOT); sys.path.insert(0, os.path.join(ROOT, "tests"))
 import bpy
 from relight_addon.blender import export
-from relight_addon.pipeline import jobs
+from relight_addon.pipeline import jobs, meshing
 from relight_addon.engine.options import JobOptions
 
 def rss(field):
@@ -73,8 +73,8 @@ base = rss("VmRSS:")
 t0 = time.perf_counter()
 exp = export.export_scene()
 options = JobOptions(**opts).validate()
-patches = jobs.mesh_for_job(exp.faces, options, exp.settings.get("max_patch_size"))
-est = jobs.solve_cost(patches, options, len(exp.faces.triangles))
+patches = meshing.mesh_for_job(exp.faces, options, exp.settings.get("max_patch_size"))
+est = meshing.solve_cost(patches, options, len(exp.faces.triangles))
 out = jobs.run_solve(exp.faces, options, patches=patches, **export.job_inputs(exp))
 seconds = time.perf_counter() - t0
 peak = rss("VmHWM:") - base

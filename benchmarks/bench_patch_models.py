@@ -38,7 +38,7 @@ import bpy  # noqa: E402
 
 import artist_scenes  # noqa: E402
 from relight_addon.blender import export
-from relight_addon.pipeline import jobs  # noqa: E402
+from relight_addon.pipeline import model as models  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.pipeline.polygons import PolygonMap  # noqa: E402
 
@@ -82,7 +82,7 @@ def target_rows(exp, model, B):
 def run_model(exp, **kw):
     opts = JobOptions(**kw).validate()
     t0 = time.perf_counter()
-    model = jobs.build_model(exp.faces, opts, "inverse", exp.settings.get("max_patch_size"))
+    model = models.build_inverse_model(exp.faces, opts, exp.settings.get("max_patch_size"))
     E = patch_exitance(model.patches, exp.faces.object_names.index("Room"))
     B = model.problem.forward_radiosity(E)
     seconds = time.perf_counter() - t0

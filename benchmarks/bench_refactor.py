@@ -47,12 +47,16 @@ try:
     from relight_addon.pipeline import jobs
 except ImportError:  # the layout before the pipeline/ and blender/ split
     from relight_addon import export, jobs
+try:
+    from relight_addon.pipeline.meshing import mesh_for_job
+except ImportError:  # before pipeline/meshing.py
+    mesh_for_job = jobs.mesh_for_job
 from relight_addon.engine.options import JobOptions
 export.open_blend(sys.argv[1])
 exp = export.export_scene()
 inputs = export.job_inputs(exp)
 options = JobOptions().validate()
-patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
+patches = mesh_for_job(exp.faces, options, inputs["default_max_patch_size"])
 out = []
 for _ in range(int(sys.argv[2])):
     r = jobs.run_solve(exp.faces, options, patches=patches, **inputs).report["timings_s"]

@@ -3,7 +3,7 @@ by measurement").
 
     .venv/bin/python benchmarks/bench_selections.py
 
-Scenes (each built as `relight solve` builds it, jobs.build_model with the default estimator):
+Scenes (each built as `relight solve` builds it, model.build_inverse_model with the default estimator):
 - staircase, polygon model (the paper's experiment: a light per face, 693 candidates);
 - staircase, adaptive model (the default: cells + groups);
 - living room (tests/artist_scenes.py, 22k triangles: a cube room of 5 big quads, furniture,
@@ -34,7 +34,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 import bpy  # noqa: E402
 
 from relight_addon.blender import export
-from relight_addon.pipeline import jobs  # noqa: E402
+from relight_addon.pipeline import stages  # noqa: E402
+from relight_addon.pipeline.model import build_inverse_model  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.engine.reduction import reduce_lights  # noqa: E402
 from relight_addon.engine.registry import SELECTIONS  # noqa: E402
@@ -82,12 +83,12 @@ def main():
             if multi not in models:
                 opts = JobOptions(patch_model=model_name, selection=sel.name,
                                   tolerance=0.1 if sel.get("needs_tolerance") else None).validate()
-                models[multi] = jobs.build_model(exp.faces, opts, "inverse", exp.settings.get("max_patch_size"))
+                models[multi] = build_inverse_model(exp.faces, opts, exp.settings.get("max_patch_size"))
                 models[multi].problem.transfer  # noqa: B018
             m = models[multi]
             opts = JobOptions(patch_model=model_name, selection=sel.name,
                               tolerance=0.1 if sel.get("needs_tolerance") else None).validate()
-            e_x, _ = jobs.solve_stage(m, opts)
+            e_x, _ = stages.solve_stage(m, opts)
             t0 = time.perf_counter()
             red = reduce_lights(m.problem, e_x, selection=sel.name, distribution="distance", max_lights=32,
                                 tolerance=opts.tolerance, max_steps=32 if sel.name == "error-construction" else None)

@@ -249,7 +249,7 @@ FINDINGS = """## Findings (from this table; see the rows below)
   message of their own. The job (`relight solve`, the add-on) closes that gap: when the final configuration's
   relative error is above 0.1 it computes the NNLS bound and says either that no positive lighting meets the
   targets (with the best possible error) or that more lights / nnls-greedy would get closer
-  (`jobs._positivity_notes`, checked in tests/test_stability.py).
+  (`notes.positivity_notes`, checked in tests/test_stability.py).
 - **Staircase**: every combination ends positive; error-elimination and error-construction dominate the time.
 - **Best k Lights (`greedy-swap`)** ignores e_x, so it gives the same curve under every solver: it ends
   positive in every case that solves, with the lowest 3-light error of the positive rows wherever the targets

@@ -440,7 +440,7 @@ def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
     from .blender import export, light_paths, results
-    from .pipeline import jobs, report as reports, viewing
+    from .pipeline import jobs, meshing, report as reports, viewing
 
     t0 = time.perf_counter()
     _check_paths(args)
@@ -451,8 +451,8 @@ def run_radiosity_command(args, progress=None, cancel=None):
     inputs = export.job_inputs(exp)
 
     def mesh(progress, cancel):
-        patches = jobs.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"], mode="direct")
-        return patches, jobs.radiosity_cost(patches, options)
+        patches = meshing.mesh_for_job(exp.faces, options, inputs["default_max_patch_size"], mode="direct")
+        return patches, meshing.radiosity_cost(patches, options)
 
     patches, cost = _job(args, mesh)
     _print_estimate(args, patches, cost)

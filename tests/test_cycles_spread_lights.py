@@ -1,7 +1,7 @@
 """A light of many patches, rendered by Cycles as Relight predicts it (issue 20's spread-light rule).
 
 A light of cost.DIRECT_SPREAD_PATCHES patches or more keeps the ray-cast form factors' gather of
-its direct light: the kernel's correction (jobs.direct_stage) is skipped for it, measured on the
+its direct light: the kernel's correction (pipeline.stages.direct_stage) is skipped for it, measured on the
 living room to change such a light's direct light by 1.6-2.3 % (tests/test_engine_kernel_transfer.py
 checks the rule on a room's ceiling cells). Here a Cycles bake holds the prediction of a
 configuration that has such a light against what Cycles renders: a room drawn as artists draw it

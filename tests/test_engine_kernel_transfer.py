@@ -477,7 +477,7 @@ def test_reproducible_for_a_seed_whatever_the_threads():
 
 
 def test_a_spread_lights_ray_cast_gather_needs_no_kernel():
-    # pipeline.jobs.direct_stage leaves the ray-cast F's direct light of a light of
+    # pipeline.stages.direct_stage leaves the ray-cast F's direct light of a light of
     # DIRECT_SPREAD_PATCHES patches or more (engine/cost.py): the kernel's differs from it less
     # than from a one-patch light's. The room's ceiling cells as lights of 1, 16, 32, 64 patches
     # (measured: 2.1 / 3.1 % for two cells, 1.3 / 1.2 / 0.9 % for the spread ones)

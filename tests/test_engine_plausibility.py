@@ -60,13 +60,13 @@ def test_the_positivity_note_never_advises_the_selection_already_used():
     greedy-swap selection' to a solve that used it (an artist's castle, chess board, temple)."""
     from types import SimpleNamespace
 
-    from relight_addon.pipeline.jobs import BEST_SELECTION, _positivity_notes
+    from relight_addon.pipeline.notes import BEST_SELECTION, positivity_notes
 
     bound = SimpleNamespace(relative_error=0.02, exitance=np.ones((96, 3)))
     final = SimpleNamespace(relative_error=0.376, n_lights=3)
-    (used,) = _positivity_notes(bound, final, selection=BEST_SELECTION)
+    (used,) = positivity_notes(bound, final, selection=BEST_SELECTION)
     assert "allow more lights" in used and BEST_SELECTION not in used and "with 96" in used
-    (other,) = _positivity_notes(bound, final, selection="exitance-elimination")
+    (other,) = positivity_notes(bound, final, selection="exitance-elimination")
     assert f"use the {BEST_SELECTION} selection" in other
 
 

@@ -712,7 +712,7 @@ def test_patch_count_estimate_is_exact_for_the_polygon_model(bpy_clean):
     """The memory guard's patch count before meshing, against the meshed count (quads split into
     grids, triangles into k x k pieces, small faces whole)."""
     from relight_addon.blender import export
-    from relight_addon.pipeline import jobs
+    from relight_addon.pipeline import meshing
     from relight_addon.engine.options import JobOptions
 
     _room()
@@ -722,7 +722,7 @@ def test_patch_count_estimate_is_exact_for_the_polygon_model(bpy_clean):
     for size in (10.0, 0.3, 0.1, 0.07):
         opts = JobOptions(max_patch_size=size, patch_model="polygon").validate()
         est = estimate_patch_count(exp.faces, opts)
-        assert est == jobs.mesh_for_job(exp.faces, opts).n_patches, size
+        assert est == meshing.mesh_for_job(exp.faces, opts).n_patches, size
 
 
 # ---------------------------------------------------------------------------- Ctrl-C: real processes

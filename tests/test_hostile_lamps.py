@@ -308,12 +308,12 @@ def test_narrow_spots_light_the_floor_with_their_cones_flux(bpy_clean, scenes):
     from relight_addon.blender import export
     from relight_addon.engine.lamps import lamp_irradiance
     from relight_addon.engine.options import JobOptions
-    from relight_addon.pipeline import jobs
+    from relight_addon.pipeline import meshing
 
     bpy.ops.wm.open_mainfile(filepath=scenes("narrow_spots"))
     assert bpy.data.lights["Pin"].spot_size == pytest.approx(math.radians(1.0))  # Blender's least size
     exp = export.export_scene()
-    patches = jobs.mesh_for_job(exp.faces, JobOptions(), 10.0)
+    patches = meshing.mesh_for_job(exp.faces, JobOptions(), 10.0)
     H = lamp_irradiance(patches, exp.faces.lamps)
     floor = patches.object == exp.faces.object_names.index("floor")
     for i, lamp in enumerate(exp.faces.lamps):

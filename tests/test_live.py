@@ -11,8 +11,8 @@ pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not insta
 import bpy  # noqa: E402
 
 from test_prepared import _clustered_polygons, _stroke  # noqa: E402
-from relight_addon.pipeline import jobs  # noqa: E402
-from relight_addon.engine.targets import PaintedRadiance
+from relight_addon.engine.scene_light import scene_light, scene_light_excess  # noqa: E402
+from relight_addon.engine.targets import PaintedRadiance  # noqa: E402
 
 SAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_blends")
 
@@ -204,13 +204,13 @@ def test_live_follows_a_kept_lamp_moved_by_hand(addon):
     bg1 = model.problem.background_radiosity.copy()
     assert not np.allclose(bg0, bg1)
     # against the fixed light of a problem built anew (the constructor's route) on the same patches
-    H, _ = jobs.scene_light(model.faces, model.patches, model.form_factors, state.options.seed)
+    H, _ = scene_light(model.faces, model.patches, model.form_factors, state.options.seed)
     p = model.patches
     fresh = InverseProblem(model.form_factors, p.area, p.reflectance,
                            [PaintedRadiance.masked(p.target, p.target_radiosity)],
                            model.problem.candidate_mask, p.center, p.normal, lights=model.lights,
                            background=model.background, background_irradiance=H.sum(axis=1),
-                           background_excess=jobs.scene_light_excess(model.faces, p, H))
+                           background_excess=scene_light_excess(model.faces, p, H))
     np.testing.assert_allclose(bg1, fresh.background_radiosity, rtol=1e-9, atol=1e-12 * np.abs(bg1).max())
 
     kept.data.energy *= 2.0  # linear in the lamp's power (the scene has no World light)

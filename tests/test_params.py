@@ -313,7 +313,7 @@ def test_least_power_through_the_operator(addon):
     reports as reachable, when no non-negative lights reach the one asked)."""
     bpy = addon
     from relight_addon.blender import export, results
-    from relight_addon.pipeline import jobs
+    from relight_addon.pipeline import model as models, stages
     from relight_addon.engine.best_lights import least_power_within_tolerance
 
     tol = 0.3
@@ -328,16 +328,17 @@ def test_least_power_through_the_operator(addon):
     e_op = np.asarray(data.exitance[k], dtype=np.float64)
 
     # the engine's own programme on the same problem (the operator's options, built independently):
-    # it chooses the lights; their direct light by the kernel (jobs.direct_stage) changes their columns
+    # it chooses the lights; their direct light by the kernel (stages.direct_stage) changes their columns
     # of T, and the programme on those lights and columns gives their strengths
     exp = export.export_scene()
     opts = JobOptions(selection="least-power", tolerance=tol, rays_per_patch=512).validate()
-    model = jobs.build_model(exp.faces, opts, "inverse", exp.settings.get("max_patch_size"))
+    model = models.build_inverse_model(exp.faces, opts, exp.settings.get("max_patch_size"))
     p = model.problem
     first = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tol)
-    red = jobs.reduce_stage(model, jobs.solve_stage(model, opts)[0], opts)
+    red = stages.reduce_stage(model, stages.solve_stage(model, opts)[0], opts)
     assert np.array_equal(np.sort(red.final.lights), first.lights)
-    jobs.direct_stage(model, red, opts)
+    model, red = stages.direct_stage(model, red, opts)
+    p = model.problem  # (its T with the direct light: a new problem, the first one kept as it was)
     ids = first.lights
     ref = least_power_within_tolerance([t[:, ids] for t in p.transfer], p.b_target, p.light_watts[ids], tol)
     assert ref.status in ("ok", "partial", "infeasible")

@@ -48,7 +48,7 @@ def test_faces_selected_counts_in_words(addon):
 
 
 def test_the_progress_says_the_lamps_are_refined_while_they_are():
-    from relight_addon.pipeline.jobs import _refining
+    from relight_addon.pipeline.stages import _refining
 
     seen = []
     check = _refining(lambda stage, f: seen.append((stage, f)), None, 1, 4, 2)

@@ -160,14 +160,15 @@ def test_infeasible_contrast_reports_the_positive_floor():
 def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     """The engine's reductions end positive with a large error and no message of their own; the
     job (what `relight solve` and the add-on run) adds one, with the NNLS bound."""
-    from relight_addon.pipeline.jobs import _positivity_notes, positive_bound
+    from relight_addon.engine.bounds import positive_bound
+    from relight_addon.pipeline.notes import positivity_notes
     from relight_addon.engine.reduction import reduce_lights
 
     prob = CASES["infeasible contrast"][1]()
     inv = solve_inverse(prob, "reduced")
     red = reduce_lights(prob, inv.exitance, max_lights=3)
     assert red.final.n_negative == 0 and red.final.relative_error > 0.1
-    notes = _positivity_notes(positive_bound(prob, inv, red.final), red.final)
+    notes = positivity_notes(positive_bound(prob, inv, red.final), red.final)
     nn = solve_inverse(prob, "nnls")
     assert len(notes) == 1 and "no positive lighting meets these targets" in notes[0]
     assert f"{nn.relative_error:.3g}" in notes[0]
@@ -176,11 +177,11 @@ def test_the_job_says_when_no_positive_lighting_meets_the_targets():
 
     shared = positive_bound(prob, inv, red.final, lower_bounds(prob.transfer, prob.b_target, 3))
     assert shared.relative_error == pytest.approx(nn.relative_error, rel=1e-6, abs=1e-9)
-    assert _positivity_notes(shared, red.final) == notes
+    assert positivity_notes(shared, red.final) == notes
     # a feasible room: the note, if any, points to more lights instead
     base = CASES["room"][1]() if "room" in CASES else None
     if base is not None:
         inv2 = solve_inverse(base, "reduced")
         red2 = reduce_lights(base, inv2.exitance, max_lights=1)
-        for note in _positivity_notes(positive_bound(base, inv2, red2.final), red2.final):
+        for note in positivity_notes(positive_bound(base, inv2, red2.final), red2.final):
             assert "allow more lights" in note or "no positive lighting" in note

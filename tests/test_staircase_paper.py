@@ -42,7 +42,7 @@ def test_staircase_paper_experiment(run_cli, bpy_clean, tmp_path):
     rel = np.array([p["relative_error"] for p in curve], dtype=float)
     err_abs = np.array([p["error"] for p in curve], dtype=float)
     neg = np.array([p["n_negative"] for p in curve])
-    # the curve's e_x after the kernel's direct light of the curve's lights (jobs.direct_stage): the
+    # the curve's e_x after the kernel's direct light of the curve's lights (pipeline.stages.direct_stage): the
     # least change of the same strengths that fits again, exact as well
     assert n[0] == 693 and rel[0] < 1e-8
     assert abs(neg[0] - inv["n_negative"]) <= 0.01 * inv["n_negative"]  # a light near 0 may change sign

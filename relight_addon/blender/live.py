@@ -113,31 +113,8 @@ class LiveSession:
                 self._start_full(context)
             return
         if job is not self.base:  # a new preparation: Live's first solve, or Solve & Reduce
-            if self.worker is not None:
-                return  # (a stroke's full solve: collected first)
-            self.base, self.changed, self.paused, self.dirty = job, set(), None, True
-            self._faces, self.touched_all = None, True
-            names = job.exp.faces.object_names[:len(job.exp.objects)]
-            gone = _gone(context, names, job.exp.objects)
-            if gone:  # (deleted while the first solve ran)
-                self.changed.update(gone)
-                return
-            self.exported = {n: ob.as_pointer() for n, ob in zip(names, job.exp.objects)}
-            self.watched = _watched(context)
-            self.geometry = _geometry_digest(job.exp.objects)
-            self.status = "preparing the transfer to every patch"
-            faces = job.exp.faces
-            settings = light_paths.snapshot(bpy.data.scenes[self.scene])  # (the strokes' light-paths check)
-
-            def prewarm():  # what every stroke reads, made before the first (PreparedScene.prepare_live)
-                t0 = time.perf_counter()
-                state.prepare_live(faces)
-                light_paths.prepare_stroke_checks(state.column_products(), settings, state.patches.reflectance,
-                                                  state.model.problem.background_radiosity)
-                self.prewarm_seconds = time.perf_counter() - t0
-
-            self._run(prewarm, job)
-            self.result["prewarm"] = True
+            if self.worker is None:  # (a stroke's full solve: collected first)
+                self._follow(context, job, state)
             return
         if self.reloaded and self.changed:  # Undo or Redo: what the watch and the digests tell anew is read again
             undone = {c for c in self.changed if not c.startswith("object ")}
@@ -168,6 +145,33 @@ class LiveSession:
             self.status = "up to date"
             return
         self._start_live(job, state, self._faces)
+
+    def _follow(self, context, job, state) -> None:
+        """A new preparation (Live's first solve, or Solve & Reduce): its objects watched, and what
+        every stroke reads made in the worker before the first (PreparedScene.prepare_live)."""
+        self.base, self.changed, self.paused, self.dirty = job, set(), None, True
+        self._faces, self.touched_all = None, True
+        names = job.exp.faces.object_names[:len(job.exp.objects)]
+        gone = _gone(context, names, job.exp.objects)
+        if gone:  # (deleted while the first solve ran)
+            self.changed.update(gone)
+            return
+        self.exported = {n: ob.as_pointer() for n, ob in zip(names, job.exp.objects)}
+        self.watched = _watched(context)
+        self.geometry = _geometry_digest(job.exp.objects)
+        self.status = "preparing the transfer to every patch"
+        faces = job.exp.faces
+        settings = light_paths.snapshot(bpy.data.scenes[self.scene])  # (the strokes' light-paths check)
+
+        def prewarm():  # what every stroke reads, made before the first (PreparedScene.prepare_live)
+            t0 = time.perf_counter()
+            state.prepare_live(faces)
+            light_paths.prepare_stroke_checks(state.column_products(), settings, state.patches.reflectance,
+                                              state.model.problem.background_radiosity)
+            self.prewarm_seconds = time.perf_counter() - t0
+
+        self._run(prewarm, job)
+        self.result["prewarm"] = True
 
     def _read_paint(self, context, job) -> None:
         """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that

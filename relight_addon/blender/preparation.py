@@ -2,7 +2,7 @@
 
     job = SolveJob.export(context, options, mode)   # main thread: the scene -> FaceSet, checked
     job.mesh(progress, cancel)                      # any thread: patches and the cost estimate
-    outcome = job.run(progress, cancel)             # any thread, no bpy: jobs.run_solve
+    outcome = job.run(progress, cancel)             # any thread, no bpy: jobs.run_solve / run_reduce
     job.finish(scene, outcome, view_radiance=True)  # main thread: the report finished (report.finish)
 
 then ``results.show_outcome`` writes it into the scene. The operator asks before a costly job
@@ -24,7 +24,7 @@ import numpy as np
 
 from . import export, light_paths
 from ..engine.options import check_light_kinds
-from ..pipeline import jobs, prepared, report, viewing
+from ..pipeline import checks, jobs, meshing, prepared, report, viewing
 
 __all__ = ["SolveJob", "PREPARED", "PREPARED_JOBS", "LOCKS"]
 
@@ -54,21 +54,27 @@ class SolveJob:
         if mode == "inverse":
             check_light_kinds(options)  # (the options alone: before the export's work)
         exp = export.export_scene(context, target_scale=target_scale)
-        jobs.check_solvable(exp.faces, mode, exp.notes)
+        if mode == "inverse":
+            checks.check_solvable(exp.faces, exp.notes)
+        else:
+            checks.check_reducible(exp.faces, exp.notes)
         name = (context or bpy.context).scene.name if session else None
         return cls(exp, options, mode, export.job_inputs(exp), session=name)
 
     def mesh(self, progress=None, cancel=None):
         """Mesh the faces (refused first when they cannot fit in memory) and estimate the solve."""
-        self.patches = jobs.mesh_for_job(self.exp.faces, self.options, self.inputs["default_max_patch_size"],
+        self.patches = meshing.mesh_for_job(self.exp.faces, self.options, self.inputs["default_max_patch_size"],
                                          mode=self.mode)
-        self.cost = jobs.solve_cost(self.patches, self.options, mode=self.mode)
+        self.cost = meshing.solve_cost(self.patches, self.options, mode=self.mode)
         return self.patches, self.cost
 
     def run(self, progress=None, cancel=None):
         """The solve (no bpy; any thread): a jobs.SolveOutcome."""
-        if self.session is None or self.mode != "inverse":
-            return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel, mode=self.mode,
+        if self.mode != "inverse":
+            return jobs.run_reduce(self.exp.faces, self.options, progress=progress, cancel=cancel,
+                                   patches=self.patches, **self.inputs)
+        if self.session is None:
+            return jobs.run_solve(self.exp.faces, self.options, progress=progress, cancel=cancel,
                                   patches=self.patches, **self.inputs)
         with LOCKS[self.session]:
             return self._run_session(progress, cancel)

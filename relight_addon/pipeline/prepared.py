@@ -24,11 +24,11 @@ and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the
 form factors. A change the fingerprint sees (an object moved, a material, a forbidden face, an
 option) is not followed: ``stale_reason`` names it, and the caller prepares again.
 
-The last solve's model (jobs.Model: its lights, the lamps offered and refined for its targets
+The last solve's model (pipeline.model.Model: its lights, the lamps offered and refined for its targets
 among them, its factorised radiosity system) is kept too, for Live mode's strokes (``live``): the
 problem retargeted on the transfer from every light to every patch (InverseProblem.retarget,
 all_rows_transfer), then the selection's quick search from the last solve's configurations, the
-certificate and the curve (jobs.solve_model(live=True)); and for a lamp of the scene moved or set
+certificate and the curve (jobs.solve_stroke); and for a lamp of the scene moved or set
 anew (``move_lamps``: the model's fixed light cast again). A stroke's live answer is of the paint
 alone (it starts from the last *solve*, never from an earlier stroke).
 
@@ -54,6 +54,9 @@ from ..engine.options import JobOptions
 from ..engine.registry import ESTIMATORS, PATCH_MODELS
 from ..engine.scene import FaceSet, PatchSet
 from . import jobs
+from . import notes as texts
+from .checks import check_solvable, face_areas
+from .model import move_scene_light, retarget_model
 
 __all__ = ["PreparedScene", "scene_key", "paint_independent"]
 
@@ -137,11 +140,11 @@ class PreparedScene:
     solves: int = 0  # solves made
     warm: int = 0  # ... of which from the kept state
     reason: str = None  # why the last solve started from scratch (None: from the kept state)
-    model: object = None  # jobs.Model of the last solve (``live`` retargets it)
+    model: object = None  # pipeline.model.Model of the last solve (``live`` retargets it)
     live_solves: int = 0  # live re-solves made
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
     _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
-    _face_area: np.ndarray = None  # jobs.face_areas of the prepared scene's faces (geometry only)
+    _face_area: np.ndarray = None  # checks.face_areas of the prepared scene's faces (geometry only)
     _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
 
@@ -182,7 +185,7 @@ class PreparedScene:
                        target_radiosity=faces.target_radiosity[self.patches.face].copy())
 
     def estimate(self, patches, options, progress=None, cancel=None, pairs=None):
-        """build_model's estimator: the prepared ray-cast form factors and, for the estimators
+        """build_inverse_model's estimator: the prepared ray-cast form factors and, for the estimators
         with kernel pairs, the kernel's rows of the targets (the new ones computed, the others
         kept), applied as compute_form_factors applies them."""
         cast = 0.0
@@ -251,7 +254,7 @@ class PreparedScene:
     def move_lamps(self, faces: FaceSet) -> None:
         """The scene's lamps changed and nothing else (a kept lamp moved, turned, resized or set to
         another power: ``faces``' lamps): the last solve's model takes their light as its fixed
-        light anew (jobs.move_scene_light: their direct light cast on the kept scene, its
+        light anew (pipeline.model.move_scene_light: their direct light cast on the kept scene, its
         radiosity through the kept factorisation) and this state its key, so that ``live``
         re-solves the rest around them. Its lights, form factors and transfer stay. ValueError
         when anything else changed, or nothing is solved yet."""
@@ -261,7 +264,7 @@ class PreparedScene:
         changed = [part for part in key if key[part] != self.key.get(part)]
         if any(part != "lamps and World" for part in changed):
             raise ValueError(f"the {', '.join(changed)} changed since it was prepared")
-        self.model = jobs.move_scene_light(self.model, faces, self.options.seed)
+        self.model = move_scene_light(self.model, faces, self.options.seed)
         self.key = key
 
     def prepare_live(self, faces: FaceSet) -> None:
@@ -269,7 +272,7 @@ class PreparedScene:
         from every light to every patch, the faces the patch model clustered, the face areas."""
         self.model.problem.all_rows_transfer()
         self._clustered = (self.patches, clustered_faces(self.patches))
-        self._face_area = jobs.face_areas(faces)
+        self._face_area = face_areas(faces)
 
     def column_products(self):
         """The products with F of the model's transfer to every patch, per light, kept across
@@ -285,28 +288,26 @@ class PreparedScene:
     def live(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, key=None):
         """A stroke's live re-solve (Live mode) from the last solve's model: its patches with the
         paint of ``faces`` (mapped as ``solve`` maps it), its lights, form factors and solvers,
-        the problem retargeted on the transfer to every patch (jobs.retarget_model,
-        jobs.solve_model(live=True)). Changes nothing kept: each stroke starts from the last
+        the problem retargeted on the transfer to every patch (pipeline.model.retarget_model,
+        jobs.solve_stroke). Changes nothing kept: each stroke starts from the last
         solve. None when it cannot follow (``self.reason`` says why): the caller solves in full."""
         self.reason = (self.stale_reason(faces, self.options, self.default_max_patch_size, key)
                        or ("nothing is solved yet" if self.model is None else self.unmappable(faces)))
         if self.reason is not None:
             return None
         if self._face_area is None:  # (the geometry is the prepared one: the key says so)
-            self._face_area = jobs.face_areas(faces)
-        jobs.check_solvable(faces, "inverse", notes, area=self._face_area)
+            self._face_area = face_areas(faces)
+        check_solvable(faces, notes, area=self._face_area)
         t0 = time.perf_counter()
-        model = jobs.retarget_model(self.model, faces, self.painted(faces))
+        model = retarget_model(self.model, faces, self.painted(faces))
         with one_blas_thread():  # (small products: a second thread costs more than it gives)
-            outcome = jobs.solve_model(model, self.options, polygon_counts, progress, cancel, t0=t0, live=True,
-                                       initial=dict(self.starts),  # (the last solve's: of the paint alone)
-                                       nnls_start=self._nnls_start)
+            outcome = jobs.solve_stroke(model, self.options, polygon_counts, progress, cancel, t0=t0,
+                                        initial=dict(self.starts),  # (the last solve's: of the paint alone)
+                                        nnls_start=self._nnls_start)
         self.live_solves += 1
         bounds = outcome.reduction.certificate
         self._nnls_start = None if bounds is None else bounds.nnls_exitance
-        outcome.warnings.append(jobs.LIVE_NOTE.format(
-            why=f"the lights offered and refined for the last solve's targets, {self.model.problem.m} target "
-                "patches; the new targets' direct light by the ray-cast form factors"))
+        outcome.warnings.append(texts.live_note(self.model.problem.m))
         return outcome
 
 
