@@ -43,12 +43,13 @@ def solve(tree, scene, report):
 WARM = r"""
 import json, sys, time
 try:
-    from relight_addon.blender import export
+    from relight_addon.blender import blend_files, export
     from relight_addon.pipeline import jobs
 except ImportError:  # the layout before the pipeline/ and blender/ split
     from relight_addon import export, jobs
+    blend_files = export  # (open_blend was export's then)
 from relight_addon.engine.options import JobOptions
-export.open_blend(sys.argv[1])
+blend_files.open_blend(sys.argv[1])
 exp = export.export_scene()
 inputs = export.job_inputs(exp)
 options = JobOptions().validate()
