@@ -52,11 +52,11 @@ _CACHE = {}
 def staircase_problem():
     """The staircase's InverseProblem as jobs.run_solve builds it (cached per process)."""
     if "p" not in _CACHE:
-        from relight_addon.blender import export
+        from relight_addon.blender import blend_files, export
         from relight_addon.pipeline.model import build_inverse_model
         from relight_addon.engine.options import NO_LAMPS, JobOptions
 
-        export.open_blend(str(SCENE))
+        blend_files.open_blend(str(SCENE))
         exp = export.export_scene()
         # the paper's experiment: a patch and a light per polygon (the polygon model), no candidate lamp
         model = build_inverse_model(exp.faces, JobOptions(patch_model="polygon", seed=0, **NO_LAMPS).validate(),

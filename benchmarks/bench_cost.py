@@ -34,7 +34,7 @@ CHILD = r'''
 import json, os, sys, time
 sys.path.insert(0, ROOT); sys.path.insert(0, os.path.join(ROOT, "tests"))
 import bpy
-from relight_addon.blender import export
+from relight_addon.blender import blend_files, export
 from relight_addon.pipeline import jobs, meshing
 from relight_addon.engine.options import JobOptions
 
@@ -58,7 +58,7 @@ def grid(name, n, z, flip, paint=False):  # an n x n grid of quads, 1 m across, 
         a.data.foreach_set("color", [0.2, 0.2, 0.2, 1.0] * len(me.loops))
 
 if scene == "staircase":
-    export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
 elif scene in ("single", "ceiling32"):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     grid("floor", 1 if scene == "single" else 4, 0.0, False, paint=True)

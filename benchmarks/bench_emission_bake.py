@@ -5,7 +5,7 @@
 Per size, a square grid (Blender's Grid primitive, 4 m) whose Principled BSDF has a 64 x 64 image
 on its Emission Color is exported with ``export.export_scene`` (the bake of blender/emission_bake.py
 included), then again with the link removed (the same faces, nothing baked: the back rays of
-export._emitting_backs are in both). Writes benchmarks/results/bench_emission_bake.json.
+engine/two_sided.emitting_backs are in both). Writes benchmarks/results/bench_emission_bake.json.
 """
 from __future__ import annotations
 

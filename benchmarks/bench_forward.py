@@ -25,7 +25,7 @@ import numpy as np
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from relight_addon.blender import export  # noqa: E402
+from relight_addon.blender import blend_files, export  # noqa: E402
 from relight_addon.engine.formfactors import auto_rays_per_patch, compute_form_factors  # noqa: E402
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
 from relight_addon.engine.scene import face_mean, mesh_patches  # noqa: E402
@@ -35,7 +35,7 @@ REFERENCE_RAYS = 131072
 
 
 def scene(name):
-    export.open_blend(os.path.join(ROOT, "sample_blends", f"{name}.blend"))
+    blend_files.open_blend(os.path.join(ROOT, "sample_blends", f"{name}.blend"))
     exp = export.export_scene()
     faces = exp.faces
     if name == "staircase":

@@ -123,9 +123,9 @@ def furnished_room(cell=0.25):
 
 
 def staircase():
-    from relight_addon.blender import export as bridge
+    from relight_addon.blender import blend_files, export as bridge
 
-    bridge.open_blend(str(SCENE))
+    blend_files.open_blend(str(SCENE))
     exp = bridge.export_scene()
     ps = mesh_patches(exp.faces, exp.settings.get("max_patch_size"))
     return ps, np.flatnonzero(ps.target), np.flatnonzero(~ps.forbidden)

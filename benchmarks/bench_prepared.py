@@ -26,14 +26,14 @@ OUT = os.path.join(ROOT, "benchmarks", "results", "bench_prepared.json")
 
 import bpy  # noqa: E402
 
-from relight_addon.blender import export  # noqa: E402
+from relight_addon.blender import blend_files, export  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.pipeline import jobs, prepared  # noqa: E402
 
 
 def scene(name):
     if name == "staircase":
-        export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
+        blend_files.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
     else:
         import artist_scenes
 

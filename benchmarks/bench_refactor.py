@@ -48,11 +48,15 @@ try:
 except ImportError:  # the layout before the pipeline/ and blender/ split
     from relight_addon import export, jobs
 try:
+    from relight_addon.blender.blend_files import open_blend
+except ImportError:  # before blender/blend_files.py
+    open_blend = export.open_blend
+try:
     from relight_addon.pipeline.meshing import mesh_for_job
 except ImportError:  # before pipeline/meshing.py
     mesh_for_job = jobs.mesh_for_job
 from relight_addon.engine.options import JobOptions
-export.open_blend(sys.argv[1])
+open_blend(sys.argv[1])
 exp = export.export_scene()
 inputs = export.job_inputs(exp)
 options = JobOptions().validate()

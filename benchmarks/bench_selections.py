@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import bpy  # noqa: E402
 
-from relight_addon.blender import export
+from relight_addon.blender import blend_files, export
 from relight_addon.pipeline import stages  # noqa: E402
 from relight_addon.pipeline.model import build_inverse_model  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
@@ -44,8 +44,8 @@ K = (1, 2, 3, 5, 10, 20, 32)
 
 
 def scenes():
-    yield "staircase (polygon model)", lambda: export.open_blend(str(ROOT / "sample_blends" / "staircase_targets.blend")), "polygon"
-    yield "staircase (adaptive)", lambda: export.open_blend(str(ROOT / "sample_blends" / "staircase_targets.blend")), "adaptive"
+    yield "staircase (polygon model)", lambda: blend_files.open_blend(str(ROOT / "sample_blends" / "staircase_targets.blend")), "polygon"
+    yield "staircase (adaptive)", lambda: blend_files.open_blend(str(ROOT / "sample_blends" / "staircase_targets.blend")), "adaptive"
 
     def room():
         import artist_scenes
@@ -59,7 +59,7 @@ def scenes():
 
         path = Path(tempfile.mkdtemp()) / "room.blend"
         t.build_room(path)
-        export.open_blend(str(path))
+        blend_files.open_blend(str(path))
     yield "cube room, 2 target regions (adaptive)", closed_loop_room, "adaptive"
 
 

@@ -48,9 +48,9 @@ def uptime():
 
 def load_staircase(rays=None, seed=0):
     """(patches, F as float64 ndarray, form-factor seconds, rays per patch) of the staircase."""
-    from relight_addon.blender import export
+    from relight_addon.blender import blend_files, export
 
-    export.open_blend(str(SCENE))
+    blend_files.open_blend(str(SCENE))
     exp = export.export_scene()
     patches = mesh_patches(exp.faces, exp.settings.get("max_patch_size"))
     ff = compute_form_factors(patches, rays_per_patch=rays, seed=seed)

@@ -40,7 +40,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from relight_addon.blender import export
+from relight_addon.blender import blend_files, export
 from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine import formfactors, kernel_transfer  # noqa: E402
 from relight_addon.engine.estimators import kernel as kernel_estimator  # noqa: E402
@@ -100,7 +100,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=int, default=8)
     args = ap.parse_args()
-    export.open_blend(str(SCENE))
+    blend_files.open_blend(str(SCENE))
     exp = export.export_scene()
     inputs = export.job_inputs(exp)
 

@@ -18,7 +18,7 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-from relight_addon.blender import export, results
+from relight_addon.blender import blend_files, export, results
 from relight_addon.pipeline import jobs  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 
@@ -27,7 +27,7 @@ os.makedirs(IMG, exist_ok=True)
 SAMPLES = 32
 VIEW = "AgX"  # compresses the lights' highlights (the add-on's own renders use Standard: radiance 1 = white)
 
-export.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
+blend_files.open_blend(os.path.join(ROOT, "sample_blends", "staircase_targets.blend"))
 scene = bpy.context.scene
 # a figure camera (the file's own looks up the stairwell): from the first landing's corner,
 # down onto the painted ground floor and the first steps

@@ -257,8 +257,8 @@ def _check_paths(args):
 
 def _check_not_read(args):
     """After the scene is open, before any work: no output may replace a file the scene reads (a
-    library it links from, an image, font or sound it uses: export.files_read)."""
-    from .blender.export import files_read
+    library it links from, an image, font or sound it uses: blend_files.files_read)."""
+    from .blender.blend_files import files_read
 
     read = files_read()
     for name in ("report", "out", "render"):
@@ -439,12 +439,12 @@ def _blender_message(exc):
 def run_radiosity_command(args, progress=None, cancel=None):
     import bpy
 
-    from .blender import export, light_paths, results
+    from .blender import blend_files, export, light_paths, results
     from .pipeline import jobs, meshing, report as reports, viewing
 
     t0 = time.perf_counter()
     _check_paths(args)
-    export.open_blend(args.scene)
+    blend_files.open_blend(args.scene)
     _check_not_read(args)
     exp = export.export_scene()
     options = _options(args)
@@ -499,7 +499,7 @@ def _match_light_paths(args, report):
 def run_solve_command(args, progress=None, cancel=None):
     import bpy
 
-    from .blender import export, results
+    from .blender import blend_files, results
     from .blender.preparation import SolveJob
 
     from .pipeline import kept
@@ -513,7 +513,7 @@ def run_solve_command(args, progress=None, cancel=None):
             keep = kept.read_kept(args.keep)
         except ValueError as exc:
             raise UsageError(str(exc)) from None
-    export.open_blend(args.scene)
+    blend_files.open_blend(args.scene)
     _check_not_read(args)
     names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",

@@ -80,11 +80,11 @@ def test_model_smaller_than_the_mesh_and_lights_smaller_than_polygons(solved):
 
 def test_out_file_shows_the_lights_and_resolves_without_counting_them(solved, tmp_path):
     from relight_addon import cli
-    from relight_addon.blender import export
+    from relight_addon.blender import blend_files
     from relight_scene import emitted, emitted_power
 
     r, out, _ = solved
-    export.open_blend(str(out))
+    blend_files.open_blend(str(out))
     em = emitted(bpy.context.scene)
     cells = [li for li in r["final"]["lights"] if li["exitance"] is not None]
     assert (em is not None) == bool(cells)

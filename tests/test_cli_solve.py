@@ -165,11 +165,11 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
     anything is written back (the operator only touches the scene after a finished job)."""
     import pytest
 
-    from relight_addon.blender import export
+    from relight_addon.blender import blend_files, export
     from relight_addon.pipeline import jobs
     from relight_addon.engine.options import JobOptions
 
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     bpy = bpy_clean
 
@@ -195,11 +195,11 @@ def test_cancelled_solve_raises_and_leaves_the_scene_as_it_was(bpy_clean):
 def test_scene_emitters_are_background_light_subtracted_from_the_targets(bpy_clean):
     """Targets painted at exactly the radiosity the Cornell box's own light gives them need no
     extra light: the solve keeps the scene's emitter as background, so e_x is ~0 and exact."""
-    from relight_addon.blender import export
+    from relight_addon.blender import blend_files, export
     from relight_addon.pipeline import jobs
     from relight_addon.engine.options import JobOptions
 
-    export.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "cornell_box.blend"))
     exp = export.export_scene()
     # a face, a patch; the same form factors for the forward job and the solve
     options = JobOptions(rays_per_patch=1024, max_patch_size=1.0, seed=3, patch_model="polygon", estimator="raycast")

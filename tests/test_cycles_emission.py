@@ -5,7 +5,7 @@ black World, emission two-sided as Cycles has it).
 - A room lit only by a panel hanging under its ceiling, emitting through an image texture (a
   4 x 4 checker of two colours): `radiosity` (the real command line) against Cycles' bake of
   every face. Relight bakes the texture's mean over the panel (blender/emission_bake.py) and
-  models the panel's back, which lights the ceiling (export._emitting_backs).
+  models the panel's back, which lights the ceiling (engine/two_sided.emitting_backs).
 - The shipped Cornell box, whose light quad lies 0.5 mm under the ceiling: its back is named in a
   warning with the light that leaks out of the gap, an estimated range; Cycles' two-sided render
   against its one-sided one must fall in it.

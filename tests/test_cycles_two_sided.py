@@ -1,7 +1,7 @@
 """Faces seen from their back, rendered by Cycles as Relight predicts them.
 
 Cycles shades both sides of a mesh face alike; Relight's faces are one-sided, so the export
-models the side the scene sees (export._faces_seen_from_behind): a room made as many artists
+models the side the scene sees (engine/two_sided.faces_seen_from_behind): a room made as many artists
 first make it, the default cube scaled up with its normals as added (facing out: the scene sees
 the walls' backs), is modelled from the inside; a shelf that is a single plane, lit from above
 and seen from below, gets its back side as a face of its own. The floor painted, solved by the

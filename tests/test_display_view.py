@@ -21,7 +21,7 @@ bpy = pytest.importorskip("bpy")
 import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
 from relight_addon import cli  # noqa: E402
-from relight_addon.blender import export, results  # noqa: E402
+from relight_addon.blender import layers, meshes, results  # noqa: E402
 from relight_addon.pipeline import false_colour as fc  # noqa: E402
 
 ARTIST = {"view_transform": "AgX", "look": "AgX - Punchy", "exposure": 1.5, "gamma": 1.2}
@@ -82,8 +82,8 @@ def _per_face(ob, name):
     """(per polygon colour, whether all its corners agree)."""
     me = ob.data
     col = _corners(ob, name)
-    loop_poly = export.loop_polygons(me)[0]
-    first = export.loop_polygons(me)[1]
+    loop_poly = meshes.loop_polygons(me)[0]
+    first = meshes.loop_polygons(me)[1]
     return col[first], bool(np.all(np.abs(col - col[first][loop_poly]) <= 1e-6))
 
 
@@ -93,7 +93,7 @@ def _expected(sc, ob, mode):
     oi = data.objects.index(ob.name)
     off = data.polygon_offset
     return view, view.values[off[oi]:off[oi + 1]], view.shown[off[oi]:off[oi + 1]], \
-        export.srgb_to_linear(view.colours[off[oi]:off[oi + 1]])
+        layers.srgb_to_linear(view.colours[off[oi]:off[oi + 1]])
 
 
 def test_false_colour_faces_are_the_views_values_and_the_floor_reads_the_reports_lux(scene, solved):
@@ -111,15 +111,15 @@ def test_false_colour_faces_are_the_views_values_and_the_floor_reads_the_reports
     assert sc.relight_view.scale_used == view.vmax and view.auto
     # the painted floor strip: its faces' illuminance, area-weighted, is the report's mean there
     floor = sc.objects["Floor"]
-    painted = export.face_flags(floor, "target")
+    painted = layers.face_flags(floor, "target")
     _, lux, _, _ = _expected(sc, floor, "ILLUMINANCE")
-    area = export.foreach_array(floor.data.polygons, "area", len(floor.data.polygons), np.float64)
+    area = meshes.foreach_array(floor.data.polygons, "area", len(floor.data.polygons), np.float64)
     mean = float((lux[painted] * area[painted]).sum() / area[painted].sum())
     assert mean == pytest.approx(report["targets_photometric"]["Floor"]["illuminance_lx"]["mean"], rel=1e-4)
     # the colour of a face is the scale's colour at its lux, by the legend's rule
     k = int(np.flatnonzero(painted)[0])
     np.testing.assert_allclose(_per_face(floor, "relight_display")[0][k],
-                               export.srgb_to_linear(fc.colours(lux[k], view.vmax)), rtol=1e-5)
+                               layers.srgb_to_linear(fc.colours(lux[k], view.vmax)), rtol=1e-5)
     # the linked crate is skipped and named; its mesh is untouched
     crate = sc.objects["Crate"]
     assert crate.data.library is not None and "relight_display" not in crate.data.color_attributes
@@ -140,7 +140,7 @@ def test_luminance_difference_and_painted_views(scene):
     # the difference: the painting is painted, the ceiling is not (grey)
     room = sc.objects["Room"]
     _, values, shown, want = _expected(sc, room, "DIFFERENCE")
-    assert not shown[0] and np.allclose(want[0], export.srgb_to_linear(np.array(fc.NOT_SHOWN)))
+    assert not shown[0] and np.allclose(want[0], layers.srgb_to_linear(np.array(fc.NOT_SHOWN)))
     assert sc.relight_view.scale_used > 0
     # the painted view: the painted radiance on painted faces, dark grey elsewhere
     sc.relight_view.mode = "PAINTED"

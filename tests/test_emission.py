@@ -1,5 +1,5 @@
 """The scene's own emission as Cycles renders it (issue 16), at export: linked emission inputs
-baked per face (blender/emission_bake.py), the back side of open emitters (export._emitting_backs,
+baked per face (blender/emission_bake.py), the back side of open emitters (engine/two_sided.emitting_backs,
 engine/backs.py), and the warnings for what is not modelled (volumes, shadow catchers, holdouts).
 References: textures of known mean (two-colour images, a linear gradient, face attributes),
 geometry (the back faces), and the scene data before and after (nothing left behind). Against
@@ -11,6 +11,7 @@ import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
 from relight_addon.blender import emission_bake, export  # noqa: E402
+from relight_addon.engine import two_sided  # noqa: E402
 from test_export import add_mesh, emission_material, principled  # noqa: E402
 
 DATA = ("objects", "meshes", "materials", "images", "scenes", "node_groups", "worlds", "cameras", "lights")
@@ -197,7 +198,7 @@ def test_back_of_a_hanging_plane_is_a_face_of_its_own(bpy_clean):
     n = np.cross(tv[:, 1] - tv[:, 0], tv[:, 2] - tv[:, 0])
     assert np.all(n[:, 2] > 0)  # the lamp faces down, its back up
     diag = np.linalg.norm(fs.vertices.max(axis=0) - fs.vertices.min(axis=0))
-    np.testing.assert_allclose(tv[..., 2], 1.7 + export.BACK_OFFSET * diag, rtol=1e-7)  # float32 vertices
+    np.testing.assert_allclose(tv[..., 2], 1.7 + two_sided.BACK_OFFSET * diag, rtol=1e-7)  # float32 vertices
     assert 0.5 * np.linalg.norm(n, axis=1).sum() == pytest.approx(0.36)
     _, cube_backs = emission_of(exp, "cube")
     assert len(cube_backs) == 0

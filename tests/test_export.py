@@ -5,8 +5,10 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon.blender import export, results  # noqa: E402
+from relight_addon.blender import blend_files, export, layers, results  # noqa: E402
+from relight_addon.engine import two_sided  # noqa: E402
 from relight_addon.engine.principled import principled_albedo  # noqa: E402
+from relight_addon.engine.units import MAX_REFLECTANCE  # noqa: E402
 
 
 def add_mesh(bpy, name, verts, faces, mat=None):
@@ -121,7 +123,7 @@ def test_materials_and_fallbacks(bpy_clean):
     assert f.exitance[row["emit"]] == pytest.approx([2 * math.pi] * 3)
     assert f.reflectance[row["emit"]] == pytest.approx([0, 0, 0])
     hot = principled_albedo(base_color=(1.5, 0.5, 0.5)).albedo
-    assert f.reflectance[row["hot"]] == pytest.approx([export.MAX_REFLECTANCE, hot[1], hot[2]])
+    assert f.reflectance[row["hot"]] == pytest.approx([MAX_REFLECTANCE, hot[1], hot[2]])
     assert any("clamped" in w for w in f.warnings)
 
 
@@ -143,7 +145,7 @@ def test_targets_forbidden_and_no_lights(bpy_clean):
     assert f.target.tolist() == [True, False, False]
     assert f.target_radiosity[0] == pytest.approx(math.pi * 2.0 * np.array([0.1, 0.2, 0.3]), rel=1e-6)
     assert f.forbidden.tolist() == [False, True, True]
-    assert export.face_flags(ob, "candidate").tolist() == [True, False]
+    assert layers.face_flags(ob, "candidate").tolist() == [True, False]
 
 
 def test_write_back_is_vertex_area_weighted_radiance(bpy_clean):
@@ -314,7 +316,7 @@ def test_an_island_of_mostly_zero_area_faces_is_sampled_by_its_real_faces(bpy_cl
     f = [tuple(p.vertices) for p in me.polygons]
     a, b = f[0][0], f[0][1]
     mid = tuple((np.array(v[a]) + np.array(v[b])) / 2)
-    for _ in range(export.ISLAND_FACES + 6):  # collinear triangles on one of the room's edges
+    for _ in range(two_sided.ISLAND_FACES + 6):  # collinear triangles on one of the room's edges
         v.append(mid)
         f.append((a, len(v) - 1, b))
     new = bpy.data.meshes.new("Room")
@@ -444,9 +446,9 @@ def test_files_read_without_file_path_map(bpy_clean, monkeypatch, tmp_path):
     img = bpy.data.images.new("hdri", 4, 4)
     img.source, img.filepath = "FILE", str(tmp_path / "sky.exr")
     bpy.data.images.new("generated", 4, 4).filepath = str(tmp_path / "not_read.png")  # (generated: not read)
-    want = {p for _, p in export.files_read()}
+    want = {p for _, p in blend_files.files_read()}
     kinds = ("images", "fonts", "sounds", "movieclips", "volumes", "cache_files", "texts", "libraries")
     old = SimpleNamespace(**{k: getattr(bpy.data, k) for k in kinds})
     monkeypatch.setattr(export, "bpy", SimpleNamespace(data=old, types=bpy.types, path=bpy.path))
-    got = export.files_read()
+    got = blend_files.files_read()
     assert {p for _, p in got} == want and ("the image 'hdri'", str(tmp_path / "sky.exr")) in got

@@ -898,9 +898,9 @@ def _check_byte_fill():
     assert [(a.name, a.data_type) for a in ob.data.color_attributes] == [("relight_target", "BYTE_COLOR")]
     c = _colors(ob)  # linear values, as export reads them: the paint colour (0.5, 0.25, 1) to 1/255 in sRGB
     assert np.allclose(c[:, :3], (0.5, 0.25, 1.0), atol=0.01) and (c[:, 3] == 1).all()
-    from relight_addon.blender import export
+    from relight_addon.blender import layers
 
-    t = export.face_flags(ob, "target")
+    t = layers.face_flags(ob, "target")
     assert t.all()
 
 
@@ -909,9 +909,9 @@ def _check_forbid_kept_type(dtype):
         bpy.ops.object.mode_set(mode="OBJECT")
         a = bpy.data.objects["ceiling"].data.attributes["relight_forbidden"]
         assert a.data_type == dtype and a.domain == "FACE"
-        from relight_addon.blender import export
+        from relight_addon.blender import layers
 
-        assert export.face_flags(bpy.data.objects["ceiling"], "forbidden").all()
+        assert layers.face_flags(bpy.data.objects["ceiling"], "forbidden").all()
     return check
 
 

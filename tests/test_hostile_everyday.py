@@ -516,7 +516,7 @@ def test_apply_after_a_modifier_changed_the_mesh(addon, scenes):
 def test_a_copy_of_the_emitters_is_the_users(addon, scenes):
     """Case 7: a Shift-D copy of Relight Emitters carries its custom properties, but it is the
     user's object now: Apply and Clear leave it, and a solve counts it as the scene's light."""
-    from relight_addon.blender import export, results
+    from relight_addon.blender import results, visibility
 
     scene = _open_solved(scenes)
     ours = results.emitters_object(scene)
@@ -525,12 +525,12 @@ def test_a_copy_of_the_emitters_is_the_users(addon, scenes):
     copy.data = ours.data.copy()
     scene.collection.objects.link(copy)
     assert copy.get("relight_owner") is not None  # it looks like ours
-    assert export.owner_of(copy) is None and export.owner_of(ours) is not None
+    assert visibility.owner_of(copy) is None and visibility.owner_of(ours) is not None
     assert bpy.ops.relight.apply_configuration(index=0) == {"FINISHED"}
     assert copy.name in bpy.data.objects
     assert bpy.ops.relight.clear_results() == {"FINISHED"}
     assert copy.name in bpy.data.objects and results.emitters_object(scene) is None
-    assert copy in export.exported_objects()
+    assert copy in visibility.exported_objects()
 
 
 def test_make_area_lights_keeps_the_users_light_in_its_collection(addon, scenes):

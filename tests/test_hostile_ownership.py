@@ -321,7 +321,7 @@ def _lights(scene):
 
 
 def test_a_renamed_relight_lamp_is_the_artists(addon, scenes):
-    """Case 2: a Relight lamp the artist renamed is theirs (export.owner_of): the next row click
+    """Case 2: a Relight lamp the artist renamed is theirs (visibility.owner_of): the next row click
     deleted it with the "Relight Lamps" collection. It stays, in the scene, as they left it; the
     collection that holds it stays too (then theirs); Clear Results leaves it as well."""
     scene, placed = _open_placed(scenes)

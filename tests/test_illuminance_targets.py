@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy")
 import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
 from relight_addon import cli  # noqa: E402
-from relight_addon.blender import export  # noqa: E402
+from relight_addon.blender import export, layers  # noqa: E402
 from relight_addon.engine.scene import SceneError  # noqa: E402
 
 WOOD = np.array([0.45, 0.3, 0.2])  # the gallery's floor (artist_scenes.gallery, Lambertian)
@@ -108,7 +108,7 @@ def test_fill_selected_writes_one_kind_per_face(addon, gallery):
     lux = np.zeros(len(floor.data.polygons))
     floor.data.attributes["relight_target_lux"].data.foreach_get("value", lux)
     assert np.all(lux[chosen] == 400.0) and np.all(lux[3:] == 0.0)
-    flags = export.face_flags(floor, "target")
+    flags = layers.face_flags(floor, "target")
     assert np.all(flags[chosen])
     f = export.export_scene().faces
     rows = np.flatnonzero((f.face_object == f.object_names.index("Floor")) & np.isin(f.face_index, chosen))

@@ -5,7 +5,7 @@ a new colour layer at (1, 1, 1, 1), which Relight reads as painted white (a cube
 6 targets; an artist's desks: 54 filled, 738 targets). Each path that creates a layer (Fill
 Selected with the colour, with the lux, Forbid Selected, Paint Targets) is run on fresh cubes,
 one alone and two together in Edit Mode (multi-object editing), with a few faces selected on
-each: exactly the selected faces change (export.face_flags reads what a solve reads), and Paint
+each: exactly the selected faces change (layers.face_flags reads what a solve reads), and Paint
 Targets, which selects nothing, leaves no face painted.
 """
 import numpy as np
@@ -13,7 +13,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from relight_addon.blender import export  # noqa: E402
+from relight_addon.blender import layers  # noqa: E402
 
 CHOSEN = {"A": [0, 3], "B": [1, 2, 5]}  # the faces selected on each cube
 
@@ -43,7 +43,7 @@ def _cubes(names):
 def test_a_new_layer_changes_exactly_the_selected_faces(addon, names, path):
     obs = _cubes(names)
     assert all(ob.data.attributes.get(n) is None for ob in obs
-               for n in (export.TARGET_ATTRIBUTE, export.LUX_ATTRIBUTE, export.FORBIDDEN_ATTRIBUTE))
+               for n in (layers.TARGET_ATTRIBUTE, layers.LUX_ATTRIBUTE, layers.FORBIDDEN_ATTRIBUTE))
     if path == "forbid":
         assert bpy.ops.relight.forbid_faces() == {"FINISHED"}
     else:
@@ -51,9 +51,9 @@ def test_a_new_layer_changes_exactly_the_selected_faces(addon, names, path):
     bpy.ops.object.mode_set(mode="OBJECT")
     flag = "forbidden" if path == "forbid" else "target"
     for ob in obs:
-        assert list(np.flatnonzero(export.face_flags(ob, flag))) == CHOSEN[ob.name], (ob.name, path)
+        assert list(np.flatnonzero(layers.face_flags(ob, flag))) == CHOSEN[ob.name], (ob.name, path)
         other = "target" if flag == "forbidden" else "forbidden"
-        assert not export.face_flags(ob, other).any(), (ob.name, path)
+        assert not layers.face_flags(ob, other).any(), (ob.name, path)
 
 
 def test_paint_targets_creates_an_unpainted_layer(addon):
@@ -61,6 +61,6 @@ def test_paint_targets_creates_an_unpainted_layer(addon):
     bpy.ops.object.mode_set(mode="OBJECT")
     assert bpy.ops.relight.paint_targets() == {"FINISHED"}
     assert bpy.context.mode == "PAINT_VERTEX"
-    assert ob.data.color_attributes.get(export.TARGET_ATTRIBUTE) is not None
+    assert ob.data.color_attributes.get(layers.TARGET_ATTRIBUTE) is not None
     bpy.ops.object.mode_set(mode="OBJECT")
-    assert not export.face_flags(ob, "target").any()
+    assert not layers.face_flags(ob, "target").any()

@@ -64,9 +64,9 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     # Fill Selected in Edit Mode: followed too (the edit mesh read), and the user left in Edit Mode
     import bmesh
 
-    from relight_addon.blender import export
+    from relight_addon.blender import export, layers
 
-    taken = set(np.flatnonzero(export.face_flags(stairs, "target")).tolist()) | set(avoid)
+    taken = set(np.flatnonzero(layers.face_flags(stairs, "target")).tolist()) | set(avoid)
     bpy.ops.object.mode_set(mode="EDIT")
     bm = bmesh.from_edit_mesh(stairs.data)
     for f in bm.faces:

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon.blender import export, materials  # noqa: E402
+from relight_addon.blender import export, exported_materials, materials  # noqa: E402
 from relight_addon.engine.principled import principled_albedo  # noqa: E402
 
 
@@ -25,7 +25,7 @@ def test_default_principled_has_no_note(bpy_clean):
     m = new_material(bpy_clean)
     _, _, p = nodes(m)
     p.inputs["Base Color"].default_value = (0.5, 0.4, 0.3, 1)
-    rho, rad, note = export.material_properties(m)
+    rho, rad, note = exported_materials.material_properties(m)
     assert note is None
     np.testing.assert_allclose(rho, principled_albedo(base_color=(0.5, 0.4, 0.3)).albedo, rtol=1e-6)
     np.testing.assert_allclose(rad, 0)
@@ -46,16 +46,16 @@ def test_mix_with_linked_factor_reroute_and_mute(bpy_clean):
     nt.links.new(mix.outputs[0], reroute.inputs[0])
     nt.links.new(reroute.outputs[0], out.inputs["Surface"])
     mix.inputs[0].default_value = 0.25
-    rho, _, note = export.material_properties(m)
+    rho, _, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, 0.75 * 0.2 + 0.25 * 0.6)
     assert note is None
     tex = nt.nodes.new("ShaderNodeTexNoise")
     nt.links.new(tex.outputs[0], mix.inputs[0])
-    rho, _, note = export.material_properties(m)
+    rho, _, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, 0.5 * 0.2 + 0.5 * 0.6)
     assert "factor is linked, taken as 0.5" in note
     mix.mute = True  # a muted Mix Shader passes its first shader through
-    rho, _, note = export.material_properties(m)
+    rho, _, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, 0.2)
 
 
@@ -72,13 +72,13 @@ def test_add_emission_and_linked_inputs(bpy_clean):
     nt.links.new(add.outputs[0], out.inputs["Surface"])
     tex = nt.nodes.new("ShaderNodeTexNoise")
     nt.links.new(tex.outputs["Fac"], p.inputs["Roughness"])
-    rho, rad, note = export.material_properties(m)
+    rho, rad, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rad, [2, 1, 0.5])
     np.testing.assert_allclose(rho, principled_albedo(base_color=(0.8,) * 3, roughness=0.5).albedo, rtol=1e-6)
     assert "Roughness is linked, using its unlinked value" in note
     # a linked Coat Roughness does not matter while the coat is off
     nt.links.new(tex.outputs["Fac"], p.inputs["Coat Roughness"])
-    assert "Coat Roughness" not in export.material_properties(m)[2]
+    assert "Coat Roughness" not in exported_materials.material_properties(m)[2]
 
 
 def test_unread_shaders_fall_back_with_a_note(bpy_clean):
@@ -88,16 +88,16 @@ def test_unread_shaders_fall_back_with_a_note(bpy_clean):
     nt, out, p = nodes(m)
     toon = nt.nodes.new("ShaderNodeBsdfToon")
     nt.links.new(toon.outputs[0], out.inputs["Surface"])
-    rho, rad, note = export.material_properties(m)
+    rho, rad, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, [0.3, 0.6, 0.9], rtol=1e-6)
     assert "Toon BSDF is not read, using the viewport colour" in note
     tr = nt.nodes.new("ShaderNodeBsdfTransparent")
     nt.links.new(tr.outputs[0], out.inputs["Surface"])
-    rho, _, note = export.material_properties(m)
+    rho, _, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, 0)
     assert "treated as lost" in note
     nt.links.remove(out.inputs["Surface"].links[0])
-    rho, _, note = export.material_properties(m)
+    rho, _, note = exported_materials.material_properties(m)
     np.testing.assert_allclose(rho, [0.3, 0.6, 0.9], rtol=1e-6)
     assert "no surface shader" in note
 
@@ -108,11 +108,11 @@ def test_approximations_are_named(bpy_clean):
     for name, word in (("Metallic", "metallic"), ("Transmission Weight", "transmission"),
                        ("Coat Weight", "coat"), ("Sheen Weight", "sheen"), ("Subsurface Weight", "subsurface")):
         p.inputs[name].default_value = 0.5
-        note = export.material_properties(m)[2]
+        note = exported_materials.material_properties(m)[2]
         assert note is not None and word in note, (name, note)
         p.inputs[name].default_value = 0.0
     p.inputs["Transmission Weight"].default_value = 1.0  # a glass: only its Fresnel reflection
-    rho = export.material_properties(m)[0]
+    rho = exported_materials.material_properties(m)[0]
     assert np.all(rho < 0.1) and np.all(rho > 0.03)
     assert materials.surface_node(m) == p
 

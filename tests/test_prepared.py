@@ -10,7 +10,7 @@ pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not insta
 import bpy  # noqa: E402
 
 from artist_scenes import paint  # noqa: E402
-from relight_addon.blender import export  # noqa: E402
+from relight_addon.blender import blend_files, export  # noqa: E402
 from relight_addon.engine import best_lights as bl, kernel_transfer  # noqa: E402
 from relight_addon.engine.estimators import kernel as kernel_estimator  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
@@ -61,7 +61,7 @@ def _counting(monkeypatch):
     "solve of the same paint (0.167 against 0.149) since this stop's region (engine.extent) and two-sided changes; "
     "a stroke's answer must be as good as a cold solve's"))])
 def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeypatch, model):
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     options = JobOptions(**{**OPTIONS, "patch_model": model}).validate()
     size = exp.settings.get("max_patch_size")
@@ -109,7 +109,7 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     worse than a cold solve's, and changes nothing kept."""
     from relight_addon.engine import inverse
 
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     options = JobOptions(**OPTIONS).validate()
     size = exp.settings.get("max_patch_size")
@@ -186,7 +186,7 @@ def _full(problem, point):
 
 
 def test_what_the_prepared_state_cannot_follow_is_named():
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     options = JobOptions(**OPTIONS).validate()
     size = exp.settings.get("max_patch_size")
@@ -208,7 +208,7 @@ def test_paint_on_clustered_faces_is_solved_from_scratch_and_named():
     """The adaptive model clusters the staircase floor's unpainted faces; paint that lands on one
     of them cannot be mapped onto the kept patches (a cluster never mixes painted and unpainted
     faces): that solve starts from scratch, says why, and meshes for the new paint."""
-    export.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     options = JobOptions(seed=3).validate()  # the default patch model: adaptive
     size = exp.settings.get("max_patch_size")

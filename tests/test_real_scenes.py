@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is not installed")
-from relight_addon.blender import export
+from relight_addon.blender import export, layers
 from relight_addon.pipeline import jobs  # noqa: E402
 from test_export import emission_material  # noqa: E402
 from relight_addon.engine import closed_forms as cf  # noqa: E402
@@ -58,7 +58,7 @@ def emitter(bpy, strength=E_RADIANCE):
 
 def paint_target(ob, polys, rgb=(0.5, 0.5, 0.5)):
     me = ob.data
-    a = export.ensure_target_layer(me)
+    a = layers.ensure_target_layer(me)
     col = np.zeros((len(me.loops), 4), dtype=np.float32)
     for p in polys:
         poly = me.polygons[p]

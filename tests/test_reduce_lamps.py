@@ -194,9 +194,9 @@ def test_a_scene_whose_lamps_light_nothing_is_refused(tmp_path, run_cli):
 
 
 def test_the_lamp_state_marks_its_copies_as_relight_made():
-    from relight_addon.blender import export, lamp_state
+    from relight_addon.blender import lamp_state, visibility
 
-    assert lamp_state.OWNER_PROP == export.RELIGHT_OWNER_PROP
+    assert lamp_state.OWNER_PROP == visibility.RELIGHT_OWNER_PROP
 
 
 

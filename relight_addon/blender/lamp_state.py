@@ -20,7 +20,7 @@ __all__ = ["STATE_PROP", "DATA_PROP", "before", "world_matrix", "visible_before"
 
 STATE_PROP = "relight_lamp_original"
 DATA_PROP = "relight_lamp_original_data"
-#: the owner property of everything Relight makes (export.RELIGHT_OWNER_PROP)
+#: the owner property of everything Relight makes (visibility.RELIGHT_OWNER_PROP)
 OWNER_PROP = "relight_owner"
 
 

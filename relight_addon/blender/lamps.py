@@ -117,8 +117,8 @@ def _light_linking(ob) -> bool:
 
 def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
     """(lamps, warnings): the scene's lamps as engine.lamps.Lamp, and what is not modelled.
-    ``renderable``: the names of the objects that render (export.render_visible_objects);
-    ``owner_of(ob)``: the result that made ``ob`` (export.owner_of: its lamps are not scene light).
+    ``renderable``: the names of the objects that render (visibility.render_visible_objects);
+    ``owner_of(ob)``: the result that made ``ob`` (visibility.owner_of: its lamps are not scene light).
     ``dark``: a list that gets, for each lamp that renders but emits nothing in Cycles, its name
     and why ("'Key' (0 W)"): a lamp of Power 0 or a black colour, an area lamp of size 0
     (``Light::has_contribution``, intern/cycles/scene/light.cpp: "Area light with a size of zero

@@ -92,7 +92,7 @@ def match_light_paths(scene, rho_max: float) -> dict:
         if cur[k] != v:
             setattr(scene.cycles, k, v)
             changed[k] = (cur[k], v)
-    from .export import work_plane
+    from .layers import work_plane
 
     for ob in scene.objects:  # work planes: light passes through them, as Relight models them
         if ob.type == "MESH" and work_plane(ob):
@@ -124,7 +124,8 @@ def scene_materials(context=None) -> dict:
     Relight exports (no material: the default grey)."""
     import bpy
 
-    from .export import DEFAULT_REFLECTANCE, exported_objects
+    from .exported_materials import DEFAULT_REFLECTANCE
+    from .visibility import exported_objects
     from .materials import surface_closure
 
     context = context or bpy.context
@@ -203,6 +204,14 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                 f"truncated after {kept_terms(n_eff)} reflections); {n_req} bounces are needed for reflectance "
                 f"{rho_max:.2f}: "
                 "use Match Cycles Light Paths (--out writes them)")
+    _filter_glossy(cur, glossy_share, block, warnings)
+    _clamping(cur, e, rho_max, block, warnings)
+    return block, warnings
+
+
+def _filter_glossy(cur, glossy_share, block, warnings) -> None:
+    """``assess``'s Filter Glossy check: noted in ``block`` and named in ``warnings`` when the scene
+    blurs glossy reflections and its materials have a glossy part."""
     if glossy_share is None:
         glossy_share = scene_materials()["max_glossy"]
     if cur["blur_glossy"] > 0 and glossy_share > 0.005:
@@ -211,6 +220,11 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
                         "bounce without keeping their energy, so the specular layers render darker in indirect light "
                         "(measured ~4 % on targets of default Principled materials; not estimated here); use Match "
                         "Cycles Light Paths (--out turns it off)")
+
+
+def _clamping(cur, e, rho_max, block, warnings) -> None:
+    """``assess``'s clamping check: noted in ``block`` and named in ``warnings`` when the lights'
+    radiance (from their exitance ``e``) reaches the scene's sample clamps."""
     radiance_max = float(radiance_from_exitance(max(e.max(), 0.0)))
     clamps = {k: cur[k] for k in ("sample_clamp_direct", "sample_clamp_indirect") if cur[k] > 0}
     if clamps:
@@ -222,7 +236,6 @@ def assess(scene, F, reflectance, B, mask=None, area=None, what="targets", gloss
             warnings.append(f"{what_c}: the lights' radiance reaches {radiance_max:.3g} W/m^2/sr, so Cycles may "
                             "render darker than predicted (clamping effects are not estimated); use Match Cycles "
                             "Light Paths (--out turns clamping off)")
-    return block, warnings
 
 
 def assess_solve(scene, outcome, settings=None, products=None) -> tuple:

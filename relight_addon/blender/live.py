@@ -41,7 +41,8 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from . import export, lamp_state, light_paths, preparation, results
+from . import export, lamp_state, light_paths, meshes, preparation, results, visibility
+from .lamps import export_lamps
 from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import scene_lamps_differ
@@ -134,7 +135,7 @@ class LiveSession:
                 return
         if self.lamps_moved and self.worker is None:  # the scene's lamps read again: re-solved around them
             self.lamps_moved = set()
-            lamps, _ = export.export_lamps(context, export.render_visible_objects(context), export.owner_of)
+            lamps, _ = export_lamps(context, visibility.render_visible_objects(context), visibility.owner_of)
             self.lamps = lamps
             self.shown = None  # the answer shown is of the lamps before
             if self._faces is not None:
@@ -373,8 +374,8 @@ def _geometry_digest(objects) -> dict:
         editing = ob.mode == "EDIT"  # (its evaluated mesh wraps the edit mesh: converted to read it)
         me = ob_eval.to_mesh() if editing else ob_eval.data
         try:
-            co = export.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
-            loops = export.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
+            co = meshes.foreach_array(me.vertices, "co", len(me.vertices), np.float32, 3)
+            loops = meshes.foreach_array(me.loops, "vertex_index", len(me.loops), np.int32)
         finally:
             if editing:
                 ob_eval.to_mesh_clear()
@@ -404,14 +405,14 @@ def _gone(context, names, objects, pointers=None) -> list:
 
 def _watched(context) -> tuple:
     """(meshes, lamps) a render of the view layer shows, the user's (not Relight's results):
-    the meshes' names (export.exported_objects); the lamps' (name, data-block address) pairs,
+    the meshes' names (visibility.exported_objects); the lamps' (name, data-block address) pairs,
     hidden from renders as lamps.export_lamps reads it (a lamp a shown reduction turned off: as
     the user set it)."""
-    renderable = export.render_visible_objects(context)
-    meshes = {ob.name for ob in export.exported_objects(context)}
+    renderable = visibility.render_visible_objects(context)
+    meshes = {ob.name for ob in visibility.exported_objects(context)}
     lamps = set()
     for ob in context.scene.objects:
-        if ob.type == "LIGHT" and ob.name in renderable and export.owner_of(ob) is None:
+        if ob.type == "LIGHT" and ob.name in renderable and visibility.owner_of(ob) is None:
             was = lamp_state.before(ob)
             if not (ob.hide_render if was is None else was["hide_render"]):
                 lamps.add((ob.name, ob.as_pointer()))
@@ -495,7 +496,7 @@ def _on_depsgraph(scene, depsgraph=None):
             s.touched.add(("OBJECT", idb.name))
         kind = ("object" if isinstance(idb, bpy.types.Object) else "lamp" if isinstance(idb, bpy.types.Light)
                 else _WATCHED.get(type(idb).__name__))
-        if kind is None or export.owner_of(idb) is not None:
+        if kind is None or visibility.owner_of(idb) is not None:
             continue
         # (a mesh's placement is in the geometry digest: a mode switch also flags its transform)
         if kind == "object" and not (u.is_updated_transform and idb.type == "LIGHT"):

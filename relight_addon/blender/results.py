@@ -53,9 +53,9 @@ from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
 from .lamps import cycles_gain, make_plain
-from .export import DISPLAY_ATTRIBUTE
-from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
-                     owner_of, tag_owned)
+from .layers import DISPLAY_ATTRIBUTE, RADIOSITY_ATTRIBUTE
+from .meshes import fingerprint_change, foreach_array, loop_polygons
+from .visibility import RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, owner_of, tag_owned
 
 EMISSION_ATTRIBUTE = "relight_emission"
 REFLECTANCE_ATTRIBUTE = "relight_reflectance"
@@ -630,7 +630,7 @@ def empty_collection(coll, ours) -> bool:
     """Ownership of a collection's *contents*, checked before any removal (issue 35): remove the
     objects of ``coll`` that ``ours(object)`` says Relight made, then the collection itself only if
     nothing else is left in it. What the artist put there (a lamp of their own, a Shift-D copy of
-    Relight's, a Relight lamp they renamed: export.owner_of) stays, and so does the collection, then
+    Relight's, a Relight lamp they renamed: visibility.owner_of) stays, and so does the collection, then
     theirs (its owner marks removed). Returns True when the collection was removed."""
     _remove_objects([o for o in coll.objects if ours(o)])
     if len(coll.objects) or len(coll.children):
@@ -932,7 +932,7 @@ def make_area_lights(scene, index) -> dict:
     Light's type), the object the cell lies on or the lamp hangs from (the nearest of the objects
     holding light cells, else of the solved objects), the first number from 1 no object has yet: an
     artist's object of that name keeps it. Converting the same row again after showing it again
-    replaces the lights this made (those it still marks: export.owner_of's rule) and so gives the
+    replaces the lights this made (those it still marks: visibility.owner_of's rule) and so gives the
     same names.
 
     All or nothing: everything is computed and checked (the row is the one shown and not converted
@@ -1050,7 +1050,7 @@ def make_area_lights(scene, index) -> dict:
 
 def _mark_area_light(ob, rid) -> None:
     """Make Area Lights' lights are the user's lights (a solve counts them), marked only so that the
-    next Make Area Lights of the same result replaces them and nothing else (export.owner_of's
+    next Make Area Lights of the same result replaces them and nothing else (visibility.owner_of's
     rule: a copy, of another name, is not replaced)."""
     ob[AREA_LIGHTS_PROP] = rid or ""
     ob[RELIGHT_NAME_PROP] = ob.name

@@ -76,60 +76,10 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
     H = max(width // 2, 1)
     made = {}
     try:
-        made["world"] = w = world.copy()
-        if not w.cycles_visibility.camera:
-            w.cycles_visibility.camera = True  # the copy is what camera rays see, whatever the user's setting
-        # camera rays only: no importance map of the World as a light (Cycles would evaluate the
-        # World at its sample_map_resolution first, seconds for an HDRI)
-        w.cycles.sampling_method = "NONE"
-        made["camera_data"] = cd = bpy.data.cameras.new("relight world map")
-        cd.type = "PANO"
-        cd.panorama_type = "EQUIRECTANGULAR"
-        cd.latitude_min, cd.latitude_max = -0.5 * math.pi, 0.5 * math.pi
-        cd.longitude_min, cd.longitude_max = -math.pi, math.pi
-        made["camera"] = cam = bpy.data.objects.new("relight world map", cd)
-        cam.rotation_euler = (0.5 * math.pi, 0.0, 0.0)  # looking along +Y, its up +Z
-        made["scene"] = sc = bpy.data.scenes.new("relight world map")
-        sc.collection.objects.link(cam)
-        sc.camera = cam
-        sc.world = w
-        r = sc.render
-        r.engine = "CYCLES"
-        r.resolution_x, r.resolution_y, r.resolution_percentage = width, H, 100
-        r.film_transparent = False
-        r.use_compositing = False
-        r.use_sequencer = False
-        c = sc.cycles
-        c.device = "CPU"
-        c.use_adaptive_sampling = False
-        c.use_denoising = False
-        c.pixel_filter_type = "BOX"
-        c.filter_width = 1.0
-        c.seed = 0
-        sc.view_settings.view_transform = "Standard"
-        r.image_settings.file_format = "OPEN_EXR"
-        r.image_settings.color_depth = "32"
+        sc = _map_scene(world, width, H, made)
         radiance = _render(sc, width, H, samples)
         env = EnvironmentMap(radiance)
-        want = np.zeros((H, width), dtype=bool)  # the texels to render finer: the suns found, and the hinted
-        for sel, _, _ in env.sun_regions():
-            want |= sel
-        for d in sun_hints:
-            row, col = env.texel(np.asarray(d, dtype=np.float64).reshape(1, 3))
-            want[row[0], col[0]] = True
-        from scipy import ndimage
-
-        details = []
-        labels, n = ndimage.label(ndimage.binary_dilation(want, np.ones((3, 3), dtype=bool)))
-        for rs, cs in ndimage.find_objects(labels):  # each block: the texels and one around them
-            r0, r1, c0, c1 = rs.start, rs.stop, cs.start, cs.stop
-            fine = _render(sc, width, H, sun_samples, (r0, r1, c0, c1), sun_scale)
-            details.append(Detail(r0, c0, sun_scale, fine))
-            om = _solid_angles(H * sun_scale, width * sun_scale, np.arange(r0 * sun_scale, r1 * sun_scale),
-                               np.arange(c0 * sun_scale, c1 * sun_scale))
-            k, h, w = sun_scale, r1 - r0, c1 - c0  # the block's texels: the fine ones' mean over solid angle
-            radiance[r0:r1, c0:c1] = (fine * om[..., None]).reshape(h, k, w, k, 3).sum(axis=(1, 3)) / \
-                om.reshape(h, k, w, k).sum(axis=(1, 3))[..., None]
+        details = _sun_details(sc, env, radiance, (H, width), sun_hints, sun_samples, sun_scale)
         return EnvironmentMap(radiance, details)
     finally:
         if "scene" in made:
@@ -141,6 +91,72 @@ def render_world_map(world, width: int = MAP_WIDTH, samples: int = MAP_SAMPLES,
         if "world" in made:
             bpy.data.worlds.remove(made["world"])
 
+
+
+def _map_scene(world, width, H, made):
+    """A temporary scene that renders a copy of ``world`` with an equirectangular camera, width x
+    H pixels (what it makes goes into ``made``: the caller removes it)."""
+    made["world"] = w = world.copy()
+    if not w.cycles_visibility.camera:
+        w.cycles_visibility.camera = True  # the copy is what camera rays see, whatever the user's setting
+    # camera rays only: no importance map of the World as a light (Cycles would evaluate the
+    # World at its sample_map_resolution first, seconds for an HDRI)
+    w.cycles.sampling_method = "NONE"
+    made["camera_data"] = cd = bpy.data.cameras.new("relight world map")
+    cd.type = "PANO"
+    cd.panorama_type = "EQUIRECTANGULAR"
+    cd.latitude_min, cd.latitude_max = -0.5 * math.pi, 0.5 * math.pi
+    cd.longitude_min, cd.longitude_max = -math.pi, math.pi
+    made["camera"] = cam = bpy.data.objects.new("relight world map", cd)
+    cam.rotation_euler = (0.5 * math.pi, 0.0, 0.0)  # looking along +Y, its up +Z
+    made["scene"] = sc = bpy.data.scenes.new("relight world map")
+    sc.collection.objects.link(cam)
+    sc.camera = cam
+    sc.world = w
+    r = sc.render
+    r.engine = "CYCLES"
+    r.resolution_x, r.resolution_y, r.resolution_percentage = width, H, 100
+    r.film_transparent = False
+    r.use_compositing = False
+    r.use_sequencer = False
+    c = sc.cycles
+    c.device = "CPU"
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.pixel_filter_type = "BOX"
+    c.filter_width = 1.0
+    c.seed = 0
+    sc.view_settings.view_transform = "Standard"
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    return sc
+
+
+def _sun_details(sc, env, radiance, size, sun_hints, sun_samples, sun_scale) -> list:
+    """The suns of ``env`` and the hinted directions rendered ``sun_scale`` times finer
+    (engine.world.Detail, one per block of texels); ``radiance`` gets each block's fine texels'
+    mean over solid angle (``size``: the map's rows and columns)."""
+    from scipy import ndimage
+
+    H, width = size
+    want = np.zeros((H, width), dtype=bool)  # the texels to render finer: the suns found, and the hinted
+    for sel, _, _ in env.sun_regions():
+        want |= sel
+    for d in sun_hints:
+        row, col = env.texel(np.asarray(d, dtype=np.float64).reshape(1, 3))
+        want[row[0], col[0]] = True
+    details = []
+    labels, n = ndimage.label(ndimage.binary_dilation(want, np.ones((3, 3), dtype=bool)))
+    for rs, cs in ndimage.find_objects(labels):  # each block: the texels and one around them
+        r0, r1, c0, c1 = rs.start, rs.stop, cs.start, cs.stop
+        fine = _render(sc, width, H, sun_samples, (r0, r1, c0, c1), sun_scale)
+        details.append(Detail(r0, c0, sun_scale, fine))
+        om = _solid_angles(H * sun_scale, width * sun_scale, np.arange(r0 * sun_scale, r1 * sun_scale),
+                           np.arange(c0 * sun_scale, c1 * sun_scale))
+        k, h, w = sun_scale, r1 - r0, c1 - c0  # the block's texels: the fine ones' mean over solid angle
+        radiance[r0:r1, c0:c1] = (fine * om[..., None]).reshape(h, k, w, k, 3).sum(axis=(1, 3)) / \
+            om.reshape(h, k, w, k).sum(axis=(1, 3))[..., None]
+    return details
 
 #: Sky Texture models that draw a sun disc (Blender 4.x: NISHITA; 5.x: the scattering models)
 SUN_DISC_SKIES = ("NISHITA", "SINGLE_SCATTERING", "MULTIPLE_SCATTERING")

@@ -1,7 +1,7 @@
 """What the back side of a face sees (no bpy): Cycles' mesh emission leaves both sides of a face.
 
 The radiosity model's faces are one-sided (a ray that reaches a back side is absorbed), while
-Cycles shades and emits both sides of a mesh face alike. blender/export.py decides with
+Cycles shades and emits both sides of a mesh face alike. engine/two_sided.py decides with
 ``back_view`` what to do with the back of each emitting face of an open mesh: cosine-weighted
 rays from points uniform by area on the face, leaving its back side, tell
 
@@ -16,7 +16,7 @@ rays from points uniform by area on the face, leaving its back side, tell
 A back that sees the scene from afar (a plane lamp hanging in a room) is modelled as a face of
 its own; one that lies against a surface (``distance`` small against the emitter's size: a lamp
 quad just under a ceiling) would trap its light in the gap, which patch-constant radiosity
-cannot resolve, and is named in a warning instead (export.py).
+cannot resolve, and is named in a warning instead (engine/two_sided.py).
 """
 from __future__ import annotations
 

@@ -30,7 +30,7 @@ from bpy.props import BoolProperty, EnumProperty, FloatProperty, PointerProperty
 
 from ...engine.scene import SceneError
 from ...pipeline import false_colour as fc
-from .. import export, results
+from .. import layers, meshes, results
 
 #: the scene's colour management while a false-colour view is shown
 STANDARD = {"view_transform": "Standard", "look": "None", "exposure": 0.0, "gamma": 1.0}
@@ -142,11 +142,11 @@ def _remove_layers(scene) -> None:
         if ob.type != "MESH" or ob.data is None or ob.data.library is not None:
             continue
         colors = ob.data.color_attributes
-        attr = colors.get(export.DISPLAY_ATTRIBUTE)
+        attr = colors.get(layers.DISPLAY_ATTRIBUTE)
         if attr is None:
             continue
         colors.remove(attr)
-        radiosity = colors.get(export.RADIOSITY_ATTRIBUTE)
+        radiosity = colors.get(layers.RADIOSITY_ATTRIBUTE)
         if radiosity is not None:
             colors.active_color = radiosity
         ob.data.update()
@@ -160,18 +160,18 @@ def write_layer(ob, poly_colours, smooth=False) -> None:
     if not np.all(np.isfinite(values)):
         raise SceneError(f"{ob.name}: refusing to write non-finite colours")
     if smooth:
-        area = export.foreach_array(me.polygons, "area", len(me.polygons), np.float64)
+        area = meshes.foreach_array(me.polygons, "area", len(me.polygons), np.float64)
         corner = results._vertex_smoothed_corners(me, values, area)
     else:
-        corner = values[export.loop_polygons(me)[0]]
+        corner = values[meshes.loop_polygons(me)[0]]
     colors = me.color_attributes
-    attr = colors.get(export.DISPLAY_ATTRIBUTE)
+    attr = colors.get(layers.DISPLAY_ATTRIBUTE)
     if attr is not None and (attr.domain != "CORNER" or attr.data_type != "FLOAT_COLOR"):
         colors.remove(attr)
         attr = None
     if attr is None:
         render = colors.render_color_index
-        attr = colors.new(export.DISPLAY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+        attr = colors.new(layers.DISPLAY_ATTRIBUTE, "FLOAT_COLOR", "CORNER")
         if 0 <= render < len(colors):
             colors.render_color_index = render
     rgba = np.ones((len(me.loops), 4), dtype=np.float32)
@@ -208,7 +208,7 @@ def refresh(scene, held=None) -> list:
         if v.mode != "PREDICTED" or v.exposure != 0.0:
             shown, data = current_view(scene)
         objects = results.check_stored(scene, data, trusted=True) if shown else {}
-        colours = None if shown is None else export.srgb_to_linear(shown.colours) if shown.display else shown.colours
+        colours = None if shown is None else layers.srgb_to_linear(shown.colours) if shown.display else shown.colours
         if colours is not None and not np.all(np.isfinite(colours)):
             raise SceneError("the stored result gives non-finite colours: solve again")
         seen = set()

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, IntProperty
 
-from .. import ADDON_PACKAGE, export, live, results
+from .. import ADDON_PACKAGE, layers, live, results
 from ...pipeline import jobs
 from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
@@ -21,8 +21,8 @@ from .properties import set_curve_index, show_row_panel, ui_value
 from ...engine.options import JobOptions
 from ...engine.scene import SceneError
 
-TARGET = export.TARGET_ATTRIBUTE
-FORBIDDEN = export.FORBIDDEN_ATTRIBUTE
+TARGET = layers.TARGET_ATTRIBUTE
+FORBIDDEN = layers.FORBIDDEN_ATTRIBUTE
 
 
 def job_options(settings, validate=True) -> JobOptions:
@@ -87,8 +87,8 @@ class RELIGHT_OT_paint_targets(bpy.types.Operator):
     def execute(self, context):
         obj = context.active_object
         try:  # validated first: a linked mesh, or a relight_target of another domain or type, is refused
-            export.check_writable_mesh(obj)
-            layer = export.ensure_target_layer(obj.data)  # the existing layer of either colour type
+            layers.check_writable_mesh(obj)
+            layer = layers.ensure_target_layer(obj.data)  # the existing layer of either colour type
         except SceneError as exc:
             return _refuse(self, exc)
         colors = obj.data.color_attributes
@@ -128,9 +128,9 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
         objs = [o for o in context.objects_in_mode if o.type == "MESH"]
         try:  # every object checked before any is written: all or nothing
             for obj in objs:
-                export.check_writable_mesh(obj)
-                export.target_layer(obj.data, obj.name)  # None, or a Face Corner colour layer of either type
-                export.lux_layer(obj.data, obj.name)  # None, or a Face float layer
+                layers.check_writable_mesh(obj)
+                layers.target_layer(obj.data, obj.name)  # None, or a Face Corner colour layer of either type
+                layers.lux_layer(obj.data, obj.name)  # None, or a Face float layer
         except SceneError as exc:
             return _refuse(self, exc)
         count = 0
@@ -138,9 +138,9 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
         for obj in objs:
             mesh = obj.data
             bm = bmesh.from_edit_mesh(mesh)
-            lux_layer = bm.faces.layers.float.get(export.LUX_ATTRIBUTE)
+            lux_layer = bm.faces.layers.float.get(layers.LUX_ATTRIBUTE)
             if lux_layer is None and lux > 0:
-                lux_layer = bm.faces.layers.float.new(export.LUX_ATTRIBUTE)
+                lux_layer = bm.faces.layers.float.new(layers.LUX_ATTRIBUTE)
             if lux_layer is not None:
                 for f in bm.faces:
                     if f.select:
@@ -151,7 +151,7 @@ class RELIGHT_OT_fill_targets(bpy.types.Operator):
             if layer is None and bm.loops.layers.color.get(TARGET) is not None:
                 layer = bm.loops.layers.color.get(TARGET)
                 if not self.unpaint:
-                    value = tuple(export.linear_to_srgb(color[:3])) + (1.0,)
+                    value = tuple(layers.linear_to_srgb(color[:3])) + (1.0,)
             if layer is None:  # BMesh starts a new colour layer white and opaque: "painted" to Relight
                 layer = bm.loops.layers.float_color.new(TARGET)
                 for f in bm.faces:
@@ -177,7 +177,7 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
     @classmethod
     def poll(cls, context):  # (greyed out when no object of the scene has targets)
         if not any(o.type == "MESH" and (o.data.attributes.get(TARGET) is not None
-                                        or o.data.attributes.get(export.LUX_ATTRIBUTE) is not None)
+                                        or o.data.attributes.get(layers.LUX_ATTRIBUTE) is not None)
                    for o in context.scene.objects):
             cls.poll_message_set("No object of the scene has targets")
             return False
@@ -186,17 +186,17 @@ class RELIGHT_OT_clear_targets(bpy.types.Operator):
     def execute(self, context):
         objs = _mesh_objects(context, selected_only=True) or _mesh_objects(context)
         objs = [o for o in objs if o.data.attributes.get(TARGET) is not None
-                or o.data.attributes.get(export.LUX_ATTRIBUTE) is not None]
+                or o.data.attributes.get(layers.LUX_ATTRIBUTE) is not None]
         try:  # all or nothing: a linked (read-only) mesh among them refuses the whole operation
             for obj in objs:
-                export.check_writable_mesh(obj)
+                layers.check_writable_mesh(obj)
         except SceneError as exc:
             return _refuse(self, exc)
         if context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
         n = 0
         for obj in objs:
-            for name in (TARGET, export.LUX_ATTRIBUTE):
+            for name in (TARGET, layers.LUX_ATTRIBUTE):
                 attr = obj.data.attributes.get(name)
                 if attr is not None:
                     obj.data.attributes.remove(attr)
@@ -224,7 +224,7 @@ class RELIGHT_OT_select_faces(bpy.types.Operator):
         objs = [o for o in context.selected_objects if o.type == "MESH"] or [context.active_object]
         try:
             masks = {o.name: (results.shown_light_polygons(context.scene, o) if self.kind == "LIGHT"
-                              else export.face_flags(o, self.kind.lower())) for o in objs}
+                              else layers.face_flags(o, self.kind.lower())) for o in objs}
         except (SceneError, KeyError) as exc:
             return _refuse(self, exc)
         for o in objs:
@@ -272,8 +272,8 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
         objs = [o for o in context.objects_in_mode if o.type == "MESH"]
         try:  # every object checked before any is written: all or nothing
             for obj in objs:
-                export.check_writable_mesh(obj)
-                export.forbidden_layer(obj.data, obj.name)
+                layers.check_writable_mesh(obj)
+                layers.forbidden_layer(obj.data, obj.name)
         except SceneError as exc:
             return _refuse(self, exc)
         bpy.ops.object.mode_set(mode="OBJECT")
@@ -283,10 +283,10 @@ class RELIGHT_OT_forbid_faces(bpy.types.Operator):
             n = len(mesh.polygons)
             sel = np.zeros(n, dtype=bool)
             mesh.polygons.foreach_get("select", sel)
-            attr = export.ensure_forbidden_layer(mesh)
-            vals = export.read_forbidden(attr, n)
+            attr = layers.ensure_forbidden_layer(mesh)
+            vals = layers.read_forbidden(attr, n)
             vals[sel] = not self.allow
-            export.write_forbidden(attr, vals)
+            layers.write_forbidden(attr, vals)
             mesh.update()
             count += int(sel.sum())
         bpy.ops.object.mode_set(mode="EDIT")
@@ -416,7 +416,7 @@ def _back_to_painting(context, mode):
     _restore_mode(context, mode)
     if mode == "VERTEX_PAINT" and context.object.type == "MESH":
         colors = context.object.data.color_attributes
-        target = export.target_layer(context.object.data)
+        target = layers.target_layer(context.object.data)
         if target is not None:
             colors.active_color = colors[target.name]
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from ...pipeline import chart
 from ...pipeline.notes import sidebar_lines
-from .. import export, results
+from .. import layers, results, visibility
 from ...engine.formfactors import auto_rays_per_patch
 from . import viewport
 
@@ -35,8 +35,8 @@ def _bmesh_counts(obj):
     if faces > EDIT_COUNT_LIMIT:
         return None, None, faces
     layers = bm.loops.layers
-    tl = layers.float_color.get(export.TARGET_ATTRIBUTE) or layers.color.get(export.TARGET_ATTRIBUTE)
-    lux = bm.faces.layers.float.get(export.LUX_ATTRIBUTE)  # (illuminance targets count too)
+    tl = layers.float_color.get(layers.TARGET_ATTRIBUTE) or layers.color.get(layers.TARGET_ATTRIBUTE)
+    lux = bm.faces.layers.float.get(layers.LUX_ATTRIBUTE)  # (illuminance targets count too)
     targets = 0
     if tl is not None or lux is not None:
         for f in bm.faces:
@@ -44,12 +44,12 @@ def _bmesh_counts(obj):
             if (lux is not None and f[lux] > 0) or (
                     tl is not None and sum(min(max(loop[tl][3], 0.0), 1.0) for loop in loops) >= 0.5 * len(loops)):
                 targets += 1
-    if export.no_lights(obj):
+    if layers.no_lights(obj):
         return targets, 0, faces
     bool_layers = getattr(bm.faces.layers, "bool", None)
     if bool_layers is None:
-        return targets, (faces if export.FORBIDDEN_ATTRIBUTE not in obj.data.attributes else None), faces
-    fl = bool_layers.get(export.FORBIDDEN_ATTRIBUTE)
+        return targets, (faces if layers.FORBIDDEN_ATTRIBUTE not in obj.data.attributes else None), faces
+    fl = bool_layers.get(layers.FORBIDDEN_ATTRIBUTE)
     forbidden = sum(1 for f in bm.faces if f[fl]) if fl is not None else 0
     return targets, faces - forbidden, faces
 
@@ -66,8 +66,8 @@ def object_counts(obj):
             c = old[1] if old is not None and old[2] == f else None
             note = "Light candidates are counted again on leaving Edit Mode"
         return t, c, f, note
-    t = int(export.face_flags(obj, "target").sum())
-    c = int(export.face_flags(obj, "candidate").sum())
+    t = int(layers.face_flags(obj, "target").sum())
+    c = int(layers.face_flags(obj, "candidate").sum())
     f = len(obj.data.polygons)
     _last_object_mode_counts[obj.name] = (t, c, f)
     return t, c, f, None
@@ -75,11 +75,11 @@ def object_counts(obj):
 
 def _counts(context):
     """(target faces, candidate faces, faces, notes) over the mesh objects a solve exports
-    (export.exported_objects); a count is None when some object's share is unknown (see
+    (visibility.exported_objects); a count is None when some object's share is unknown (see
     object_counts)."""
     targets = candidates = faces = 0
     notes = []
-    for obj in export.exported_objects(context):
+    for obj in visibility.exported_objects(context):
         t, c, f, note = object_counts(obj)
         faces += f
         targets = None if targets is None or t is None else targets + t
@@ -93,7 +93,7 @@ def effective_max_patch_size(scene):
     """(metres, source) the solve uses when Max Patch Size is 0: the scene's
     ``relight_max_patch_size`` ("scene"), else the last solve's automatic value ("last solve": the
     diagonal of the region that decides the answer / 20, engine.extent), else (None, "auto")."""
-    size = export.scene_settings(scene).get("max_patch_size")
+    size = layers.scene_settings(scene).get("max_patch_size")
     if size:
         return float(size), "scene"
     used = last_auto(scene.relight).get("max_patch_size")

@@ -136,7 +136,7 @@ def _get_target_scale(self):
     its name, by a solve."""
     import math
 
-    from ..export import TARGET_SCALE_PROP
+    from ..layers import TARGET_SCALE_PROP
 
     value = self.id_data.get(TARGET_SCALE_PROP, 1.0)
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -145,7 +145,7 @@ def _get_target_scale(self):
 
 
 def _set_target_scale(self, value):
-    from ..export import TARGET_SCALE_PROP
+    from ..layers import TARGET_SCALE_PROP
 
     self.id_data[TARGET_SCALE_PROP] = float(value)
 

@@ -12,7 +12,7 @@ import json
 
 import bpy
 
-from .. import export
+from .. import layers
 from . import display
 
 
@@ -49,7 +49,7 @@ def _activate_radiosity_layers(scene):
         if obj.type != "MESH":
             continue
         colors = obj.data.color_attributes
-        layer = colors.get(export.RADIOSITY_ATTRIBUTE)
+        layer = colors.get(layers.RADIOSITY_ATTRIBUTE)
         if layer is not None and colors.active_color_name != layer.name:
             colors.active_color = layer
 
