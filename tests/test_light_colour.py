@@ -20,7 +20,8 @@ from relight_addon.engine.colours.blackbody import Blackbody
 from relight_addon.engine.colours.white import White
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
 from relight_addon.engine.options import JobOptions
-from relight_addon.engine.reduction import reduce_lights
+from relight_addon.engine.reduction import StopCriteria, reduce_lights
+from relight_addon.engine.registry import SELECTIONS
 
 WARM = np.array([0.7, 0.55, 0.4])  # a warm floor and walls
 
@@ -45,9 +46,10 @@ def stacked_error(prob, S, colours):
     return r
 
 
-def solve(prob, selection="greedy-swap", **kw):
+def solve(prob, selection="greedy-swap", max_lights=None, **params):
+    """The reduction of the svd solution by ``selection`` with its parameters ``params``."""
     e_x = solve_inverse(prob, "svd").exitance
-    return reduce_lights(prob, e_x, selection=selection, **kw)
+    return reduce_lights(prob, e_x, SELECTIONS[selection].bind(**params), stop=StopCriteria(max_lights=max_lights))
 
 
 def test_blackbody_is_blenders():

@@ -36,8 +36,8 @@ from ..engine.options import REFINE_RAY_FRACTION, JobOptions, OptionError, check
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.plausibility import MIN_UTILISATION
 from ..engine.radiosity import solve_radiosity
-from ..engine.reduction import ReductionResult, reduce_lights
-from ..engine.registry import ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS
+from ..engine.reduction import ReductionResult, StopCriteria, StrokeStart, reduce_lights
+from ..engine.registry import DISTRIBUTIONS, ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS
 from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from .polygons import PolygonMap
@@ -215,7 +215,7 @@ def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=Non
 
 def uses_kernel_pairs(options: JobOptions, mode: str = "inverse") -> bool:
     """Whether the job's estimator computes the light-to-target pairs by the kernel (inverse mode)."""
-    return mode == "inverse" and bool(ESTIMATORS[options.estimator].get("kernel_pairs", False))
+    return mode == "inverse" and ESTIMATORS[options.estimator].traits.kernel_pairs
 
 
 def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -> int:
@@ -239,7 +239,7 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
                                  lamp_refinements=k * (k + 1) // 2, max_lights=options.max_lights,
                                  patches_per_light=per_light,
                                  colour_relaxation=mode == "inverse"
-                                 and bool(LIGHT_COLOURS[options.light_colour].get("relaxation", False)))
+                                 and LIGHT_COLOURS[options.light_colour].traits.relaxation)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:
@@ -353,7 +353,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
     history = []
     # the paper's heuristics redistribute between lights that partition the candidates: single-scale;
     # direct-lighting mode reduces the scene's own lamps: one light per emitter polygon
-    scales = None if SELECTIONS[options.selection].get("multiscale") else ("cell",)
+    scales = None if SELECTIONS[options.selection].traits.multiscale else ("cell",)
     if mode == "direct":
         scales = ("polygon",)
     for p in range(passes + 1):
@@ -530,14 +530,14 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the
     final point. ``curve_lights``, ``initial``: a stroke's re-solve (Live; reduce_lights': a
     per-k curve to ``curve_lights``, the quick search, from the configurations ``initial``)."""
-    by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
-    red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
-                        max_lights=None if by_lp else options.max_lights,
-                        relative_error_threshold=None if by_lp else options.error_threshold,
-                        require_positive=options.require_positive, tolerance=options.param("tolerance"),
-                        uniformity=options.param("uniformity"),
-                        coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
-                        initial=initial, quick=curve_lights is not None, nnls_start=nnls_start,
+    selection = SELECTIONS[options.selection]
+    by_lp = selection.traits.needs_tolerance  # the programme decides, not the stop criteria
+    distribution = DISTRIBUTIONS[options.distribution]
+    red = reduce_lights(model.problem, e_x, selection.bind(options), distribution.bind(options),
+                        StopCriteria(max_lights=None if by_lp else options.max_lights,
+                                     relative_error_threshold=None if by_lp else options.error_threshold,
+                                     require_positive=options.require_positive),
+                        stroke=StrokeStart(curve_lights, initial, nnls_start) if curve_lights is not None else None,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
@@ -621,7 +621,8 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     problem.correct_direct(todo, dH)
     norm = problem.target_norm or 1.0
     before = [float(pt.relative_error) for pt in red.curve]
-    refit = SELECTIONS[options.selection].get("refit")  # a selection's own programme (least-power's LP)
+    selection = SELECTIONS[options.selection]
+    refit = selection.traits.refit  # a selection's own programme (least-power's LP)
     corrected, notes = set(todo), []
     for i, pt in enumerate(red.curve):
         ids = np.asarray(pt.lights, dtype=np.int64)
@@ -633,7 +634,7 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
             e = e + _least_squares_change(problem, ids, e) if len(ids) == problem.n_lights else e
         elif refit is not None:
             view = colour_problem(problem, problem.colour, ids, e)  # (the configuration's colours kept)
-            e, note = refit(view or problem, ids, options.param("tolerance"), options.param("uniformity"))
+            e, note = refit(view or problem, ids, **selection.bind(options).params)
             e = view.exitance_of(ids, e) if view is not None else e
             notes += [note] if i == red.final_index and note else []
             on = e.max(axis=1) > 0
@@ -678,7 +679,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     is not refined: the refinement lowers the error and refits by least squares, which broke the
     programme's band and goal (the gallery's strip: U0 0.563 reported against the 0.6 'met')."""
     if model.mode != "inverse" or not options.param("refine_lamps", False) or not offered_kinds(options) \
-            or SELECTIONS[options.selection].get("refit") is not None:
+            or SELECTIONS[options.selection].traits.refit is not None:
         return None
     problem, lights, patches = model.problem, model.lights, model.patches
     todo = [i for i, pt in enumerate(red.curve)
@@ -1085,7 +1086,7 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     mode = model.mode
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
-    if live and not SELECTIONS[options.selection].get("distributes", True):  # (the selection never reads e_x)
+    if live and not SELECTIONS[options.selection].traits.distributes:  # (the selection never reads e_x)
         e_x, inv = np.zeros((model.problem.n_lights, 3)), None
     else:
         e_x, inv = solve_stage(model, options)
