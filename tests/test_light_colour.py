@@ -99,7 +99,7 @@ def test_blackbody_lights_are_blackbody_and_k1_is_exhaustive():
     reported temperature, in the range; with one light the curve's error is the best of every light
     at every temperature of the grid (stacked NNLS here); the certificate (the cone relaxation) is
     below every configuration found and below blackbody lights at temperatures off the grid."""
-    mode = Blackbody(JobOptions(light_colour="blackbody", temperature_min=3000.0, temperature_max=6000.0))
+    mode = Blackbody(temperature_min=3000.0, temperature_max=6000.0)
     prob = room(colour=mode)
     red = solve(prob, max_lights=3)
     for pt in red.curve:

@@ -82,3 +82,10 @@ def test_the_job_options_reach_the_selection_and_the_distribution():
     tight = Distributor(prob, "coplanar")  # the declared default, 1e-3
     assert loose.kind == tight.kind == "coplanar"
     assert loose.pair[0, 1] and not tight.pair[0, 1]
+
+
+def test_the_light_colour_receives_its_range():
+    o = JobOptions(light_colour="blackbody", temperature_min=3000.0).validate()
+    assert LIGHT_COLOURS["blackbody"].bind(o)().range == (3000.0, 6500.0)
+    assert LIGHT_COLOURS["auto"].bind(o)().blackbody.range == (3000.0, 6500.0)
+    assert LIGHT_COLOURS["white"].bind(o)().name == "white"  # (declares no parameter: receives none)

@@ -259,7 +259,7 @@ class _JobOptionsBase:
                 reason = self.unused_reason(name)
                 if reason:
                     raise ValueError(f"{p.cli_flag} {reason}")
-        LIGHT_COLOURS[self.light_colour](self)  # (its own checks: a blackbody range, before any work)
+        LIGHT_COLOURS[self.light_colour].bind(self)()  # (its own checks: a blackbody range, before any work)
         return self
 
     def to_dict(self):

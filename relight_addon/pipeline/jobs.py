@@ -558,7 +558,7 @@ def target_regions(faces, patches, problem) -> np.ndarray:
 def light_colour_of(problem, options) -> tuple:
     """(the problem's light colour mode, None for free colours; a note): the option's mode, or
     the one an automatic mode chooses for this problem (engine/colours/auto.py)."""
-    mode, note = LIGHT_COLOURS[options.light_colour](options), None
+    mode, note = LIGHT_COLOURS[options.light_colour].bind(options)(), None
     if hasattr(mode, "choose"):
         mode, note = mode.choose(problem)
     return (None if mode.free else mode), note
