@@ -17,6 +17,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.reduction import StopCriteria, reduce_lights  # noqa: E402
 from relight_addon.engine.scene import mesh_patches, polygon_faceset  # noqa: E402
 
@@ -53,13 +54,13 @@ def main():
     rng = np.random.default_rng(0)
     e = np.zeros((P, 3))
     e[rng.choice(np.flatnonzero(cand), 3, replace=False)] = rng.uniform(20, 60, (3, 3))
-    base = InverseProblem(F, patches.area, patches.reflectance, band, np.zeros((P, 3)), cand)
+    base = InverseProblem(F, patches.area, patches.reflectance, [PaintedRadiance.masked(band, np.zeros((P, 3)))], cand)
     b = base.forward_radiosity(e) * band[:, None]
     print(f"scene: {P} patches, {band.sum()} targets, {cand.sum()} candidates, form factors {t_ff:.2f} s "
           f"({args.rays} rays/patch)")
 
     def fresh():
-        return InverseProblem(F, patches.area, patches.reflectance, band, b, cand, c, n)
+        return InverseProblem(F, patches.area, patches.reflectance, [PaintedRadiance.masked(band, b)], cand, c, n)
 
     rows = []
     res = {}

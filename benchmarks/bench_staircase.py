@@ -33,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.reduction import reduce_lights  # noqa: E402
 from relight_addon.engine.scene import mesh_patches  # noqa: E402
 
@@ -98,7 +99,8 @@ def main():
                     "candidates": int(cand.sum()), "rays_per_patch": rays, "form_factors_s": t_ff}
 
     def fresh():
-        return InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+        return InverseProblem(F, patches.area, patches.reflectance,
+                              [PaintedRadiance.masked(patches.target, patches.target_radiosity)],
                               cand, patches.center, patches.normal)
 
     # 1. the mathematical phase. One untimed solve first: the process's first dense solves pay

@@ -47,7 +47,7 @@ bpy.ops.wm.save_as_mainfile(filepath=out + "/lamp_room.blend")
 RUNS = [("solve", "staircase"), ("solve", "living_room"), ("solve", "gallery"), ("solve", "lamp_room"),
         ("radiosity", "lamp_room"), ("reduce", "lamp_room")]
 
-SKIP = ("time", "timings", "path", "file", "elapsed", "seconds", "_s", "version", "estimate")
+SKIP = ("time", "timings", "path", "file", "elapsed", "seconds", "_s", "version", "estimate", "input", "output")
 
 
 def build(out):

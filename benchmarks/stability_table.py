@@ -29,6 +29,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
 from relight_addon.engine.reduction import StopCriteria, reduce_lights  # noqa: E402
 from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS  # noqa: E402
@@ -83,7 +84,8 @@ def painted(patches, F, targets, cand, seed=0):
 
 
 def problem(patches, F, targets, b, cand):
-    return InverseProblem(F, patches.area, patches.reflectance, targets, b, cand, patches.center, patches.normal)
+    return InverseProblem(F, patches.area, patches.reflectance, [PaintedRadiance.masked(targets, b)],
+                          cand, patches.center, patches.normal)
 
 
 def case_builders():

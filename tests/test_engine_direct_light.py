@@ -15,6 +15,7 @@ import pytest
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors
 from relight_addon.engine.inverse import InverseProblem
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.kernel_transfer import lights_direct_correction
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
 
@@ -32,7 +33,8 @@ def _room():
 def _problem(ps, floor, ceiling, rays, seed, corrected):
     ff = compute_form_factors(ps, rays, seed=seed, kernel_pairs=(np.flatnonzero(floor), np.flatnonzero(ceiling)))
     b = np.where(floor[:, None], 1.0, 0.0) * np.ones(3)
-    prob = InverseProblem(ff, ps.area, ps.reflectance, floor, b, ceiling, ps.center, ps.normal)
+    prob = InverseProblem(ff, ps.area, ps.reflectance, [PaintedRadiance.masked(floor, b)],
+                          ceiling, ps.center, ps.normal)
     light = 4  # one ceiling cell (a corner one: its light reaches the far floor after reflections)
     if corrected:
         dH = lights_direct_correction(ps, prob.F, [light], prob.lights.members, ff.send, np.flatnonzero(floor),

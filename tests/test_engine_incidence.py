@@ -11,6 +11,7 @@ import pytest
 
 from relight_addon.engine.incidence import INCIDENCE_MU, first_bounce_matrices, incidence_tables
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.principled import BRDFTable, PrincipledParams, principled_albedo
 
 
@@ -97,7 +98,7 @@ def test_inverse_problem_with_first_bounce_is_consistent():
     cand[20:] = True
     b = np.zeros((n, 3))
     b[:6] = rng.uniform(1, 2, (6, 3))
-    prob = InverseProblem(F, np.ones(n), rho, target, b, cand)
+    prob = InverseProblem(F, np.ones(n), rho, [PaintedRadiance.masked(target, b)], cand)
     D = [np.zeros((n, n)) for _ in range(3)]
     for c in range(3):
         D[c][:, 20:] = 0.1 * F[:, 20:] * (c + 1)

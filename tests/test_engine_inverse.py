@@ -12,6 +12,7 @@ import scipy.sparse as sp
 import flatland
 from relight_addon.engine.inverse import (InverseError, InverseProblem, direct_lighting_problem,
                                           solve_inverse)
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity
 from relight_addon.engine.scene import SceneError
 
@@ -24,8 +25,8 @@ def room():
 
 
 def make(r, tmask, b, cmask, F=None):
-    return InverseProblem(r["F"] if F is None else F, r["area"], r["reflectance"], tmask, b, cmask,
-                          r["center"], r["normal"])
+    return InverseProblem(r["F"] if F is None else F, r["area"], r["reflectance"], [PaintedRadiance.masked(tmask, b)],
+                          cmask, r["center"], r["normal"])
 
 
 def feasible(r, seed=0, n_lights=3):
@@ -170,11 +171,11 @@ def test_unreachable_targets_are_named():
     t[n + np.flatnonzero(r["wall"] == "floor")] = True  # room 2 floor
     b = np.where(t[:, None], np.full(3, 5.0), 0.0)
     with pytest.raises(InverseError, match=r"no candidate light reaches any target.*" + str(n)):
-        solve_inverse(InverseProblem(F, area, rho, t, b, cand), "reduced")
+        solve_inverse(InverseProblem(F, area, rho, [PaintedRadiance.masked(t, b)], cand), "reduced")
     t2 = t.copy()
     t2[np.flatnonzero(r["wall"] == "floor")] = True  # and room 1 floor
     b2 = np.where(t2[:, None], np.full(3, 5.0), 0.0)
-    prob2 = InverseProblem(F, area, rho, t2, b2, cand)
+    prob2 = InverseProblem(F, area, rho, [PaintedRadiance.masked(t2, b2)], cand)
     res = solve_inverse(prob2, "reduced")
     # the problem records them (the report names their objects: tests/test_engine_artist_geometry.py)
     assert sorted(prob2.unmet.tolist()) == (n + np.flatnonzero(r["wall"] == "floor")).tolist()
@@ -250,8 +251,10 @@ def test_light_groups_make_a_face_one_light():
     cand = r["wall"] == "ceiling"
     tgt = np.where(floor[:, None], 1.0, 0.0) * np.array([1.0, 0.9, 0.8])
     groups = np.arange(P) // 2  # pairs of neighbouring patches
-    plain = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"])
-    grouped = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"],
+    plain = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, tgt)],
+                           cand, r["center"], r["normal"])
+    grouped = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, tgt)],
+                             cand, r["center"], r["normal"],
                              light_groups=groups)
     assert grouped.n_lights == len(np.unique(groups[cand])) < plain.n_lights
     for c in range(3):
@@ -270,7 +273,8 @@ def test_light_groups_make_a_face_one_light():
     # explicit SVD pseudo-inverse's solution
     np.testing.assert_allclose(solve_inverse(grouped, "svd").exitance,
                                solve_inverse(grouped, "svd", svd_driver="svd").exitance, rtol=1e-8, atol=1e-10)
-    alone = InverseProblem(r["F"], r["area"], r["reflectance"], floor, tgt, cand, r["center"], r["normal"],
+    alone = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, tgt)],
+                           cand, r["center"], r["normal"],
                            light_groups=np.arange(P))
     np.testing.assert_allclose(solve_inverse(alone, "reduced").exitance, solve_inverse(plain, "reduced").exitance)
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from relight_addon.engine import lamp_refinement as lr
+from relight_addon.engine.candidate_lamps import LAMP_POINTS
 from relight_addon.engine.lamps import lamp_irradiance
 from relight_addon.engine.lights.placed import frame
 from relight_addon.engine.lights.spot import spot_lamp
@@ -109,7 +110,7 @@ def test_refinement_finds_at_least_what_an_exhaustive_grid_of_aims_and_cones_fin
         d = aim[0] + math.tan(da) * aim[1] + math.tan(db) * aim[2]
         lamps = [spot_lamp("grid", lamp0.position, d, s, blend)
                  for s in lamp0.spot_size * np.geomspace(0.6, 1.4, 7) for blend in (0.0, 0.3, 0.6)]
-        Hs = lamp_irradiance(patches, lamps, seed=5, points_per_patch=lr.LAMP_POINTS)[:, :, 0]
+        Hs = lamp_irradiance(patches, lamps, seed=5, points_per_patch=LAMP_POINTS)[:, :, 0]
         for h in Hs.T:
             col = transport.column(h)
             err2 = 0.0

@@ -7,6 +7,7 @@ import pytest
 
 import flatland
 from relight_addon.engine.inverse import InverseProblem
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.lamps import Lamp, lamp_irradiance
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
 
@@ -84,7 +85,8 @@ def test_inverse_problem_subtracts_the_lamps_radiosity():
     rng = np.random.default_rng(1)
     H = np.where(floor[:, None], rng.uniform(1, 4, (P, 3)), 0.0)  # a lamp lighting the floor
     painted = np.where(floor[:, None], 5.0, np.zeros((P, 3)))
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], floor, painted, ~floor, r["center"], r["normal"],
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, painted)],
+                          ~floor, r["center"], r["normal"],
                           background_irradiance=H)
     for c in range(3):
         B_lamp = np.linalg.solve(np.eye(P) - r["reflectance"][:, c:c + 1] * r["F"], r["reflectance"][:, c] * H[:, c])

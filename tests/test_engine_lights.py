@@ -9,6 +9,7 @@ import scipy.sparse as sp
 
 import flatland
 from relight_addon.engine.inverse import InverseError, InverseProblem
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.lights import LightSet, kind_code
 from relight_addon.engine.registry import LIGHT_KINDS
 
@@ -53,7 +54,7 @@ def test_a_light_column_is_A_inverse_of_its_source(room):
     rng = np.random.default_rng(3)
     H_col = np.where(r["wall"] == "left", rng.uniform(1, 5, P), 0.0)  # a lamp lighting the left wall
     cand, lights = _two_lights(r, H_col)
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], floor, np.ones((P, 3)), cand,
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, np.ones((P, 3)))], cand,
                           r["center"], r["normal"], lights=lights)
     for c in range(3):
         Ainv = np.linalg.inv(np.eye(P) - RHO[c] * r["F"])
@@ -72,5 +73,7 @@ def test_a_light_without_source_is_refused(room):
     P = len(r["area"])
     cand, lights = _two_lights(r, np.zeros(P))  # the second light lights nothing
     with pytest.raises(InverseError, match="every light must have a source"):
-        InverseProblem(r["F"], r["area"], r["reflectance"], r["wall"] == "floor", np.ones((P, 3)), cand,
+        InverseProblem(r["F"], r["area"], r["reflectance"],
+                       [PaintedRadiance.masked(r["wall"] == "floor", np.ones((P, 3)))],
+                       cand,
                        r["center"], r["normal"], lights=lights)

@@ -11,6 +11,7 @@ import pytest
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import compute_form_factors
 from relight_addon.engine.inverse import InverseProblem
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.lights import candidate_mask, kind_code
 from relight_addon.engine.options import JobOptions
 from relight_addon.engine.patch_models.adaptive import AdaptiveModel
@@ -188,9 +189,11 @@ def test_power_is_conserved_across_scales(model):
     np.testing.assert_allclose((patch_e * patches.area[:, None]).sum(axis=0),
                                (e * lights.area[:, None]).sum(axis=0), rtol=1e-12)
     F = compute_form_factors(patches, rays_per_patch=256, seed=0)
-    prob = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+    prob = InverseProblem(F, patches.area, patches.reflectance,
+                          [PaintedRadiance.masked(patches.target, patches.target_radiosity)],
                           candidate_mask(patches), patches.center, patches.normal, light_basis=lights.basis)
-    cells = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+    cells = InverseProblem(F, patches.area, patches.reflectance,
+                           [PaintedRadiance.masked(patches.target, patches.target_radiosity)],
                            candidate_mask(patches), patches.center, patches.normal)
     for c in range(3):
         np.testing.assert_allclose(prob.transfer[c], cells.transfer[c] @ lights.basis.toarray(), rtol=1e-10, atol=1e-14)
@@ -236,7 +239,8 @@ def test_adaptive_matches_a_fine_uniform_reference_on_the_targets():
         e = 30.0 * frac[:, None] * np.ones(3)
         on = frac > 0
         F = compute_form_factors(patches, rays_per_patch=rays, seed=1)
-        prob = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+        prob = InverseProblem(F, patches.area, patches.reflectance,
+                              [PaintedRadiance.masked(patches.target, patches.target_radiosity)],
                               ~patches.target, patches.center, patches.normal)
         B = prob.forward_radiosity(e)
         out = np.zeros((faces.n_faces, 3))

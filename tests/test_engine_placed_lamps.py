@@ -13,6 +13,7 @@ import pytest
 
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.inverse import InverseProblem
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.lamps import lamp_irradiance
 from relight_addon.engine.lights import append_lamps
 from relight_addon.engine.lights.area import area_lamp, blender_shape
@@ -123,7 +124,8 @@ def test_a_placed_lamps_column_is_A_inverse_rho_H(box):
     ceiling = ps.normal[:, 2] < -0.9
     lights = append_lamps(None, np.flatnonzero(ceiling)[:0], P, lamps, ["spot", "area", "point"], H,
                           [0.0, lamps[1].area, 0.0])
-    prob = InverseProblem(F, ps.area, np.full((P, 3), 0.5), floor, np.ones((P, 3)), np.zeros(P, bool),
+    prob = InverseProblem(F, ps.area, np.full((P, 3), 0.5), [PaintedRadiance.masked(floor, np.ones((P, 3)))],
+                          np.zeros(P, bool),
                           ps.center, ps.normal, lights=lights)
     Ainv = np.linalg.inv(np.eye(P) - 0.5 * F)
     for c in range(3):

@@ -4,6 +4,7 @@ import pytest
 
 import flatland
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity
 from relight_addon.engine.reduction import Distributor, StopCriteria, reduce_lights
 from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS
@@ -19,8 +20,8 @@ def feasible(seed, n=(10, 8, 10, 8), n_lights=3):
     e = np.zeros((P, 3))
     e[rng.choice(np.flatnonzero(~floor), n_lights, replace=False)] = rng.uniform(10, 50, (n_lights, 3))
     B, _ = solve_radiosity(r["F"], r["reflectance"], e, method="direct")
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], floor, B * floor[:, None], ~floor,
-                          r["center"], r["normal"])
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, B * floor[:, None])],
+                          ~floor, r["center"], r["normal"])
     return prob, solve_inverse(prob, "svd").exitance
 
 
@@ -121,9 +122,9 @@ def test_stop_criteria(case):
 def test_distance_and_local_weights():
     r = flatland.room(4.0, 3.0, n_per_wall=(4, 3, 4, 3), reflectance=0.5)
     P = len(r["area"])
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], r["wall"] == "floor",
-                          np.where((r["wall"] == "floor")[:, None], np.ones(3), 0.0), r["wall"] != "floor",
-                          r["center"], r["normal"])
+    floor = r["wall"] == "floor"
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, np.ones((P, 3)))],
+                          ~floor, r["center"], r["normal"])
     d = Distributor(prob, "distance")
     np.testing.assert_allclose(d.weights([0], [3]), [[1.0]])  # one light left takes everything
     w = d.weights([0], [1, 2, 3, 4])

@@ -19,6 +19,7 @@ from relight_addon.engine import light_colour as lc
 from relight_addon.engine.colours.blackbody import Blackbody
 from relight_addon.engine.colours.white import White
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.options import JobOptions
 from relight_addon.engine.reduction import StopCriteria, reduce_lights
 from relight_addon.engine.registry import SELECTIONS
@@ -32,7 +33,8 @@ def room(target=(0.3, 0.28, 0.25), colour=None):
     r = flatland.room(4.0, 3.0, n_per_wall=(6, 5, 6, 5), reflectance=WARM)
     floor = r["wall"] == "floor"
     B = np.where(floor[:, None], np.asarray(target, dtype=np.float64)[None, :], 0.0)
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], floor, B, ~floor, r["center"], r["normal"])
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, B)],
+                          ~floor, r["center"], r["normal"])
     prob.colour = colour
     return prob
 

@@ -12,6 +12,7 @@ import bpy  # noqa: E402
 
 from test_prepared import _clustered_polygons, _stroke  # noqa: E402
 from relight_addon.pipeline import jobs  # noqa: E402
+from relight_addon.engine.targets import PaintedRadiance
 
 SAMPLES = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "sample_blends")
 
@@ -205,7 +206,8 @@ def test_live_follows_a_kept_lamp_moved_by_hand(addon):
     # against the fixed light of a problem built anew (the constructor's route) on the same patches
     H, _ = jobs.scene_light(model.faces, model.patches, model.form_factors, state.options.seed)
     p = model.patches
-    fresh = InverseProblem(model.form_factors, p.area, p.reflectance, p.target, p.target_radiosity,
+    fresh = InverseProblem(model.form_factors, p.area, p.reflectance,
+                           [PaintedRadiance.masked(p.target, p.target_radiosity)],
                            model.problem.candidate_mask, p.center, p.normal, lights=model.lights,
                            background=model.background, background_irradiance=H.sum(axis=1),
                            background_excess=jobs.scene_light_excess(model.faces, p, H))

@@ -10,6 +10,7 @@ import pytest
 
 import flatland
 from relight_addon.engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.reduction import Distributor, StopCriteria, reduce_lights
 from relight_addon.engine.registry import DISTRIBUTIONS
 
@@ -26,7 +27,7 @@ def wall(r, name):
 
 
 def problem(r, target_mask, target_radiosity, candidate_mask):
-    return InverseProblem(r["F"], r["area"], r["reflectance"], target_mask, target_radiosity,
+    return InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(target_mask, target_radiosity)],
                           candidate_mask, r["center"], r["normal"])
 
 

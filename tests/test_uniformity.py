@@ -13,6 +13,7 @@ import pytest
 import flatland
 from relight_addon.engine.colours.white import White
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
+from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity
 from relight_addon.engine.reduction import reduce_lights
 from relight_addon.engine.registry import SELECTIONS
@@ -27,7 +28,8 @@ def room(colour=None):
     E = 300.0 / 683.0
     B = np.where(floor[:, None], RHO[None, :] * E, 0.0)  # 300 lx of white light on the floor
     cand = r["wall"] == "ceiling"
-    prob = InverseProblem(r["F"], r["area"], r["reflectance"], floor, B, cand, r["center"], r["normal"])
+    prob = InverseProblem(r["F"], r["area"], r["reflectance"], [PaintedRadiance.masked(floor, B)],
+                          cand, r["center"], r["normal"])
     prob.target_region = np.zeros(prob.m, dtype=np.int64)  # one region: the floor
     prob.colour = colour
     return prob, r

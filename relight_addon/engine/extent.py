@@ -25,6 +25,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .units import TINY
+
 __all__ = ["Region", "decisive_region", "far_factor", "face_sizes", "quad_cells", "is_beyond", "DIVISIONS"]
 
 #: the automatic patch size is the region's diagonal / DIVISIONS
@@ -122,7 +124,7 @@ def _region(faces, rays, seed):
             p = org[ok] + d[ok] * np.asarray(hit["tfar"])[ok, None]
             if len(p):
                 lo, hi = np.minimum(lo, p.min(axis=0)), np.maximum(hi, p.max(axis=0))
-    if not np.linalg.norm(hi - lo) > 1e-6 * max(scene_diag, 1e-300):  # a point: the whole scene
+    if not np.linalg.norm(hi - lo) > 1e-6 * max(scene_diag, TINY):  # a point: the whole scene
         return Region(scene_lo, scene_hi, "faces", scene_diag)
     return Region(np.maximum(lo, scene_lo), np.minimum(hi, scene_hi), kind, scene_diag)
 

@@ -589,8 +589,41 @@ def compute_form_factors(
     Progress then runs to 0.5 for the rays and to 1 for the kernel pairs.
     """
     t0 = time.perf_counter()
+    rays_per_patch, threads = _checked_options(patches, rays_per_patch, sampling, reciprocity, threads,
+                                               kernel=kernel_pairs is not None)
+    # one sampler (triangles, area tables, Embree scene) for the rays and the kernel pairs
+    sampler = SceneSampler(patches)
+    tr = _Tracer(patches, int(rays_per_patch), seed, sampling, sampler=sampler)
+    P, N = tr.P, tr.N
+    dense = P <= dense_limit
+    ray_progress = (lambda f: progress(0.5 * f)) if kernel_pairs is not None and progress is not None else progress
+    matrix = _ray_counts(tr, dense, threads, cancel, ray_progress)
+    visible = visible_fraction(patches, sampler, seed)
+    if reciprocity == "weighted":
+        matrix = weigh_reciprocity(matrix, patches.area, N)
+    n_kernel = 0
+    rec = src = K = unfit = None
+    if kernel_pairs is not None:
+        rec, src = kernel_pairs
+        K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel, sampler=sampler,
+                                progress=None if progress is None else (lambda f: progress(0.5 + 0.5 * f)),
+                                **(kernel_options or {}))
+        n_kernel = K.size
+        K, unfit = _finite_kernel(K, matrix, patches, rec, src)
+    send = sending_scale(visible)
+    matrix = pairs_then_sending_scale(matrix, patches.area, send, rec, src, K)
+    if not np.all(np.isfinite(matrix if dense else matrix.data)):
+        raise SceneError("form factors contain NaN or infinite values (degenerate geometry?)")
+    return FormFactors(matrix=matrix, rays_per_patch=N, n_rays=N * P + P * BURIED_POINTS * BURIED_RAYS,
+                       seconds=time.perf_counter() - t0, sampling=sampling, reciprocity=reciprocity,
+                       kernel_pairs=int(n_kernel), visible=visible, send=send, sampler=sampler, kernel_unfit=unfit)
+
+
+def _checked_options(patches, rays_per_patch, sampling, reciprocity, threads, kernel: bool) -> tuple:
+    """compute_form_factors' options checked (ValueError naming the wrong one): (rays per patch,
+    threads), the automatic quality and os.cpu_count() in place of None."""
     if rays_per_patch is None:
-        rays_per_patch = auto_rays_per_patch(patches.n_patches, kernel=kernel_pairs is not None)
+        rays_per_patch = auto_rays_per_patch(patches.n_patches, kernel=kernel)
     if isinstance(rays_per_patch, str):
         if rays_per_patch not in QUALITY:
             raise ValueError(f"unknown quality {rays_per_patch!r}; use one of {sorted(QUALITY)}")
@@ -605,16 +638,13 @@ def compute_form_factors(
         threads = os.cpu_count() or 1
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return rays_per_patch, threads
 
-    user_progress = progress
-    if kernel_pairs is not None and progress is not None:
-        def progress(f):
-            user_progress(0.5 * f)
-    # one sampler (triangles, area tables, Embree scene) for the rays and the kernel pairs
-    sampler = SceneSampler(patches)
-    tr = _Tracer(patches, int(rays_per_patch), seed, sampling, sampler=sampler)
+
+def _ray_counts(tr: "_Tracer", dense: bool, threads, cancel, progress):
+    """F from the rays alone: each patch's hits per patch / its rays, float32, (P, P) dense or
+    CSR; traced by chunks of patches (sampling.run_chunks)."""
     P, N = tr.P, tr.N
-    dense = P <= dense_limit
     M = np.zeros((P, P), dtype=np.float32) if dense else None
     blocks = [None] * len(tr.chunks)
     stop = threading.Event()
@@ -637,38 +667,7 @@ def compute_form_factors(
         return ci
 
     run_chunks(work, len(tr.chunks), threads, stop, cancel, progress)
-    matrix = M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
-    visible = visible_fraction(patches, sampler, seed)
-    if reciprocity == "weighted":
-        matrix = weigh_reciprocity(matrix, patches.area, N)
-    n_kernel = 0
-    if kernel_pairs is not None:
-        rec, src = kernel_pairs
-        K = kernel_form_factors(patches, rec, src, seed=seed, threads=threads, cancel=cancel, sampler=sampler,
-                                progress=None if user_progress is None else (lambda f: user_progress(0.5 + 0.5 * f)),
-                                **(kernel_options or {}))
-        n_kernel = K.size
-        K, unfit = _finite_kernel(K, matrix, patches, rec, src)
-    else:
-        rec = src = K = unfit = None
-    send = sending_scale(visible)
-    matrix = pairs_then_sending_scale(matrix, patches.area, send, rec, src, K)
-    data = matrix if dense else matrix.data
-    if not np.all(np.isfinite(data)):
-        raise SceneError("form factors contain NaN or infinite values (degenerate geometry?)")
-    return FormFactors(
-        matrix=matrix,
-        rays_per_patch=N,
-        n_rays=N * P + P * BURIED_POINTS * BURIED_RAYS,
-        seconds=time.perf_counter() - t0,
-        sampling=sampling,
-        reciprocity=reciprocity,
-        kernel_pairs=int(n_kernel),
-        visible=visible,
-        send=send,
-        sampler=sampler,
-        kernel_unfit=unfit,
-    )
+    return M if dense else sp.vstack(blocks, format="csr").astype(np.float32)
 
 
 def _finite_kernel(K, matrix, patches, rec, src):

@@ -36,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .principled import _directional, oren_nayar_albedo, principled_albedo
+from .units import TINY
 
 __all__ = ["INCIDENCE_MU", "incidence_tables", "first_bounce_matrices", "lamp_incidence", "lamp_albedo_excess",
            "lamp_excess"]
@@ -114,7 +115,7 @@ def first_bounce_matrices(F, center, normal, material, tables, sources):
         keep = glossy[material[j]] & (f > 0)
         j, k, f = j[keep], k[keep], f[keep]
         d = center[k] - center[j]
-        d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        d /= np.maximum(np.linalg.norm(d, axis=1), TINY)[:, None]
         mu = np.clip(np.einsum("ij,ij->i", d, normal[j]), 0.0, 1.0)
         vals = np.empty((len(j), 3), dtype=np.float32)
         for m in np.unique(material[j]):
@@ -138,7 +139,7 @@ def lamp_incidence(lamp, points, normals) -> np.ndarray:
         w = np.broadcast_to(-np.asarray(lamp.direction, dtype=np.float64), points.shape)
     else:
         w = np.asarray(lamp.position, dtype=np.float64)[None, :] - points
-        w = w / np.maximum(np.linalg.norm(w, axis=1), 1e-300)[:, None]
+        w = w / np.maximum(np.linalg.norm(w, axis=1), TINY)[:, None]
     return np.clip(np.einsum("ij,ij->i", w, normals), 0.0, 1.0)
 
 

@@ -4,7 +4,9 @@ Per channel (R, G, B) the forward system is ``A b = e`` with
 ``A = I - diag(rho) F`` (b radiosity and e self-exitance, both W/m^2).
 The user paints radiosities ``b_P`` on a set P of m patches (targets) and
 allows lights on a set C of candidates (every patch that is not forbidden);
-forbidden patches have e = 0.
+forbidden patches have e = 0. More generally the targets are m rows ``R B = b`` of any kinds
+(engine/targets/: a painted patch's row selects it, other kinds' rows may mix patches); below, a
+selection's "rows P of A^-1" are ``R A^-1``.
 
 Two formulations of the same inverse problem, plus a physical one (each a registered
 solver in ``engine/solvers/``; see engine.registry):
@@ -50,6 +52,7 @@ from . import solvers  # noqa: F401  (registers the solvers that solve_inverse d
 from .registry import SOLVERS
 from .solvers.common import channel_groups
 from .scene import SceneError
+from .targets import PaintedRadiance, TargetRows, scene_targets
 
 __all__ = [
     "InverseError",
@@ -225,16 +228,67 @@ class InverseResult:
         return problem.patch_exitance(self.exitance)
 
 
+def _array(x, shape, name, dtype=np.float64):
+    """``x`` as an array of ``shape``, finite when float (InverseError naming ``name`` if not)."""
+    try:
+        a = np.asarray(x, dtype=dtype).reshape(shape)
+    except (ValueError, TypeError) as exc:
+        raise InverseError(f"{name} must have shape {shape}") from exc
+    if dtype is np.float64 and not np.all(np.isfinite(a)):
+        raise InverseError(f"{name} contains NaN or infinite values")
+    return a
+
+
+def _form_factor_matrix(F):
+    """(F, emission_share or None): the (P, P) matrix (CSR when sparse) of form factors or of a
+    formfactors.FormFactors, checked square and finite."""
+    share = None
+    if hasattr(F, "matrix"):  # formfactors.FormFactors
+        F, share = F.matrix, getattr(F, "emission_share", None)
+    if sp.issparse(F):
+        F = F.tocsr()
+        n, data = F.shape[0], F.data
+    else:
+        F = np.asarray(F)
+        n, data = (F.shape[0] if F.ndim == 2 else -1), F
+    if F.ndim != 2 or F.shape != (n, n) or n == 0:
+        raise InverseError(f"form factors must be a square (P, P) matrix, got shape {F.shape}")
+    if not np.all(np.isfinite(data)):
+        raise InverseError("the form factors contain NaN or infinite values")
+    return F, share
+
+
+def target_rows(targets, n_patches) -> TargetRows:
+    """The targets (a list of engine.targets objects) stacked into the problem's rows, checked:
+    at least one row, finite non-negative values."""
+    try:
+        rows = TargetRows.stack(targets, n_patches)
+    except ValueError as exc:
+        raise InverseError(str(exc)) from exc
+    if rows.m == 0:
+        raise InverseError("no target: paint a radiosity on at least one face")
+    if not np.all(np.isfinite(rows.values)):
+        raise InverseError("target radiosity contains NaN or infinite values")
+    if np.any(rows.values < 0):
+        raise InverseError("target radiosities must be non-negative")
+    return rows
+
+
 class InverseProblem:
     """Inverse lighting problem on patches.
 
     F: (P, P) form factors (dense ndarray or scipy.sparse), F[i, j] from i to j.
-    area (P,) m^2, reflectance (P, 3), target_mask (P,) bool with
-    target_radiosity (P, 3) W/m^2 (only the targets' rows are used),
+    area (P,) m^2, reflectance (P, 3), ``targets`` a list of targets (engine.targets: each kind
+    gives its rows, a linear map on B, and their values; ``target_rows`` stacks them),
     candidate_mask (P,) bool (not forbidden), center (P, 3), normal (P, 3).
     Patch centres and normals are only used by the reduction's distributions;
     ``exitance`` (P, 3) optionally holds the scene's own emitters (for the
     Gauss-Seidel error route and direct-lighting mode).
+
+    The system's rows are the targets' (``target_rows``, m of them): ``targets`` (m,) the patch of
+    each row (the first it reads when a row mixes several), ``target_mask`` (P,) the patches the
+    rows read, ``target_region`` (m,) their uniformity regions, ``b_target`` (m, 3) their values
+    less the fixed light's radiosity there.
 
     ``lights``: the LightSet (engine.lights) over the candidates, of any kinds; each light's
     column of T is A^-1 applied to its source (``transfer``). Without it, ``light_basis``
@@ -248,67 +302,22 @@ class InverseProblem:
 
     #: the light colour mode (a LIGHT_COLOURS instance, engine/colours/); None: free colours
     colour = None
-    #: optional (m,) per target row: the object of an illuminance target, -1 for a painted one
-    #: (pipeline.jobs.target_regions: the least-power selection's uniformity regions)
-    target_region = None
 
-    def __init__(self, F, area, reflectance, target_mask, target_radiosity, candidate_mask,
+    def __init__(self, F, area, reflectance, targets, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
                  first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,
                  background_excess=None):
-        share = None
-        if hasattr(F, "matrix"):  # formfactors.FormFactors
-            F, share = F.matrix, getattr(F, "emission_share", None)
-        if sp.issparse(F):
-            F = F.tocsr()
-            n = F.shape[0]
-            data = F.data
-        else:
-            F = np.asarray(F)
-            n = F.shape[0] if F.ndim == 2 else -1
-            data = F
-        if F.ndim != 2 or F.shape != (n, n) or n == 0:
-            raise InverseError(f"form factors must be a square (P, P) matrix, got shape {F.shape}")
-        if not np.all(np.isfinite(data)):
-            raise InverseError("the form factors contain NaN or infinite values")
-        self.F = F
-        self.n_patches = n
+        self.F, share = _form_factor_matrix(F)
+        n = self.n_patches = self.F.shape[0]
         #: (P,) or None: the share of a patch's emission that leaves it into the scene
         #: (formfactors.FormFactors.emission_share): F's columns carry its inverse for the radiosity,
         #: a whole-area mean, while an emitter sends the exitance of its visible part (Cycles emits
         #: from the whole face, the buried part into the occluder)
         self.emission_share = None if share is None else np.asarray(share, dtype=np.float64).reshape(n)
-
-        def arr(x, shape, name, dtype=np.float64):
-            try:
-                a = np.asarray(x, dtype=dtype).reshape(shape)
-            except (ValueError, TypeError) as exc:
-                raise InverseError(f"{name} must have shape {shape}") from exc
-            if dtype is np.float64 and not np.all(np.isfinite(a)):
-                raise InverseError(f"{name} contains NaN or infinite values")
-            return a
-
-        self.area = arr(area, (n,), "area")
-        if np.any(self.area <= 0):
-            raise InverseError(f"patch areas must be positive; patches {np.flatnonzero(self.area <= 0)[:10].tolist()} are not")
-        self.reflectance = arr(reflectance, (n, 3), "reflectance")
-        if np.any(self.reflectance < 0) or np.any(self.reflectance > 1):
-            raise InverseError("reflectance must lie in [0, 1]")
-        self.target_mask = arr(target_mask, (n,), "target mask", dtype=bool)
-        tr = arr(target_radiosity, (n, 3), "target radiosity")
-        self.candidate_mask = arr(candidate_mask, (n,), "candidate mask", dtype=bool)
-        self.center = arr(center, (n, 3), "centre") if center is not None else np.zeros((n, 3))
-        self.normal = arr(normal, (n, 3), "normal") if normal is not None else np.zeros((n, 3))
-        self.targets = np.flatnonzero(self.target_mask)
-        self.candidates = np.flatnonzero(self.candidate_mask)
-        if len(self.targets) == 0:
-            raise InverseError("no target: paint a radiosity on at least one face")
+        self._init_patches(area, reflectance, candidate_mask, center, normal)
+        self._set_targets(target_rows(targets, n))
         if len(self.candidates) == 0 and (lights is None or lights.irradiance is None):
             raise InverseError("no candidate light: every face is forbidden")  # (lamps have no candidate patch)
-        self.b_target = tr[self.targets].copy()  # (m, 3)
-        if np.any(self.b_target < 0):
-            raise InverseError("target radiosities must be non-negative")
-        self.target_norm = float(np.linalg.norm(self.b_target))
         self.exitance = np.zeros((n, 3))
         if lights is not None:
             if not np.array_equal(np.asarray(lights.patches), self.candidates):
@@ -332,16 +341,52 @@ class InverseProblem:
         #: None, or (P, n_lights) sparse: the surface lights' direct light computed anew (W/m^2 per
         #: unit exitance: a better gather minus F's, ``correct_direct``), in T and in the forward solves
         self.direct_correction = None
-        #: (P, 3) W/m^2: the radiosity of the fixed light (``background``: the scene's own emitters'
-        #: exitance; ``background_irradiance``: the lamps' direct irradiance, engine.lamps),
-        #: subtracted from the targets; the lights supply what it leaves. target_norm
-        #: stays the painted targets' norm (relative errors are of what was painted)
+        self._init_fixed_light(background, background_irradiance, background_excess)
+
+    def _init_patches(self, area, reflectance, candidate_mask, center, normal):
+        n = self.n_patches
+        self.area = _array(area, (n,), "area")
+        if np.any(self.area <= 0):
+            raise InverseError(f"patch areas must be positive; patches {np.flatnonzero(self.area <= 0)[:10].tolist()} are not")
+        self.reflectance = _array(reflectance, (n, 3), "reflectance")
+        if np.any(self.reflectance < 0) or np.any(self.reflectance > 1):
+            raise InverseError("reflectance must lie in [0, 1]")
+        self.candidate_mask = _array(candidate_mask, (n,), "candidate mask", dtype=bool)
+        self.center = _array(center, (n, 3), "centre") if center is not None else np.zeros((n, 3))
+        self.normal = _array(normal, (n, 3), "normal") if normal is not None else np.zeros((n, 3))
+        self.candidates = np.flatnonzero(self.candidate_mask)
+
+    def _set_targets(self, rows: TargetRows):
+        """The system's rows (``target_rows``) and what is read of them; ``b_target`` their values
+        (the fixed light's radiosity is subtracted by ``_init_fixed_light``), ``target_norm``
+        their norm (relative errors are of what was asked)."""
+        self.target_rows = rows
+        self.targets = rows.patch
+        #: (m,) per target row: the object of its uniformity region (illuminance targets), -1 for
+        #: none (the least-power selection's uniformity goal)
+        self.target_region = rows.region
+        self.b_target = rows.values.copy()  # (m, 3)
+        self.target_norm = float(np.linalg.norm(self.b_target))
+
+    @property
+    def target_mask(self) -> np.ndarray:
+        """(P,) bool: the patches the targets' rows read."""
+        mask = np.zeros(self.n_patches, dtype=bool)
+        mask[self.target_rows.matrix.indices] = True
+        return mask
+
+    def _init_fixed_light(self, background, background_irradiance, background_excess):
+        """(P, 3) W/m^2 ``background_radiosity``: the radiosity of the fixed light (``background``:
+        the scene's own emitters' exitance; ``background_irradiance``: the lamps' direct
+        irradiance, engine.lamps; ``background_excess`` its first reflection's), subtracted from
+        the targets: the lights supply what it leaves. target_norm stays the asked targets' norm."""
+        n = self.n_patches
         self.background_radiosity = np.zeros((n, 3))
-        e_bg = None if background is None else arr(background, (n, 3), "background exitance")
-        h_bg = None if background_irradiance is None else arr(background_irradiance, (n, 3), "background irradiance")
-        x_bg = None if background_excess is None else arr(background_excess, (n, 3), "background excess")
+        e_bg = None if background is None else _array(background, (n, 3), "background exitance")
+        h_bg = None if background_irradiance is None else _array(background_irradiance, (n, 3), "background irradiance")
+        x_bg = None if background_excess is None else _array(background_excess, (n, 3), "background excess")
         self.background_radiosity = self._fixed_light(e_bg, h_bg, x_bg)
-        self.b_target = self.b_target - self.background_radiosity[self.targets]
+        self.b_target = self.b_target - self.target_rows.of(self.background_radiosity)
 
     def _fixed_light(self, background=None, irradiance=None, excess=None) -> np.ndarray:
         """(P, 3) W/m^2: the radiosity of the fixed light (the scene's own emitters' exitance
@@ -483,7 +528,7 @@ class InverseProblem:
         if self._transfer is None:
             t0 = time.perf_counter()
             facs = self.factors()
-            n, P, C = self.n_patches, self.targets, self.candidates
+            n, R, C = self.n_patches, self.target_rows, self.candidates
             T = [None] * 3
             done = {}
             D = self.first_bounce
@@ -492,10 +537,8 @@ class InverseProblem:
                 if key in done:
                     T[c] = done[key]
                     continue
-                if len(P) <= len(C):
-                    rhs = np.zeros((n, len(P)))
-                    rhs[P, np.arange(len(P))] = 1.0
-                    Y = facs[c].solve(rhs, trans=True)  # Y^T = rows P of A^-1
+                if R.m <= len(C):
+                    Y = facs[c].solve(R.columns(), trans=True)  # Y^T = R A^-1, the rows' rows of A^-1
                     if D is not None:  # rows P of A^-1 (I + D): Y + D^T Y
                         Y = Y + np.asarray(D[c].T @ Y)
                     T[c] = np.ascontiguousarray(Y[C].T)
@@ -505,7 +548,7 @@ class InverseProblem:
                     if D is not None:
                         rhs += D[c][:, C].toarray()
                     X = facs[c].solve(rhs)  # columns C of A^-1 (I + D)
-                    T[c] = np.ascontiguousarray(X[P])
+                    T[c] = np.ascontiguousarray(R.of(X))
                 if self.emission_share is not None:  # what a candidate patch's exitance sends (``source``)
                     T[c] = T[c] * self.emission_share[C][None, :]
                 if self.grouped:  # one column per light: the sum of its patches' columns
@@ -590,28 +633,22 @@ class InverseProblem:
         new.background_radiosity = self._fixed_light(*shaped)
         if not np.all(np.isfinite(new.background_radiosity)):
             raise InverseError("the scene's own light gives non-finite radiosity")
-        new.b_target = self.b_target + self.background_radiosity[self.targets] - new.background_radiosity[self.targets]
+        R = self.target_rows
+        new.b_target = self.b_target + R.of(self.background_radiosity) - R.of(new.background_radiosity)
         return new
 
-    def retarget(self, target_mask, target_radiosity) -> "InverseProblem":
-        """This problem with other targets (the same scene, lights, solvers and fixed light): its
-        T is rows of ``all_rows_transfer`` (no factorisation, no solve), its b_P the new targets'
-        radiosity less the fixed light's. A stroke's re-solve (pipeline.prepared)."""
-        n = self.n_patches
-        mask = np.asarray(target_mask, dtype=bool).reshape(n)
-        tr = np.asarray(target_radiosity, dtype=np.float64).reshape(n, 3)
-        targets = np.flatnonzero(mask)
-        if len(targets) == 0:
-            raise InverseError("no target: paint a radiosity on at least one face")
-        if not np.all(np.isfinite(tr[targets])) or np.any(tr[targets] < 0):
-            raise InverseError("target radiosities must be finite and non-negative")
+    def retarget(self, targets) -> "InverseProblem":
+        """This problem with other targets (a list of engine.targets objects; the same scene, lights,
+        solvers and fixed light): its T is their rows of ``all_rows_transfer`` (no factorisation,
+        no solve), its b_P their values less the fixed light's radiosity. A stroke's re-solve
+        (pipeline.prepared)."""
+        rows = target_rows(targets, self.n_patches)
         T_all = self.all_rows_transfer()
         new = copy.copy(self)
-        new.target_mask, new.targets = mask, targets
-        new.target_norm = float(np.linalg.norm(tr[targets]))
-        new.b_target = tr[targets] - self.background_radiosity[targets]
-        rows = {}
-        new._transfer = [rows.setdefault(id(t), np.ascontiguousarray(t[targets])) for t in T_all]
+        new._set_targets(rows)
+        new.b_target = rows.values - rows.of(self.background_radiosity)
+        shared = {}
+        new._transfer = [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
         new.transfer_seconds = 0.0
         new.warnings = list(self.condition_warnings)
         new._check_reachable()
@@ -639,11 +676,10 @@ class InverseProblem:
         self._transfer = [np.ascontiguousarray(np.hstack([T[c], np.asarray(columns[c], dtype=np.float64)]))
                           for c in range(3)]
 
-    def _target_rows(self, fac):
-        """Y (P, m): Y^T = rows P (the targets) of A^-1, from the factors ``fac`` of one channel."""
-        Y = np.zeros((self.n_patches, self.m))
-        Y[self.targets, np.arange(self.m)] = 1.0
-        return fac.solve(Y, trans=True)
+    def _inverse_rows(self, fac):
+        """Y (P, m): Y^T = R A^-1 (R the targets' rows; a selection's: rows P of A^-1), from the
+        factors ``fac`` of one channel."""
+        return fac.solve(self.target_rows.columns(), trans=True)
 
     def correct_direct(self, lights, dH):
         """The direct light of the surface lights ``lights`` (indices) computed anew, e.g. by the
@@ -662,7 +698,7 @@ class InverseProblem:
             if id(T[c]) in done:
                 continue
             done.add(id(T[c]))
-            Y = self._target_rows(facs[c])
+            Y = self._inverse_rows(facs[c])
             T[c][:, lights] += (dH.T @ (self.reflectance[:, c:c + 1] * Y)).T
         new = sp.csc_matrix((dH.ravel(), (np.repeat(np.arange(self.n_patches), len(lights)),
                                           np.tile(lights, self.n_patches))), shape=(self.n_patches, self.n_lights))
@@ -692,7 +728,7 @@ class InverseProblem:
     def _irradiance_transfer(self, fac, c, H):
         """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
         lights whose source is a direct irradiance H (P, n_lights)."""
-        Y = self._target_rows(fac)  # Y^T = rows P of A^-1
+        Y = self._inverse_rows(fac)  # Y^T = rows P of A^-1
         T = H.T @ (self.reflectance[:, c:c + 1] * Y)
         if self.lamp_excess is not None:
             T = T + self.lamp_excess[c].T @ Y
@@ -792,11 +828,12 @@ class InverseProblem:
         return np.stack([np.asarray(self.lamp_excess[c] @ s[:, c]).reshape(-1) for c in range(3)], axis=1)
 
     @classmethod
-    def from_patches(cls, patches, F, lights_per_face=True):
-        """Problem from a PatchSet (targets, target radiosities, candidates as
-        ``lights.candidate_mask``) and its form factors; with ``lights_per_face`` a light is a
-        whole face (all its patches), as Blender shows it."""
-        return cls(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+    def from_patches(cls, patches, F, lights_per_face=True, faces=None):
+        """Problem from a PatchSet (its targets: engine.targets.scene_targets, of the FaceSet
+        ``faces`` it was meshed from when given; candidates as ``lights.candidate_mask``) and its
+        form factors; with ``lights_per_face`` a light is a whole face (all its patches), as
+        Blender shows it."""
+        return cls(F, patches.area, patches.reflectance, scene_targets(faces, patches),
                    candidate_mask(patches), patches.center, patches.normal,
                    light_groups=patches.face if lights_per_face else None)
 
@@ -837,7 +874,8 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
     s_own = np.zeros((int(own.sum()), 3)) if strength is None else np.asarray(strength, dtype=np.float64)
     if s_own.shape != (int(own.sum()), 3) or not np.all(np.isfinite(s_own)) or np.any(s_own < 0):
         raise InverseError(f"the lamps' strength must be a finite non-negative ({int(own.sum())}, 3) array")
-    prob = InverseProblem(F, area, reflectance, ~emitters, np.zeros((n, 3)), emitters, center, normal,
+    prob = InverseProblem(F, area, reflectance, [PaintedRadiance.masked(~emitters, np.zeros((n, 3)))], emitters,
+                          center, normal,
                           light_groups=light_groups, light_basis=light_basis, lights=lights,
                           first_bounce=first_bounce, background_irradiance=background_irradiance,
                           lamp_excess=lamp_excess)
@@ -848,8 +886,9 @@ def direct_lighting_problem(F, area, reflectance, exitance, center=None, normal=
         e_x[own] = s_own
         H = prob.lights.patch_irradiance(np.where(own[:, None], e_x, 0.0), n)
     B = prob.forward_radiosity(exitance, H, None if H is None else prob.excess_of(np.where(own[:, None], e_x, 0.0)))
-    prob.b_target = B[prob.targets].copy()
-    prob.target_norm = float(np.linalg.norm(B[prob.targets] + prob.background_radiosity[prob.targets]))
+    R = prob.target_rows
+    prob.b_target = R.of(B).copy()
+    prob.target_norm = float(np.linalg.norm(R.of(B) + R.of(prob.background_radiosity)))
     prob.exitance = exitance.copy()
     return prob, e_x
 

@@ -88,6 +88,7 @@ import scipy.special
 
 from .sampling import SceneSampler, run_chunks
 from .scene import PatchSet, SceneError
+from .units import TINY
 
 __all__ = [
     "DEFAULT_POINTS_PER_PATCH",
@@ -260,7 +261,7 @@ def _triangle_rule(v, h, coarse=False):
     c = int(np.argmin(e))
     a, b, d = v[c], v[(c + 1) % 3], v[(c + 2) % 3]
     area = 0.5 * np.linalg.norm(np.cross(b - a, d - a))
-    length = 2 * area / max(e[c], 1e-300)
+    length = 2 * area / max(e[c], TINY)
     if coarse and length <= h and e[c] <= h:  # no larger than the node spacing: the centroid
         n_xi = n_eta = 1
     else:
@@ -292,7 +293,7 @@ def _triangle_rules(V, h, coarse=False):
     a, b, d = V[rows, c], V[rows, (c + 1) % 3], V[rows, (c + 2) % 3]
     area = 0.5 * np.linalg.norm(np.cross(b - a, d - a), axis=1)
     ec = e[rows, c]
-    length = 2 * area / np.maximum(ec, 1e-300)
+    length = 2 * area / np.maximum(ec, TINY)
     n_xi = np.minimum(MAX_NODES, np.maximum(2, np.ceil(length / h - 1e-9))).astype(np.int64)
     n_eta = np.where(ec < 0.25 * h, 1, np.minimum(MAX_NODES, np.maximum(2, np.ceil(ec / h - 1e-9)))).astype(np.int64)
     if coarse:
@@ -336,7 +337,7 @@ class _Geometry:
         self.tstart, self.tcount = sm.tstart, sm.tcount
         self.tn, self.ta, self.area = sm.tn, sm.ta, sm.area
         self.cdf_lo, self.key = sm.cdf_lo, sm.key
-        self.cdf_w = np.maximum(sm.cdf_hi - sm.cdf_lo, 1e-300)
+        self.cdf_w = np.maximum(sm.cdf_hi - sm.cdf_lo, TINY)
         self.offset = sm.offset
         cr = sm.cross
         self.tc = tv.mean(axis=1)
@@ -347,11 +348,11 @@ class _Geometry:
         self.radius = np.zeros(P)
         np.maximum.at(self.radius, self.tri_patch, dist)
         self.diam = 2 * self.radius
-        self.width = self.area / np.maximum(self.diam, 1e-300)
+        self.width = self.area / np.maximum(self.diam, TINY)
         nsum = np.stack([np.bincount(self.tri_patch, weights=cr[:, k], minlength=P) for k in range(3)], axis=1)
-        self.normal = nsum / np.maximum(np.linalg.norm(nsum, axis=1), 1e-300)[:, None]
+        self.normal = nsum / np.maximum(np.linalg.norm(nsum, axis=1), TINY)[:, None]
         # planar: every triangle's normal is the patch's and every vertex lies in its plane
-        tol = 1e-9 * np.maximum(self.diam, 1e-300)
+        tol = 1e-9 * np.maximum(self.diam, TINY)
         dn = np.linalg.norm(self.tn - self.normal[self.tri_patch], axis=1)
         off = np.abs(np.einsum("tkj,tj->tk", tv - self.center[self.tri_patch][:, None, :],
                                self.normal[self.tri_patch])).max(axis=1)
@@ -554,21 +555,38 @@ def kernel_form_factors(
     arrays of len(receivers) x len(sources).
     """
     t_start = time.perf_counter()
-    P = patches.n_patches
+    rec = _patch_indices(receivers, "receivers", patches.n_patches)
+    src = _patch_indices(sources, "sources", patches.n_patches)
+    threads = _checked_counts(points_per_patch, shadow_rays, penumbra_points, penumbra_rays, far_ratio, threads)
+    out = np.zeros((len(rec), len(src)))
+    info = {"pairs": 0, "culled": 0, "far": 0, "levels": [0] * (MAX_LEVEL + 1), "clipped_receivers": 0,
+            "evaluations": 0, "rays": 0, "penumbra_pairs": 0}
+    if len(rec) and len(src):
+        g = kernel_geometry(patches, int(points_per_patch), sampler)
+        pairs = _Pairs(g, rec, src, far_ratio, info)
+        if len(pairs.pr):
+            transfer = _PairTransfer(g, pairs, info, int(shadow_rays), int(penumbra_points), int(penumbra_rays), seed)
+            out[pairs.ii, pairs.jj] = transfer.run(threads, cancel, progress, info)
+    if stats is not None:
+        stats.update(info, seconds=time.perf_counter() - t_start)
+    return out
 
-    def indices(x, name):
-        x = np.asarray(x)
-        if x.dtype == bool:
-            if x.shape != (P,):
-                raise ValueError(f"{name} mask must have {P} entries, got shape {x.shape}")
-            return np.flatnonzero(x)
-        x = x.astype(np.int64).reshape(-1)
-        if len(x) and (x.min() < 0 or x.max() >= P):
-            raise ValueError(f"{name} must be patch indices in [0, {P})")
-        return x
 
-    rec = indices(receivers, "receivers")
-    src = indices(sources, "sources")
+def _patch_indices(x, name, P):
+    """Patch indices (int64) of ``x``: indices, or a boolean mask over the P patches."""
+    x = np.asarray(x)
+    if x.dtype == bool:
+        if x.shape != (P,):
+            raise ValueError(f"{name} mask must have {P} entries, got shape {x.shape}")
+        return np.flatnonzero(x)
+    x = x.astype(np.int64).reshape(-1)
+    if len(x) and (x.min() < 0 or x.max() >= P):
+        raise ValueError(f"{name} must be patch indices in [0, {P})")
+    return x
+
+
+def _checked_counts(points_per_patch, shadow_rays, penumbra_points, penumbra_rays, far_ratio, threads) -> int:
+    """kernel_form_factors' counts checked (ValueError naming the wrong one); the threads to use."""
     if not (isinstance(points_per_patch, (int, np.integer)) and points_per_patch >= 1):
         raise ValueError(f"points per patch must be a positive integer, got {points_per_patch!r}")
     if not (isinstance(shadow_rays, (int, np.integer)) and shadow_rays >= 0):
@@ -583,50 +601,54 @@ def kernel_form_factors(
         threads = os.cpu_count() or 1
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
-    out = np.zeros((len(rec), len(src)))
-    info = {"pairs": 0, "culled": 0, "far": 0, "levels": [0] * (MAX_LEVEL + 1), "clipped_receivers": 0,
-            "evaluations": 0, "rays": 0, "penumbra_pairs": 0}
-    if len(rec) == 0 or len(src) == 0:
-        if stats is not None:
-            stats.update(info, seconds=time.perf_counter() - t_start)
-        return out
+    return threads
 
-    g = kernel_geometry(patches, int(points_per_patch), sampler)
-    # all pairs, receiver-major; drop (r, r) and pairs with one patch behind the other
-    ii = np.repeat(np.arange(len(rec)), len(src))
-    jj = np.tile(np.arange(len(src)), len(rec))
-    pr, ps = rec[ii], src[jj]
-    keep = pr != ps
-    ii, jj, pr, ps = ii[keep], jj[keep], pr[keep], ps[keep]
-    # one patch entirely in or behind the other's plane: 0. A receiver crossing the source's
-    # plane: its rule is clipped to the source's front (the source crossing the receiver's
-    # plane is clipped exactly by the contour integral).
-    _, mx_sr, tol_sr = _signed_range(g, pr, ps)  # source vertices vs the receiver's plane
-    mn_rs, mx_rs, tol_rs = _signed_range(g, ps, pr)  # receiver vertices vs the source's plane
-    culled = (mx_sr <= tol_sr) | (mx_rs <= tol_rs)  # False where NaN (not planar)
-    straddle = (mn_rs < -tol_rs) & (mx_rs > tol_rs)
-    info["culled"] = int(culled.sum())
-    ii, jj, pr, ps, straddle = ii[~culled], jj[~culled], pr[~culled], ps[~culled], straddle[~culled]
-    dist = np.linalg.norm(g.center[pr] - g.center[ps], axis=1)
-    far = dist > far_ratio * np.maximum(g.diam[pr], g.diam[ps])
-    gap = np.maximum(dist - g.radius[pr] - g.radius[ps], 0.0)
-    scale = np.maximum(gap, g.width[ps])
-    with np.errstate(divide="ignore"):
-        lev = np.ceil(np.log2(g.diam[pr] / (LEVEL_SPAN * np.maximum(scale, 1e-300))))
-    lev = np.where(far, 0, np.clip(lev, 0, MAX_LEVEL)).astype(np.int64)
-    info["pairs"] = int(len(pr))
-    info["far"] = int(far.sum())
-    info["levels"] = np.bincount(lev, minlength=MAX_LEVEL + 1).tolist()
-    # the rule of a pair: its level, or -1 (coarse: one node per triangle no larger than the node
-    # spacing) for a pair whose gap exceeds COARSE_GAP x the receiver's diameter
-    rule_level = np.where((lev == 0) & (gap > COARSE_GAP * g.diam[pr]), -1, lev)
-    info["coarse"] = int(np.count_nonzero(rule_level < 0))
-    if len(pr) == 0:
-        if stats is not None:
-            stats.update(info, seconds=time.perf_counter() - t_start)
-        return out
 
-    # receiver point sets: one array of all (receiver, level) rules
+class _Pairs:
+    """The receiver x source pairs that exchange light, receiver-major: ``ii``, ``jj`` their
+    places in the output, ``pr``, ``ps`` their patches, ``straddle`` (the receiver crosses the
+    source's plane), ``far`` (the point kernel), ``lev`` the receiver rule's level and
+    ``rule_level`` (-1: the coarse rule). Fills info's pairs, culled, far, levels, coarse."""
+
+    def __init__(self, g: _Geometry, rec, src, far_ratio, info: dict):
+        # all pairs, receiver-major; drop (r, r) and pairs with one patch behind the other
+        ii = np.repeat(np.arange(len(rec)), len(src))
+        jj = np.tile(np.arange(len(src)), len(rec))
+        pr, ps = rec[ii], src[jj]
+        keep = pr != ps
+        ii, jj, pr, ps = ii[keep], jj[keep], pr[keep], ps[keep]
+        # one patch entirely in or behind the other's plane: 0. A receiver crossing the source's
+        # plane: its rule is clipped to the source's front (the source crossing the receiver's
+        # plane is clipped exactly by the contour integral).
+        _, mx_sr, tol_sr = _signed_range(g, pr, ps)  # source vertices vs the receiver's plane
+        mn_rs, mx_rs, tol_rs = _signed_range(g, ps, pr)  # receiver vertices vs the source's plane
+        culled = (mx_sr <= tol_sr) | (mx_rs <= tol_rs)  # False where NaN (not planar)
+        straddle = (mn_rs < -tol_rs) & (mx_rs > tol_rs)
+        info["culled"] = int(culled.sum())
+        ii, jj, pr, ps, straddle = ii[~culled], jj[~culled], pr[~culled], ps[~culled], straddle[~culled]
+        dist = np.linalg.norm(g.center[pr] - g.center[ps], axis=1)
+        far = dist > far_ratio * np.maximum(g.diam[pr], g.diam[ps])
+        gap = np.maximum(dist - g.radius[pr] - g.radius[ps], 0.0)
+        scale = np.maximum(gap, g.width[ps])
+        with np.errstate(divide="ignore"):
+            lev = np.ceil(np.log2(g.diam[pr] / (LEVEL_SPAN * np.maximum(scale, TINY))))
+        lev = np.where(far, 0, np.clip(lev, 0, MAX_LEVEL)).astype(np.int64)
+        info["pairs"] = int(len(pr))
+        info["far"] = int(far.sum())
+        info["levels"] = np.bincount(lev, minlength=MAX_LEVEL + 1).tolist()
+        # the rule of a pair: its level, or -1 (coarse: one node per triangle no larger than the node
+        # spacing) for a pair whose gap exceeds COARSE_GAP x the receiver's diameter
+        rule_level = np.where((lev == 0) & (gap > COARSE_GAP * g.diam[pr]), -1, lev)
+        info["coarse"] = int(np.count_nonzero(rule_level < 0))
+        self.ii, self.jj, self.pr, self.ps, self.straddle = ii, jj, pr, ps, straddle
+        self.far, self.lev, self.rule_level = far, lev, rule_level
+
+
+def _receiver_rules(g: _Geometry, pairs: _Pairs, info: dict):
+    """The receiver point sets of the pairs in one array: (X, N, W) the points, normals and
+    weights, (pstart, pcount) each pair's range in them; a (receiver, level) rule is made once,
+    a pair whose receiver crosses the source's plane has a rule of its own."""
+    pr, ps, rule_level = pairs.pr, pairs.ps, pairs.rule_level
     need = np.unique(pr * (MAX_LEVEL + 2) + rule_level + 1)
     sets = {}
     xs, ns, ws = [], [], []
@@ -643,40 +665,66 @@ def kernel_form_factors(
     lookup = np.array([sets[int(k)] for k in need], dtype=np.int64)
     pos = np.searchsorted(need, rule_key)
     pstart, pcount = lookup[pos, 0], lookup[pos, 1]
-    # pairs whose receiver crosses the source's plane: a rule of their own
-    info["clipped_receivers"] = int(straddle.sum())
-    for k in np.flatnonzero(straddle):
+    info["clipped_receivers"] = int(pairs.straddle.sum())
+    for k in np.flatnonzero(pairs.straddle):
         x, n, w = _clipped_receiver_points(g, pr[k], rule_level[k], ps[k])
         pstart[k], pcount[k] = base, len(x)
         xs.append(x)
         ns.append(n)
         ws.append(w)
         base += len(x)
-    X, N, W = np.concatenate(xs), np.concatenate(ns), np.concatenate(ws)
+    return np.concatenate(xs), np.concatenate(ns), np.concatenate(ws), pstart, pcount
 
-    # chunks: contiguous pair ranges of about CHUNK_EVALS kernel evaluations
-    evals = pcount * g.tcount[ps]
-    info["evaluations"] = int(evals.sum())
-    chunks = _chunks(evals, CHUNK_EVALS)
-    values = np.zeros(len(pr))
-    partial = np.zeros(len(pr), dtype=bool)
-    rays = np.zeros(len(chunks), dtype=np.int64)
-    stop = threading.Event()
-    S = int(shadow_rays)
-    Q = int(round(math.sqrt(penumbra_points))) ** 2  # a square: a jittered grid
-    K2 = int(penumbra_rays)
 
-    def work(ci):
-        if stop.is_set():
+class _PairTransfer:
+    """The pairs' form factors, computed by chunks (contiguous pair ranges of about
+    CHUNK_EVALS kernel evaluations, each with its own random stream): ``chunk(ci)`` fills
+    ``values``, ``partial`` (pairs found in penumbra) and ``rays`` of chunk ci."""
+
+    def __init__(self, g: _Geometry, pairs: _Pairs, info: dict, shadow_rays: int, penumbra_points: int,
+                 penumbra_rays: int, seed):
+        self.g, self.pairs, self.seed = g, pairs, seed
+        self.X, self.N, self.W, self.pstart, self.pcount = _receiver_rules(g, pairs, info)
+        evals = self.pcount * g.tcount[pairs.ps]
+        info["evaluations"] = int(evals.sum())
+        self.chunks = _chunks(evals, CHUNK_EVALS)
+        self.values = np.zeros(len(pairs.pr))
+        self.partial = np.zeros(len(pairs.pr), dtype=bool)
+        self.rays = np.zeros(len(self.chunks), dtype=np.int64)
+        self.stop = threading.Event()
+        self.S = shadow_rays
+        self.Q = int(round(math.sqrt(penumbra_points))) ** 2  # a square: a jittered grid
+        self.K2 = penumbra_rays
+
+    def run(self, threads, cancel, progress, info: dict) -> np.ndarray:
+        """Every chunk (sampling.run_chunks); the pairs' form factors. Fills info's rays and penumbra_pairs."""
+        run_chunks(self.chunk, len(self.chunks), threads, self.stop, cancel, progress)
+        if not np.all(np.isfinite(self.values)):
+            raise SceneError("kernel form factors contain NaN or infinite values (degenerate geometry?)")
+        info["rays"] = int(self.rays.sum())
+        info["penumbra_pairs"] = int(self.partial.sum())
+        return self.values
+
+    def chunk(self, ci):
+        if self.stop.is_set():
             return ci
-        a, b = chunks[ci]
-        rng = np.random.default_rng([int(seed), ci])
-        cps, clev, cfar = ps[a:b], lev[a:b], far[a:b]
-        # phase 1: the quadrature rule of every pair's receiver (at the pair's level)
-        npp = pcount[a:b]
+        a, b = self.chunks[ci]
+        rng = np.random.default_rng([int(self.seed), ci])
+        pp_pair, fpt, vis, unoccluded, n_rays = self._quadrature(a, b, rng)
+        if self.S > 0 and self.Q > 0:
+            n_rays += self._penumbra(a, b, rng, pp_pair, fpt, vis, unoccluded)
+        self.rays[ci] = n_rays
+        return ci
+
+    def _quadrature(self, a, b, rng):
+        """Phase 1: the quadrature rule of every pair's receiver (at the pair's level), with
+        shadow rays; values[a:b] and the unoccluded estimate kept for phase 2."""
+        g, S = self.g, self.S
+        cps, clev, cfar = self.pairs.ps[a:b], self.pairs.lev[a:b], self.pairs.far[a:b]
+        npp = self.pcount[a:b]
         pp_pair = np.repeat(np.arange(b - a), npp)
-        pp_pt = _ragged(pstart[a:b], npp)
-        fpt = _source_kernel(g, X[pp_pt], N[pp_pt], cps[pp_pair], cfar[pp_pair])
+        pp_pt = _ragged(self.pstart[a:b], npp)
+        fpt = _source_kernel(g, self.X[pp_pt], self.N[pp_pt], cps[pp_pair], cfar[pp_pair])
         vis = np.ones(len(pp_pair))
         n_rays = 0
         if S > 0:
@@ -685,44 +733,37 @@ def kernel_form_factors(
                 if len(sel) == 0:
                     continue
                 k = max(1, S >> (2 * int(L)))
-                vis[sel], nr = _visibility(g, X[pp_pt[sel]], N[pp_pt[sel]], cps[pp_pair[sel]], k, rng)
+                vis[sel], nr = _visibility(g, self.X[pp_pt[sel]], self.N[pp_pt[sel]], cps[pp_pair[sel]], k, rng)
                 n_rays += nr
-        values[a:b] = np.bincount(pp_pair, weights=W[pp_pt] * fpt * vis, minlength=b - a)
-        unoccluded = np.bincount(pp_pair, weights=W[pp_pt] * fpt, minlength=b - a)
-        # phase 2: pairs partly in shadow (some visibility ray blocked, some not) again, with
-        # jittered receiver points (the Gauss rule is no good across a shadow edge)
-        if S > 0 and Q > 0:
-            live = fpt > 0
-            vmin = np.ones(b - a)
-            vmax = np.zeros(b - a)
-            np.minimum.at(vmin, pp_pair[live], vis[live])
-            np.maximum.at(vmax, pp_pair[live], vis[live])
-            part = np.flatnonzero((vmin < 1) & (vmax > 0))
-            partial[a + part] = True
-            per = max(1, PENUMBRA_BATCH_RAYS // (Q * K2))
-            for q0 in range(0, len(part), per):
-                sub = part[q0:q0 + per]
-                x, n = _sample_patches(g, pr[a + sub], Q, rng)
-                x, n = x.reshape(-1, 3), n.reshape(-1, 3)
-                wv, ws, nr = _visibility(g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
-                n_rays += nr
-                # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
-                # fraction of the point-to-point kernel over all the rays of the pair
-                fv = wv.reshape(len(sub), Q).sum(axis=1)
-                fs = ws.reshape(len(sub), Q).sum(axis=1)
-                values[a + sub] = unoccluded[sub] * fv / np.where(fs > 0, fs, 1.0)
-        rays[ci] = n_rays
-        return ci
+        self.values[a:b] = np.bincount(pp_pair, weights=self.W[pp_pt] * fpt * vis, minlength=b - a)
+        unoccluded = np.bincount(pp_pair, weights=self.W[pp_pt] * fpt, minlength=b - a)
+        return pp_pair, fpt, vis, unoccluded, n_rays
 
-    run_chunks(work, len(chunks), threads, stop, cancel, progress)
-    if not np.all(np.isfinite(values)):
-        raise SceneError("kernel form factors contain NaN or infinite values (degenerate geometry?)")
-    out[ii, jj] = values
-    info["rays"] = int(rays.sum())
-    info["penumbra_pairs"] = int(partial.sum())
-    if stats is not None:
-        stats.update(info, seconds=time.perf_counter() - t_start)
-    return out
+    def _penumbra(self, a, b, rng, pp_pair, fpt, vis, unoccluded) -> int:
+        """Phase 2: pairs partly in shadow (some visibility ray blocked, some not) again, with
+        jittered receiver points (the Gauss rule is no good across a shadow edge); the rays cast."""
+        Q, K2, cps = self.Q, self.K2, self.pairs.ps[a:b]
+        live = fpt > 0
+        vmin = np.ones(b - a)
+        vmax = np.zeros(b - a)
+        np.minimum.at(vmin, pp_pair[live], vis[live])
+        np.maximum.at(vmax, pp_pair[live], vis[live])
+        part = np.flatnonzero((vmin < 1) & (vmax > 0))
+        self.partial[a + part] = True
+        per = max(1, PENUMBRA_BATCH_RAYS // (Q * K2))
+        n_rays = 0
+        for q0 in range(0, len(part), per):
+            sub = part[q0:q0 + per]
+            x, n = _sample_patches(self.g, self.pairs.pr[a + sub], Q, rng)
+            x, n = x.reshape(-1, 3), n.reshape(-1, 3)
+            wv, ws, nr = _visibility(self.g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
+            n_rays += nr
+            # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
+            # fraction of the point-to-point kernel over all the rays of the pair
+            fv = wv.reshape(len(sub), Q).sum(axis=1)
+            fs = ws.reshape(len(sub), Q).sum(axis=1)
+            self.values[a + sub] = unoccluded[sub] * fv / np.where(fs > 0, fs, 1.0)
+        return n_rays
 
 
 def _source_kernel(g: _Geometry, x, n, s, far):

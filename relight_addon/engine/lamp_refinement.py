@@ -36,16 +36,15 @@ import scipy.optimize as sopt
 
 from .light_colour import fit_columns
 from .geometry import unit
-from .candidate_lamps import _reach as lamp_reach, patch_radius
+from .candidate_lamps import LAMP_POINTS, _reach as lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
 
 __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
 
-#: receiver points per patch of a lamp's irradiance while searching, and for the lamp kept
-#: (as candidate_lamps.LAMP_POINTS)
+#: receiver points per patch of a lamp's irradiance while searching (the lamp kept takes
+#: candidate_lamps.LAMP_POINTS)
 SEARCH_POINTS = 4
-LAMP_POINTS = 16
 #: Nelder-Mead evaluations per lamp and round, and rounds over the configuration's lamps
 MAX_EVALUATIONS = 60
 ROUNDS = 2
@@ -69,16 +68,13 @@ class Transport:
 
     def __init__(self, problem, albedo_excess=None):
         facs = problem.factors()
-        m, P = problem.m, problem.n_patches
         self.rho = problem.reflectance
         self.albedo_excess = albedo_excess
         self.Y = []
         done = {}
         for c in range(3):
             if id(facs[c]) not in done:
-                Y = np.zeros((P, m))
-                Y[problem.targets, np.arange(m)] = 1.0
-                done[id(facs[c])] = facs[c].solve(Y, trans=True)  # (P, m): Y^T = rows P of A^-1
+                done[id(facs[c])] = facs[c].solve(problem.target_rows.columns(), trans=True)  # (P, m): Y^T = R A^-1
             self.Y.append(done[id(facs[c])])
 
     def column(self, h, lamp=None) -> np.ndarray:

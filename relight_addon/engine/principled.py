@@ -76,6 +76,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from .units import TINY
+
 __all__ = ["F0_from_ior", "ior_from_F0", "fresnel_dielectric", "hemispherical_fresnel", "PrincipledParams",
            "PrincipledAlbedo", "principled_albedo", "ggx_albedo", "oren_nayar_directional",
            "oren_nayar_albedo", "view_brdf", "lobes_brdf", "BRDFTable", "MU_NODES"]
@@ -134,7 +136,7 @@ def hemispherical_fresnel(eta) -> float:
 
 # ------------------------------------------------------------------ GGX integrals
 def _lambda(alpha2, cos):
-    cos2 = np.clip(cos * cos, 1e-300, 1.0)
+    cos2 = np.clip(cos * cos, TINY, 1.0)
     return 0.5 * (np.sqrt(1.0 + alpha2 * np.maximum(1.0 / cos2 - 1.0, 0.0)) - 1.0)
 
 
@@ -500,94 +502,19 @@ def _directional(p: PrincipledParams, mu, lobes: list | None = None):
     ``lobes``: a list that receives the BSDF's closures at these mu, as (kind, weight (n,3),
     details): ("ggx", multiplier of the single-scattering BRDF, _Lobe) and ("diffuse", weight,
     (colour, sigma)), for ``view_brdf``."""
-    mu = np.clip(np.asarray(mu, dtype=np.float64), _MU_MIN, 1.0)
-    n = len(mu)
-    base = np.maximum(np.asarray(p.base_color, dtype=np.float64), 0.0)
-    cbase = np.minimum(base, 1.0)
-    rough = float(np.clip(p.roughness, 0.0, 1.0))
-    tint = np.maximum(np.asarray(p.specular_tint, dtype=np.float64), 0.0)
-    w = np.ones((n, 3))  # the weight of the layers still to come
-    R = np.zeros((n, 3))
-    gloss = np.zeros((n, 3))
-    notes = []
-    alpha = float(np.clip(p.alpha, 0.0, 1.0))
-    if alpha < 1.0:
-        w *= alpha
-        notes.append(f"alpha {alpha:g}: the transparent part lets light through, treated as lost")
+    layers = _Layers(p, np.clip(np.asarray(mu, dtype=np.float64), _MU_MIN, 1.0), lobes)
+    layers.alpha()
     if p.sheen_weight > 0:
-        notes.append(f"sheen {p.sheen_weight:g}: ignored (Cycles' sheen adds about 0.1 x its weight x "
-                     "(Sheen Tint - Base Color) at Sheen Roughness 0.5)")
+        layers.notes.append(f"sheen {p.sheen_weight:g}: ignored (Cycles' sheen adds about 0.1 x its weight x "
+                            "(Sheen Tint - Base Color) at Sheen Roughness 0.5)")
     if p.coat_weight > 0:
-        cw = float(p.coat_weight)
-        cior = max(float(p.coat_ior), 1.0)
-        crough = float(np.clip(p.coat_roughness, 0.0, 1.0))
-        if cior > 1.0:
-            lobe = _dielectric_lobe(crough, cior, None, mu, True, real_fresnel=True)
-            if lobes is not None:
-                lobes.append(("ggx", cw * w * lobe.scale, lobe))
-            R += cw * w * lobe.albedo
-            gloss += cw * w * lobe.albedo
-            w = w * np.clip(1.0 - cw * lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
-        ctint = np.maximum(np.asarray(p.coat_tint, dtype=np.float64), 0.0)
-        if not np.allclose(ctint, 1.0):
-            cos_t = np.sqrt(1.0 - (1.0 / cior) ** 2 * (1.0 - mu * mu))[:, None]
-            w = w * (1.0 + cw * (ctint[None, :] ** (1.0 / cos_t) - 1.0))
-        notes.append(f"coat {cw:g}: layered as Cycles does, its glossy reflection treated as diffuse")
-    emission = w.copy()
-    metallic = float(np.clip(p.metallic, 0.0, 1.0))
-    if metallic > 0:
-        lobe = _metal_lobe(rough, cbase, tint, mu, p.multiscatter)
-        if lobes is not None:
-            lobes.append(("ggx", metallic * w * lobe.scale, lobe))
-        R += metallic * w * lobe.albedo
-        gloss += metallic * w * lobe.albedo
-        w = w * (1.0 - metallic)
-        notes.append(f"metallic {metallic:g}: the metal's glossy reflection treated as diffuse with its "
-                     "white-furnace albedo (F82-tint GGX)")
-    trans = float(np.clip(p.transmission, 0.0, 1.0))
-    if trans > 0:
-        ior = max(float(p.ior), 1e-5)
-        eta = ior if ior >= 1 else 1.0 / ior
-        if eta > 1.0:
-            f0 = np.clip(F0_from_ior(ior) * tint, 0.0, 1.0)
-            est = f0[None, :] + (1 - f0[None, :]) * s_ior_table(rough, mu, eta)[:, None]
-            if lobes is not None:  # its reflection, scaled to reflect the estimated albedo
-                lobe = _dielectric_lobe(rough, eta, f0, mu, False)
-                lobes.append(("ggx", trans * w * est / np.maximum(lobe.albedo, 1e-9), lobe))
-            R += trans * w * est
-            gloss += trans * w * est
-        w = w * (1.0 - trans)
-        notes.append(f"transmission {trans:g}: its Fresnel reflection kept, the light it transmits treated as lost")
-    # dielectric specular layer
-    ior = max(float(p.ior), 1e-5)
-    level = max(float(p.specular_ior_level), 0.0)
-    f0 = float(F0_from_ior(ior))
-    eta = ior
-    if level != 0.5:
-        f0 *= 2.0 * level
-        eta = float(ior_from_F0(f0))
-        if ior < 1.0:
-            eta = 1.0 / eta
-    if eta != 1.0:
-        lobe = _dielectric_lobe(rough, eta, np.clip(f0 * tint, 0.0, 1.0), mu, p.multiscatter)
-        if lobes is not None:
-            lobes.append(("ggx", w * lobe.scale, lobe))
-        R += w * lobe.albedo
-        gloss += w * lobe.albedo
-        w = w * np.clip(1.0 - lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
-    # diffuse and subsurface (both Base Color)
-    sigma = float(np.clip(p.diffuse_roughness, 0.0, 1.0))
-    if sigma < 1e-5:
-        R += w * base[None, :]
-        if lobes is not None:
-            lobes.append(("diffuse", w * base[None, :], (base, 0.0)))
-    else:  # Oren-Nayar's weight is Base Color x (1 - subsurface) x w; the subsurface part stays Lambert
-        ss = float(np.clip(p.subsurface_weight, 0.0, 1.0))
-        R += w * base[None, :] * ((1.0 - ss) * oren_nayar_directional(base, sigma, mu) + ss)
-        if lobes is not None:
-            lobes.append(("diffuse", (1.0 - ss) * w * base[None, :], (base, sigma)))
-            if ss > 0:
-                lobes.append(("diffuse", ss * w * base[None, :], (base, 0.0)))
+        layers.coat()
+    emission = layers.w.copy()
+    layers.metal()
+    layers.transmission()
+    layers.specular()
+    layers.diffuse()
+    notes = layers.notes
     if p.subsurface_weight > 0:
         notes.append(f"subsurface {p.subsurface_weight:g}: treated as diffuse with Base Color (Cycles' random "
                      "walk reflects a few % less)")
@@ -595,7 +522,110 @@ def _directional(p: PrincipledParams, mu, lobes: list | None = None):
         notes.append("thin film: ignored")
     if p.anisotropic > 0:
         notes.append("anisotropy: ignored (isotropic roughness)")
-    return R, gloss, emission, notes
+    return layers.R, layers.gloss, emission, notes
+
+
+class _Layers:
+    """A Principled BSDF's layers from the top down at view cosines ``mu`` (n,), as Cycles
+    stacks them: each adds its reflection to ``R`` (its glossy part to ``gloss`` too, its closure
+    to ``lobes`` when given) and leaves ``w``, the weight of the layers still to come."""
+
+    def __init__(self, p: PrincipledParams, mu, lobes):
+        self.p, self.mu, self.lobes = p, mu, lobes
+        n = len(mu)
+        self.base = np.maximum(np.asarray(p.base_color, dtype=np.float64), 0.0)
+        self.rough = float(np.clip(p.roughness, 0.0, 1.0))
+        self.tint = np.maximum(np.asarray(p.specular_tint, dtype=np.float64), 0.0)
+        self.w = np.ones((n, 3))  # the weight of the layers still to come
+        self.R = np.zeros((n, 3))
+        self.gloss = np.zeros((n, 3))
+        self.notes = []
+
+    def _glossy(self, weight, lobe, reflected):
+        """A glossy lobe of ``weight`` x its BRDF reflecting ``reflected`` (n, 3)."""
+        if self.lobes is not None:
+            self.lobes.append(("ggx", weight, lobe))
+        self.R += reflected
+        self.gloss += reflected
+
+    def alpha(self):
+        alpha = float(np.clip(self.p.alpha, 0.0, 1.0))
+        if alpha < 1.0:
+            self.w *= alpha
+            self.notes.append(f"alpha {alpha:g}: the transparent part lets light through, treated as lost")
+
+    def coat(self):
+        p, mu = self.p, self.mu
+        cw = float(p.coat_weight)
+        cior = max(float(p.coat_ior), 1.0)
+        crough = float(np.clip(p.coat_roughness, 0.0, 1.0))
+        if cior > 1.0:
+            lobe = _dielectric_lobe(crough, cior, None, mu, True, real_fresnel=True)
+            self._glossy(cw * self.w * lobe.scale, lobe, cw * self.w * lobe.albedo)
+            self.w = self.w * np.clip(1.0 - cw * lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
+        ctint = np.maximum(np.asarray(p.coat_tint, dtype=np.float64), 0.0)
+        if not np.allclose(ctint, 1.0):
+            cos_t = np.sqrt(1.0 - (1.0 / cior) ** 2 * (1.0 - mu * mu))[:, None]
+            self.w = self.w * (1.0 + cw * (ctint[None, :] ** (1.0 / cos_t) - 1.0))
+        self.notes.append(f"coat {cw:g}: layered as Cycles does, its glossy reflection treated as diffuse")
+
+    def metal(self):
+        metallic = float(np.clip(self.p.metallic, 0.0, 1.0))
+        if metallic > 0:
+            lobe = _metal_lobe(self.rough, np.minimum(self.base, 1.0), self.tint, self.mu, self.p.multiscatter)
+            self._glossy(metallic * self.w * lobe.scale, lobe, metallic * self.w * lobe.albedo)
+            self.w = self.w * (1.0 - metallic)
+            self.notes.append(f"metallic {metallic:g}: the metal's glossy reflection treated as diffuse with its "
+                              "white-furnace albedo (F82-tint GGX)")
+
+    def transmission(self):
+        trans = float(np.clip(self.p.transmission, 0.0, 1.0))
+        if trans > 0:
+            ior = max(float(self.p.ior), 1e-5)
+            eta = ior if ior >= 1 else 1.0 / ior
+            if eta > 1.0:
+                f0 = np.clip(F0_from_ior(ior) * self.tint, 0.0, 1.0)
+                est = f0[None, :] + (1 - f0[None, :]) * s_ior_table(self.rough, self.mu, eta)[:, None]
+                if self.lobes is not None:  # its reflection, scaled to reflect the estimated albedo
+                    lobe = _dielectric_lobe(self.rough, eta, f0, self.mu, False)
+                    self.lobes.append(("ggx", trans * self.w * est / np.maximum(lobe.albedo, 1e-9), lobe))
+                self.R += trans * self.w * est
+                self.gloss += trans * self.w * est
+            self.w = self.w * (1.0 - trans)
+            self.notes.append(f"transmission {trans:g}: its Fresnel reflection kept, the light it transmits "
+                              "treated as lost")
+
+    def specular(self):
+        """The dielectric specular layer."""
+        ior = max(float(self.p.ior), 1e-5)
+        level = max(float(self.p.specular_ior_level), 0.0)
+        f0 = float(F0_from_ior(ior))
+        eta = ior
+        if level != 0.5:
+            f0 *= 2.0 * level
+            eta = float(ior_from_F0(f0))
+            if ior < 1.0:
+                eta = 1.0 / eta
+        if eta != 1.0:
+            lobe = _dielectric_lobe(self.rough, eta, np.clip(f0 * self.tint, 0.0, 1.0), self.mu, self.p.multiscatter)
+            self._glossy(self.w * lobe.scale, lobe, self.w * lobe.albedo)
+            self.w = self.w * np.clip(1.0 - lobe.layering.max(axis=1, keepdims=True), 0.0, 1.0)
+
+    def diffuse(self):
+        """Diffuse and subsurface (both Base Color)."""
+        w, base, lobes = self.w, self.base, self.lobes
+        sigma = float(np.clip(self.p.diffuse_roughness, 0.0, 1.0))
+        if sigma < 1e-5:
+            self.R += w * base[None, :]
+            if lobes is not None:
+                lobes.append(("diffuse", w * base[None, :], (base, 0.0)))
+        else:  # Oren-Nayar's weight is Base Color x (1 - subsurface) x w; the subsurface part stays Lambert
+            ss = float(np.clip(self.p.subsurface_weight, 0.0, 1.0))
+            self.R += w * base[None, :] * ((1.0 - ss) * oren_nayar_directional(base, sigma, self.mu) + ss)
+            if lobes is not None:
+                lobes.append(("diffuse", (1.0 - ss) * w * base[None, :], (base, sigma)))
+                if ss > 0:
+                    lobes.append(("diffuse", ss * w * base[None, :], (base, 0.0)))
 
 
 # ------------------------------------------------------------------ view-dependent BRDF
@@ -632,7 +662,7 @@ def _ggx_eval(alpha, fres, v, l):
     mu_l = l[:, 2]
     ok = (mu_l > 0) & (v[:, 2] > 0)
     h = l + v
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-300)
+    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), TINY)
     c_nh = np.clip(h[:, 2], 0.0, 1.0)
     D = a2 / (np.pi * ((1.0 - c_nh ** 2) + a2 * c_nh ** 2) ** 2)
     G2 = 1.0 / (1.0 + _lambda(a2, mu_v) + _lambda(a2, np.where(ok, mu_l, 1.0)))

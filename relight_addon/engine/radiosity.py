@@ -164,78 +164,11 @@ def solve_radiosity(
             x0 = np.repeat(x0[:, None], 3, axis=1)
         if x0.shape != (P, 3) or not np.all(np.isfinite(x0)):
             raise ValueError(f"x0 must be a finite (P, 3) = ({P}, 3) array, got shape {x0.shape}")
-
-    B = np.zeros((P, 3))
-    iterations = []
-    residuals = []
-    converged = True
-    message = ""
     if method == "direct":
-        for c in range(3):
-            A = radiosity_matrix(M, rho[:, c])
-            with np.errstate(all="ignore"):
-                if sparse:
-                    try:
-                        B[:, c] = spla.splu(A.tocsc()).solve(e[:, c])
-                    except RuntimeError as exc:
-                        raise RadiosityError(f"the radiosity system is singular ({exc})") from None
-                else:
-                    try:
-                        B[:, c] = sla.lu_solve(sla.lu_factor(A, check_finite=False), e[:, c], check_finite=False)
-                    except (sla.LinAlgError, ValueError) as exc:
-                        raise RadiosityError(f"the radiosity system is singular ({exc})") from None
-            if not np.all(np.isfinite(B[:, c])):
-                raise RadiosityError("the radiosity system is singular (non-finite solution); "
-                                     "check reflectances and form factors")
-            iterations.append(0)
-            residuals.append(_residual(A, B[:, c], e[:, c]))
+        B, iterations, residuals = _direct(M, rho, e)
+        converged, message = True, ""
     else:
-        Mf = M.astype(np.float64)
-        lowerF = sp.tril(Mf, format="csr") if sparse else np.tril(Mf)
-        upperF = sp.triu(Mf, k=1, format="csr") if sparse else np.triu(Mf, k=1)
-        for c in range(3):
-            rc = rho[:, c]
-            ec = e[:, c]
-            A = radiosity_matrix(Mf, rc)
-            if sparse:
-                DL = (sp.identity(P, format="csr") - sp.diags(rc) @ lowerF).tocsr()
-                U = (sp.diags(rc) @ upperF).tocsr()  # -U of A
-            else:
-                DL = -(rc[:, None] * lowerF)
-                DL[np.diag_indices(P)] += 1.0
-                U = rc[:, None] * upperF
-            if np.any(DL.diagonal() <= 0):
-                raise RadiosityError("Gauss-Seidel needs rho_i F_ii < 1 on every patch")
-            x = (x0[:, c] if x0 is not None else ec).copy()
-            ne = np.linalg.norm(ec)
-            if ne == 0:  # no light: B = 0 is the solution
-                B[:, c] = 0.0
-                iterations.append(0)
-                residuals.append(0.0)
-                continue
-            r0 = np.linalg.norm(ec - A @ x) / ne
-            res = r0
-            it = 0
-            while res > tol and it < max_iter:
-                rhs = ec + U @ x
-                if sparse:
-                    x = spla.spsolve_triangular(DL, rhs, lower=True)
-                else:
-                    x = sla.solve_triangular(DL, rhs, lower=True, check_finite=False)
-                it += 1
-                res = np.linalg.norm(ec - A @ x) / ne
-                if not np.isfinite(res) or res > 1e3 * max(r0, 1.0):
-                    raise RadiosityError(
-                        f"Gauss-Seidel diverged in channel {'RGB'[c]} after {it} sweeps "
-                        f"(relative residual {res:.3g}); form-factor row sums times reflectance "
-                        f"must stay below 1 (max {float(np.max(np.abs(U @ np.ones(P) + rc * (lowerF @ np.ones(P))))):.4g})")
-            B[:, c] = x
-            iterations.append(it)
-            residuals.append(float(res))
-            if res > tol:
-                converged = False
-                message = (f"Gauss-Seidel did not reach tol={tol:g} in {max_iter} sweeps "
-                           f"(relative residual {max(residuals):.3g}); raise max_iter or use method='direct'")
+        B, iterations, residuals, converged, message = _gauss_seidel(M, rho, e, x0, tol, max_iter)
     if not np.all(np.isfinite(B)):
         raise RadiosityError("radiosity contains NaN or infinite values")
     info = {
@@ -247,3 +180,97 @@ def solve_radiosity(
         "message": message,
     }
     return B, info
+
+
+def _direct(M, rho, e):
+    """(B, iterations, residuals): each channel by an LU factorisation of A (sparse or dense)."""
+    P = M.shape[0]
+    sparse = sp.issparse(M)
+    B = np.zeros((P, 3))
+    iterations, residuals = [], []
+    for c in range(3):
+        A = radiosity_matrix(M, rho[:, c])
+        with np.errstate(all="ignore"):
+            if sparse:
+                try:
+                    B[:, c] = spla.splu(A.tocsc()).solve(e[:, c])
+                except RuntimeError as exc:
+                    raise RadiosityError(f"the radiosity system is singular ({exc})") from None
+            else:
+                try:
+                    B[:, c] = sla.lu_solve(sla.lu_factor(A, check_finite=False), e[:, c], check_finite=False)
+                except (sla.LinAlgError, ValueError) as exc:
+                    raise RadiosityError(f"the radiosity system is singular ({exc})") from None
+        if not np.all(np.isfinite(B[:, c])):
+            raise RadiosityError("the radiosity system is singular (non-finite solution); "
+                                 "check reflectances and form factors")
+        iterations.append(0)
+        residuals.append(_residual(A, B[:, c], e[:, c]))
+    return B, iterations, residuals
+
+
+def _gauss_seidel(M, rho, e, x0, tol, max_iter):
+    """(B, iterations, residuals, converged, message): each channel by Gauss-Seidel sweeps from
+    x0 (default e) until the relative residual is below tol or after max_iter sweeps."""
+    P = M.shape[0]
+    sparse = sp.issparse(M)
+    B = np.zeros((P, 3))
+    iterations, residuals = [], []
+    converged, message = True, ""
+    Mf = M.astype(np.float64)
+    lowerF = sp.tril(Mf, format="csr") if sparse else np.tril(Mf)
+    upperF = sp.triu(Mf, k=1, format="csr") if sparse else np.triu(Mf, k=1)
+    for c in range(3):
+        rc = rho[:, c]
+        ec = e[:, c]
+        A = radiosity_matrix(Mf, rc)
+        if sparse:
+            DL = (sp.identity(P, format="csr") - sp.diags(rc) @ lowerF).tocsr()
+            U = (sp.diags(rc) @ upperF).tocsr()  # -U of A
+        else:
+            DL = -(rc[:, None] * lowerF)
+            DL[np.diag_indices(P)] += 1.0
+            U = rc[:, None] * upperF
+        if np.any(DL.diagonal() <= 0):
+            raise RadiosityError("Gauss-Seidel needs rho_i F_ii < 1 on every patch")
+        x = (x0[:, c] if x0 is not None else ec).copy()
+        ne = np.linalg.norm(ec)
+        if ne == 0:  # no light: B = 0 is the solution
+            B[:, c] = 0.0
+            iterations.append(0)
+            residuals.append(0.0)
+            continue
+        x, it, res = _sweeps(A, DL, U, x, ec, ne, tol, max_iter, lambda: (
+            f"channel {'RGB'[c]}", float(np.max(np.abs(U @ np.ones(P) + rc * (lowerF @ np.ones(P)))))))
+        B[:, c] = x
+        iterations.append(it)
+        residuals.append(float(res))
+        if res > tol:
+            converged = False
+            message = (f"Gauss-Seidel did not reach tol={tol:g} in {max_iter} sweeps "
+                       f"(relative residual {max(residuals):.3g}); raise max_iter or use method='direct'")
+    return B, iterations, residuals, converged, message
+
+
+def _sweeps(A, DL, U, x, ec, ne, tol, max_iter, diverged):
+    """(x, sweeps, relative residual) of Gauss-Seidel on A x = ec (A = DL - U, DL lower
+    triangular) from x; RadiosityError when it diverges (``diverged()``: the channel's name and
+    the largest row sum of rho F, for the message)."""
+    r0 = np.linalg.norm(ec - A @ x) / ne
+    res = r0
+    it = 0
+    while res > tol and it < max_iter:
+        rhs = ec + U @ x
+        if sp.issparse(DL):
+            x = spla.spsolve_triangular(DL, rhs, lower=True)
+        else:
+            x = sla.solve_triangular(DL, rhs, lower=True, check_finite=False)
+        it += 1
+        res = np.linalg.norm(ec - A @ x) / ne
+        if not np.isfinite(res) or res > 1e3 * max(r0, 1.0):
+            channel, row_sum = diverged()
+            raise RadiosityError(
+                f"Gauss-Seidel diverged in {channel} after {it} sweeps "
+                f"(relative residual {res:.3g}); form-factor row sums times reflectance "
+                f"must stay below 1 (max {row_sum:.4g})")
+    return x, it, res

@@ -255,7 +255,7 @@ class _ErrorEval:
                                        tol=self.gs_tol, max_iter=10000)
             self.cold.append(int(sum(info0["iterations"])))
         self.x = B
-        return float(np.linalg.norm(B[self.p.targets] - self.b))
+        return float(np.linalg.norm(self.p.target_rows.of(B) - self.b))
 
 
 def in_colour(problem, view, colour, curve, refits=False) -> list:

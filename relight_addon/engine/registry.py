@@ -35,7 +35,7 @@ from types import MappingProxyType
 from typing import Callable
 
 __all__ = ["Param", "Method", "Bound", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS",
-           "DISTRIBUTIONS", "LIGHT_KINDS", "LIGHT_COLOURS", "PatchModelTraits", "EstimatorTraits", "SolverTraits",
+           "DISTRIBUTIONS", "LIGHT_KINDS", "LIGHT_COLOURS", "TARGET_KINDS", "PatchModelTraits", "EstimatorTraits", "SolverTraits",
            "SelectionTraits", "ColourTraits", "NoTraits"]
 
 
@@ -378,3 +378,5 @@ SELECTIONS = Registry("selection", ".selections", SelectionTraits)
 DISTRIBUTIONS = Registry("distribution", ".distributions")
 LIGHT_KINDS = Registry("light kind", ".lights")
 LIGHT_COLOURS = Registry("light colour", ".colours", ColourTraits)
+#: what a solve is asked to meet: kinds of targets (engine/targets/), each giving rows on the radiosity
+TARGET_KINDS = Registry("target kind", ".targets")

@@ -34,6 +34,7 @@ import numpy as np
 
 from .rays import RAY_OFFSET
 from .scene import PatchSet, SceneError, patch_triangles
+from .units import TINY
 
 __all__ = ["Cancelled", "SceneSampler", "run_chunks"]
 
@@ -48,14 +49,16 @@ class SceneSampler:
     docstring), built once and shared by the estimators of one solve."""
 
     def __init__(self, patches: PatchSet):
-        from embreex import rtcore as rtc
-        from embreex import rtcore_scene as rtcs
-        from embreex.mesh_construction import TriangleMesh
+        self._triangles(patches)
+        self._area_tables()
+        self._shrunk_triangles(patches)
+        self._ray_scene(patches)
 
+    def _triangles(self, patches: PatchSet):
+        """The triangle table, sorted by patch: vertices, edges, areas, normals; patch areas."""
         tv, tri_patch = patch_triangles(patches)
         P = patches.n_patches
         self.n_patches = P
-        # triangles sorted by patch
         order = np.argsort(tri_patch, kind="stable")
         self.tv = tv = tv[order]
         self.tri_patch = tri_patch = tri_patch[order]
@@ -72,7 +75,9 @@ class SceneSampler:
         if np.any(self.area <= 0):
             raise SceneError("some patches have zero area")
 
-        # per patch a cumulative-area table: the within-patch CDF at each triangle's ends
+    def _area_tables(self):
+        """Per patch a cumulative-area table: the within-patch CDF at each triangle's ends."""
+        ta, tri_patch = self.ta, self.tri_patch
         cum = np.cumsum(ta)
         before = np.concatenate([[0.0], cum])[self.tstart]  # area before each patch's first triangle
         self.cdf_hi = (cum - before[tri_patch]) / self.area[tri_patch]
@@ -81,33 +86,40 @@ class SceneSampler:
         self.cdf_lo[self.tstart] = 0.0
         self.key = tri_patch + self.cdf_hi  # global monotone search key
 
+    def _shrunk_triangles(self, patches: PatchSet):
+        """The ray offset, and each triangle shrunk about its incentre: edges moved inward by
+        2 * offset (the shift, <= 2 * offset, is of the order of the normal offset)."""
+        tv, ta = self.tv, self.ta
         lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
         diag = float(np.linalg.norm(hi - lo)) if patches.region is None else patches.region.diagonal
         self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
-        # each triangle shrunk about its incentre: edges moved inward by 2 * offset (the shift,
-        # <= 2 * offset, is of the order of the normal offset)
         el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
                         np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)  # side opposite each vertex
-        perim = np.maximum(el3.sum(axis=1), 1e-300)
+        perim = np.maximum(el3.sum(axis=1), TINY)
         incentre = np.einsum("tk,tkj->tj", el3, tv) / perim[:, None]
         r_in = 2 * ta / perim
-        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, 1e-300))
+        shrink = 1 - np.minimum(0.5, 2 * self.offset / np.maximum(r_in, TINY))
         self.s_v0 = incentre + shrink[:, None] * (tv[:, 0] - incentre)
-        self.s_e1 = e1 * shrink[:, None]
-        self.s_e2 = e2 * shrink[:, None]
+        self.s_e1 = self.e1 * shrink[:, None]
+        self.s_e2 = self.e2 * shrink[:, None]
+
+    def _ray_scene(self, patches: PatchSet):
+        """The Embree scene: every triangle but those of the patches light passes through (work
+        planes, PatchSet.passes: they occlude nothing and nothing sees them)."""
+        from embreex import rtcore as rtc
+        from embreex import rtcore_scene as rtcs
+        from embreex.mesh_construction import TriangleMesh
 
         # front-side test of a first hit: the hit triangle's normal; the extra last row (all
         # zero, receiving patch P) is what a miss (primID -1) picks up
         self._n_ext = np.concatenate([self.tn, np.zeros((1, 3))]).astype(np.float32)
-        self._patch_ext = np.concatenate([tri_patch, [P]])
-
-        # the ray scene: every triangle but those of the patches light passes through (work planes,
-        # PatchSet.passes: they occlude nothing and nothing sees them)
+        self._patch_ext = np.concatenate([self.tri_patch, [self.n_patches]])
         self._occluders = None
         if patches.passes is not None and np.any(patches.passes):
-            self._occluders = np.flatnonzero(~np.asarray(patches.passes, dtype=bool)[tri_patch])
+            self._occluders = np.flatnonzero(~np.asarray(patches.passes, dtype=bool)[self.tri_patch])
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
-        self._mesh = TriangleMesh(self.scene, (tv if self._occluders is None else tv[self._occluders]).astype(np.float32))
+        tv = self.tv if self._occluders is None else self.tv[self._occluders]
+        self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
 
     def first_hit(self, org, d) -> np.ndarray:
         """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a miss."""

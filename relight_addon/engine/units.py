@@ -16,9 +16,14 @@ import math
 
 import numpy as np
 
-__all__ = ["MAX_REFLECTANCE", "MIN_REFLECTANCE_LUX", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
+__all__ = ["TINY", "MAX_REFLECTANCE", "MIN_REFLECTANCE_LUX", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
            "radiance_from_exitance", "illuminance_lux", "irradiance_from_lux", "luminous_flux_lm", "luminance_cd",
            "luminance_weighted"]
+
+#: a floor under a divisor (a norm, a length, a sum of weights), so that a zero stays zero instead
+#: of dividing by zero: ``x / max(d, TINY)`` is ``x / d`` for any d a scene holds, and 0 where
+#: d is 0 (and x with it); far below every physical quantity, so it never changes a result
+TINY = 1e-300
 
 #: reflectance of an exported material is clamped to [0, MAX_REFLECTANCE] (with a warning):
 #: a reflectance of 1 or more creates energy; the engine's forward solver clamps to the same value

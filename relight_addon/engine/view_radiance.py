@@ -35,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .principled import BRDFTable
+from .units import TINY, radiance_from_exitance
 
 __all__ = ["view_radiance", "HORIZON"]
 
@@ -83,63 +84,89 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     material = np.asarray(material, dtype=np.int64)
     patches = np.asarray(patches, dtype=np.int64)
     FB = np.asarray(M @ B, dtype=np.float64)
-    e = B - rho * FB if exitance is None else np.asarray(exitance, dtype=np.float64)
-    e_own = e  # what a patch shows of its own emission
+    e_own = B - rho * FB if exitance is None else np.asarray(exitance, dtype=np.float64)  # what a patch shows
+    e = e_own  # what it sends
     if emission_share is not None and exitance is not None:
-        e = e * np.asarray(emission_share, dtype=np.float64).reshape(-1, 1)  # what it sends
+        e = e * np.asarray(emission_share, dtype=np.float64).reshape(-1, 1)
     tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
     frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
-    E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), 1e-300), axis=1))
+    E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), TINY), axis=1))
     rows = M[patches]
     rows = rows.tocsr() if sp.issparse(rows) else np.asarray(rows)
     nnz = rows.nnz if sp.issparse(rows) else int(np.count_nonzero(rows))
-    glossy = source_glossy and len(E) > 0 and nnz * len(E) <= max_pairs
-    if glossy:
-        FE = M[:, E]
-        FE = (FE.toarray() if sp.issparse(FE) else np.asarray(FE)).astype(np.float64)  # (P, |E|)
-        dE = center[None, E, :] - center[:, None, :]
-        dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), 1e-300)
-        lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
-        H_direct = FE @ e[E]  # F's gather, what the Lambertian rest below takes out of F B
-        XE = None
-        if direct_correction is not None:
-            XE = direct_correction[:, E]
-            XE = (XE.toarray() if sp.issparse(XE) else np.asarray(XE)).astype(np.float64)
-        # the rest of the light, sent Lambertian: what the emitters' light leaves of F B, and the
-        # lamps' and the World's direct light (in B, not in F B)
-        H_lamps = sum((np.asarray(H, dtype=np.float64) for _, H in lamp_light or ()), np.zeros_like(B))
-        indirect = rho * (FB - H_direct + H_lamps) / np.pi
+    sources = None
+    if source_glossy and len(E) > 0 and nnz * len(E) <= max_pairs:
+        sources = _GlossySources(M, E, e, e_own, rho, FB, B, center, frames, material, tables, direct_correction,
+                                 lamp_light)
     out = np.empty((len(patches), 3))
     for k, i in enumerate(patches):
-        if sp.issparse(rows):
-            js, fij = rows.indices[rows.indptr[k]:rows.indptr[k + 1]], rows.data[rows.indptr[k]:rows.indptr[k + 1]]
-        else:
-            js = np.flatnonzero(rows[k])
-            fij = rows[k, js]
+        js, fij = _row(rows, k)
         R = frames[i]
         v = np.array([0.0, 0.0, 1.0]) if view is None else R @ np.asarray(view[k], dtype=np.float64)
         d = center[js] - center[i]
-        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY)
         f = tables[int(material[i])](v, _above(d @ R.T))
-        if glossy:
-            src = e[js] / np.pi + indirect[js]
-            vj = _above(np.einsum("jab,jb->ja", frames[js], -d))  # towards i, in each source's frame
-            for m in np.unique(material[js]):
-                sel = np.flatnonzero(material[js] == m)
-                n, nE = len(sel), len(E)
-                g = tables[int(m)](np.repeat(vj[sel], nE, axis=0), lE[js[sel]].reshape(-1, 3)).reshape(n, nE, 3)
-                src[sel] += np.einsum("jkc,jk,kc->jc", g, FE[js[sel]], e[E])
-                if XE is not None:
-                    src[sel] += np.einsum("jkc,jk,kc->jc", g, XE[js[sel]], e_own[E])
-        else:
-            src = B[js] / np.pi
-        out[k] = e_own[i] / np.pi + np.sum(f * (np.asarray(fij, dtype=np.float64)[:, None] * np.pi * src), axis=0)
+        src = radiance_from_exitance(B[js]) if sources is None else sources.towards(js, d)
+        solid_angle = np.asarray(fij, dtype=np.float64)[:, None] * np.pi  # pi F_ij: j's projected solid angle
+        out[k] = radiance_from_exitance(e_own[i]) + np.sum(f * (solid_angle * src), axis=0)
         for towards, H in lamp_light or ():
-            if towards is None:
-                out[k] += rho[i] * H[i] / np.pi
-            elif np.any(H[i] > 0):
-                out[k] += tables[int(material[i])](v, _above((R @ towards[i])[None, :]))[0] * H[i]
+            if towards is None or np.any(H[i] > 0):
+                out[k] += _lamp_seen(towards, H, i, rho, tables[int(material[i])], v, R)
     return out
+
+
+def _lamp_seen(towards, H, i, rho, table, v, R):
+    """(3,) the radiance along local ``v`` of patch i (frame R, BSDF table) reflecting a lamp's
+    direct irradiance H[i] from world direction towards[i] (``towards`` None: the World's, from
+    every direction, reflected Lambertian at reflectance rho[i])."""
+    if towards is None:
+        return radiance_from_exitance(rho[i] * H[i])
+    return table(v, _above((R @ towards[i])[None, :]))[0] * H[i]
+
+
+class _GlossySources:
+    """The radiance sources send towards a patch: their emission, their reflection of the
+    emitters' light (patches ``E``) through their own BSDF, and the rest of their light
+    Lambertian (module docstring)."""
+
+    def __init__(self, M, E, e, e_own, rho, FB, B, center, frames, material, tables, direct_correction, lamp_light):
+        self.E, self.e, self.e_own, self.frames, self.material, self.tables = E, e, e_own, frames, material, tables
+        FE = M[:, E]
+        self.FE = (FE.toarray() if sp.issparse(FE) else np.asarray(FE)).astype(np.float64)  # (P, |E|)
+        dE = center[None, E, :] - center[:, None, :]
+        dE /= np.maximum(np.linalg.norm(dE, axis=2, keepdims=True), TINY)
+        self.lE = _above(np.einsum("jab,jkb->jka", frames, dE))  # (P, |E|, 3) to each emitter, local
+        H_direct = self.FE @ e[E]  # F's gather, what the Lambertian rest below takes out of F B
+        self.XE = None
+        if direct_correction is not None:
+            XE = direct_correction[:, E]
+            self.XE = (XE.toarray() if sp.issparse(XE) else np.asarray(XE)).astype(np.float64)
+        # the rest of the light, sent Lambertian: what the emitters' light leaves of F B, and the
+        # lamps' and the World's direct light (in B, not in F B)
+        H_lamps = sum((np.asarray(H, dtype=np.float64) for _, H in lamp_light or ()), np.zeros_like(B))
+        self.indirect = radiance_from_exitance(rho * (FB - H_direct + H_lamps))
+
+    def towards(self, js, d):
+        """(len(js), 3) the radiance sources ``js`` send along -d (d: unit world directions to them)."""
+        E, e, material = self.E, self.e, self.material
+        src = radiance_from_exitance(e[js]) + self.indirect[js]
+        vj = _above(np.einsum("jab,jb->ja", self.frames[js], -d))  # towards i, in each source's frame
+        for m in np.unique(material[js]):
+            sel = np.flatnonzero(material[js] == m)
+            n, nE = len(sel), len(E)
+            g = self.tables[int(m)](np.repeat(vj[sel], nE, axis=0), self.lE[js[sel]].reshape(-1, 3)).reshape(n, nE, 3)
+            src[sel] += np.einsum("jkc,jk,kc->jc", g, self.FE[js[sel]], e[E])
+            if self.XE is not None:
+                src[sel] += np.einsum("jkc,jk,kc->jc", g, self.XE[js[sel]], self.e_own[E])
+        return src
+
+
+def _row(rows, k):
+    """(the patches j row k of F sees, F_kj) of ``rows`` (CSR or dense)."""
+    if sp.issparse(rows):
+        return rows.indices[rows.indptr[k]:rows.indptr[k + 1]], rows.data[rows.indptr[k]:rows.indptr[k + 1]]
+    js = np.flatnonzero(rows[k])
+    return js, rows[k, js]
 
 
 def _above(loc):

@@ -26,6 +26,7 @@ from .rays import cosine_directions
 from .kernel_transfer import _sample_patches, kernel_geometry
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
 from .sampling import SceneSampler
+from .units import TINY, exitance_from_radiance, luminance_weighted, radiance_from_exitance
 
 __all__ = ["EnvironmentMap", "Detail", "world_irradiance", "sees_sky", "WORLD_RAYS", "SKY_MIN"]
 
@@ -44,8 +45,6 @@ SUN_MAX_ANGLE = math.radians(12.0)
 SKY_TEST_RAYS = 200_000
 SKY_TEST_MIN_RAYS = 8
 SKY_TEST_SHARE = 1e-4
-#: luminance weights of linear Rec.709
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def _directions(H: int, W: int, rows, cols) -> np.ndarray:
@@ -69,8 +68,8 @@ def _sun(radiance, om, dirs, texel_angle) -> tuple:
     """(power (3,) W/m^2 at normal incidence, unit direction towards it, the full angle of the
     cone about it through the texels' centres plus one texel) of texels (n, 3) / (n,) / (n, 3)."""
     power = np.einsum("i,ic->c", om, radiance)
-    d = np.einsum("i,ic->c", om * (radiance @ LUMA), dirs)
-    d /= max(np.linalg.norm(d), 1e-300)
+    d = np.einsum("i,ic->c", om * luminance_weighted(radiance), dirs)
+    d /= max(np.linalg.norm(d), TINY)
     spread = float(np.max(np.arccos(np.clip(dirs @ d, -1.0, 1.0))))
     return power, d, 2.0 * spread + texel_angle
 
@@ -155,7 +154,7 @@ class EnvironmentMap:
 
     def mean_luminance(self) -> float:
         """The luminance (Rec.709) averaged over the sphere."""
-        return float(np.sum((self.radiance @ LUMA) * self.solid_angles()) / (4.0 * math.pi))
+        return float(np.sum(luminance_weighted(self.radiance) * self.solid_angles()) / (4.0 * math.pi))
 
     def sun_regions(self) -> list:
         """The map's suns, each (mask (H, W) bool, unit direction (3,) towards it, cone angle): a
@@ -166,7 +165,7 @@ class EnvironmentMap:
             return []
         from scipy import ndimage
 
-        labels, n = ndimage.label(self.radiance @ LUMA > BRIGHT * mean)
+        labels, n = ndimage.label(luminance_weighted(self.radiance) > BRIGHT * mean)
         om, dirs = self.solid_angles(), self.directions()
         out = []
         for k in range(1, n + 1):
@@ -207,7 +206,7 @@ class EnvironmentMap:
                 rows, cols = np.arange(rs.start * k, rs.stop * k), np.arange(cs.start * k, cs.stop * k)
                 fine = det.radiance
                 om_f = _solid_angles(H * k, W * k, rows, cols)
-                bright = fine @ LUMA > BRIGHT * mean
+                bright = luminance_weighted(fine) > BRIGHT * mean
                 power, d, angle = _sun(fine[bright], om_f[bright], _directions(H * k, W * k, rows, cols)[bright],
                                        math.pi / (H * k))
                 left = np.where(bright[..., None], 0.0, fine) * om_f[..., None]
@@ -265,11 +264,11 @@ def world_irradiance(patches, world, sampler: SceneSampler | None = None, seed: 
         o = (y + ny * sm.offset).astype(np.float32)
         escaped = np.asarray(sm.first_hit(o, d.astype(np.float32))) == -1
         if uniform is not None:
-            out[s] += np.pi * escaped.reshape(m, k).mean(axis=1)[:, None] * uniform[None, :]
+            out[s] += exitance_from_radiance(escaped.reshape(m, k).mean(axis=1)[:, None]) * uniform[None, :]
         else:
             L = np.zeros((m * k, 3))
             L[escaped] = rest.lookup(d[escaped])
-            out[s] += np.pi * L.reshape(m, k, 3).mean(axis=1)
+            out[s] += exitance_from_radiance(L.reshape(m, k, 3).mean(axis=1))
     return out
 
 
@@ -286,7 +285,7 @@ def sees_sky(faces, rays: int = SKY_TEST_RAYS, seed: int = 0) -> bool:
 
     patches = mesh_patches(faces, 2.0 * scene_scale(faces) + 1.0)
     per_patch = max(SKY_TEST_MIN_RAYS, int(rays) // max(patches.n_patches, 1))
-    share = world_irradiance(patches, np.ones(3), seed=seed, rays_per_patch=per_patch)[:, 0] / math.pi
+    share = radiance_from_exitance(world_irradiance(patches, np.ones(3), seed=seed, rays_per_patch=per_patch)[:, 0])
     counted = share < 1.0
     if faces.target is not None:
         counted |= np.asarray(faces.target, dtype=bool)[patches.face]

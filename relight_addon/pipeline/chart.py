@@ -209,51 +209,80 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     if not ok.any():
         _draw_text(img, 4 * s, 4 * s, "no curve", COLORS["text"], s)
         return img[::-1].copy(), geometry
-
-    # y range: linear from 0; the top is a round number above the curve, clipped
-    e_ok = err[ok]
-    top = float(e_ok.max())
     cur_err = float(err[current]) if current is not None and 0 <= current < len(err) and ok[current] else None
+    ymax, yt = _y_range(err[ok], cur_err, bound)
+    xlo, xhi, log = _x_range(n_lights[ok])
+    plot = _Plot(w, h, s, [_fmt(v) for v in yt], ymax, xlo, xhi, log)
+    geometry.update(plot=[plot.x0, plot.y0, plot.x1, plot.y1], y_max=ymax, x_log=bool(log), x_range=[xlo, xhi])
+    img[plot.y0:plot.y1 + 1, plot.x0:plot.x1 + 1] = COLORS["plot"]
+    _draw_axes(img, plot, yt, *x_ticks(xlo, xhi, log))
+    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
+    if b is not None and b.size == 1 and np.isfinite(b[0]):
+        _draw_bound(img, plot, b[0], bound_n_lights, geometry)
+    elif b is not None and b.size == len(n_lights):
+        _draw_bounds(img, plot, n_lights, b, ok, current, geometry)
+    _draw_curve(img, plot, n_lights, err, ok, neg)
+    if cur_err is not None:  # the shown configuration
+        mx, my = float(plot.px(n_lights[current])), float(plot.py(cur_err))
+        _line(img, mx, plot.y0, mx, plot.y1, COLORS["marker"], width=s)
+        _disc(img, mx, my, 3 * s, COLORS["marker"])
+        geometry["marker"] = [mx, my]
+    return img[::-1].copy(), geometry
+
+
+def _y_range(e_ok, cur_err, bound) -> tuple:
+    """(the top of the y axis, its ticks): linear from 0; the top is a round number above the
+    curve ``e_ok`` (its finite errors), clipped at CLIP unless the shown point or the bound is above."""
+    top = float(e_ok.max())
     if top > CLIP:
         top = max(CLIP * 2 / 3, cur_err * 1.05 if cur_err is not None else 0.0,
                   bound * 1.05 if bound is not None and np.isfinite(bound) else 0.0)
         top = min(top, float(e_ok.max()))
     ymax = nice_ceil(max(top, 1e-6))
     yt = y_ticks(ymax)
-    ymax = max(ymax, yt[-1])
+    return max(ymax, yt[-1]), yt
 
-    # x range
-    xv = np.maximum(n_lights[ok], 1.0)
+
+def _x_range(n_ok) -> tuple:
+    """(lowest, highest, logarithmic) of the lights axis over the curve's numbers of lights ``n_ok``."""
+    xv = np.maximum(n_ok, 1.0)
     xlo, xhi = float(xv.min()), float(xv.max())
     log = xhi / xlo > LOG_X_ABOVE
     if log:
         xlo = 10.0 ** math.floor(math.log10(xlo) + 1e-9)
     elif xhi == xlo:
         xlo, xhi = xlo - 1, xhi + 1
-    xmaj, xmin_ = x_ticks(xlo, xhi, log)
+    return xlo, xhi, log
 
-    # layout (top-down pixels)
-    ch = 7 * s
-    labels = [_fmt(v) for v in yt]
-    left = max(text_width(t, s) for t in labels) + 5 * s
-    x0, x1 = left, w - 6 * s
-    y0, y1 = ch + 9 * s, h - ch - 6 * s          # plot top / bottom (y1 = the x axis)
-    geometry.update(plot=[x0, y0, x1, y1], y_max=ymax, x_log=bool(log), x_range=[xlo, xhi])
-    img[y0:y1 + 1, x0:x1 + 1] = COLORS["plot"]
 
-    def px(n):
-        n = np.maximum(np.asarray(n, dtype=np.float64), 1.0 if log else -np.inf)
-        t = (np.log10(n) - math.log10(xlo)) / (math.log10(xhi) - math.log10(xlo)) if log \
+class _Plot:
+    """The layout (top-down pixels) of a w x h chart at font scale s: the plot rectangle x0..x1,
+    y0..y1 (y1 the x axis) beside the y labels, and the maps px (lights) and py (error) into it."""
+
+    def __init__(self, w, h, s, labels, ymax, xlo, xhi, log):
+        self.w, self.s, self.ch, self.labels = w, s, 7 * s, labels
+        left = max(text_width(t, s) for t in labels) + 5 * s
+        self.x0, self.x1 = left, w - 6 * s
+        self.y0, self.y1 = self.ch + 9 * s, h - self.ch - 6 * s  # plot top / bottom (y1 = the x axis)
+        self.ymax, self.xlo, self.xhi, self.log = ymax, xlo, xhi, log
+
+    def px(self, n):
+        xlo, xhi = self.xlo, self.xhi
+        n = np.maximum(np.asarray(n, dtype=np.float64), 1.0 if self.log else -np.inf)
+        t = (np.log10(n) - math.log10(xlo)) / (math.log10(xhi) - math.log10(xlo)) if self.log \
             else (n - xlo) / (xhi - xlo)
-        return x0 + 2 * s + t * (x1 - x0 - 4 * s)
+        return self.x0 + 2 * self.s + t * (self.x1 - self.x0 - 4 * self.s)
 
-    def py(e):
-        e = np.clip(np.asarray(e, dtype=np.float64), 0.0, ymax)
-        return y1 - e / ymax * (y1 - y0)
+    def py(self, e):
+        e = np.clip(np.asarray(e, dtype=np.float64), 0.0, self.ymax)
+        return self.y1 - e / self.ymax * (self.y1 - self.y0)
 
-    # grid, ticks and labels
-    for v, t in zip(yt, labels):
-        yy = float(py(v))
+
+def _draw_axes(img, plot: _Plot, yt, xmaj, xmin_):
+    """The grid, the ticks, their labels and the axis titles."""
+    s, ch, w, x0, x1, y0, y1 = plot.s, plot.ch, plot.w, plot.x0, plot.x1, plot.y0, plot.y1
+    for v, t in zip(yt, plot.labels):
+        yy = float(plot.py(v))
         if v > 0:
             _line(img, x0 + 1, yy, x1, yy, COLORS["grid"])
         _line(img, x0 - 2 * s, yy, x0, yy, COLORS["axis"])
@@ -261,10 +290,10 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     title = "lights"
     title_x = w - 2 * s - text_width(title, s)   # top right, beside the y title
     for v in xmin_:
-        xx = float(px(v))
+        xx = float(plot.px(v))
         _line(img, xx, y1, xx, y1 + 2 * s, COLORS["axis"])
     for v in xmaj:
-        xx = float(px(v))
+        xx = float(plot.px(v))
         if x0 < xx < x1:
             _line(img, xx, y0, xx, y1, COLORS["grid"])
         _line(img, xx, y1, xx, y1 + 3 * s, COLORS["axis"])
@@ -278,51 +307,57 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     _line(img, x0, y0, x0, y1, COLORS["axis"])
     _line(img, x0, y1, x1, y1, COLORS["axis"])
 
-    # the best achievable: a lower bound of the error (the NNLS bound, or per point the certificate)
-    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
-    label = "best possible"
-    if b is not None and b.size == 1 and np.isfinite(b[0]):
-        by = float(py(b[0]))
-        _line(img, x0 + 1, by, x1, by, COLORS["bound"], width=s, dash=4 * s)
-        _draw_text(img, x1 - text_width(label, s) - 2 * s, int(round(by)) - ch - 2 * s, label, COLORS["bound"], s)
-        geometry["bound_y"] = by
-        if bound_n_lights is not None and bound_n_lights >= 1:
-            _disc(img, float(px(bound_n_lights)), by, 2 * s, COLORS["bound"])
-    elif b is not None and b.size == len(n_lights):
-        okb = ok & np.isfinite(b)
-        idx = np.flatnonzero(okb)
-        idx = idx[np.argsort(n_lights[idx], kind="stable")]
-        if len(idx):
-            bx, byy = px(n_lights[idx]), py(b[idx])
-            for k in range(len(idx) - 1):
-                _line(img, bx[k], byy[k], bx[k + 1], byy[k + 1], COLORS["bound"], width=max(1, s + (s == 1)))
-            if len(idx) == 1:
-                _disc(img, float(bx[0]), float(byy[0]), 2 * s, COLORS["bound"])
-            # legend in the top-right corner (few lights have the large errors: it is the left
-            # part of the plot that fills up)
-            lx = x1 - text_width(label, s) - 3 * s
-            ly = y0 + 3 * s
-            _line(img, lx - 9 * s, ly + ch // 2, lx - 3 * s, ly + ch // 2, COLORS["bound"], width=max(1, s + (s == 1)))
-            _draw_text(img, lx, ly, label, COLORS["bound"], s)
-            if current is not None and 0 <= current < len(b) and okb[current]:
-                geometry["bound_y"] = float(py(b[current]))
-            geometry["bound_points"] = int(len(idx))
 
-    # the curve, sorted by number of lights
+BOUND_LABEL = "best possible"
+
+
+def _draw_bound(img, plot: _Plot, bound, bound_n_lights, geometry):
+    """The NNLS bound (one number): a dashed line, its label, a dot at its number of lights if known."""
+    s = plot.s
+    by = float(plot.py(bound))
+    _line(img, plot.x0 + 1, by, plot.x1, by, COLORS["bound"], width=s, dash=4 * s)
+    _draw_text(img, plot.x1 - text_width(BOUND_LABEL, s) - 2 * s, int(round(by)) - plot.ch - 2 * s, BOUND_LABEL,
+               COLORS["bound"], s)
+    geometry["bound_y"] = by
+    if bound_n_lights is not None and bound_n_lights >= 1:
+        _disc(img, float(plot.px(bound_n_lights)), by, 2 * s, COLORS["bound"])
+
+
+def _draw_bounds(img, plot: _Plot, n_lights, b, ok, current, geometry):
+    """The certificate: per configuration the lower bound of the error for its number of lights
+    (``b`` aligned with the curve, NaN = none), a line with its legend in the top-right corner."""
+    s = plot.s
+    okb = ok & np.isfinite(b)
+    idx = np.flatnonzero(okb)
+    idx = idx[np.argsort(n_lights[idx], kind="stable")]
+    if not len(idx):
+        return
+    bx, byy = plot.px(n_lights[idx]), plot.py(b[idx])
+    for k in range(len(idx) - 1):
+        _line(img, bx[k], byy[k], bx[k + 1], byy[k + 1], COLORS["bound"], width=max(1, s + (s == 1)))
+    if len(idx) == 1:
+        _disc(img, float(bx[0]), float(byy[0]), 2 * s, COLORS["bound"])
+    # legend in the top-right corner (few lights have the large errors: it is the left
+    # part of the plot that fills up)
+    lx = plot.x1 - text_width(BOUND_LABEL, s) - 3 * s
+    ly = plot.y0 + 3 * s
+    _line(img, lx - 9 * s, ly + plot.ch // 2, lx - 3 * s, ly + plot.ch // 2, COLORS["bound"],
+          width=max(1, s + (s == 1)))
+    _draw_text(img, lx, ly, BOUND_LABEL, COLORS["bound"], s)
+    if current is not None and 0 <= current < len(b) and okb[current]:
+        geometry["bound_y"] = float(plot.py(b[current]))
+    geometry["bound_points"] = int(len(idx))
+
+
+def _draw_curve(img, plot: _Plot, n_lights, err, ok, neg):
+    """The curve, sorted by number of lights; orange between configurations with negative exitances."""
+    s = plot.s
     idx = np.flatnonzero(ok)
     order = idx[np.argsort(n_lights[idx], kind="stable")]
-    xs, ys = px(n_lights[order]), py(err[order])
+    xs, ys = plot.px(n_lights[order]), plot.py(err[order])
     for k in range(len(order) - 1):
         a, b = order[k], order[k + 1]
         color = COLORS["negative"] if (neg[a] or neg[b]) else COLORS["curve"]
         _line(img, xs[k], ys[k], xs[k + 1], ys[k + 1], color, width=max(1, s + (s == 1)))
     if len(order) == 1:
         _disc(img, float(xs[0]), float(ys[0]), 2 * s, COLORS["curve"])
-
-    # the shown configuration
-    if cur_err is not None:
-        mx, my = float(px(n_lights[current])), float(py(cur_err))
-        _line(img, mx, y0, mx, y1, COLORS["marker"], width=s)
-        _disc(img, mx, my, 3 * s, COLORS["marker"])
-        geometry["marker"] = [mx, my]
-    return img[::-1].copy(), geometry

@@ -40,6 +40,7 @@ from ..engine.reduction import ReductionResult, StopCriteria, StrokeStart, reduc
 from ..engine.registry import DISTRIBUTIONS, ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS
 from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
+from ..engine.targets import scene_targets
 from .polygons import PolygonMap
 from .report import json_safe, radiosity_report, solve_report
 from .stored import StoredResult, stored_points
@@ -405,7 +406,7 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                 if emitting.any():
                     background = patches.exitance.copy()
                 lamp_H, lamp_names = scene_light(faces, patches, F, options.seed)
-                problem = InverseProblem(F, patches.area, patches.reflectance, patches.target, patches.target_radiosity,
+                problem = InverseProblem(F, patches.area, patches.reflectance, scene_targets(faces, patches),
                                          mask, patches.center, patches.normal, lights=lights,
                                          first_bounce=first_bounce(faces, patches, F, mask | emitting),
                                          background=background, background_irradiance=lamp_H.sum(axis=1),
@@ -437,7 +438,6 @@ def build_model(faces: FaceSet, options: JobOptions, mode="inverse", default_max
                      f"this solve ({patches.n_patches} patches after refinement pass {p + 1})")
         t_mesh += time.perf_counter() - t3
     if mode == "inverse":  # the lights' colour (an automatic mode chooses it on the final problem)
-        problem.target_region = target_regions(faces, patches, problem)
         problem.colour, note = light_colour_of(problem, options)
         if note:
             warnings.append(note)
@@ -543,16 +543,6 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     if red.cancelled:
         raise Cancelled("solve cancelled")
     return red
-
-
-def target_regions(faces, patches, problem) -> np.ndarray:
-    """(m,) per target row of ``problem``: the object of an illuminance target (faces.target_lux),
-    -1 for a painted one (the least-power selection's uniformity regions)."""
-    tg = problem.targets
-    if faces.target_lux is None:
-        return np.full(len(tg), -1, dtype=np.int64)
-    lux = faces.target_lux[patches.face[tg]] > 0
-    return np.where(lux, patches.object[tg], -1).astype(np.int64)
 
 
 def light_colour_of(problem, options) -> tuple:
@@ -1052,8 +1042,7 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     refined for the earlier targets among them), form factors, solvers and fixed light; the
     problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
     t0 = time.perf_counter()
-    problem = model.problem.retarget(patches.target, patches.target_radiosity)
-    problem.target_region = target_regions(faces, patches, problem)
+    problem = model.problem.retarget(scene_targets(faces, patches))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

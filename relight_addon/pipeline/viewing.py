@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.view_radiance import view_radiance
+from ..engine.units import TINY
 
 #: above this many chosen patches it is not computed (work: chosen patches x all patches)
 MAX_PATCHES = 20000
@@ -48,11 +49,11 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
                 towards = np.broadcast_to(-lamp.direction, (P, 3))
             else:
                 d = lamp.position[None, :] - patches.center
-                towards = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
+                towards = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY)
             lamp_light.append((towards, H[:, k]))
     for lamp, H in placed or ():
         d = lamp.position[None, :] - patches.center
-        lamp_light.append((d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300),
+        lamp_light.append((d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY),
                            np.asarray(H, dtype=np.float64)))
     if emission_share is None:
         emission_share = getattr(F, "emission_share", None)

@@ -509,12 +509,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             summary = f"{p.n_lights} lights, relative error {p.relative_error:.3g}"
         _wrap(box, summary, context, icon="CHECKMARK", width_px=context.region.width - 70)
         draw_warnings(box, s, [w for w in s.last_warnings.split("\n") if w])
-        rows = [line.split("\t") for line in s.last_fixed_light.split("\n") if line.count("\t") == 2]
-        if rows:  # the scene's own light the solve kept: each lamp, the World, each emissive object
-            col = layout.box().column(align=True)
-            col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
-            for kind, name, share in rows:
-                col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
+        _draw_fixed_light(layout, s)
         icon = chart_icon(context)
         if icon:
             ui = context.preferences.system.ui_scale
@@ -541,24 +536,41 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
                      icon="HIDE_ON" if shown else "SHADING_SOLID")
         # the row shown: its light on the targets and its lights (under the list, which then stays in place
         # whichever row is picked)
-        rows = [line.split("\t") for line in s.last_photometric.split("\n") if line.count("\t") == 5]
-        if rows:  # the predicted illuminance on the targets (the configuration shown)
-            col = layout.box().column(align=True)
-            col.label(text="Targets' illuminance (predicted)", icon="LIGHT_SUN")
-            for row in rows:
-                col.label(text=photometric_line(*row))
-        rows = [line.split("\t") for line in s.last_lights.split("\n") if line.count("\t") == 5]
-        if rows:  # the lights shown: power and luminous flux (a blackbody light's temperature; implausible: marked)
-            col = layout.box().column(align=True)
-            col.label(text="Lights shown", icon="OUTLINER_OB_LIGHT")
-            for name, kind, watts, lm, kelvin, mark in rows[:8]:  # two short lines each: the sidebar is narrow
-                col.label(text=f"{name} ({kind})", icon="ERROR" if mark else "DOT")
-                col.label(text=f"{float(watts):.3g} W, {float(lm):.3g} lm" + (f", {kelvin} K" if kelvin else ""),
-                          icon="BLANK1")
-                if mark:
-                    col.label(text=f"implausible: {mark}", icon="BLANK1")
-            if len(rows) > 8:
-                col.label(text=f"... and {len(rows) - 8} more")
+        _draw_shown_light(layout, s)
+
+
+def _draw_fixed_light(layout, s):
+    """The scene's own light the solve kept: each lamp, the World, each emissive object, with its
+    share of the targets."""
+    rows = [line.split("\t") for line in s.last_fixed_light.split("\n") if line.count("\t") == 2]
+    if rows:
+        col = layout.box().column(align=True)
+        col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
+        for kind, name, share in rows:
+            col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
+
+
+def _draw_shown_light(layout, s):
+    """The configuration shown: the predicted illuminance on the targets, and its lights' power
+    and luminous flux (a blackbody light's temperature; an implausible one marked)."""
+    rows = [line.split("\t") for line in s.last_photometric.split("\n") if line.count("\t") == 5]
+    if rows:
+        col = layout.box().column(align=True)
+        col.label(text="Targets' illuminance (predicted)", icon="LIGHT_SUN")
+        for row in rows:
+            col.label(text=photometric_line(*row))
+    rows = [line.split("\t") for line in s.last_lights.split("\n") if line.count("\t") == 5]
+    if rows:
+        col = layout.box().column(align=True)
+        col.label(text="Lights shown", icon="OUTLINER_OB_LIGHT")
+        for name, kind, watts, lm, kelvin, mark in rows[:8]:  # two short lines each: the sidebar is narrow
+            col.label(text=f"{name} ({kind})", icon="ERROR" if mark else "DOT")
+            col.label(text=f"{float(watts):.3g} W, {float(lm):.3g} lm" + (f", {kelvin} K" if kelvin else ""),
+                      icon="BLANK1")
+            if mark:
+                col.label(text=f"implausible: {mark}", icon="BLANK1")
+        if len(rows) > 8:
+            col.label(text=f"... and {len(rows) - 8} more")
 
 
 CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_model, RELIGHT_PT_solve,

@@ -43,6 +43,7 @@ from ..lights import LightSet, kind_code
 from ..registry import PATCH_MODELS, Param
 from ..extent import face_sizes
 from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
+from ..units import TINY
 
 __all__ = ["AdaptiveModel", "DIRECTIONS", "normal_bucket"]
 
@@ -160,7 +161,7 @@ class AdaptiveModel:
         kid = _ids(key[small])
         # connected components among the small faces of one key, through welded vertices
         scale = float(np.linalg.norm(faces.vertices.max(axis=0) - lo))
-        weld = _ids(np.rint((faces.vertices - lo) / (WELD * max(scale, 1e-300))).astype(np.int64))
+        weld = _ids(np.rint((faces.vertices - lo) / (WELD * max(scale, TINY))).astype(np.int64))
         small_id = np.full(faces.n_faces, -1, dtype=np.int64)
         small_id[small] = np.arange(int(small.sum()))
         corner_tri = np.flatnonzero(small[tf] & ok)
@@ -234,7 +235,7 @@ class AdaptiveModel:
         lights = LightSet(C, basis, np.concatenate(kinds)).with_geometry(patches)
         # a canonical order (kind, then position): the same lights get the same indices after a
         # refinement of the reflectors
-        q = np.rint(lights.center / (1e-6 * max(float(np.ptp(patches.center, axis=0).max()), 1e-300)))
+        q = np.rint(lights.center / (1e-6 * max(float(np.ptp(patches.center, axis=0).max()), TINY)))
         order = np.lexsort((lights.area, q[:, 2], q[:, 1], q[:, 0], lights.kind))
         return LightSet(C, basis[:, order].tocsr(), lights.kind[order], lights.area[order], lights.center[order],
                         lights.normal[order])
@@ -285,7 +286,7 @@ def refinement_measure(problem, history: list):
     change = None
     if history:
         prev = history[-1][1]
-        change = float(np.linalg.norm(pred - prev) / max(np.linalg.norm(prev), 1e-300))
+        change = float(np.linalg.norm(pred - prev) / max(np.linalg.norm(prev), TINY))
     history.append((e_ref, pred, change))
     facs = problem.factors()
     w = np.zeros(problem.n_patches)

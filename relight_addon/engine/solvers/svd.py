@@ -15,6 +15,7 @@ import scipy.sparse as sp
 from .common import GRAM_MAX_COND, SolverOutput, channel_groups, default_rcond, lstsq_min_norm
 from ..radiosity import radiosity_matrix
 from ..registry import SOLVERS
+from ..scene import SceneError
 
 
 class _PaperGram:
@@ -81,6 +82,9 @@ class _PaperGram:
                   cost="paper")
 def solve_paper(problem, rcond=None, svd_driver="auto"):
     n = problem.n_patches
+    if not problem.target_rows.selects:
+        raise SceneError("the paper's formulation substitutes the targets' patches: targets that mix patches "
+                         "need the reduced or nnls solver")
     C, P = problem.candidates, problem.targets
     U = np.flatnonzero(~problem.target_mask)
     D = problem.first_bounce  # the lights' first reflection (engine.incidence): A b = (I + D) S e

@@ -1,0 +1,99 @@
+"""Target kinds: what a solve is asked to meet, as rows of a linear system on the radiosity.
+
+A target is an object of a registered kind (``engine.registry.TARGET_KINDS``, one file per
+kind here) that gives
+
+- ``rows(n_patches)``: its rows, a sparse (k, P) linear map on the patches' radiosity B (the same
+  map in every channel): a painted face selects its patches, a mean would average several;
+- ``values``: (k, 3) W/m^2, what each row of B is asked to be (in the radiosity's units);
+- ``region``: (k,) int, per row the object of a uniformity region (the least-power selection's
+  uniformity goal: illuminance targets), -1 for none;
+- ``shown()``: (k, 3) the values in the kind's own unit (``unit``), as the report says them.
+
+``TargetRows.stack`` puts the targets of a problem into one system (``InverseProblem``): rows
+ordered by the first patch they read (stable), so a scene's painted and illuminance targets keep
+the patches' order. A kind's ``from_scene(faces, patches)`` makes its target of a scene (None
+when the scene has none); ``scene_targets`` asks every registered kind.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..registry import TARGET_KINDS
+from .kind import Target, selection_rows
+from .radiance import PaintedRadiance  # (the kinds register themselves, in this order)
+from .illuminance import Illuminance
+
+__all__ = ["Target", "TargetRows", "scene_targets", "selection_rows", "PaintedRadiance", "Illuminance"]
+
+
+@dataclass
+class TargetRows:
+    """The targets of a problem stacked into one system: ``matrix`` (m, P) CSR on B, ``values``
+    (m, 3) W/m^2, ``region`` (m,), ``target`` (m,) the index in ``targets`` of each row's target.
+    ``patch`` (m,): the patch of each row when every row selects one patch, each patch once
+    (``selects``: the paper's formulation substitutes them), else the first patch each row reads."""
+
+    targets: list
+    matrix: sp.csr_matrix
+    values: np.ndarray
+    region: np.ndarray
+    target: np.ndarray
+    patch: np.ndarray
+    selects: bool
+
+    @classmethod
+    def stack(cls, targets, n_patches) -> "TargetRows":
+        """The rows of ``targets`` (their kinds' ``rows`` and ``values``) in one system of
+        ``n_patches`` columns, ordered by the first patch each row reads (stable: a kind's own order
+        among rows that start on one patch); ValueError on rows of another width or reading nothing."""
+        targets = list(targets)
+        mats = [sp.csr_matrix(t.rows(n_patches), dtype=np.float64) for t in targets]
+        if any(M.shape[1] != n_patches for M in mats):
+            raise ValueError(f"a target's rows do not have {n_patches} columns")
+        M = sp.vstack(mats, format="csr") if mats else sp.csr_matrix((0, n_patches))
+        M.sort_indices()
+        if np.any(np.diff(M.indptr) == 0):
+            raise ValueError("a target row reads no patch")
+        values = np.concatenate([np.asarray(t.values, dtype=np.float64).reshape(-1, 3) for t in targets]) \
+            if targets else np.zeros((0, 3))
+        region = np.concatenate([t.region for t in targets]) if targets else np.zeros(0, np.int64)
+        which = np.repeat(np.arange(len(targets)), [X.shape[0] for X in mats])
+        first = M.indices[M.indptr[:-1]]
+        order = np.argsort(first, kind="stable")
+        M = M[order]
+        selects = bool(np.all(np.diff(M.indptr) == 1) and np.all(M.data == 1.0)
+                       and len(np.unique(first)) == len(first))  # (one patch per row, each patch once)
+        return cls(targets, M, values[order], region[order].astype(np.int64), which[order], first[order], selects)
+
+    @property
+    def m(self) -> int:
+        return self.matrix.shape[0]
+
+    def kind_of(self, row) -> str:
+        """The kind of target row ``row``."""
+        return self.targets[self.target[row]].kind
+
+    def of(self, X) -> np.ndarray:
+        """The rows applied to X (P, ...): a selection's rows of X, else the sparse product."""
+        if self.selects:
+            return X[self.patch]
+        return np.asarray(self.matrix @ X)
+
+    def columns(self) -> np.ndarray:
+        """(P, m) dense: the rows' transpose, right-hand sides of A^T Y = R^T."""
+        if self.selects:
+            Y = np.zeros((self.matrix.shape[1], self.m))
+            Y[self.patch, np.arange(self.m)] = 1.0
+            return Y
+        return self.matrix.T.toarray()
+
+
+def scene_targets(faces, patches) -> list:
+    """The targets of a scene (FaceSet ``faces`` meshed into ``patches``): every registered kind's
+    (``from_scene``), in registration order."""
+    found = (kind.impl.from_scene(faces, patches) for kind in TARGET_KINDS)
+    return [t for t in found if t is not None]
