@@ -18,7 +18,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
 from relight_addon.engine.targets import PaintedRadiance
-from relight_addon.engine.reduction import reduce_lights  # noqa: E402
+from relight_addon.engine.reduction import StopCriteria, reduce_lights  # noqa: E402
 from relight_addon.engine.scene import mesh_patches, polygon_faceset  # noqa: E402
 
 
@@ -79,7 +79,7 @@ def main():
     for sel, dist in (("exitance-elimination", "distance"), ("error-elimination", "distance"),
                       ("exitance-construction", "distance"), ("nnls-greedy", "distance")):
         t = time.perf_counter()
-        rr = reduce_lights(p, r.exitance, sel, dist, relative_error_threshold=0.05)
+        rr = reduce_lights(p, r.exitance, sel, dist, StopCriteria(relative_error_threshold=0.05))
         dt = time.perf_counter() - t
         f = rr.final
         rows.append((f"reduce {sel} full curve ({len(rr.curve)} points)", dt,

@@ -37,7 +37,7 @@ from relight_addon.blender import blend_files, export
 from relight_addon.pipeline import stages  # noqa: E402
 from relight_addon.pipeline.model import build_inverse_model  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
-from relight_addon.engine.reduction import reduce_lights  # noqa: E402
+from relight_addon.engine.reduction import StopCriteria, reduce_lights  # noqa: E402
 from relight_addon.engine.registry import SELECTIONS  # noqa: E402
 
 K = (1, 2, 3, 5, 10, 20, 32)
@@ -79,19 +79,19 @@ def main():
         rows = []
         models = {}
         for sel in SELECTIONS:
-            multi = bool(sel.get("multiscale"))
+            multi = sel.traits.multiscale
             if multi not in models:
                 opts = JobOptions(patch_model=model_name, selection=sel.name,
-                                  tolerance=0.1 if sel.get("needs_tolerance") else None).validate()
+                                  tolerance=0.1 if sel.traits.needs_tolerance else None).validate()
                 models[multi] = build_inverse_model(exp.faces, opts, exp.settings.get("max_patch_size"))
                 models[multi].problem.transfer  # noqa: B018
             m = models[multi]
             opts = JobOptions(patch_model=model_name, selection=sel.name,
-                              tolerance=0.1 if sel.get("needs_tolerance") else None).validate()
+                              tolerance=0.1 if sel.traits.needs_tolerance else None).validate()
             e_x, _ = stages.solve_stage(m, opts)
             t0 = time.perf_counter()
-            red = reduce_lights(m.problem, e_x, selection=sel.name, distribution="distance", max_lights=32,
-                                tolerance=opts.tolerance, max_steps=32 if sel.name == "error-construction" else None)
+            red = reduce_lights(m.problem, e_x, sel.bind(opts), "distance", StopCriteria(max_lights=32),
+                                max_steps=32 if sel.name == "error-construction" else None)
             seconds = time.perf_counter() - t0
             row = {"selection": sel.name, "lights": int(m.problem.n_lights), "seconds": seconds, "by_k": {}}
             for k in K:
@@ -124,7 +124,7 @@ def plot(out):
             if not ks:
                 continue
             err = [max(row["by_k"][k]["relative_error"], 1e-3) for k in ks]
-            style = "-" if SELECTIONS[row["selection"]].get("paper") else "--"
+            style = "-" if SELECTIONS[row["selection"]].traits.paper else "--"
             ax.plot(ks, err, style, marker="o", ms=3, label=row["selection"])
         ax.set_xscale("log")
         ax.set_yscale("log")

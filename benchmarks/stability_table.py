@@ -31,7 +31,7 @@ from relight_addon.engine.formfactors import compute_form_factors  # noqa: E402
 from relight_addon.engine.inverse import InverseProblem, solve_inverse  # noqa: E402
 from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity  # noqa: E402
-from relight_addon.engine.reduction import reduce_lights  # noqa: E402
+from relight_addon.engine.reduction import StopCriteria, reduce_lights  # noqa: E402
 from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS, SOLVERS  # noqa: E402
 from relight_addon.engine.scene import SceneError, mesh_patches, polygon_faceset  # noqa: E402
 
@@ -191,9 +191,10 @@ def run_row(prob, solver, selection, distribution, ec_steps=10, solves=None):
             inv = solve_inverse(prob, solver)
             if solves is not None:
                 solves[solver] = inv
-        lp = SELECTIONS[selection].get("needs_tolerance")  # the least-power programme: +-10 %, no stop criteria
-        red = reduce_lights(prob, inv.exitance, selection, distribution, max_lights=None if lp else 3,
-                            require_positive=True, tolerance=LP_TOLERANCE if lp else None,
+        lp = SELECTIONS[selection].traits.needs_tolerance  # the least-power programme: +-10 %, no stop criteria
+        method = SELECTIONS[selection].bind(tolerance=LP_TOLERANCE) if lp else selection
+        red = reduce_lights(prob, inv.exitance, method, distribution,
+                            StopCriteria(max_lights=None if lp else 3, require_positive=True),
                             max_steps=ec_steps if selection == "error-construction" else None)
     except (SceneError, ValueError) as exc:  # InverseError and RadiosityError are both
         row["seconds"] = time.perf_counter() - t0
@@ -225,7 +226,7 @@ LP_TOLERANCE = 0.1
 def combos():
     for solver in SOLVERS.names():
         for sel in SELECTIONS.names():
-            for dist in (DISTRIBUTIONS.names() if SELECTIONS[sel].get("distributes", True) else ("distance",)):
+            for dist in (DISTRIBUTIONS.names() if SELECTIONS[sel].traits.distributes else ("distance",)):
                 yield solver, sel, dist
 
 

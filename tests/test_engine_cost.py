@@ -62,4 +62,4 @@ def test_the_blackbody_relaxation_is_counted_for_the_modes_that_run_it():
     assert np.isclose(b, cost.RELAXATION_COPIES * 8 * entries) and np.isclose(s, cost.RELAXATION_SECONDS_PER_ENTRY * entries)
     big, _ = _parts(colour_relaxation=True, n_targets=100_000)["light_colour"]
     assert np.isclose(big, cost.RELAXATION_COPIES * RELAXATION_BYTES)  # (a coarser cone beyond)
-    assert {m.name for m in LIGHT_COLOURS if m.get("relaxation")} == {"auto", "blackbody"}
+    assert {m.name for m in LIGHT_COLOURS if m.traits.relaxation} == {"auto", "blackbody"}

@@ -18,7 +18,7 @@ from relight_addon.engine.inverse import InverseError, direct_lighting_problem
 from relight_addon.engine.lamps import Lamp
 from relight_addon.engine.lights import kind_code
 from relight_addon.engine.lights.lamp import add_lamps, blender_values
-from relight_addon.engine.reduction import reduce_lights
+from relight_addon.engine.reduction import StopCriteria, reduce_lights
 from relight_addon.engine.registry import DISTRIBUTIONS, LIGHT_KINDS
 
 RHO = np.array([0.5, 0.6, 0.7])
@@ -136,7 +136,7 @@ def test_best_k_lamps_curve_against_exhaustive_search(room):
     strength = np.array([lamp.power for lamp in lamps])
     T = [inverse_of_A(r, c) @ (RHO[c] * H) for c in range(3)]
     b = np.stack([T[c] @ strength[:, c] for c in range(3)], axis=1)
-    red = reduce_lights(prob, e_x, selection="greedy-swap", max_lights=4)
+    red = reduce_lights(prob, e_x, selection="greedy-swap", stop=StopCriteria(max_lights=4))
     by_k = {p.n_lights: p for p in red.curve}
     assert sorted(by_k) == [1, 2, 3, 4]
     for k in (1, 2, 3):

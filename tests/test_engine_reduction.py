@@ -6,7 +6,7 @@ import flatland
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
 from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity
-from relight_addon.engine.reduction import Distributor, reduce_lights
+from relight_addon.engine.reduction import Distributor, StopCriteria, reduce_lights
 from relight_addon.engine.registry import DISTRIBUTIONS, SELECTIONS
 
 RHO = np.array([0.5, 0.6, 0.7])
@@ -30,7 +30,7 @@ def case():
     return feasible(0)
 
 
-@pytest.mark.parametrize("selection", [s.name for s in SELECTIONS if s.get("distributes", True)])
+@pytest.mark.parametrize("selection", [s.name for s in SELECTIONS if s.traits.distributes])
 @pytest.mark.parametrize("distribution", DISTRIBUTIONS.names())
 def test_power_conserved_and_errors_exact(case, selection, distribution):
     prob, e_x = case
@@ -86,7 +86,7 @@ def test_error_elimination_matches_brute_force(case):
 @pytest.mark.parametrize("seed", range(6))
 def test_exitance_elimination_ends_positive(seed):
     prob, e_x = feasible(seed, n_lights=1 + seed % 3)
-    res = reduce_lights(prob, e_x, "exitance-elimination", "distance", relative_error_threshold=0.2)
+    res = reduce_lights(prob, e_x, "exitance-elimination", "distance", StopCriteria(relative_error_threshold=0.2))
     A = prob.area[prob.candidates]
     assert ((e_x * A[:, None]).sum(0) > 0).all()  # total power positive: the premise of the guarantee
     assert res.final.n_negative == 0 and res.curve[-1].n_negative == 0
@@ -108,13 +108,13 @@ def test_nnls_greedy_non_negative_and_monotone(case):
 
 def test_stop_criteria(case):
     prob, e_x = case
-    res = reduce_lights(prob, e_x, max_lights=4)
+    res = reduce_lights(prob, e_x, stop=StopCriteria(max_lights=4))
     assert res.final.n_lights <= 4 and res.final.n_negative == 0
     thr = 0.05 * prob.target_norm
-    res = reduce_lights(prob, e_x, error_threshold=thr)
+    res = reduce_lights(prob, e_x, stop=StopCriteria(error_threshold=thr))
     ok = [p for p in res.curve if p.error <= thr and p.n_negative == 0]
     assert res.final.error <= thr and res.final.n_lights == min(p.n_lights for p in ok)
-    res = reduce_lights(prob, e_x, error_threshold=0.0, max_lights=1)
+    res = reduce_lights(prob, e_x, stop=StopCriteria(error_threshold=0.0, max_lights=1))
     assert res.warnings and res.final.n_lights == 1
     np.testing.assert_allclose(res.patch_exitance(prob)[prob.candidates[res.final.lights]], res.final.exitance)
 

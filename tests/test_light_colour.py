@@ -21,7 +21,8 @@ from relight_addon.engine.colours.white import White
 from relight_addon.engine.inverse import InverseProblem, solve_inverse
 from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.options import JobOptions
-from relight_addon.engine.reduction import reduce_lights
+from relight_addon.engine.reduction import StopCriteria, reduce_lights
+from relight_addon.engine.registry import SELECTIONS
 
 WARM = np.array([0.7, 0.55, 0.4])  # a warm floor and walls
 
@@ -47,9 +48,10 @@ def stacked_error(prob, S, colours):
     return r
 
 
-def solve(prob, selection="greedy-swap", **kw):
+def solve(prob, selection="greedy-swap", max_lights=None, **params):
+    """The reduction of the svd solution by ``selection`` with its parameters ``params``."""
     e_x = solve_inverse(prob, "svd").exitance
-    return reduce_lights(prob, e_x, selection=selection, **kw)
+    return reduce_lights(prob, e_x, SELECTIONS[selection].bind(**params), stop=StopCriteria(max_lights=max_lights))
 
 
 def test_blackbody_is_blenders():
@@ -99,7 +101,7 @@ def test_blackbody_lights_are_blackbody_and_k1_is_exhaustive():
     reported temperature, in the range; with one light the curve's error is the best of every light
     at every temperature of the grid (stacked NNLS here); the certificate (the cone relaxation) is
     below every configuration found and below blackbody lights at temperatures off the grid."""
-    mode = Blackbody(JobOptions(light_colour="blackbody", temperature_min=3000.0, temperature_max=6000.0))
+    mode = Blackbody(temperature_min=3000.0, temperature_max=6000.0)
     prob = room(colour=mode)
     red = solve(prob, max_lights=3)
     for pt in red.curve:

@@ -11,7 +11,7 @@ import pytest
 import flatland
 from relight_addon.engine.inverse import InverseProblem, direct_lighting_problem, solve_inverse
 from relight_addon.engine.targets import PaintedRadiance
-from relight_addon.engine.reduction import Distributor, reduce_lights
+from relight_addon.engine.reduction import Distributor, StopCriteria, reduce_lights
 from relight_addon.engine.registry import DISTRIBUTIONS
 
 
@@ -51,7 +51,7 @@ def test_fig3_exitance_construction_not_minimal_with_negatives(room):
     e_x = e_full[prob.candidates]
     assert prob.error(e_x) < 1e-12
 
-    res = reduce_lights(prob, e_x, "exitance-construction", "local", require_positive=False)
+    res = reduce_lights(prob, e_x, "exitance-construction", "local", StopCriteria(require_positive=False))
     first, second = res.curve[0], res.curve[1]
     # the paper's numbers follow from energy conservation with equal areas
     assert list(first.lights) == [s1] and first.exitance[0, 0] == pytest.approx(18.0)  # 30 - 29 + 10 + 7
@@ -62,8 +62,8 @@ def test_fig3_exitance_construction_not_minimal_with_negatives(room):
     e_s4 = prob.error(only_s4)
     assert e_s4 < first.error  # a single S4 is better than a single S1
     threshold = max(e_s4, second.error) * 1.0001
-    final = reduce_lights(prob, e_x, "exitance-construction", "local", error_threshold=threshold,
-                          require_positive=False).final
+    final = reduce_lights(prob, e_x, "exitance-construction", "local",
+                          StopCriteria(error_threshold=threshold, require_positive=False)).final
     assert final.n_lights == 2 and s1 in final.lights  # not minimal: one light (S4) meets the threshold
 
 
@@ -82,20 +82,21 @@ def test_fig4_error_selections_keep_negatives_exitance_elimination_does_not(room
     left = r["wall"][prob.candidates] == "left"
     assert (e_x[~left] < 0).any() and (e_x[left] > 0).any()
 
-    ec = reduce_lights(prob, e_x, "error-construction", "distance", require_positive=False)
+    ec = reduce_lights(prob, e_x, "error-construction", "distance", StopCriteria(require_positive=False))
     one, two = ec.curve[0], ec.curve[1]
     assert left[one.lights].all() and one.n_negative == 0  # S1 on the left wall first
     assert two.n_negative == 1 and (two.exitance[~left[two.lights]] < 0).all()  # then a negative S2 on the right
     threshold = two.error * 1.001
     assert one.error > threshold
     for sel in ("error-construction", "error-elimination"):
-        fin = reduce_lights(prob, e_x, sel, "distance", error_threshold=threshold, require_positive=False).final
+        fin = reduce_lights(prob, e_x, sel, "distance",
+                            StopCriteria(error_threshold=threshold, require_positive=False)).final
         assert fin.n_negative > 0, sel  # no positivity guarantee
-    ee = reduce_lights(prob, e_x, "error-elimination", "distance", require_positive=False)
+    ee = reduce_lights(prob, e_x, "error-elimination", "distance", StopCriteria(require_positive=False))
     two_el = [p for p in ee.curve if p.n_lights == 2][0]
     assert list(two_el.lights) == list(two.lights)  # ends at the same configuration as the construction
     np.testing.assert_allclose(two_el.exitance, two.exitance, rtol=1e-9)
-    xe = reduce_lights(prob, e_x, "exitance-elimination", "distance", error_threshold=threshold)
+    xe = reduce_lights(prob, e_x, "exitance-elimination", "distance", StopCriteria(error_threshold=threshold))
     assert xe.final.n_negative == 0
 
 

@@ -162,11 +162,11 @@ def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     job (what `relight solve` and the add-on run) adds one, with the NNLS bound."""
     from relight_addon.engine.bounds import positive_bound
     from relight_addon.pipeline.notes import positivity_notes
-    from relight_addon.engine.reduction import reduce_lights
+    from relight_addon.engine.reduction import StopCriteria, reduce_lights
 
     prob = CASES["infeasible contrast"][1]()
     inv = solve_inverse(prob, "reduced")
-    red = reduce_lights(prob, inv.exitance, max_lights=3)
+    red = reduce_lights(prob, inv.exitance, stop=StopCriteria(max_lights=3))
     assert red.final.n_negative == 0 and red.final.relative_error > 0.1
     notes = positivity_notes(positive_bound(prob, inv, red.final), red.final)
     nn = solve_inverse(prob, "nnls")
@@ -182,6 +182,6 @@ def test_the_job_says_when_no_positive_lighting_meets_the_targets():
     base = CASES["room"][1]() if "room" in CASES else None
     if base is not None:
         inv2 = solve_inverse(base, "reduced")
-        red2 = reduce_lights(base, inv2.exitance, max_lights=1)
+        red2 = reduce_lights(base, inv2.exitance, stop=StopCriteria(max_lights=1))
         for note in positivity_notes(positive_bound(base, inv2, red2.final), red2.final):
             assert "allow more lights" in note or "no positive lighting" in note

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 import flatland
 from relight_addon.engine.inverse import InverseProblem, solve_inverse, target_rows
 from relight_addon.engine.radiosity import solve_radiosity
-from relight_addon.engine.reduction import reduce_lights
+from relight_addon.engine.reduction import StopCriteria, reduce_lights
 from relight_addon.engine.registry import TARGET_KINDS
 from relight_addon.engine.scene import SceneError
 from relight_addon.engine.targets import PaintedRadiance, Target, scene_targets
@@ -95,8 +95,8 @@ def test_reduction_keeps_the_rows(room, toy_kind):
     r = room
     prob = _problem(r, toy_kind)[0]
     e_x = solve_inverse(prob, "nnls").exitance
-    red = reduce_lights(prob, e_x, "exitance-elimination", "distance", max_lights=4, error_route="gauss-seidel",
-                        require_positive=False)
+    red = reduce_lights(prob, e_x, "exitance-elimination", "distance",
+                        StopCriteria(max_lights=4, require_positive=False), error_route="gauss-seidel")
     final = red.final
     strength = np.zeros((prob.n_lights, 3))
     strength[final.lights] = final.exitance

@@ -16,6 +16,7 @@ from relight_addon.engine.inverse import InverseProblem, solve_inverse
 from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.radiosity import solve_radiosity
 from relight_addon.engine.reduction import reduce_lights
+from relight_addon.engine.registry import SELECTIONS
 from relight_addon.engine.units import illuminance_lux
 
 RHO = np.array([0.5, 0.45, 0.4])
@@ -50,10 +51,10 @@ def floor_u0(prob, r, red):
 def test_uniformity_goal_met(colour):
     prob, r = room(colour)
     e_x = solve_inverse(prob, "svd").exitance
-    free = reduce_lights(prob, e_x, selection="least-power", tolerance=0.5)
+    free = reduce_lights(prob, e_x, SELECTIONS["least-power"].bind(tolerance=0.5))
     u_free, _ = floor_u0(prob, r, free)
     goal = min(0.97, u_free + 0.5 * (1 - u_free))  # above what the band alone gives
-    red = reduce_lights(prob, e_x, selection="least-power", tolerance=0.5, uniformity=goal)
+    red = reduce_lights(prob, e_x, SELECTIONS["least-power"].bind(tolerance=0.5, uniformity=goal))
     u, lux = floor_u0(prob, r, red)
     msg = " ".join(red.warnings)
     if "is reachable" in msg:
@@ -67,14 +68,14 @@ def test_uniformity_goal_met(colour):
 def test_unreachable_goal_says_what_is_reachable():
     prob, r = room()
     e_x = solve_inverse(prob, "svd").exitance
-    red = reduce_lights(prob, e_x, selection="least-power", tolerance=0.5, uniformity=1.0)
+    red = reduce_lights(prob, e_x, SELECTIONS["least-power"].bind(tolerance=0.5, uniformity=1.0))
     msg = " ".join(red.warnings)
     assert "cannot be met within the band" in msg, msg
     reach = float(msg.split("U0 >= ")[2].split(" is reachable")[0])
     u, _ = floor_u0(prob, r, red)
     assert 0.9 < reach < 1.0 and u >= reach - 1e-3  # (the message gives it to 3 digits)
     # at a tolerance no lights can meet: the goal within the reachable band, or the U0 reachable there
-    red = reduce_lights(prob, e_x, selection="least-power", tolerance=0.02, uniformity=1.0)
+    red = reduce_lights(prob, e_x, SELECTIONS["least-power"].bind(tolerance=0.02, uniformity=1.0))
     msg = " ".join(red.warnings)
     assert "the closest is" in msg and "cannot be met within the band" in msg, msg
     reach = float(msg.split("U0 >= ")[2].split(" is reachable")[0])

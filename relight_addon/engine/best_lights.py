@@ -263,6 +263,42 @@ class KLightPoint:
     source: str = "greedy"
 
 
+def _swap_unused(q, N, iN, MN, tolN, val, beta, kkt_ok):
+    """swap_bounds' rows i in N (the channel does not use light i): adding j as in add_bounds;
+    ``val``, ``beta``, ``kkt_ok`` filled in place."""
+    g = q["corr"]
+    cp = np.maximum(g, 0.0)
+    bN = np.where(q["ok"], cp / q["perp"], 0.0)
+    val[iN] = q["rls2"] - bN * cp
+    beta[iN] = bN
+    viol = g[N][:, None] - bN[None, :] * MN > tolN[:, None]  # (|N|, n)
+    nviol = viol.sum(axis=0)
+    for p_, i in enumerate(iN):  # KKT over l in N - {i}
+        kkt_ok[i] = (nviol - viol[p_]) == 0
+
+
+def _swap_used(q, d, N, ia, MN, tolN, val, beta, kkt_ok):
+    """swap_bounds' rows i in A (the channel uses light i): downdate A by i, add j; ``val``,
+    ``beta``, ``kkt_ok`` filled in place and the downdate's diagonal kept in q["Hd"]."""
+    g = q["corr"]
+    H, Z, x = q["H"], q["Z"], q["x"]
+    Hd = np.diag(H).copy()
+    Hd = np.where(Hd > 0, Hd, np.inf)
+    pij = q["raw_perp"][None, :] + Z * Z / Hd[:, None]
+    ok = pij > 1e-10 * np.maximum(d, 1e-300)[None, :]
+    cij = np.maximum(g[None, :] + Z * (x / Hd)[:, None], 0.0)
+    bA = np.where(ok, cij / np.where(ok, pij, 1.0), 0.0)
+    val[ia] = (q["rls2"] + x * x / Hd)[:, None] - bA * cij
+    beta[ia] = bA
+    q["Hd"] = Hd
+    if len(N):
+        zN = Z[:, N]  # [i, l]: t_l . z_i
+        gl = g[N][None, :] + (x / Hd)[:, None] * zN  # t_l . r without light i
+        MNi = MN[None, :, :] + zN[:, :, None] * (Z / Hd[:, None])[:, None, :]  # [i, l, j]
+        kkt = gl[:, :, None] - bA[:, None, :] * MNi
+        kkt_ok[ia] = (kkt <= tolN[None, :, None]).all(axis=1)
+
+
 class _Model:
     """Gram matrices, NNLS fits of light sets (cached), and the screening bounds."""
 
@@ -453,67 +489,66 @@ class _Model:
         LB0 = np.zeros((k, n))
         UB1 = np.zeros((k, n))
         for c in self.chans:
-            key = id(self.T[c])
-            G, d = self.G[key], self.d[key]
-            act = e[:, c] > 0
-            A, N = S[act], S[~act]
-            ia, iN = np.flatnonzero(act), np.flatnonzero(~act)
-            q = self._channel(G, d, A, c)
-            g = q["corr"]
-            val = np.zeros((k, n))
-            beta = np.zeros((k, n))
-            kkt_ok = np.ones((k, n), dtype=bool)
-            if len(N):
-                MN = G[N] - (q["GA"][:, N].T @ q["Z"] if len(A) else 0.0)  # t_l . (t_j - P_A t_j)
-                tolN = self._kkt_tol(d[N], c)
-            if len(N):  # rows i in N: the channel does not use light i; adding j as in add_bounds
-                cp = np.maximum(g, 0.0)
-                bN = np.where(q["ok"], cp / q["perp"], 0.0)
-                val[iN] = q["rls2"] - bN * cp
-                beta[iN] = bN
-                viol = g[N][:, None] - bN[None, :] * MN > tolN[:, None]  # (|N|, n)
-                nviol = viol.sum(axis=0)
-                for p_, i in enumerate(iN):  # KKT over l in N - {i}
-                    kkt_ok[i] = (nviol - viol[p_]) == 0
-            if len(A):  # rows i in A: downdate A by i, add j
-                H, Z, x = q["H"], q["Z"], q["x"]
-                Hd = np.diag(H).copy()
-                Hd = np.where(Hd > 0, Hd, np.inf)
-                pij = q["raw_perp"][None, :] + Z * Z / Hd[:, None]
-                ok = pij > 1e-10 * np.maximum(d, 1e-300)[None, :]
-                cij = np.maximum(g[None, :] + Z * (x / Hd)[:, None], 0.0)
-                bA = np.where(ok, cij / np.where(ok, pij, 1.0), 0.0)
-                val[ia] = (q["rls2"] + x * x / Hd)[:, None] - bA * cij
-                beta[ia] = bA
-                q["Hd"] = Hd
-                if len(N):
-                    zN = Z[:, N]  # [i, l]: t_l . z_i
-                    gl = g[N][None, :] + (x / Hd)[:, None] * zN  # t_l . r without light i
-                    MNi = MN[None, :, :] + zN[:, :, None] * (Z / Hd[:, None])[:, None, :]  # [i, l, j]
-                    kkt = gl[:, :, None] - bA[:, None, :] * MNi
-                    kkt_ok[ia] = (kkt <= tolN[None, :, None]).all(axis=1)
-            if len(N) and not kkt_ok.all():
-                LB0 += np.where(kkt_ok, val, np.minimum(self._swap_relaxation(G, d, S, c), val))
-            else:
-                LB0 += val
-            chan.append((c, q, A, ia, val, beta))
-            # achievable: drop light i from the current fit, best non-negative multiple of j
-            ec = e[:, c]
-            gS = self.h[:, c] - np.einsum("ij,i->j", G[S], ec)  # t_j . rho
-            rho_i2 = err2[c] + 2.0 * ec * gS[S] + ec * ec * d[S]
-            gij = gS[None, :] + G[S] * ec[:, None]
-            UB1 += rho_i2[:, None] - np.where((d > 0)[None, :], np.maximum(gij, 0.0) ** 2
-                                              / np.where(d > 0, d, 1.0)[None, :], 0.0)
-            chan[-1] = chan[-1] + (kkt_ok,)
+            lb, fit = self._swap_channel(S, e, c)
+            LB0 += lb
+            chan.append(fit)
+            UB1 += self._swap_achievable(S, e[:, c], err2[c], c)
         LB0 = np.maximum(LB0, 0.0)
         I, J = np.nonzero((LB0 <= limit) & cols[None, :])
         if len(I) > max_pairs:  # the search refits pairs in increasing bound: keep the most promising
             keep = np.argpartition(LB0[I, J], max_pairs - 1)[:max_pairs]
             keep.sort()
             I, J = I[keep], J[keep]
-        P = len(I)
-        if P == 0:
+        if len(I) == 0:
             return I, J, np.zeros(0), np.zeros(0)
+        exact, exact_val = self._swap_exact(chan, I, J, k)
+        LB = LB0[I, J]
+        UB = np.where(exact, np.maximum(exact_val, 0.0), np.maximum(UB1[I, J], 0.0))
+        return I, J, LB, UB
+
+    def _swap_channel(self, S, e, c) -> tuple:
+        """swap_bounds on channel c: (its (k, n) lower bounds, (c, q, A, ia, val, beta, kkt_ok): the
+        channel's fit on its active lights A (positions ia in S), the least-squares values and
+        multiples of j per swap, and where the KKT condition holds)."""
+        k, n = len(S), self.n
+        key = id(self.T[c])
+        G, d = self.G[key], self.d[key]
+        act = e[:, c] > 0
+        A, N = S[act], S[~act]
+        ia, iN = np.flatnonzero(act), np.flatnonzero(~act)
+        q = self._channel(G, d, A, c)
+        val = np.zeros((k, n))
+        beta = np.zeros((k, n))
+        kkt_ok = np.ones((k, n), dtype=bool)
+        MN = tolN = None
+        if len(N):  # rows i in N: the channel does not use light i; adding j as in add_bounds
+            MN = G[N] - (q["GA"][:, N].T @ q["Z"] if len(A) else 0.0)  # t_l . (t_j - P_A t_j)
+            tolN = self._kkt_tol(d[N], c)
+            _swap_unused(q, N, iN, MN, tolN, val, beta, kkt_ok)
+        if len(A):  # rows i in A: downdate A by i, add j
+            _swap_used(q, d, N, ia, MN, tolN, val, beta, kkt_ok)
+        if len(N) and not kkt_ok.all():
+            lb = np.where(kkt_ok, val, np.minimum(self._swap_relaxation(G, d, S, c), val))
+        else:
+            lb = val
+        return lb, (c, q, A, ia, val, beta, kkt_ok)
+
+    def _swap_achievable(self, S, ec, err2c, c):
+        """(k, n) achievable squared errors on channel c: drop light S[i] from the current fit
+        (exitance ``ec``, squared error ``err2c``), best non-negative multiple of j."""
+        key = id(self.T[c])
+        G, d = self.G[key], self.d[key]
+        gS = self.h[:, c] - np.einsum("ij,i->j", G[S], ec)  # t_j . rho
+        rho_i2 = err2c + 2.0 * ec * gS[S] + ec * ec * d[S]
+        gij = gS[None, :] + G[S] * ec[:, None]
+        return rho_i2[:, None] - np.where((d > 0)[None, :], np.maximum(gij, 0.0) ** 2
+                                          / np.where(d > 0, d, 1.0)[None, :], 0.0)
+
+    @staticmethod
+    def _swap_exact(chan, I, J, k) -> tuple:
+        """(exact (P,), value (P,)): the swaps (I, J) whose least-squares value is the NNLS value
+        on every channel (the KKT condition holds and the coefficients are >= 0), and that value."""
+        P = len(I)
         exact = np.ones(P, dtype=bool)
         exact_val = np.zeros(P)
         for c, q, A, ia, val, beta, kkt_ok in chan:
@@ -537,9 +572,7 @@ class _Model:
                 if len(t):
                     cert[t] = (x[None, :] - bt[t][:, None] * Z[:, J[t]].T).min(axis=1) >= 0
             exact &= cert
-        LB = LB0[I, J]
-        UB = np.where(exact, np.maximum(exact_val, 0.0), np.maximum(UB1[I, J], 0.0))
-        return I, J, LB, UB
+        return exact, exact_val
 
     def _swap_relaxation(self, G, d, S, c):
         """(k, n) lower bounds: least squares on S - {S[i]} + {j} with only x_j >= 0."""
@@ -683,109 +716,168 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
     if score not in SCORES + ("both",):
         raise ValueError(f"unknown score {score!r}; choose one of {', '.join(SCORES + ('both',))}")
     model = _model or _Model(T, b, light_watts)
-    k_max = int(k_max)
-    if k_max < 1:
-        raise ValueError(f"k_max must be at least 1, got {k_max}")
-    k_max = min(k_max, model.n)
-    max_exact = max(1, int(max_exact))
-    rng = np.random.default_rng(seed)
-    norm = model.norm if model.norm > 0 else 1.0
+    k_max = _checked_k_max(k_max, model.n)
+    search = _KSearch(model, score, max(1, int(max_exact)), max_swap_rounds, swap_all, restarts,
+                      np.random.default_rng(seed), initial)
     empty = model.fit(())
     cur = empty  # chained configuration (at most k lights)
     curve = []
-    counts = {"exact_fits": 0, "swap_rounds": 0, "restarts_won": 0}
-    usable = np.flatnonzero(model.usable)
-    exact_sets = {}
     if swap and exhaustive_limit:
-        k_exh = 0
-        while k_exh < k_max and _n_subsets(model.n, k_exh + 1) <= exhaustive_limit:
-            k_exh += 1
-        if k_exh:
-            exact_sets = {s + 1: st for s, st in enumerate(_exhaustive(model, k_exh)[1])}
+        search.exact_sets = _exact_sets(model, k_max, exhaustive_limit)
+    paths = {sc: empty for sc in (SCORES if score == "both" else (score,))}  # plain greedy paths
+    for k in range(1, k_max + 1):
+        cand, source = search.greedy(paths, k)
+        if swap:
+            cand, source = search.swaps(paths, cur, cand, source, k)
+        cand, source = _no_worse_than_fewer(model, curve, cand, source, empty)
+        cur = cand
+        curve.append(_k_point(k, cand, source, model.norm if model.norm > 0 else 1.0))
+        if progress is not None:
+            progress(k, k_max)
+        if cancel is not None and cancel():
+            break
+    _monotone(curve)
+    search.report(stats)
+    return curve
 
-    def fill(fit, k, sc):
-        # add lights up to k (an addition can switch another light off under the refit)
+
+def _checked_k_max(k_max, n) -> int:
+    """k_max as an int, at most ``n`` (ValueError below 1)."""
+    k_max = int(k_max)
+    if k_max < 1:
+        raise ValueError(f"k_max must be at least 1, got {k_max}")
+    return min(k_max, n)
+
+
+def _exact_sets(model, k_max, exhaustive_limit) -> dict:
+    """{k: the exact optimum's lights} for every k <= k_max with at most ``exhaustive_limit``
+    subsets of at most k lights (_exhaustive's enumeration)."""
+    k_exh = 0
+    while k_exh < k_max and _n_subsets(model.n, k_exh + 1) <= exhaustive_limit:
+        k_exh += 1
+    if not k_exh:
+        return {}
+    return {s + 1: st for s, st in enumerate(_exhaustive(model, k_exh)[1])}
+
+
+class _KSearch:
+    """best_k_curve's search at one k: the greedy paths, then the swap searches from every start
+    (the paths, the chained configuration, the exact optimum, the initial sets, random restarts)."""
+
+    def __init__(self, model, score, max_exact, max_swap_rounds, swap_all, restarts, rng, initial):
+        self.model, self.score, self.max_exact = model, score, max_exact
+        self.max_swap_rounds, self.swap_all, self.restarts = max_swap_rounds, swap_all, restarts
+        self.rng, self.initial = rng, initial
+        self.usable = np.flatnonzero(model.usable)
+        self.exact_sets = {}
+        self.counts = {"exact_fits": 0, "swap_rounds": 0, "restarts_won": 0}
+
+    def report(self, stats):
+        """The counters into ``stats`` (a dict, or None)."""
+        self.counts["exact_fits"] = self.model.n_fits
+        if stats is not None:
+            stats.update(self.counts)
+
+    def fill(self, fit, k, sc):
+        """Add lights up to k (an addition can switch another light off under the refit)."""
         for _ in range(2 * k + 2):
             if len(fit[0]) >= k:
                 break
-            nxt = _add_one(model, fit[0], fit, sc, max_exact)
+            nxt = _add_one(self.model, fit[0], fit, sc, self.max_exact)
             if nxt is None:
                 break
             fit = nxt
         return fit
 
-    paths = {sc: empty for sc in (SCORES if score == "both" else (score,))}  # plain greedy paths
-    for k in range(1, k_max + 1):
-        source = "greedy"
+    def greedy(self, paths, k) -> tuple:
+        """Every greedy path grown to k lights (``paths`` updated); (the best of them, "greedy")."""
         cand = None
         for sc in paths:
-            paths[sc] = fill(paths[sc], k, sc)
-            if cand is None or model.better(paths[sc], cand):
+            paths[sc] = self.fill(paths[sc], k, sc)
+            if cand is None or self.model.better(paths[sc], cand):
                 cand = paths[sc]
-        if swap:
-            starts = list(paths.values())
-            if all(tuple(cur[0]) != tuple(f[0]) for f in paths.values()):
-                chained = fill(cur, k, "error" if score == "both" else score)
-                starts.append(chained)
-                if model.better(chained, cand):
-                    cand, source = chained, "swap"
-            if not swap_all:
-                starts = [cand]  # the swap search from the best start only
-            rounds = max_swap_rounds if max_swap_rounds is not None else 2 * k + 10
-            seen = set()
-            for f in starts:
-                if not len(f[0]) or tuple(f[0]) in seen:
-                    continue
-                seen.add(tuple(f[0]))
-                sw, r = _swap_search(model, f, rounds, max_exact)
-                counts["swap_rounds"] += r
-                if model.better(sw, cand):
-                    cand, source = sw, "swap"
-            starts = [exact_sets[k]] if k in exact_sets else []
-            if initial is not None:
-                got = initial.get(k) if isinstance(initial, dict) else (initial[k - 1] if k <= len(initial) else None)
-                if got is not None and 0 < len(got) <= k:
-                    starts.append(np.asarray(got, dtype=np.int64))
-            for st in starts:
-                alt, r = _swap_search(model, model.fit(st), rounds, max_exact)
-                counts["swap_rounds"] += r
-                if model.better(alt, cand):
-                    cand, source = alt, "exhaustive" if k in exact_sets and st is starts[0] else "initial"
-            for _ in range(max(0, int(restarts))):
-                if len(usable) < k:
-                    break
-                start = model.fit(rng.choice(usable, size=k, replace=False))
-                alt, r = _swap_search(model, start, rounds, max_exact)
-                counts["swap_rounds"] += r
-                if model.better(alt, cand):
-                    cand, source = alt, "swap"
-                    counts["restarts_won"] += 1
-        prev = curve[-1] if curve else None
-        if prev is not None and model.better(model.fit(prev.lights), cand):
-            cand, source = model.fit(prev.lights), "fewer"
-        elif prev is None and not model.better(cand, empty):
-            cand, source = empty, "none"
-        cur = cand
-        lights, e, err2, power = cand
-        err = math.sqrt(max(float(err2.sum()), 0.0))
-        if len(lights) == 0 and source != "none":
-            source = "none"
-        curve.append(KLightPoint(k=k, n_lights=len(lights), error=err, relative_error=err / norm, power=power,
-                                 lights=np.asarray(lights, dtype=np.int64).copy(), exitance=np.asarray(e).copy(),
-                                 n_negative=0, changed=-1, source=source))
-        if progress is not None:
-            progress(k, k_max)
-        if cancel is not None and cancel():
-            break
-    # the curve is monotone by construction (the k - 1 configuration is always a candidate)
+        return cand, "greedy"
+
+    def _swap(self, start, cand, source, rounds, won):
+        """The swap search from ``start``: (cand, source) replaced by its result where better."""
+        alt, r = _swap_search(self.model, start, rounds, self.max_exact)
+        self.counts["swap_rounds"] += r
+        return (alt, won) if self.model.better(alt, cand) else (cand, source)
+
+    def swaps(self, paths, cur, cand, source, k) -> tuple:
+        """(cand, source) after the swap searches at k lights."""
+        model = self.model
+        starts = list(paths.values())
+        if all(tuple(cur[0]) != tuple(f[0]) for f in paths.values()):
+            chained = self.fill(cur, k, "error" if self.score == "both" else self.score)
+            starts.append(chained)
+            if model.better(chained, cand):
+                cand, source = chained, "swap"
+        if not self.swap_all:
+            starts = [cand]  # the swap search from the best start only
+        rounds = self.max_swap_rounds if self.max_swap_rounds is not None else 2 * k + 10
+        seen = set()
+        for f in starts:
+            if not len(f[0]) or tuple(f[0]) in seen:
+                continue
+            seen.add(tuple(f[0]))
+            cand, source = self._swap(f, cand, source, rounds, "swap")
+        cand, source = self._given_starts(k, cand, source, rounds)
+        return self._random_restarts(k, cand, source, rounds)
+
+    def _given_starts(self, k, cand, source, rounds) -> tuple:
+        """The swap search from the exact optimum at k and from the initial set of k lights."""
+        starts = [self.exact_sets[k]] if k in self.exact_sets else []
+        initial = self.initial
+        if initial is not None:
+            got = initial.get(k) if isinstance(initial, dict) else (initial[k - 1] if k <= len(initial) else None)
+            if got is not None and 0 < len(got) <= k:
+                starts.append(np.asarray(got, dtype=np.int64))
+        for st in starts:
+            won = "exhaustive" if k in self.exact_sets and st is starts[0] else "initial"
+            cand, source = self._swap(self.model.fit(st), cand, source, rounds, won)
+        return cand, source
+
+    def _random_restarts(self, k, cand, source, rounds) -> tuple:
+        for _ in range(max(0, int(self.restarts))):
+            if len(self.usable) < k:
+                break
+            start = self.model.fit(self.rng.choice(self.usable, size=k, replace=False))
+            before = cand
+            cand, source = self._swap(start, cand, source, rounds, "swap")
+            if cand is not before:
+                self.counts["restarts_won"] += 1
+        return cand, source
+
+
+def _no_worse_than_fewer(model, curve, cand, source, empty) -> tuple:
+    """(cand, source), or the configuration kept with fewer lights when it is better ("fewer"),
+    or no light at all when the first candidate does not beat it ("none")."""
+    prev = curve[-1] if curve else None
+    if prev is not None and model.better(model.fit(prev.lights), cand):
+        cand, source = model.fit(prev.lights), "fewer"
+    elif prev is None and not model.better(cand, empty):
+        cand, source = empty, "none"
+    return cand, source
+
+
+def _k_point(k, cand, source, norm) -> "KLightPoint":
+    lights, e, err2, power = cand
+    err = math.sqrt(max(float(err2.sum()), 0.0))
+    if len(lights) == 0 and source != "none":
+        source = "none"
+    return KLightPoint(k=k, n_lights=len(lights), error=err, relative_error=err / norm, power=power,
+                       lights=np.asarray(lights, dtype=np.int64).copy(), exitance=np.asarray(e).copy(),
+                       n_negative=0, changed=-1, source=source)
+
+
+def _monotone(curve):
+    """The curve is monotone by construction (the k - 1 configuration is always a candidate); a
+    point worse than the one before (a refit's rounding) takes its values."""
     for a, b_ in zip(curve, curve[1:]):
         if b_.error > a.error:  # cannot happen; guard against a refit's rounding
             b_.error, b_.relative_error, b_.power = a.error, a.relative_error, a.power
             b_.lights, b_.exitance, b_.n_lights, b_.source = a.lights.copy(), a.exitance.copy(), a.n_lights, "fewer"
-    counts["exact_fits"] = model.n_fits
-    if stats is not None:
-        stats.update(counts)
-    return curve
 
 
 def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, nnls_start=None, **kw):
@@ -945,22 +1037,7 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
     k_max = int(k_max)
     if k_max < 1:
         raise ValueError(f"k_max must be at least 1, got {k_max}")
-    # the all-lights NNLS optimum, with its KKT gap checked
-    cols = np.flatnonzero(model.usable)
-    err2 = model.bb.copy()
-    e_nnls = np.zeros((model.n, 3))
-    if len(cols):
-        for c in model.chans:
-            A = model.T[c][:, cols]
-            if nnls_start is not None and np.shape(nnls_start) == (model.n, 3):
-                on = np.flatnonzero(np.asarray(nnls_start)[cols, c] > 0)
-                d = model.d[id(model.T[c])][cols]
-                x = _nnls_from(A, model.b[:, c], on, model._kkt_tol(d, c))
-            else:
-                x = _nnls(A, model.b[:, c])
-            e_nnls[cols, c] = x
-            r = A @ x - model.b[:, c]
-            err2[c] = float(r @ r)
+    err2, e_nnls = _all_lights_nnls(model, nnls_start)
     nnls_err = math.sqrt(max(err2.sum(), 0.0)) * (1 - BOUND_MARGIN)
     k_exh = 0
     while k_exh < min(k_max, model.n) and _n_subsets(model.n, k_exh + 1) <= exhaustive_limit:
@@ -978,14 +1055,39 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
             opt_sets[s - 1] = f[0].copy()
     if model.n <= k_max:  # all lights allowed: NNLS is the optimum
         exact[model.n - 1:] = True
-    # monotone: the optimum with at most k lights is at least the optimum with at most k' > k
-    for i in range(k_max - 2, -1, -1):
-        if bound[i + 1] > bound[i]:
-            bound[i] = bound[i + 1]
+    _monotone_bounds(bound)
     norm = model.norm if model.norm > 0 else 1.0
     return LowerBounds(k=np.arange(1, k_max + 1), bound=bound, relative=bound / norm, exact=exact,
                        nnls=nnls_err, nnls_relative=nnls_err / norm, optimum_lights=opt_sets,
                        seconds=time.perf_counter() - t0, nnls_exitance=e_nnls)
+
+
+def _all_lights_nnls(model, nnls_start=None) -> tuple:
+    """(squared error per channel (3,), exitance (n, 3)): the all-lights NNLS optimum, from
+    ``nnls_start``'s active lights where given (lower_bounds)."""
+    cols = np.flatnonzero(model.usable)
+    err2 = model.bb.copy()
+    e_nnls = np.zeros((model.n, 3))
+    if len(cols):
+        for c in model.chans:
+            A = model.T[c][:, cols]
+            if nnls_start is not None and np.shape(nnls_start) == (model.n, 3):
+                on = np.flatnonzero(np.asarray(nnls_start)[cols, c] > 0)
+                d = model.d[id(model.T[c])][cols]
+                x = _nnls_from(A, model.b[:, c], on, model._kkt_tol(d, c))
+            else:
+                x = _nnls(A, model.b[:, c])
+            e_nnls[cols, c] = x
+            r = A @ x - model.b[:, c]
+            err2[c] = float(r @ r)
+    return err2, e_nnls
+
+
+def _monotone_bounds(bound):
+    """In place: the optimum with at most k lights is at least the optimum with at most k' > k."""
+    for i in range(len(bound) - 2, -1, -1):
+        if bound[i + 1] > bound[i]:
+            bound[i] = bound[i + 1]
 
 
 def curve_notes(curve, bounds, target_norm, gap=0.1, k=None):
@@ -1167,16 +1269,49 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, u
     zb = _default_zero_band(model.b) if zero_band is None else float(zero_band)
     if not (np.isfinite(zb) and zb >= 0):
         raise ValueError(f"zero_band must be a non-negative number (W/m^2), got {zero_band}")
-    scale = _band_scale(model.b, zb)
     n = model.n
-    unreach = _unreachable(model)
-    rows = ~unreach
+    prog = _BandProgramme(model, _band_scale(model.b, zb), _unreachable(model), uniformity)
+    e, status, reach, x_used = _within_band(prog, tol, zb)
+    goal, reach_u = prog.goal, None
+    if e is not None and goal:  # the uniformity goal within that band, else the largest that holds
+        e, reach_u = _with_uniformity(prog, e, x_used)
+    if e is None:
+        return ToleranceResult(status="failed", message=status, tolerance=tol, exitance=np.zeros((n, 3)),
+                               lights=np.zeros(0, dtype=np.int64), n_lights=0, power=0.0,
+                               max_deviation=float("nan"), error=float("nan"), relative_error=float("nan"),
+                               reachable_tolerance=reach, zero_band=zb,
+                               unreachable=np.flatnonzero(prog.unreach.any(1)), seconds=time.perf_counter() - t0)
+    emax = float(e.max()) if e.size else 0.0
+    on = e.max(axis=1) > 1e-9 * max(emax, 1e-300)
+    e = np.where(on[:, None], e, 0.0)
+    power = total_power(e, model.area)
+    dev = _deviation(model, e, prog.scale, prog.rows)
+    err = float(np.linalg.norm(np.stack([model.T[c] @ e[:, c] for c in range(3)], axis=1) - model.b))
+    rel = err / model.norm if model.norm > 0 else err
+    bad = np.flatnonzero(prog.unreach.any(axis=1))  # target rows no light reaches (painted above 0)
+    status, msg = _band_message(prog, status, tol, reach, int(on.sum()), power, dev, bad)
+    msg += _uniformity_message(goal, reach_u, x_used)
+    return ToleranceResult(status=status, message=msg, tolerance=tol, exitance=e, lights=np.flatnonzero(on),
+                           n_lights=int(on.sum()), power=power, max_deviation=dev, error=err, relative_error=rel,
+                           reachable_tolerance=reach, zero_band=zb, unreachable=bad,
+                           seconds=time.perf_counter() - t0, reachable_uniformity=reach_u)
 
-    goal, regions = (None, None) if uniformity is None else uniformity
 
-    def solve(x, u=None):
-        u = goal if u is None else u
-        e = np.zeros((n, 3))
+class _BandProgramme:
+    """least_power_within_tolerance's linear programmes: the least power within a band ``x`` x
+    ``scale`` of the targets the lights reach (``unreach``: (m, 3) those they do not), and the
+    uniformity goal (u, regions) or None."""
+
+    def __init__(self, model, scale, unreach, uniformity):
+        self.model, self.scale, self.unreach = model, scale, unreach
+        self.rows = ~unreach
+        self.goal, self.regions = (None, None) if uniformity is None else uniformity
+
+    def solve(self, x, u=None):
+        """(exitance (n, 3), "ok"), or (None, "infeasible" or the solver's failure)."""
+        model, rows, scale, regions = self.model, self.rows, self.scale, self.regions
+        u = self.goal if u is None else u
+        e = np.zeros((model.n, 3))
         for c in range(3):
             keep = rows[:, c]
             if not keep.any():
@@ -1198,64 +1333,71 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, u
             e[:, c] = np.maximum(res.x, 0.0)
         return e, "ok"
 
-    e, status = solve(tol, 0.0)  # the band alone
-    reach = reach_u = None
+
+def _within_band(prog, tol, zb) -> tuple:
+    """(exitance or None, status, the reachable tolerance or None, the band used): the band
+    alone at ``tol``; when no non-negative lights can, at the smallest reachable tolerance (the
+    min-max deviation programme), status 'infeasible'."""
+    model = prog.model
+    e, status = prog.solve(tol, 0.0)  # the band alone
+    reach = None
     x_used = tol
     if e is None and status == "infeasible":
         reach, _ = min_max_deviation(model.T, model.b, zb)
         x = max(reach * (1 + 1e-7), reach + 1e-9, tol)
-        e, st2 = solve(x, 0.0)
+        e, st2 = prog.solve(x, 0.0)
         if e is None:  # a hair more room for the LP's tolerances
             x = x * (1 + 1e-4) + 1e-7
-            e, st2 = solve(x, 0.0)
+            e, st2 = prog.solve(x, 0.0)
         x_used = x
         status = "infeasible" if e is not None else st2
-    if e is not None and goal:  # the uniformity goal within that band, else the largest that holds
-        eg, _ = solve(x_used, goal)
-        if eg is not None:
-            e = eg
-        else:
-            lo_u, hi_u = 0.0, float(goal)
-            while hi_u - lo_u > UNIFORMITY_STEP:
-                mid = 0.5 * (lo_u + hi_u)
-                lo_u, hi_u = (mid, hi_u) if solve(x_used, mid)[0] is not None else (lo_u, mid)
-            reach_u = lo_u
-            if reach_u > 0:
-                got = solve(x_used, reach_u)[0]
-                e = got if got is not None else e
-    if e is None:
-        return ToleranceResult(status="failed", message=status, tolerance=tol, exitance=np.zeros((n, 3)),
-                               lights=np.zeros(0, dtype=np.int64), n_lights=0, power=0.0,
-                               max_deviation=float("nan"), error=float("nan"), relative_error=float("nan"),
-                               reachable_tolerance=reach, zero_band=zb, unreachable=np.flatnonzero(unreach.any(1)),
-                               seconds=time.perf_counter() - t0)
-    emax = float(e.max()) if e.size else 0.0
-    on = e.max(axis=1) > 1e-9 * max(emax, 1e-300)
-    e = np.where(on[:, None], e, 0.0)
-    power = total_power(e, model.area)
-    dev = _deviation(model, e, scale, rows)
-    err = float(np.linalg.norm(np.stack([model.T[c] @ e[:, c] for c in range(3)], axis=1) - model.b))
-    rel = err / model.norm if model.norm > 0 else err
-    bad = np.flatnonzero(unreach.any(axis=1))  # target rows no light reaches (painted above 0)
-    if unreach.any() and not (rows & (model.b > 0)).any():
+    return e, status, reach, x_used
+
+
+def _with_uniformity(prog, e, x_used) -> tuple:
+    """(exitance, the reachable uniformity or None): the goal within the band ``x_used``, else
+    the largest that holds (bisection to UNIFORMITY_STEP; ``e`` kept when none does)."""
+    goal = prog.goal
+    reach_u = None
+    eg, _ = prog.solve(x_used, goal)
+    if eg is not None:
+        e = eg
+    else:
+        lo_u, hi_u = 0.0, float(goal)
+        while hi_u - lo_u > UNIFORMITY_STEP:
+            mid = 0.5 * (lo_u + hi_u)
+            lo_u, hi_u = (mid, hi_u) if prog.solve(x_used, mid)[0] is not None else (lo_u, mid)
+        reach_u = lo_u
+        if reach_u > 0:
+            got = prog.solve(x_used, reach_u)[0]
+            e = got if got is not None else e
+    return e, reach_u
+
+
+def _uniformity_message(goal, reach_u, x_used) -> str:
+    """The uniformity goal's part of least_power_within_tolerance's message ("" without a goal)."""
+    if goal and reach_u is not None:
+        return (f"; the uniformity U0 >= {goal:.3g} cannot be met within the band (±{100 * x_used:.3g} %): "
+                f"U0 >= {reach_u:.3g} is reachable (and kept)")
+    elif goal:
+        return f"; uniformity U0 >= {goal:.3g} met (every channel's irradiance, each illuminance region)"
+    return ""
+
+
+def _band_message(prog, status, tol, reach, n_on, power, dev, bad) -> tuple:
+    """(status, message) of least_power_within_tolerance's result."""
+    unreach, rows, b = prog.unreach, prog.rows, prog.model.b
+    if unreach.any() and not (rows & (b > 0)).any():
         status = "infeasible"
         msg = "no candidate light reaches any painted target: every light stays off"
     elif status == "ok":
         status = "partial" if len(bad) else "ok"
         msg = (f"every target {'a light reaches ' if len(bad) else ''}within \u00b1{100 * tol:.3g} %: "
-               f"{int(on.sum())} light(s), {power:.4g} W (largest deviation {100 * dev:.3g} %)")
+               f"{n_on} light(s), {power:.4g} W (largest deviation {100 * dev:.3g} %)")
     else:
         msg = (f"no non-negative lights keep every target within \u00b1{100 * tol:.3g} %; the closest is "
-               f"\u00b1{100 * reach:.3g} % ({int(on.sum())} light(s), {power:.4g} W at that tolerance)")
+               f"\u00b1{100 * reach:.3g} % ({n_on} light(s), {power:.4g} W at that tolerance)")
     if len(bad):
         msg += (f"; {len(bad)} target(s) no candidate light reaches are left out (always dark): target rows "
                 f"{bad[:20].tolist()}{' ...' if len(bad) > 20 else ''}")
-    if goal and reach_u is not None:
-        msg += (f"; the uniformity U0 >= {goal:.3g} cannot be met within the band (±{100 * x_used:.3g} %): "
-                f"U0 >= {reach_u:.3g} is reachable (and kept)")
-    elif goal:
-        msg += f"; uniformity U0 >= {goal:.3g} met (every channel's irradiance, each illuminance region)"
-    return ToleranceResult(status=status, message=msg, tolerance=tol, exitance=e, lights=np.flatnonzero(on),
-                           n_lights=int(on.sum()), power=power, max_deviation=dev, error=err, relative_error=rel,
-                           reachable_tolerance=reach, zero_band=zb, unreachable=bad,
-                           seconds=time.perf_counter() - t0, reachable_uniformity=reach_u)
+    return status, msg

@@ -165,7 +165,7 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     tris = _count("n_triangles", n_triangles)
     passes = _count("refine_passes", refine_passes)
     g = max(1, min(3, int(channel_groups)))
-    kind = SOLVERS[solver].get("cost", "transfer")  # ValueError for an unknown solver
+    kind = SOLVERS[solver].traits.cost  # ValueError for an unknown solver
     if not (rays_per_second > 0 and flops > 0):
         raise ValueError("rays_per_second and flops must be positive")
     P2 = float(P) * P

@@ -916,7 +916,7 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
     err = problem.error(e)
     rel = err / problem.target_norm if problem.target_norm > 0 else err
     warns = list(problem.warnings)
-    if method.get("nonnegative") and rel > 1e-3:
+    if method.traits.nonnegative and rel > 1e-3:
         warns.append(f"no non-negative configuration meets the targets: residual {err:.4g} W/m^2 "
                      f"({100 * rel:.3g}% of the targets' norm)")
     warns.extend(w for w in out.warnings if w not in warns)

@@ -46,21 +46,21 @@ METHOD_CHOICES = (("solver", SOLVERS), ("selection", SELECTIONS), ("distribution
 
 
 def _unused_without_distribution(o):
-    if not SELECTIONS[o.selection].get("distributes", True):
-        users = ", ".join(m.name for m in SELECTIONS if m.get("distributes", True))
+    if not SELECTIONS[o.selection].traits.distributes:
+        users = ", ".join(m.name for m in SELECTIONS if m.traits.distributes)
         return f"the {o.selection} selection distributes no power (the selections that do: {users})"
     return ""
 
 
 def _unused_by_least_power(o):
-    if SELECTIONS[o.selection].get("needs_tolerance"):
+    if SELECTIONS[o.selection].traits.needs_tolerance:
         return f"the {o.selection} selection stops at its tolerance, not at the stop criteria"
     return ""
 
 
 def _unused_by_single_scale(o):
-    if not SELECTIONS[o.selection].get("multiscale"):
-        users = ", ".join(m.name for m in SELECTIONS if m.get("multiscale"))
+    if not SELECTIONS[o.selection].traits.multiscale:
+        users = ", ".join(m.name for m in SELECTIONS if m.traits.multiscale)
         return (f"the {o.selection} selection runs on single-scale light cells, without candidate lamps "
                 f"(the selections that choose among cells and lamps: {users})")
     return ""
@@ -259,7 +259,7 @@ class _JobOptionsBase:
                 reason = self.unused_reason(name)
                 if reason:
                     raise ValueError(f"{p.cli_flag} {reason}")
-        LIGHT_COLOURS[self.light_colour](self)  # (its own checks: a blackbody range, before any work)
+        LIGHT_COLOURS[self.light_colour].bind(self)()  # (its own checks: a blackbody range, before any work)
         return self
 
     def to_dict(self):

@@ -36,7 +36,7 @@ lights, light l gets ``Phi_s[channel] * w_l / A_l`` so the power per channel is
 conserved exactly:
 - ``uniform``: w = 1/p over the p remaining lights.
 - ``coplanar``: w = 1/n over the n remaining lights coplanar with s (same facing
-  normal within ``coplanar_tol`` and in-plane within ``coplanar_tol`` times the
+  normal within ``coplanar_tolerance`` and in-plane within ``coplanar_tolerance`` times the
   candidates' extent); uniform when there is none.
 - ``local``: all weight to the light(s) nearest in form-factor-row distance
   d_l = ||F_s - F_l||; ties (relative 1e-9) share equally.
@@ -74,6 +74,8 @@ __all__ = [
     "SELECTIONS",
     "DISTRIBUTIONS",
     "Selection",
+    "StopCriteria",
+    "StrokeStart",
     "ERROR_ROUTES",
     "CurvePoint",
     "ReductionResult",
@@ -133,12 +135,14 @@ class ReductionResult:
 
 
 class Distributor:
-    """XDistribute weights between lights: the registered rule ``kind`` (engine/distributions/),
-    its pairwise data precomputed once, rows normalised to 1 (power conserved per channel)."""
+    """XDistribute weights between lights: the registered rule ``distribution`` (engine/distributions/;
+    with its parameters), its pairwise data precomputed once, rows normalised to 1 (power conserved
+    per channel)."""
 
-    def __init__(self, problem: InverseProblem, kind="distance", coplanar_tol=1e-3):
-        self.kind = kind
-        self.rule = DISTRIBUTIONS[kind].impl(problem, coplanar_tol=coplanar_tol)
+    def __init__(self, problem: InverseProblem, distribution="distance"):
+        rule = DISTRIBUTIONS.bound(distribution)  # a name (its declared defaults) or DISTRIBUTIONS[name].bind(...)
+        self.kind = rule.name
+        self.rule = rule(problem)
         self.area = problem.light_watts
 
     @property
@@ -167,13 +171,48 @@ class Distributor:
         return e_lights + (W.T @ phi_src) / self.area[lights][:, None]
 
 
+@dataclass(frozen=True)
+class StopCriteria:
+    """The stop criteria that choose the final configuration on the curve (``select_final``): at
+    most ``max_lights`` lights, an error at most ``error_threshold`` (W/m^2) and at most
+    ``relative_error_threshold`` x ||b_P||, and no negative exitance with ``require_positive``."""
+
+    max_lights: int | None = None
+    error_threshold: float | None = None
+    relative_error_threshold: float | None = None
+    require_positive: bool = True
+
+    def check(self):
+        """ValueError naming the first criterion out of range."""
+        if self.max_lights is not None and int(self.max_lights) < 1:
+            raise ValueError(f"max_lights must be at least 1, got {self.max_lights}")
+        for name in ("error_threshold", "relative_error_threshold"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a non-negative number, got {v}")
+
+
+@dataclass(frozen=True)
+class StrokeStart:
+    """A stroke's re-solve (Live): the selections that build a curve per number of lights
+    (greedy-swap) stop at ``curve_lights`` and run their quicker search (greedy-swap: without the
+    surface lights' own curve) from the configurations ``initial`` {k: lights} (an earlier
+    answer's); ``nnls_start`` (n_lights, 3): an earlier stroke's all-lights NNLS, the certificate's
+    start."""
+
+    curve_lights: int
+    initial: dict | None = None
+    nnls_start: object = None
+
+
 @dataclass
 class Selection:
-    """What a registered selection works with (engine/selections/): the problem, the starting
-    configuration e_x (n_lights, 3), the distributor (None for selections that do not
-    redistribute), ``record(lights, exitance, changed)`` to add a configuration to the curve,
-    ``step(done, total)`` returning True when cancelled, and ``max_steps`` for constructions. A
-    selection that computes the certificate (lower bounds) on the way gives it in ``certificate``."""
+    """What a registered selection works with (engine/selections/), besides its own parameters
+    (given as keywords): the problem, the starting configuration e_x (n_lights, 3), the
+    distributor (None for selections that do not redistribute), ``record(lights, exitance,
+    changed)`` to add a configuration to the curve, ``step(done, total)`` returning True when
+    cancelled, and ``max_steps`` for constructions. A selection that computes the certificate
+    (lower bounds) on the way gives it in ``certificate``."""
 
     problem: InverseProblem
     e_x: np.ndarray
@@ -182,13 +221,8 @@ class Selection:
     step: object
     max_steps: int | None = None
     max_lights: int | None = None  # the stop criterion (selections that build a curve per k use it)
-    tolerance: float | None = None  # the least-power selection's band (relative)
     certificate: object = None  # set by the selection: best_lights.LowerBounds, or left None
-    curve_lights: int | None = None  # how far a per-k curve goes (greedy-swap; None: the selection's own)
-    initial: dict | None = None  # {k: lights}: configurations to start from (greedy-swap: an earlier answer's)
-    quick: bool = False  # a stroke's re-solve (Live): the selection's quicker search, where it has one
-    nnls_start: object = None  # (n_lights, 3): an earlier stroke's all-lights NNLS (greedy-swap's certificate)
-    uniformity: float | None = None  # the least-power selection's uniformity goal U0 (illuminance targets)
+    stroke: StrokeStart | None = None  # a stroke's re-solve (Live): the selection's quicker search, where it has one
 
 
 class _ErrorEval:
@@ -255,9 +289,10 @@ def _neg(e):
     return int((e < 0).any(axis=1).sum())
 
 
-def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
-                 relative_error_threshold=None, require_positive=True):
+def select_final(curve, target_norm=1.0, stop: StopCriteria = StopCriteria()):
     """Index of the final configuration on the curve under the stop criteria, and warnings."""
+    max_lights, error_threshold = stop.max_lights, stop.error_threshold
+    relative_error_threshold, require_positive = stop.relative_error_threshold, stop.require_positive
     n = np.array([p.n_lights for p in curve])
     err = np.array([p.error for p in curve])
     neg = np.array([p.n_negative for p in curve])
@@ -306,44 +341,23 @@ def select_final(curve, target_norm=1.0, max_lights=None, error_threshold=None,
 
 
 def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination", distribution="distance",
-                  max_lights=None, error_threshold=None, relative_error_threshold=None,
-                  require_positive=True, error_route="transfer", max_steps=None, coplanar_tol=1e-3,
-                  gs_compare_cold=False, progress=None, cancel=None, tolerance=None, curve_lights=None,
-                  initial=None, quick=False, nnls_start=None, uniformity=None):
+                  stop: StopCriteria = StopCriteria(), *, error_route="transfer", max_steps=None,
+                  gs_compare_cold=False, stroke: StrokeStart | None = None, progress=None, cancel=None):
     """Reduce the number of lights of configuration e_x (|C|, 3); returns a ReductionResult.
 
-    The whole curve is computed (eliminations down to one light, constructions
-    until every candidate is in or ``max_steps`` steps); the stop criteria only
-    choose the final point. ``error_route``: 'transfer' (exact, one product with
-    T) or 'gauss-seidel' (the paper's ComputeError: forward re-solve warm-started
-    from the previous radiosity; exitance-* selections only). ``progress(done,
-    total)`` is called every step; ``cancel()`` returning True stops the curve
-    where it is (``result.cancelled``). ``curve_lights``: the selections that build a curve per
-    number of lights (greedy-swap) stop there (None: their own length). ``initial`` {k: lights}
-    and ``quick``: a stroke's re-solve (Live): configurations to start from (an earlier answer's)
-    and the selection's quicker search (greedy-swap: without the surface lights' own curve);
-    ``nnls_start``: an earlier stroke's all-lights NNLS exitance, the certificate's start.
-    Deterministic: ties go to the lower index.
+    ``selection`` and ``distribution``: a registered name (the method with its declared defaults)
+    or a bound method with its parameters (``SELECTIONS[name].bind(options)``). The whole curve
+    is computed (eliminations down to one light, constructions until every candidate is in or
+    ``max_steps`` steps); the stop criteria ``stop`` only choose the final point. ``error_route``:
+    'transfer' (exact, one product with T) or 'gauss-seidel' (the paper's ComputeError: forward
+    re-solve warm-started from the previous radiosity; exitance-* selections only;
+    ``gs_compare_cold``: the cold start's sweeps counted too). ``progress(done, total)`` is called
+    every step; ``cancel()`` returning True stops the curve where it is (``result.cancelled``).
+    ``stroke``: a stroke's re-solve (Live, :class:`StrokeStart`). Deterministic: ties go to the
+    lower index.
     """
-    method = SELECTIONS[selection]
-    if error_route not in ERROR_ROUTES:
-        raise ValueError(f"unknown error route {error_route!r}; choose one of {', '.join(ERROR_ROUTES)}")
-    if error_route == "gauss-seidel" and not method.get("gauss_seidel"):
-        raise ValueError("the Gauss-Seidel error route re-solves the scene per configuration; it is only "
-                         "offered for exitance-elimination and exitance-construction (use 'transfer')")
-    for name, v in (("max_lights", max_lights), ("max_steps", max_steps)):
-        if v is not None and int(v) < 1:
-            raise ValueError(f"{name} must be at least 1, got {v}")
-    for name, v in (("error_threshold", error_threshold), ("relative_error_threshold", relative_error_threshold)):
-        if v is not None and not (np.isfinite(v) and v >= 0):
-            raise ValueError(f"{name} must be a non-negative number, got {v}")
-    k = problem.n_lights
-    e_x = np.asarray(e_x, dtype=np.float64)
-    if e_x.shape != (k, 3):
-        raise ValueError(f"e_x must have shape ({k}, 3) (one row per candidate), got {e_x.shape}")
-    if not np.all(np.isfinite(e_x)):
-        raise ValueError("e_x contains NaN or infinite values")
-
+    selection = SELECTIONS.bound(selection)
+    e_x = _checked_start(problem, e_x, selection, stop, error_route, max_steps)
     t0 = time.perf_counter()
     colour = getattr(problem, "colour", None)
     view = colour_problem(problem, colour)  # the problem with the lights' colours tied (engine.light_colour)
@@ -354,50 +368,81 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
                              "lights use the 'transfer' route")
         # (the paper's selections start from the constrained problem's inverse solution; the others
         # do not read it)
-        work, e_x = view, view.start() if method.get("distributes", True) else np.zeros((k, 3))
-    err_fn = _ErrorEval(work, error_route, compare_cold=gs_compare_cold)
-    norm = problem.target_norm if problem.target_norm > 0 else 1.0
-    curve = []
-    cancelled = False
+        work, e_x = view, view.start() if selection.traits.distributes else np.zeros((problem.n_lights, 3))
+    curve = _Curve(_ErrorEval(work, error_route, compare_cold=gs_compare_cold),
+                   problem.target_norm if problem.target_norm > 0 else 1.0, progress, cancel)
+    dist = Distributor(work, distribution) if selection.traits.distributes else None
+    sel = Selection(work, e_x, dist, curve.record, curve.step, max_steps, stop.max_lights, stroke=stroke)
+    notes = selection(sel) or []
+    if not curve.points:
+        raise ValueError("the reduction produced no configuration")
+    points, certificate = curve.points, sel.certificate
+    if view is not None:  # back to the lights' colours (refitted where the selection fits by NNLS)
+        points, certificate = _in_colours(problem, view, colour, selection, points, certificate)
+    idx, warns = select_final(points, problem.target_norm, stop)
+    warns = list(notes) + warns
+    if curve.cancelled:
+        warns.append("cancelled: the curve is incomplete")
+    return ReductionResult(curve=points, final_index=idx, selection=selection.name,
+                           distribution=dist.kind if dist is not None else "none",
+                           seconds=time.perf_counter() - t0, cancelled=curve.cancelled,
+                           gs_iterations=curve.error.iters, gs_cold_iterations=curve.error.cold, warnings=warns,
+                           notes=list(notes), certificate=certificate)
 
-    def record(lights, e, changed=-1):
+
+def _checked_start(problem, e_x, selection, stop, error_route, max_steps) -> np.ndarray:
+    """e_x as a (n_lights, 3) float array, after checking the route, the stop criteria and
+    ``max_steps`` (ValueError naming what is wrong)."""
+    if error_route not in ERROR_ROUTES:
+        raise ValueError(f"unknown error route {error_route!r}; choose one of {', '.join(ERROR_ROUTES)}")
+    if error_route == "gauss-seidel" and not selection.traits.gauss_seidel:
+        raise ValueError("the Gauss-Seidel error route re-solves the scene per configuration; it is only "
+                         "offered for exitance-elimination and exitance-construction (use 'transfer')")
+    stop.check()
+    if max_steps is not None and int(max_steps) < 1:
+        raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+    k = problem.n_lights
+    e_x = np.asarray(e_x, dtype=np.float64)
+    if e_x.shape != (k, 3):
+        raise ValueError(f"e_x must have shape ({k}, 3) (one row per candidate), got {e_x.shape}")
+    if not np.all(np.isfinite(e_x)):
+        raise ValueError("e_x contains NaN or infinite values")
+    return e_x
+
+
+class _Curve:
+    """The error curve as a selection records it (``record``), with its error evaluation and the
+    progress and cancel hooks (``step``)."""
+
+    def __init__(self, error: _ErrorEval, norm: float, progress, cancel):
+        self.error, self.norm = error, norm
+        self.progress, self.cancel = progress, cancel
+        self.points = []
+        self.cancelled = False
+
+    def record(self, lights, e, changed=-1):
         lights = np.asarray(lights, dtype=np.int64)
         order = np.argsort(lights)
         lights, e = lights[order], np.asarray(e, dtype=np.float64)[order]
         if not np.all(np.isfinite(e)):
             raise ValueError("the reduction produced non-finite exitances")
-        err = err_fn(lights, e)
-        curve.append(CurvePoint(len(lights), err, err / norm, _neg(e), lights, e.copy(), int(changed)))
+        err = self.error(lights, e)
+        self.points.append(CurvePoint(len(lights), err, err / self.norm, _neg(e), lights, e.copy(), int(changed)))
 
-    def step_hook(done, total):
-        nonlocal cancelled
-        if progress is not None:
-            progress(done, total)
-        if cancel is not None and cancel():
-            cancelled = True
-        return cancelled
+    def step(self, done, total):
+        if self.progress is not None:
+            self.progress(done, total)
+        if self.cancel is not None and self.cancel():
+            self.cancelled = True
+        return self.cancelled
 
-    dist = Distributor(work, distribution, coplanar_tol) if method.get("distributes", True) else None
-    sel = Selection(work, e_x, dist, record, step_hook, max_steps, max_lights, tolerance,
-                    curve_lights=curve_lights, initial=initial, quick=quick, nnls_start=nnls_start,
-                    uniformity=uniformity)
-    notes = method(sel) or []
-    if not curve:
-        raise ValueError("the reduction produced no configuration")
-    if view is not None:  # back to the lights' colours (refitted where the selection fits by NNLS)
-        refits = getattr(colour, "refits", False) and not method.get("distributes", True) \
-            and not method.get("needs_tolerance")
-        curve = in_colour(problem, view, colour, curve, refits)
-        if sel.certificate is not None:
-            sel.certificate = colour.certificate(problem, view, view.real_bounds(sel.certificate),
-                                                 len(sel.certificate.bound))
-    idx, warns = select_final(curve, problem.target_norm, max_lights, error_threshold,
-                              relative_error_threshold, require_positive)
-    warns = list(notes) + warns
-    if cancelled:
-        warns.append("cancelled: the curve is incomplete")
-    return ReductionResult(curve=curve, final_index=idx, selection=selection,
-                           distribution=distribution if dist is not None else "none",
-                           seconds=time.perf_counter() - t0, cancelled=cancelled,
-                           gs_iterations=err_fn.iters, gs_cold_iterations=err_fn.cold, warnings=warns,
-                           notes=list(notes), certificate=sel.certificate)
+
+def _in_colours(problem, view, colour, selection, points, certificate) -> tuple:
+    """(the curve, the certificate) found on the colour view, back in the lights' colours: each
+    configuration refitted where the selection fits by NNLS (``in_colour``)."""
+    refits = getattr(colour, "refits", False) and not selection.traits.distributes \
+        and not selection.traits.needs_tolerance
+    points = in_colour(problem, view, colour, points, refits)
+    if certificate is not None:
+        certificate = colour.certificate(problem, view, view.real_bounds(certificate), len(certificate.bound))
+    return points, certificate

@@ -11,22 +11,32 @@ from the declarations (``engine/options.py``):
 
     from ..registry import SOLVERS, Param
 
-    @SOLVERS.register("my-solver", "My Solver", "What it does, for the tooltip", paper=False,
+    @SOLVERS.register("my-solver", "My Solver", "What it does, for the tooltip", nonnegative=True,
                       params=(Param("damping", float, 0.1, min=0, description="..."),))
-    def solve(problem, **kw): ...
+    def solve(problem, damping): ...
+
+A method receives exactly its declared parameters: ``method.bind(options)`` takes them from the
+job options (or from keywords: ``bind(damping=0.2)``), and the :class:`Bound` method passes them
+to the implementation as keywords. What a registry's callers need to know about a method (does a
+selection distribute power? which cost model does a solver follow?) is a typed trait, declared
+once per registry with its default (:class:`SelectionTraits`, ...): a keyword of ``register``
+that is not a trait of that registry, or of the wrong type, is refused when the method registers.
 
 ``Registry[name]`` returns the :class:`Method`; an unknown name raises ValueError with the
 list of known ones (the CLI and the operators show that line to the user).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Callable
 
-__all__ = ["Param", "Method", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS", "DISTRIBUTIONS",
-           "LIGHT_KINDS", "LIGHT_COLOURS"]
+__all__ = ["Param", "Method", "Bound", "Registry", "PATCH_MODELS", "ESTIMATORS", "SOLVERS", "SELECTIONS",
+           "DISTRIBUTIONS", "LIGHT_KINDS", "LIGHT_COLOURS", "TARGET_KINDS", "PatchModelTraits", "EstimatorTraits", "SolverTraits",
+           "SelectionTraits", "ColourTraits", "NoTraits"]
 
 
 @dataclass(frozen=True)
@@ -170,20 +180,133 @@ class Param:
         return "; ".join(p for p in parts if p).replace("%", "%%")
 
 
+# The traits of each registry's methods: what its callers ask of a method, with the defaults.
+@dataclass(frozen=True)
+class NoTraits:
+    """A registry whose methods declare no traits (distributions, light kinds)."""
+
+
+@dataclass(frozen=True)
+class PatchModelTraits:
+    #: its patches do not depend on the paint (pipeline.prepared keeps them across paint changes)
+    paint_independent: bool = False
+
+
+@dataclass(frozen=True)
+class EstimatorTraits:
+    #: it takes the candidate-light-to-target pairs (the kernel's transport; pipeline.prepared, jobs)
+    kernel_pairs: bool = False
+
+
+#: the cost models of engine/cost.py
+SOLVER_COSTS = ("transfer", "paper")
+
+
+@dataclass(frozen=True)
+class SolverTraits:
+    #: its cost model (engine/cost.py): "transfer" (T from an LU of A) or "paper" (the SVD formulation)
+    cost: str = "transfer"
+    #: its exitances are never negative (engine.inverse warns when the targets are then not met)
+    nonnegative: bool = False
+
+    def __post_init__(self):
+        if self.cost not in SOLVER_COSTS:
+            raise ValueError(f"cost must be one of {', '.join(SOLVER_COSTS)}, got {self.cost!r}")
+
+
+@dataclass(frozen=True)
+class SelectionTraits:
+    #: it gives a removed light's power to the others: it reads e_x and a distribution
+    distributes: bool = True
+    #: it chooses among the multi-scale candidates (cells, groups, polygons) and the candidate lamps
+    multiscale: bool = False
+    #: it stops at its own tolerance (a programme), not at the stop criteria
+    needs_tolerance: bool = False
+    #: the paper's Gauss-Seidel error route is offered for it
+    gauss_seidel: bool = False
+    #: one of the paper's four heuristics (benchmarks draw them apart)
+    paper: bool = False
+    #: (problem, lights, tolerance, uniformity) -> (exitance, message): its programme again on the chosen
+    #: lights after their columns of T changed (pipeline.jobs), None when it has none
+    refit: Callable | None = None
+
+
+@dataclass(frozen=True)
+class ColourTraits:
+    #: its certificate relaxes the colour constraint (light_colour.relaxed_bound; engine/cost.py)
+    relaxation: bool = False
+
+
+def _traits(registry_kind, name, traits_type, extra):
+    """The traits of a method being registered: ValueError for a keyword that is not one of
+    ``traits_type``'s fields, or a value of the wrong type."""
+    fields = {f.name: f for f in dataclasses.fields(traits_type)}
+    for key, value in extra.items():
+        if key not in fields:
+            known = ", ".join(fields) or "none"
+            raise ValueError(f"{registry_kind} {name!r}: unknown trait {key}= (the traits of a {registry_kind}: "
+                             f"{known})")
+        default = fields[key].default
+        ok = callable(value) if default is None else isinstance(value, type(default))
+        if not ok:
+            raise ValueError(f"{registry_kind} {name!r}: trait {key}= must be "
+                             f"{'callable' if default is None else type(default).__name__}, got {value!r}")
+    try:
+        return traits_type(**extra)
+    except ValueError as exc:
+        raise ValueError(f"{registry_kind} {name!r}: {exc}") from None
+
+
 @dataclass(frozen=True)
 class Method:
     name: str
     label: str
     description: str
     impl: Callable
-    extra: dict = field(default_factory=dict)
+    traits: object = NoTraits()  # its registry's traits dataclass (SelectionTraits, ...)
     params: tuple = ()  # its Params (engine/options.py builds the job options from them)
 
     def __call__(self, *args, **kwargs):
         return self.impl(*args, **kwargs)
 
-    def get(self, key, default=None):
-        return self.extra.get(key, default)
+    def bind(self, options=None, **values) -> "Bound":
+        """This method with its declared parameters: each from ``values`` if given there, else
+        from ``options`` (the job options: the field of that name), else its declared default (a
+        value None is "not set": the default too). ValueError for a value that is not one of its
+        parameters or fails its declaration's check."""
+        declared = {p.name: p for p in self.params}
+        unknown = [n for n in values if n not in declared]
+        if unknown:
+            raise ValueError(f"{self.name!r} has no parameter {', '.join(unknown)} "
+                             f"(its parameters: {', '.join(declared) or 'none'})")
+        bound = {}
+        for name, p in declared.items():
+            value = values[name] if name in values else getattr(options, name, None)
+            try:
+                bound[name] = p.check(p.default if value is None else value)
+            except ValueError as exc:
+                raise ValueError(f"{name.replace('_', ' ')} {exc}") from None
+        return Bound(self, MappingProxyType(bound))
+
+
+@dataclass(frozen=True)
+class Bound:
+    """A method with its parameters (``Method.bind``): calling it calls the implementation with
+    the arguments given and the parameters as keywords."""
+
+    method: Method
+    params: MappingProxyType
+
+    @property
+    def name(self) -> str:
+        return self.method.name
+
+    @property
+    def traits(self):
+        return self.method.traits
+
+    def __call__(self, *args):
+        return self.method.impl(*args, **self.params)
 
 
 class Registry:
@@ -195,18 +318,32 @@ class Registry:
     kind -- so no import cycle runs through here). Reading a registry whose package was never
     imported is a programming error, said as such."""
 
-    def __init__(self, kind: str, package: str):
+    def __init__(self, kind: str, package: str, traits: type = NoTraits):
         self.kind = kind
         self.package = __name__.rsplit(".", 1)[0] + package  # e.g. relight_addon.engine.solvers
+        self.traits = traits
         self._methods: dict[str, Method] = {}
 
-    def register(self, name: str, label: str, description: str, params=(), **extra):
+    def register(self, name: str, label: str, description: str, params=(), **traits):
+        """Register ``impl`` (the decorated function or class) as method ``name``; ``traits``:
+        the registry's traits (ValueError now for one it does not have, or of the wrong type)."""
+        checked = _traits(self.kind, name, self.traits, traits)
+
         def deco(impl):
             if name in self._methods:
                 raise ValueError(f"{self.kind} {name!r} is registered twice")
-            self._methods[name] = Method(name, label, description, impl, dict(extra), tuple(params))
+            self._methods[name] = Method(name, label, description, impl, checked, tuple(params))
             return impl
         return deco
+
+    def bound(self, choice) -> Bound:
+        """``choice`` as a bound method: a name, with its declared defaults, or a Bound of this
+        registry as it is (ValueError for an unknown name)."""
+        if isinstance(choice, Bound):
+            if self._loaded().get(choice.name) is not choice.method:
+                raise ValueError(f"{choice.name!r} is not a {self.kind}")
+            return choice
+        return self[choice].bind()
 
     def _loaded(self) -> dict:
         if self.package not in sys.modules:
@@ -234,12 +371,12 @@ class Registry:
         return [(m.name, m.label, m.description) for m in self]
 
 
-PATCH_MODELS = Registry("patch model", ".patch_models")
-ESTIMATORS = Registry("form-factor estimator", ".estimators")
-SOLVERS = Registry("inverse solver", ".solvers")
-SELECTIONS = Registry("selection", ".selections")
+PATCH_MODELS = Registry("patch model", ".patch_models", PatchModelTraits)
+ESTIMATORS = Registry("form-factor estimator", ".estimators", EstimatorTraits)
+SOLVERS = Registry("inverse solver", ".solvers", SolverTraits)
+SELECTIONS = Registry("selection", ".selections", SelectionTraits)
 DISTRIBUTIONS = Registry("distribution", ".distributions")
 LIGHT_KINDS = Registry("light kind", ".lights")
-LIGHT_COLOURS = Registry("light colour", ".colours")
+LIGHT_COLOURS = Registry("light colour", ".colours", ColourTraits)
 #: what a solve is asked to meet: kinds of targets (engine/targets/), each giving rows on the radiosity
 TARGET_KINDS = Registry("target kind", ".targets")

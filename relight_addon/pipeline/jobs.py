@@ -256,7 +256,7 @@ def solve_stroke(model: Model, options: JobOptions, polygon_counts=None, progres
     holds them)."""
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
-    if not SELECTIONS[options.selection].get("distributes", True):  # (the selection never reads e_x)
+    if not SELECTIONS[options.selection].traits.distributes:  # (the selection never reads e_x)
         e_x, inv = np.zeros((model.problem.n_lights, 3)), None
     else:
         e_x, inv = solve_stage(model, options)

@@ -31,7 +31,7 @@ def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=Non
 
 def uses_kernel_pairs(options: JobOptions, mode: str = "inverse") -> bool:
     """Whether the job's estimator computes the light-to-target pairs by the kernel (inverse mode)."""
-    return mode == "inverse" and bool(ESTIMATORS[options.estimator].get("kernel_pairs", False))
+    return mode == "inverse" and ESTIMATORS[options.estimator].traits.kernel_pairs
 
 
 def rays_per_patch(options: JobOptions, n_patches: int, mode: str = "inverse") -> int:
@@ -55,7 +55,7 @@ def solve_cost(patches: PatchSet, options: JobOptions, n_triangles: int = 0, mod
                                  lamp_refinements=k * (k + 1) // 2, max_lights=options.max_lights,
                                  patches_per_light=per_light,
                                  colour_relaxation=mode == "inverse"
-                                 and bool(LIGHT_COLOURS[options.light_colour].get("relaxation", False)))
+                                 and LIGHT_COLOURS[options.light_colour].traits.relaxation)
 
 
 def radiosity_cost(patches: PatchSet, options: JobOptions) -> dict:

@@ -210,7 +210,7 @@ def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_s
     seconds = {"meshing": t_mesh, "form_factors": 0.0, "problem": 0.0, "lamps": 0.0}
     history = []
     # the paper's heuristics redistribute between lights that partition the candidates: single-scale
-    scales = None if SELECTIONS[options.selection].get("multiscale") else ("cell",)
+    scales = None if SELECTIONS[options.selection].traits.multiscale else ("cell",)
     for p in range(passes + 1):
         lights, F, problem, background, lamp_H, lamp_names = _inverse_pass(
             faces, patches, options, pm, scales, estimate, p, passes, warnings, seconds, progress, cancel)
@@ -272,7 +272,7 @@ def build_direct_model(faces: FaceSet, options: JobOptions, default_max_patch_si
 def light_colour_of(problem, options) -> tuple:
     """(the problem's light colour mode, None for free colours; a note): the option's mode, or
     the one an automatic mode chooses for this problem (engine/colours/auto.py)."""
-    mode, note = LIGHT_COLOURS[options.light_colour](options), None
+    mode, note = LIGHT_COLOURS[options.light_colour].bind(options)(), None
     if hasattr(mode, "choose"):
         mode, note = mode.choose(problem)
     return (None if mode.free else mode), note

@@ -111,7 +111,7 @@ def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) 
 
 def paint_independent(options: JobOptions) -> bool:
     """Whether the options' patch model meshes the faces without looking at the paint."""
-    return bool(PATCH_MODELS[options.patch_model].get("paint_independent", False))
+    return PATCH_MODELS[options.patch_model].traits.paint_independent
 
 
 def clustered_faces(patches: PatchSet) -> np.ndarray:
@@ -198,7 +198,7 @@ class PreparedScene:
             self._cast_for, self.kernel_sources, self.kernel_rows = patches, None, {}
             self.seconds["rays"] = cast = time.perf_counter() - t0
         F = self.form_factors
-        if pairs is None or not ESTIMATORS[options.estimator].get("kernel_pairs", False):
+        if pairs is None or not ESTIMATORS[options.estimator].traits.kernel_pairs:
             return replace(F, matrix=F.matrix.copy(), seconds=cast)
         t0 = time.perf_counter()
         rec, src = (np.asarray(p, dtype=np.int64) for p in pairs)

@@ -31,8 +31,8 @@ from ..engine.light_colour import fit_columns
 from ..engine.lights import append_lamps
 from ..engine.lights.placed import WRITER as PLACED
 from ..engine.options import JobOptions
-from ..engine.reduction import ReductionResult, reduce_lights
-from ..engine.registry import SELECTIONS
+from ..engine.reduction import ReductionResult, StopCriteria, StrokeStart, reduce_lights
+from ..engine.registry import DISTRIBUTIONS, SELECTIONS
 from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import SceneError
 from ..engine.scene_light import brighter_than_painted, fixed_light_shares
@@ -75,14 +75,13 @@ def reduce_stage(model: Model, e_x, options: JobOptions, progress=None, cancel=N
     """Stage 3: the selection x distribution over the whole curve; the stop criteria pick the
     final point. ``curve_lights``, ``initial``: a stroke's re-solve (Live; reduce_lights': a
     per-k curve to ``curve_lights``, the quick search, from the configurations ``initial``)."""
-    by_lp = SELECTIONS[options.selection].get("needs_tolerance")  # the programme decides, not the stop criteria
-    red = reduce_lights(model.problem, e_x, selection=options.selection, distribution=options.distribution,
-                        max_lights=None if by_lp else options.max_lights,
-                        relative_error_threshold=None if by_lp else options.error_threshold,
-                        require_positive=options.require_positive, tolerance=options.param("tolerance"),
-                        uniformity=options.param("uniformity"),
-                        coplanar_tol=options.param("coplanar_tolerance", 1e-3), curve_lights=curve_lights,
-                        initial=initial, quick=curve_lights is not None, nnls_start=nnls_start,
+    selection = SELECTIONS[options.selection]
+    by_lp = selection.traits.needs_tolerance  # the programme decides, not the stop criteria
+    red = reduce_lights(model.problem, e_x, selection.bind(options), DISTRIBUTIONS[options.distribution].bind(options),
+                        StopCriteria(max_lights=None if by_lp else options.max_lights,
+                                     relative_error_threshold=None if by_lp else options.error_threshold,
+                                     require_positive=options.require_positive),
+                        stroke=StrokeStart(curve_lights, initial, nnls_start) if curve_lights is not None else None,
                         progress=(lambda d, t: progress("reduction", 0.8 + 0.15 * d / max(t, 1)))
                         if progress is not None else None, cancel=cancel)
     if red.cancelled:
@@ -144,9 +143,9 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
     problem = _own_transfer(problem)
     problem.correct_direct(todo, dH)
     before = [float(pt.relative_error) for pt in red.curve]
-    refit = SELECTIONS[options.selection].get("refit")  # a selection's own programme (least-power's LP)
-    own = None if refit is None else \
-        (lambda view, ids: refit(view, ids, options.param("tolerance"), options.param("uniformity")))
+    selection = SELECTIONS[options.selection]
+    refit = selection.traits.refit  # a selection's own programme (least-power's LP)
+    own = None if refit is None else (lambda view, ids: refit(view, ids, **selection.bind(options).params))
     curve, notes = refit_curve(problem, red.curve, red.final_index, todo, own)
     warnings, kept_notes = red.warnings, red.notes
     if notes:  # the selection's message of the final configuration, as it is now
@@ -258,7 +257,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     and refits by least squares, which broke the programme's band and goal (the gallery's strip:
     U0 0.563 reported against the 0.6 'met')."""
     if not options.param("refine_lamps", False) or not offered_kinds(options) \
-            or SELECTIONS[options.selection].get("refit") is not None:
+            or SELECTIONS[options.selection].traits.refit is not None:
         return model, red
     lights = model.lights
     todo = [i for i, pt in enumerate(red.curve)

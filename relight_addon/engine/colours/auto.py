@@ -12,7 +12,7 @@ from __future__ import annotations
 from ..best_lights import lower_bounds
 from ..light_colour import relaxed_bound
 from ..registry import LIGHT_COLOURS
-from .blackbody_range import RANGE_PARAMS
+from .blackbody_range import DEFAULT_RANGE, RANGE_PARAMS
 
 #: relative error: blackbody lights are chosen unless their bound is this much above free colours'
 AUTO_GAP = 0.05
@@ -26,11 +26,11 @@ class Auto:
     name = "auto"
     free = False
 
-    def __init__(self, options=None):
+    def __init__(self, temperature_min=DEFAULT_RANGE[0], temperature_max=DEFAULT_RANGE[1]):
         from .blackbody import Blackbody  # (imported here: the registry lists Automatic first)
 
-        self.options = options
-        self.blackbody = Blackbody(options)  # the range set, else the default (ValueError: a bad range, at once)
+        # the range set, else the default (ValueError: a bad range, at once)
+        self.blackbody = Blackbody(temperature_min, temperature_max)
 
     def choose(self, problem):
         """(the mode to solve with, a note)."""

@@ -20,10 +20,8 @@ class Blackbody:
     free = False
     refits = True  # every configuration's temperatures refitted (engine.reduction.in_colour)
 
-    def __init__(self, options=None):
-        lo = getattr(options, "temperature_min", None) or DEFAULT_RANGE[0]
-        hi = getattr(options, "temperature_max", None) or DEFAULT_RANGE[1]
-        self.range = (float(lo), float(hi))
+    def __init__(self, temperature_min=DEFAULT_RANGE[0], temperature_max=DEFAULT_RANGE[1]):
+        self.range = (float(temperature_min), float(temperature_max))
         self.grid = temperature_grid(*self.range)  # (ValueError: a range outside Blender's, or reversed)
         self._solo = None  # (the problem's key, its lights' solo colours)
 

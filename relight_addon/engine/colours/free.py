@@ -11,9 +11,6 @@ class Free:
     name = "free"
     free = True
 
-    def __init__(self, options=None):
-        pass
-
     def describe(self, exitance) -> list:
         return [{} for _ in range(len(exitance))]
 

@@ -22,9 +22,6 @@ class OneColour:
     free = False
     refits = True  # every configuration's colours refitted (engine.reduction.in_colour)
 
-    def __init__(self, options=None):
-        pass
-
     def colours(self, problem) -> np.ndarray:
         return solo_colours(problem)
 

@@ -14,9 +14,6 @@ class White:
     name = "white"
     free = False
 
-    def __init__(self, options=None):
-        pass
-
     def colours(self, problem) -> np.ndarray:
         return np.ones((problem.n_lights, 3))
 

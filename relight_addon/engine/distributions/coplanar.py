@@ -1,5 +1,5 @@
 """CoplanarDistribute: w = 1/n over the n remaining lights coplanar with the suppressed one
-(same facing normal within ``coplanar_tol`` and in-plane within ``coplanar_tol`` times the
+(same facing normal within ``coplanar_tolerance`` and in-plane within ``coplanar_tolerance`` times the
 lights' extent); uniform when there is none."""
 from __future__ import annotations
 
@@ -14,13 +14,13 @@ from ..registry import DISTRIBUTIONS, Param
                                       "dot product exceeds 1 - this and each lies within this fraction of the "
                                       "lights' extent of the other's plane"),))
 class Coplanar:
-    def __init__(self, problem, coplanar_tol=1e-3, **_):
+    def __init__(self, problem, coplanar_tolerance):
         n = problem.light_normal
         c = problem.light_center
         extent = float(np.linalg.norm(np.ptp(c, axis=0))) or 1.0
-        same_facing = n @ n.T > 1.0 - coplanar_tol
+        same_facing = n @ n.T > 1.0 - coplanar_tolerance
         offset = np.abs(np.einsum("ik,ijk->ij", n, c[None, :, :] - c[:, None, :]))
-        self.pair = same_facing & (offset <= coplanar_tol * extent)
+        self.pair = same_facing & (offset <= coplanar_tolerance * extent)
 
     def raw(self, src, lights, valid):
         co = self.pair[np.ix_(src, lights)] & valid

@@ -13,7 +13,7 @@ from ..registry import DISTRIBUTIONS
 @DISTRIBUTIONS.register("distance", "Distance",
                         "Suppressed power goes to nearby lights, weighted by 1/distance (the paper's choice)")
 class Distance:
-    def __init__(self, problem, **_):
+    def __init__(self, problem):
         c = problem.light_center
         d2 = (c * c).sum(1)
         self.pair = np.sqrt(np.maximum(d2[:, None] + d2[None, :] - 2.0 * c @ c.T, 0.0))

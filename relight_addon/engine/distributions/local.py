@@ -9,7 +9,7 @@ from ..registry import DISTRIBUTIONS
 
 @DISTRIBUTIONS.register("local", "Local", "Suppressed power goes to the light(s) with the most similar form-factor row")
 class Local:
-    def __init__(self, problem, **_):
+    def __init__(self, problem):
         FC = problem.light_rows()
         g = (FC * FC).sum(1)
         self.pair = np.sqrt(np.maximum(g[:, None] + g[None, :] - 2.0 * FC @ FC.T, 0.0))

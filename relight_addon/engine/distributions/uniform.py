@@ -8,7 +8,7 @@ from ..registry import DISTRIBUTIONS
 
 @DISTRIBUTIONS.register("uniform", "Uniform", "Suppressed power is shared by all remaining lights")
 class Uniform:
-    def __init__(self, problem, **_):
+    def __init__(self, problem):
         pass
 
     def raw(self, src, lights, valid):

@@ -96,7 +96,7 @@ def _ids(rows) -> np.ndarray:
 
 @PATCH_MODELS.register("adaptive", "Adaptive",
                        "Small polygons clustered, candidate surfaces cut into light cells (cells, 2x2 groups, "
-                       "whole polygons), reflectors refined where the targets need it", refines=True,
+                       "whole polygons), reflectors refined where the targets need it",
                        params=(
                            Param("light_size", float, None, min=0.0, min_exclusive=True, unit="LENGTH",
                                  label="Light Size", ui="zero", none="the patch size",

@@ -33,27 +33,31 @@ QUICK_SWAP_ROUNDS = 2
 @SELECTIONS.register("greedy-swap", "Best k Lights",
                      "For every number of lights, the best non-negative configuration found: greedy pursuit "
                      "on the true error with NNLS refits, then swaps (beyond the paper)",
-                     distributes=False, multiscale=True, nonnegative=True)
+                     distributes=False, multiscale=True)
 def greedy_swap(s):
     p = s.problem
-    k_max = min(p.n_lights, s.curve_lights or max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
+    stroke = s.stroke  # a stroke's re-solve (Live): its curve length, the quick search and its starts
+    curve_lights = stroke.curve_lights if stroke is not None else None
+    k_max = min(p.n_lights, curve_lights or max(CURVE_LIGHTS, s.max_lights or 0, s.max_steps or 0))
     stop = {"cancel": False}
     surface = surface_lights(p)
     # cells and lamps: the cells' own curve too (a stroke's quick re-solve starts from the earlier
     # answer's configurations instead)
-    both = 0 < len(surface) < p.n_lights and not s.quick
+    both = 0 < len(surface) < p.n_lights and stroke is None
 
     def progress(done, total, part=0):
         stop["cancel"] = s.step(done + part * total, (2 if both else 1) * total)
 
-    initial = {k: v for k, v in (s.initial or {}).items() if k <= k_max and np.all(np.asarray(v) < p.n_lights)}
+    starts = (stroke.initial if stroke is not None else None) or {}
+    initial = {k: v for k, v in starts.items() if k <= k_max and np.all(np.asarray(v) < p.n_lights)}
     # quick: the swap search from the best start only, 2 rounds (the earlier answer's
     # configurations are starts: measured on the living room and the staircase, the same final
     # error as the full search at 60-75 % of its time; docs/benchmarks.md, "Live")
-    quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS) if s.quick else {}
+    quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS) if stroke is not None else {}
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
                                             cancel=lambda: stop["cancel"], progress=progress,
-                                            nnls_start=s.nnls_start, **quick)
+                                            nnls_start=stroke.nnls_start if stroke is not None else None,
+                                            **quick)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],

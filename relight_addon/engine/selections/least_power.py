@@ -41,7 +41,7 @@ def uniformity_goal(problem, uniformity) -> tuple:
 @SELECTIONS.register("least-power", "Least Power within Tolerance",
                      "The non-negative lights with the least total power that keep every target within "
                      "the tolerance of its painted value (a linear programme)",
-                     distributes=False, multiscale=True, nonnegative=True, needs_tolerance=True, refit=refit,
+                     distributes=False, multiscale=True, needs_tolerance=True, refit=refit,
                      params=(Param("tolerance", float, 0.1, min=0.0, label="Tolerance", soft_max=1.0,
                                    description="Every target within +-this fraction of its painted value "
                                                "(0.1 = +-10 %); when no non-negative lights can, the reachable "
@@ -52,13 +52,11 @@ def uniformity_goal(problem, uniformity) -> tuple:
                                                "least this fraction of their mean (U0 = E_min / E_mean, EN 12464-1: "
                                                "0.6 on a desk); when it cannot be met, the reachable U0 is reported "
                                                "and used")))
-def least_power(s):
+def least_power(s, tolerance, uniformity):
     p = s.problem
-    if s.tolerance is None:
-        raise ValueError("the least-power selection needs a tolerance (e.g. --tolerance 0.1 for +-10 %)")
     s.step(0, 1)
-    goal, notes = uniformity_goal(p, s.uniformity)
-    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, s.tolerance, uniformity=goal)
+    goal, notes = uniformity_goal(p, uniformity)
+    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tolerance, uniformity=goal)
     on = np.flatnonzero(res.exitance.max(axis=1) > 0)
     s.record(on, res.exitance[on])
     s.step(1, 1)
