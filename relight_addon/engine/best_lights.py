@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 import scipy.optimize as sopt
+from .units import TINY
 
 __all__ = [
     "SCORES",
@@ -203,7 +204,7 @@ def _nnls_from(A, y, start, tol):
     n = A.shape[1]
     W = np.zeros(n, dtype=bool)
     W[np.asarray(start, dtype=np.int64)] = True
-    scale = np.maximum(np.linalg.norm(A, axis=0), 1e-300)
+    scale = np.maximum(np.linalg.norm(A, axis=0), TINY)
     for _ in range(n):
         idx = np.flatnonzero(W)
         x = np.zeros(n)
@@ -230,7 +231,7 @@ def _inv_spd(M):
     except (np.linalg.LinAlgError, ValueError):
         pass
     w, V = np.linalg.eigh(M)
-    keep = w > 1e-12 * max(float(w.max()), 1e-300)
+    keep = w > 1e-12 * max(float(w.max()), TINY)
     return (V[:, keep] / w[keep]) @ V[:, keep].T
 
 
@@ -285,7 +286,7 @@ def _swap_used(q, d, N, ia, MN, tolN, val, beta, kkt_ok):
     Hd = np.diag(H).copy()
     Hd = np.where(Hd > 0, Hd, np.inf)
     pij = q["raw_perp"][None, :] + Z * Z / Hd[:, None]
-    ok = pij > 1e-10 * np.maximum(d, 1e-300)[None, :]
+    ok = pij > 1e-10 * np.maximum(d, TINY)[None, :]
     cij = np.maximum(g[None, :] + Z * (x / Hd)[:, None], 0.0)
     bA = np.where(ok, cij / np.where(ok, pij, 1.0), 0.0)
     val[ia] = (q["rls2"] + x * x / Hd)[:, None] - bA * cij
@@ -329,7 +330,7 @@ class _Model:
         self.h = np.stack([self.T[c].T @ self.b[:, c] if c in self.chans else np.zeros(n) for c in range(3)],
                           axis=1)  # (n, 3)
         self.norm = float(np.sqrt(self.bb.sum()))
-        self.tol = EQUAL_ERROR_RTOL * max(self.norm, 1e-300)
+        self.tol = EQUAL_ERROR_RTOL * max(self.norm, TINY)
         dsum = sum(self.d[id(self.T[c])] for c in self.chans)
         self.usable = dsum > 0  # lights that reach at least one target
         self._cache = {}
@@ -368,7 +369,7 @@ class _Model:
             return True
         if ea > eb + self.tol:
             return False
-        if pa < pb * (1 - 1e-9) - 1e-300:
+        if pa < pb * (1 - 1e-9) - TINY:
             return True
         if pa > pb * (1 + 1e-9):
             return False
@@ -401,7 +402,7 @@ class _Model:
             else:
                 GA = H = Z = None
                 perp = d.copy()
-            ok = perp > 1e-10 * np.maximum(d, 1e-300)
+            ok = perp > 1e-10 * np.maximum(d, TINY)
             got = (GA, H, Z, perp, ok, np.where(ok, perp, 1.0))
             if len(self._gcache) > 256:
                 self._gcache.clear()
@@ -423,7 +424,7 @@ class _Model:
         return dict(GA=GA, H=H, Z=Z, x=x, perp=safe, raw_perp=perp, ok=ok, rls2=rls2, corr=corr)
 
     def _kkt_tol(self, d, c):
-        return 1e-9 * np.sqrt(np.maximum(d, 0.0) * max(self.bb[c], 1e-300))
+        return 1e-9 * np.sqrt(np.maximum(d, 0.0) * max(self.bb[c], TINY))
 
     def add_bounds(self, S, e, err2):
         """For every light j: (LB_j, UB_j, gain1_j) on the squared error of the NNLS fit of S + {j}.
@@ -581,7 +582,7 @@ class _Model:
         Hd = np.diag(H).copy()
         Hd = np.where(Hd > 0, Hd, np.inf)
         pij = q["raw_perp"][None, :] + Z * Z / Hd[:, None]
-        ok = pij > 1e-10 * np.maximum(d, 1e-300)[None, :]
+        ok = pij > 1e-10 * np.maximum(d, TINY)[None, :]
         cij = np.maximum(q["corr"][None, :] + Z * (x / Hd)[:, None], 0.0)
         rem = q["rls2"] + x * x / Hd
         return rem[:, None] - np.where(ok, cij * cij / np.where(ok, pij, 1.0), 0.0)
@@ -982,7 +983,7 @@ def _exhaustive(model, k_top, chunk=50000):
             ls = np.full((len(Cc), 3), np.inf)
             for key, chans in model.groups.items():
                 G = model.G[key]
-                dg = np.sqrt(np.maximum(model.d[key][Cc], 1e-300))  # (N, s)
+                dg = np.sqrt(np.maximum(model.d[key][Cc], TINY))  # (N, s)
                 if s == 2:  # closed form: Gn = [[1, rho], [rho, 1]], eigenvalues 1 -+ |rho|
                     rho = G[Cc[:, 0], Cc[:, 1]] / (dg[:, 0] * dg[:, 1])
                     det = 1.0 - rho * rho
@@ -1166,7 +1167,7 @@ def _default_zero_band(b):
 def _unreachable(model):
     """(m, 3) bool: target channels no light reaches (a zero row of T) that are painted above 0."""
     scale = max(float(np.abs(t).max()) for t in model.T) if model.T[0].size else 0.0
-    zero = np.stack([np.abs(t).max(axis=1) <= 1e-12 * max(scale, 1e-300) if t.shape[1] else
+    zero = np.stack([np.abs(t).max(axis=1) <= 1e-12 * max(scale, TINY) if t.shape[1] else
                      np.ones(t.shape[0], dtype=bool) for t in model.T], axis=1)
     return zero & (model.b > 0)
 
@@ -1177,7 +1178,7 @@ def _deviation(model, e, scale, rows=None):
         dev = np.where(rows, dev, 0.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         rel = np.where(scale > 0, dev / np.where(scale > 0, scale, 1.0),
-                       np.where(dev > 1e-12 * max(model.norm, 1e-300), np.inf, 0.0))
+                       np.where(dev > 1e-12 * max(model.norm, TINY), np.inf, 0.0))
     return float(rel.max()) if rel.size else 0.0
 
 
@@ -1282,7 +1283,7 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, u
                                reachable_tolerance=reach, zero_band=zb,
                                unreachable=np.flatnonzero(prog.unreach.any(1)), seconds=time.perf_counter() - t0)
     emax = float(e.max()) if e.size else 0.0
-    on = e.max(axis=1) > 1e-9 * max(emax, 1e-300)
+    on = e.max(axis=1) > 1e-9 * max(emax, TINY)
     e = np.where(on[:, None], e, 0.0)
     power = total_power(e, model.area)
     dev = _deviation(model, e, prog.scale, prog.rows)

@@ -53,6 +53,7 @@ from .registry import SOLVERS
 from .solvers.common import channel_groups
 from .scene import SceneError
 from .targets import PaintedRadiance, TargetRows, scene_targets
+from .units import TINY
 
 __all__ = [
     "InverseError",
@@ -121,7 +122,7 @@ def growth_bound(F, rho, sweeps: int = GROWTH_SWEEPS):
             best, rows = float(ratio.max()), ratio >= 1.0
         if best < 1.0:
             break
-        x = y / max(float(y.max()), 1e-300) + 1e-12  # (kept positive)
+        x = y / max(float(y.max()), TINY) + 1e-12  # (kept positive)
     return best, rows
 
 
@@ -189,7 +190,7 @@ class _Iterative:
             return R[:, 0] if one and R.shape[1] else R
         rho = self.rho[:, None]
         X = R.copy()
-        scale = max(float(np.abs(R).max()), 1e-300)
+        scale = max(float(np.abs(R).max()), TINY)
         for _ in range(self.max_iter):
             Xn = R + (self.FT @ (rho * X) if trans else rho * (self.F @ X))
             done = float(np.abs(Xn - X).max()) <= ITERATIVE_TOL * scale
@@ -756,7 +757,7 @@ class InverseProblem:
         scale = max(float(np.abs(t).max()) for t in T)
         reach = np.zeros(self.m, dtype=bool)
         for t in T:
-            reach |= np.abs(t).max(axis=1) > 1e-12 * max(scale, 1e-300)
+            reach |= np.abs(t).max(axis=1) > 1e-12 * max(scale, TINY)
         self.unreachable = self.targets[~reach]
         bad = self.targets[(~reach) & (self.b_target.max(axis=1) > 0)]
         if len(bad) == len(self.targets):

@@ -35,6 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 import scipy.optimize as sopt
+from .units import TINY
 
 __all__ = ["blackbody_rec709", "temperature_grid", "ColourProblem", "colour_problem", "fit_colours", "fit_lights",
            "fit_columns", "lower_bounds_of", "temperature_of", "TEMPERATURE_STEPS"]
@@ -105,7 +106,7 @@ def temperature_of(rgb, t_min, t_max) -> np.ndarray:
     chi = blackbody_rec709(grid)
     chi = chi / chi.sum(axis=1, keepdims=True)
     rgb = np.asarray(rgb, dtype=np.float64).reshape(-1, 3)
-    c = rgb / np.maximum(rgb.sum(axis=1, keepdims=True), 1e-300)
+    c = rgb / np.maximum(rgb.sum(axis=1, keepdims=True), TINY)
     return grid[np.argmin(((c[:, None, :] - chi[None]) ** 2).sum(axis=2), axis=1)]
 
 
@@ -329,11 +330,11 @@ def cone_edges(t_min, t_max, checks=BLACKBODY_CHECKS, points=CONE_POINTS) -> np.
     Q = plane(fine_rgb)
     seg = P[1:] - P[:-1]
     rel = Q[:, None, :] - P[None, :-1, :]
-    tt = np.clip((rel * seg[None]).sum(axis=2) / np.maximum((seg * seg).sum(axis=1), 1e-300)[None], 0.0, 1.0)
+    tt = np.clip((rel * seg[None]).sum(axis=2) / np.maximum((seg * seg).sum(axis=1), TINY)[None], 0.0, 1.0)
     dist = np.linalg.norm(rel - tt[..., None] * seg[None], axis=2).min(axis=1)
     tangent = np.gradient(P, axis=0)
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), TINY)
     delta = 1.5 * float(dist.max()) + 1e-7
     for _ in range(20):
         pts = np.vstack([P + delta * normal, P - delta * normal])

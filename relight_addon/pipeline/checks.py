@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine.scene import FaceSet, SceneError
+from ..engine.units import TINY
 
 __all__ = ["face_areas", "check_solvable", "check_reducible"]
 
@@ -30,7 +31,7 @@ def check_solvable(faces: FaceSet, notes: dict | None = None, area=None):
     notes = notes or {}
     area = face_areas(faces) if area is None else area
     scale = float(np.linalg.norm(np.ptp(faces.vertices, axis=0))) if len(faces.vertices) else 0.0
-    has_area = area > (1e-10 * max(scale, 1e-300)) ** 2
+    has_area = area > (1e-10 * max(scale, TINY)) ** 2
     if not np.any(faces.target):
         raise SceneError(_with_notes("no target: paint a radiosity on at least one face (relight_target, "
                                      "alpha >= 0.5)", notes.get("target")))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..registry import DISTRIBUTIONS
+from ..units import TINY
 
 
 @DISTRIBUTIONS.register("local", "Local", "Suppressed power goes to the light(s) with the most similar form-factor row")
@@ -17,4 +18,4 @@ class Local:
     def raw(self, src, lights, valid):
         D = np.where(valid, self.pair[np.ix_(src, lights)], np.inf)
         dmin = D.min(axis=1, keepdims=True)
-        return (valid & (D <= dmin * (1 + 1e-9) + 1e-300)).astype(np.float64)
+        return (valid & (D <= dmin * (1 + 1e-9) + TINY)).astype(np.float64)

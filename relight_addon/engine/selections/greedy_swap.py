@@ -17,6 +17,7 @@ import numpy as np
 
 from ..best_lights import EQUAL_ERROR_RTOL, best_k_curve, best_k_with_certificate, column_subset
 from ..registry import SELECTIONS
+from ..units import TINY
 
 
 def surface_lights(problem) -> np.ndarray:
@@ -63,7 +64,7 @@ def greedy_swap(s):
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
                              cancel=lambda: stop["cancel"], progress=lambda d, t: progress(d, t, 1))
         curve = never_worse(curve, cells, surface, tol=EQUAL_ERROR_RTOL * max(float(np.linalg.norm(p.b_target)),
-                                                                              1e-300))
+                                                                              TINY))
     s.certificate = bounds  # the reduction's result carries it to the certificate stage
     for pt in curve:
         on = pt.exitance.max(axis=1) > 0

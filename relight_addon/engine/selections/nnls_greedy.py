@@ -7,6 +7,7 @@ import numpy as np
 import scipy.optimize as sopt
 
 from ..registry import SELECTIONS
+from ..units import TINY
 
 
 @SELECTIONS.register("nnls-greedy", "NNLS Greedy",
@@ -27,7 +28,7 @@ def nnls_greedy(s):
         corr = sum(T[c].T @ r[:, c] for c in range(3)) / colnorm
         corr[sel] = -np.inf
         j = int(np.argmax(corr))
-        if not corr[j] > 1e-12 * max(float(np.abs(b).max()), 1e-300):
+        if not corr[j] > 1e-12 * max(float(np.abs(b).max()), TINY):
             break  # no candidate can lower the residual any more
         sel.append(j)
         S = np.asarray(sel)
