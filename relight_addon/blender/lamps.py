@@ -29,13 +29,18 @@ import bpy
 import numpy as np
 
 from ..engine.lamps import Lamp
+from ..engine.registry import LIGHT_KINDS
 from ..engine.scene import SceneError
 from . import lamp_state
 
 #: W: a lamp of more power is refused (an infinite Power, stored as 3.4e38)
 MAX_LAMP_POWER = 1e15
 
-__all__ = ["export_lamps", "cycles_gain", "make_plain"]
+__all__ = ["export_lamps", "cycles_gain", "make_plain", "KIND_OF_TYPE"]
+
+#: the lamp kind (engine/lights/, its LIGHT_KINDS name) of each Blender Light type Relight reads:
+#: the one place a Light's ``type`` becomes a kind (the kind reads the rest: LampKind.blender_settings)
+KIND_OF_TYPE = {"POINT": "point", "SPOT": "spot", "AREA": "area", "SUN": "sun"}
 
 #: the values of the Light settings Cycles multiplies colour x Power by, at which it emits colour x
 #: Power (what Relight writes on the lamps it makes); Blender 4.2 lacks them
@@ -54,26 +59,9 @@ def make_plain(ld) -> None:
             setattr(ld, k, v)
 
 
-def _area_size(ld, M) -> tuple:
-    """An area Light's (size u, size v, ellipse) in world space: its sizes x its object's X and Y
-    scale, from its world matrix ``M`` (4, 4)."""
-    su = float(ld.size)
-    sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
-    return su * float(np.linalg.norm(M[:3, 0])), sv * float(np.linalg.norm(M[:3, 1])), ld.shape in ("DISK", "ELLIPSE")
-
-
-def _cycles_area(ld, M) -> float:
-    """Cycles' ``Light::area`` (intern/cycles/scene/light.cpp), what it divides a Light's strength by
-    when Normalize is on: a point or spot 4 pi r^2 (4 at r = 0), an area lamp its area (world
-    space), a sun pi sin^2(angle / 2) (1 at angle 0)."""
-    if ld.type in ("POINT", "SPOT"):
-        a = 4.0 * np.pi * float(ld.shadow_soft_size) ** 2
-        return a if a > 0 else 4.0
-    if ld.type == "AREA":
-        su, sv, ellipse = _area_size(ld, M)
-        return su * sv * (np.pi / 4 if ellipse else 1.0)
-    angle = float(ld.angle)
-    return float(np.pi * np.sin(0.5 * angle) ** 2) if angle > 0 else 1.0
+def lamp_kind(ld):
+    """The lamp kind (engine.lights.LampKind) of the Blender Light ``ld`` (KIND_OF_TYPE)."""
+    return LIGHT_KINDS[KIND_OF_TYPE[ld.type]].impl
 
 
 def cycles_gain(ld, M) -> np.ndarray:
@@ -84,7 +72,7 @@ def cycles_gain(ld, M) -> np.ndarray:
     if getattr(ld, "use_temperature", False):
         gain = gain * np.array(ld.temperature_color, dtype=np.float64)[:3]
     if not getattr(ld, "normalize", True):
-        gain = gain * _cycles_area(ld, M)
+        gain = gain * lamp_kind(ld).cycles_area(ld, M)
     return gain
 
 
@@ -163,12 +151,11 @@ def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
             warnings.append(f"lamp {name!r} is scaled to zero: left out")
             dark.append(f"{name!r} (scaled to zero)")
             continue
-        if ld.type == "AREA" and min(_area_size(ld, M)[:2]) <= 0:
-            warnings.append(f"lamp {name!r} is an area lamp of size 0 ({ld.size:g} x "
-                            f"{(ld.size_y if ld.shape in ('RECTANGLE', 'ELLIPSE') else ld.size):g} m): Cycles renders "
-                            "no light from it (an area light of size zero does not contribute): left out; give it a "
-                            "size, or make it a Point lamp")
-            dark.append(f"{name!r} (an area lamp of size 0)")
+        kind = lamp_kind(ld)
+        no_light = kind.blender_dark(ld, M)
+        if no_light is not None:
+            warnings.append(f"lamp {name!r} {no_light[0]}")
+            dark.append(f"{name!r} ({no_light[1]})")
             continue
         gain = cycles_gain(ld, M)
         power = color * energy * gain  # what Cycles emits
@@ -183,24 +170,11 @@ def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
             warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
                             "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
                             "reduction leaves it as it is)")
-        kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
+        kw = dict(name=name, kind=kind, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
                   power=power, energy=energy, color=color, gain=gain,
                   cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
-        notes = []
-        if ld.type in ("POINT", "SPOT"):
-            kw["radius"] = float(ld.shadow_soft_size)
-            if not getattr(ld, "use_soft_falloff", True) and kw["radius"] > 0:
-                notes.append("soft falloff off: modelled as a point lamp of the same intensity")
-                kw["radius"] = 0.0
-            if ld.type == "SPOT":
-                kw["spot_size"], kw["spot_blend"] = float(ld.spot_size), float(ld.spot_blend)
-                if max(sx, sy, sz) - min(sx, sy, sz) > 1e-6 * max(sx, sy, sz):
-                    notes.append("a non-uniform scale (an elliptic cone) is modelled as a round cone")
-        elif ld.type == "AREA":
-            su, sv, ellipse = _area_size(ld, M)
-            kw.update(size_u=su, size_v=sv, ellipse=ellipse, spread=float(ld.spread))
-        elif ld.type == "SUN":
-            kw["angle"] = float(ld.angle)
+        own, notes = kind.blender_settings(ld, M)
+        kw.update(own)
         if not _default_light_nodes(ld):
             notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
         if _light_linking(ob):

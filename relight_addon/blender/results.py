@@ -52,7 +52,7 @@ from ..engine.units import radiance_from_exitance
 from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
-from .lamps import cycles_gain, make_plain
+from .lamps import cycles_gain, lamp_kind, make_plain
 from .export import DISPLAY_ATTRIBUTE
 from .export import (RADIOSITY_ATTRIBUTE, RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, fingerprint_change, foreach_array, loop_polygons,
                      owner_of, tag_owned)
@@ -469,8 +469,9 @@ def plan_placed(data, strength) -> list:
 
 
 def new_lamp(rec, energy, color, owner=None):
-    """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
-    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, its
+    """A new Light object (not linked) of a lamp record (a lamp kind's ``record``, engine/lights/kind.py;
+    pipeline.kept's): its type, Power and colour, its kind's own settings (``LampKind.blender_light``:
+    a spot's Spot Size and Blend, a radius, an area lamp's shape, sizes and Spread), its
     Temperature (a blackbody light's ``temperature_K``, where this Blender has Use Temperature), and
     its frame (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
@@ -482,18 +483,8 @@ def new_lamp(rec, energy, color, owner=None):
         ld.temperature = float(rec["temperature_K"])
     ld.energy = float(energy)
     ld.color = tuple(float(x) for x in color)
-    if rec["type"] in ("POINT", "SPOT"):
-        ld.shadow_soft_size = float(rec["radius"])
-    if rec["type"] == "SPOT":
-        ld.spot_size, ld.spot_blend = float(rec["spot_size"]), float(rec["spot_blend"])
-        ld.show_cone = True
-    if rec["type"] == "AREA":
-        same = abs(rec["size_u"] - rec["size_v"]) <= 1e-9 * max(rec["size_u"], rec["size_v"])
-        ld.shape = ("DISK" if same else "ELLIPSE") if rec["ellipse"] else ("SQUARE" if same else "RECTANGLE")
-        ld.size = float(rec["size_u"])
-        if not same:
-            ld.size_y = float(rec["size_v"])
-        ld.spread = float(rec.get("spread", math.pi))  # (a record stored before the spread was kept: 180 degrees)
+    for attribute, value in lamp_kind(ld).blender_light(rec).items():  # its kind's own settings
+        setattr(ld, attribute, value)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
     M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]

@@ -36,11 +36,11 @@ import scipy.optimize as sopt
 
 from .light_colour import fit_columns
 from .geometry import unit
-from .candidate_lamps import LAMP_POINTS, _reach as lamp_reach, patch_radius
+from .candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
 
-__all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
+__all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp"]
 
 #: receiver points per patch of a lamp's irradiance while searching (the lamp kept takes
 #: candidate_lamps.LAMP_POINTS)
@@ -54,10 +54,6 @@ BUDGET = 8 * MAX_EVALUATIONS
 MIN_GAIN = 1e-4
 #: a size stays within this range of factors of its first size
 SIZE_RANGE = (0.25, 4.0)
-#: the parameters refined per lamp kind (engine.lamps.Lamp.kind)
-PARAMETERS = {"SPOT": ("aim_u", "aim_v", "log_size", "blend", "slide_u", "slide_v"),
-              "AREA": ("aim_u", "aim_v", "log_size_u", "log_size_v", "slide_u", "slide_v"),
-              "POINT": ("slide_u", "slide_v")}
 
 
 class Transport:
@@ -135,20 +131,23 @@ class RefinedLamp:
 
 
 class _LampParameters:
-    """A lamp's refined parameters as a vector x scaled to unit steps (x = 0: the lamp as it is);
-    it slides along the surface it hangs from (``mount``, Mount.normal_at) if any."""
+    """A lamp's refined parameters (its kind's ``parameters``: slide_u / slide_v along the surface it
+    hangs from, ``mount``'s Mount.normal_at, if any; aim_u / aim_v about its axis; the kind's own,
+    which its ``refined`` applies) as a vector x scaled to unit steps (x = 0: the lamp as it is)."""
+
+    size_range = SIZE_RANGE
 
     def __init__(self, lamp, mount, step_length):
         normal = mount.normal_at(lamp.position)
         self.lamp, self.mount, self.normal = lamp, mount, normal
-        self.names = PARAMETERS[lamp.kind] if normal is not None else \
-            tuple(p for p in PARAMETERS[lamp.kind] if not p.startswith("slide"))
+        self.names = lamp.kind.parameters if normal is not None else \
+            tuple(p for p in lamp.kind.parameters if not p.startswith("slide"))
         self.mount_u = self.mount_v = None
         if normal is not None:  # tangents u and n x u (frame's second axis is -n x u)
             _, self.mount_u, v = frame(normal)
             self.mount_v = -v
         self.step_length = float(step_length)
-        half = 0.5 * lamp.spot_size if lamp.kind == "SPOT" else 0.25
+        half = lamp.kind.aim_half_angle(lamp)
         self.step_angle = 0.25 * half  # radians of aim per unit
         self.step_log = 0.15
         self.step_blend = 0.2
@@ -168,19 +167,8 @@ class _LampParameters:
             if self.normal is not None and direction @ self.normal <= 0:
                 return None  # aimed behind its mounting surface
         d, u, v = frame(direction)
-        out = replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[])
-        if lamp.kind == "SPOT":
-            size = lamp.spot_size * math.exp(self.step_log * values["log_size"])
-            blend = lamp.spot_blend + self.step_blend * values["blend"]
-            if not (0.0 < size <= math.pi and 0.0 <= blend <= 1.0):
-                return None
-            out = replace(out, spot_size=size, spot_blend=blend)
-        if lamp.kind == "AREA":
-            fu, fv = (math.exp(self.step_log * values[k]) for k in ("log_size_u", "log_size_v"))
-            if not all(SIZE_RANGE[0] <= f <= SIZE_RANGE[1] for f in (fu, fv)):
-                return None
-            out = replace(out, size_u=lamp.size_u * fu, size_v=lamp.size_v * fv)
-        return out
+        return lamp.kind.refined(replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[]),
+                                 values, self)
 
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,

@@ -725,7 +725,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
             progress("refining lamps", 0.95 + 0.03 * (n_done + 1) / len(todo))
     offered = lights.count_by_kind()
     if new_lamps:
-        area = np.array([lamp.area if lamp.kind == "AREA" else 0.0 for lamp in new_lamps])
+        area = np.array([lamp.kind.area(lamp) for lamp in new_lamps])
         model.lights = append_lamps(lights, lights.patches, patches.n_patches, new_lamps, new_kinds,
                                     np.stack(new_H, axis=1), area)
         H_new = np.stack(new_H, axis=1)
@@ -857,7 +857,7 @@ def scene_light(faces: FaceSet, patches: PatchSet, F, seed=0) -> tuple:
     column). Shadow and sky rays are cast on the form factors' sampler (one Embree scene)."""
     sampler = getattr(F, "sampler", None)
     cols = [lamp_irradiance(patches, faces.lamps, sampler=sampler, seed=seed)]
-    names = [(lamp.name, lamp.kind.lower(), lamp.power) for lamp in faces.lamps]
+    names = [(lamp.name, lamp.kind.blender_type.lower(), lamp.power) for lamp in faces.lamps]
     if faces.world_radiance is not None:
         M = getattr(F, "matrix", F)
         rows = np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1)

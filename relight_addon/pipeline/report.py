@@ -66,7 +66,7 @@ def lamp_records(model, strength) -> list:
             energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain) if kept else (0.0, lamp.color)
         except ValueError as e:
             energy, color, problem = None, None, str(e)
-        out.append({"name": lamp.name, "type": lamp.kind.lower(), "kind": model.lights.kind_names[j], "kept": kept,
+        out.append({"name": lamp.name, "type": lamp.kind.blender_type.lower(), "kind": model.lights.kind_names[j], "kept": kept,
                     "unit": model.lights.kind_of(j).strength_unit,
                     "power_before": lamp.power, "power_after": s if kept else np.zeros(3), "gain": lamp.gain,
                     "energy_before": float(lamp.energy), "energy_after": None if energy is None else float(energy),
@@ -83,28 +83,20 @@ def placed_record(lamp, kind, strength, temperature=None) -> dict:
     spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
     shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg.
     ``temperature`` (K, a blackbody light's): the Light's Temperature (Use Temperature on: Cycles
-    multiplies colour x Power by its blackbody colour), and energy and color with it."""
-    from ..engine.lights.area import blender_shape
+    multiplies colour x Power by its blackbody colour), and energy and color with it. The kind's own
+    fields are its ``report_fields`` (engine/lights/)."""
     from ..engine.lights.lamp import blender_values
 
     s = np.asarray(strength, dtype=np.float64).reshape(3)
     gain = lamp.gain if temperature is None else blackbody_rec709(temperature)
     energy, color = blender_values(s, lamp.energy, lamp.color, gain)
-    rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
+    rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.blender_type.lower(),
            "location": lamp.position, "direction": lamp.direction, "axis_u": lamp.axis_u, "center": lamp.position,
-           "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
-           "area": float(lamp.area) if lamp.kind == "AREA" else 0.0, "exitance": None, "strength": s,
+           "normal": lamp.kind.normal(lamp), "area": lamp.kind.area(lamp), "exitance": None, "strength": s,
            "power": float(s.sum()), "energy": float(energy), "color": color}
     if temperature is not None:
         rec["temperature_K"] = float(temperature)
-    if lamp.kind in ("POINT", "SPOT"):
-        rec["radius"] = float(lamp.radius)
-    if lamp.kind == "SPOT":
-        rec.update(spot_size=float(lamp.spot_size), spot_blend=float(lamp.spot_blend),
-                   cone_angle_deg=float(np.degrees(lamp.spot_size)))
-    if lamp.kind == "AREA":
-        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)],
-                   spread=float(lamp.spread), spread_deg=float(np.degrees(lamp.spread)))
+    rec.update(lamp.kind.report_fields(lamp))
     return rec
 
 
