@@ -103,6 +103,57 @@ def _light_linking(ob) -> bool:
                                or getattr(ll, "blocker_collection", None) is not None)
 
 
+def _read_lamp(ob, ld, was, warnings, dark):
+    """The engine.lamps.Lamp of the lamp object ``ob`` (its Light ``ld``; ``was``: what a shown
+    reduction keeps of it, lamp_state.before), None when it gives no light (``dark`` gets why, and
+    ``warnings`` what is not modelled, as export_lamps says)."""
+    name = ob.name
+    color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
+    energy = float(ld.energy if was is None else was["energy"])
+    if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
+        raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
+    if not np.any(color * energy != 0):
+        dark.append(f"{name!r} ({'0 W' if energy == 0 else 'colour black'})")
+        return None
+    M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
+    X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
+    sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
+    if min(sx, sy, sz) <= 0:
+        warnings.append(f"lamp {name!r} is scaled to zero: left out")
+        dark.append(f"{name!r} (scaled to zero)")
+        return None
+    kind = lamp_kind(ld)
+    no_light = kind.blender_dark(ld, M)
+    if no_light is not None:
+        warnings.append(f"lamp {name!r} {no_light[0]}")
+        dark.append(f"{name!r} ({no_light[1]})")
+        return None
+    gain = cycles_gain(ld, M)
+    power = color * energy * gain  # what Cycles emits
+    if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
+        raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
+                         "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
+                         "finite values")
+    if not np.any(power != 0):
+        dark.append(f"{name!r} (0 W after its Exposure, Temperature or Normalize)")
+        return None
+    if energy < 0:
+        warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
+                        "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
+                        "reduction leaves it as it is)")
+    kw = dict(name=name, kind=kind, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
+              power=power, energy=energy, color=color, gain=gain,
+              cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
+    own, notes = kind.blender_settings(ld, M)
+    kw.update(own)
+    if not _default_light_nodes(ld):
+        notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
+    if _light_linking(ob):
+        notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")
+    warnings.extend(f"lamp {name!r}: {n}" for n in notes)
+    return Lamp(**kw)
+
+
 def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
     """(lamps, warnings): the scene's lamps as engine.lamps.Lamp, and what is not modelled.
     ``renderable``: the names of the objects that render (export.render_visible_objects);
@@ -132,55 +183,13 @@ def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
                 else lamp_state.visible_before(ob, view_layer, was)):
             hidden.append(ob.name)  # hidden in the viewport only: Cycles renders it
         ld = ob.data if was is None else was["data"]
-        name = ob.name
         if not getattr(ob, "visible_diffuse", True):
-            warnings.append(f"lamp {name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
+            warnings.append(f"lamp {ob.name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
                             "left out, as Cycles leaves it out of their light")
             continue
-        color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
-        energy = float(ld.energy if was is None else was["energy"])
-        if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
-            raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
-        if not np.any(color * energy != 0):
-            dark.append(f"{name!r} ({'0 W' if energy == 0 else 'colour black'})")
-            continue
-        M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
-        X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
-        sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
-        if min(sx, sy, sz) <= 0:
-            warnings.append(f"lamp {name!r} is scaled to zero: left out")
-            dark.append(f"{name!r} (scaled to zero)")
-            continue
-        kind = lamp_kind(ld)
-        no_light = kind.blender_dark(ld, M)
-        if no_light is not None:
-            warnings.append(f"lamp {name!r} {no_light[0]}")
-            dark.append(f"{name!r} ({no_light[1]})")
-            continue
-        gain = cycles_gain(ld, M)
-        power = color * energy * gain  # what Cycles emits
-        if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
-            raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
-                             "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
-                             "finite values")
-        if not np.any(power != 0):
-            dark.append(f"{name!r} (0 W after its Exposure, Temperature or Normalize)")
-            continue
-        if energy < 0:
-            warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
-                            "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
-                            "reduction leaves it as it is)")
-        kw = dict(name=name, kind=kind, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
-                  power=power, energy=energy, color=color, gain=gain,
-                  cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
-        own, notes = kind.blender_settings(ld, M)
-        kw.update(own)
-        if not _default_light_nodes(ld):
-            notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
-        if _light_linking(ob):
-            notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")
-        lamps.append(Lamp(**kw))
-        warnings.extend(f"lamp {name!r}: {n}" for n in notes)
+        lamp = _read_lamp(ob, ld, was, warnings, dark)
+        if lamp is not None:
+            lamps.append(lamp)
     n_inst = 0
     depsgraph = context.evaluated_depsgraph_get()
     for inst in depsgraph.object_instances:

@@ -40,7 +40,6 @@ lights no patch is left out. Deterministic for a seed.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np

@@ -179,30 +179,12 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     refinement lowered the error, the columns with theirs replaced, the relative error before and
     after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET). ``exitance``
     (k, 3): the configuration's strengths, whose colours a constrained light colour keeps."""
-    patches = mount.patches
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
     budget = BUDGET if budget is None else int(budget)
-    b = problem.b_target
-    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    search = _Search(problem, transport, mount, seed, exitance)
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
-    radius = patch_radius(patches)
-
-    def error(cs):  # the best strengths of the problem's light colour (NNLS per channel when free)
-        return fit_columns(problem, cs, exitance, refit=False)[1] / norm
-
-    def irradiance(lamp, points=SEARCH_POINTS):
-        return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,
-                               only=lamp_reach(patches, [lamp], radius))[:, 0, 0]
-
-    def with_column(cs, j, h, lamp):
-        col = transport.column(h, lamp)
-        out = [c.copy() for c in cs]
-        for c in range(3):
-            out[c][:, j] = col[:, c]
-        return out
-
-    start = error(cols)
+    start = search.error(cols)
     best, evaluations, refined = start, 0, {}
     current = dict(lamps)
     for _ in range(rounds):
@@ -211,31 +193,63 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             if (cancel is not None and cancel()) or evaluations >= budget:
                 break
             params = _LampParameters(current[j], mount, step_length)
-            seen = {}
-
-            def f(x):
-                key = tuple(np.round(x, 9))
-                if key not in seen:
-                    cand = params.lamp_at(x)
-                    h = None if cand is None else irradiance(cand)
-                    val = error(with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
-                    seen[key] = (val, cand)
-                return seen[key][0]
-
-            x0 = np.zeros(len(params.names))
-            base = f(x0)  # this lamp as it is, with the search's receiver points
-            res = sopt.minimize(f, x0, method="Nelder-Mead",
-                                options={"maxfev": min(max_evaluations, budget - evaluations), "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
-                                         "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
-            evaluations += len(seen)
-            val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
-            if cand is not None and val < base - 1e-12:  # kept if it lowers the error at the full points
-                h = irradiance(cand, LAMP_POINTS)
-                kept = with_column(cols, j, h, cand)
-                err = error(kept)
+            lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
+            evaluations += used
+            if cand is not None and lowered:  # kept if it lowers the error at the full points
+                h = search.irradiance(cand, LAMP_POINTS)
+                kept = search.with_column(cols, j, h, cand)
+                err = search.error(kept)
                 if err < best:
                     cols, best, current[j] = kept, err, cand
                     refined[j] = RefinedLamp(j, cand, h)
         if round_start - best < MIN_GAIN * max(round_start, 1e-12):
             break
     return list(refined.values()), cols, start, best, evaluations
+
+
+class _Search:
+    """What refine_configuration evaluates: a configuration's relative error (the best strengths of
+    the problem's light colour: NNLS per channel when free), a lamp's irradiance on the patches it
+    reaches (one seed: the same receiver points at every evaluation), and its column of T."""
+
+    def __init__(self, problem, transport, mount, seed, exitance):
+        self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
+        self.norm = problem.target_norm if problem.target_norm > 0 else 1.0
+        self.radius = patch_radius(mount.patches)
+
+    def error(self, cs):
+        return fit_columns(self.problem, cs, self.exitance, refit=False)[1] / self.norm
+
+    def irradiance(self, lamp, points=SEARCH_POINTS):
+        patches = self.mount.patches
+        return lamp_irradiance(patches, [lamp], sampler=self.mount.sampler, seed=self.seed, points_per_patch=points,
+                               only=lamp_reach(patches, [lamp], self.radius))[:, 0, 0]
+
+    def with_column(self, cs, j, h, lamp):
+        col = self.transport.column(h, lamp)
+        out = [c.copy() for c in cs]
+        for c in range(3):
+            out[c][:, j] = col[:, c]
+        return out
+
+    def minimize(self, params, cols, j, max_evaluations) -> tuple:
+        """Nelder-Mead on lamp ``j``'s parameters (``params``, _LampParameters), at most
+        ``max_evaluations``: (whether the lamp it found lowers the error, that lamp or None, evaluations)."""
+        seen = {}
+
+        def f(x):
+            key = tuple(np.round(x, 9))
+            if key not in seen:
+                cand = params.lamp_at(x)
+                h = None if cand is None else self.irradiance(cand)
+                val = self.error(self.with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
+                seen[key] = (val, cand)
+            return seen[key][0]
+
+        x0 = np.zeros(len(params.names))
+        base = f(x0)  # this lamp as it is, with the search's receiver points
+        res = sopt.minimize(f, x0, method="Nelder-Mead",
+                            options={"maxfev": max_evaluations, "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
+                                     "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
+        val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
+        return val < base - 1e-12, cand, len(seen)
