@@ -47,7 +47,7 @@ LAMPS = {
     "area rectangle": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
                                                                       size_y=0.4)),
     "area disk": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6)),
-    # Blender's Spread (Cycles' soft-box grid: engine.lamps.spread_attenuation); 0: a collimated beam
+    # Blender's Spread (Cycles' soft-box grid: engine.lights.area.spread_attenuation); 0: a collimated beam
     "area spread 60": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
                                                                       size_y=0.4, spread=math.radians(60))),
     "area disk spread 120": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6,

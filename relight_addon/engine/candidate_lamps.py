@@ -32,6 +32,10 @@ Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells 
   lights): "wide" only 0.864 (no better than the cells), with "cover" 0.350 (docs/benchmarks.md).
 - **Point lamps**: one per position (radius 0).
 
+Each lamp kind offers its own lamps (engine/lights/: LampKind.offer_at at a position, offer_for per
+cluster it sees; the spots' CONES and CONE_MARGIN in spot.py, the area lamps' AREA_BEAMS,
+AREA_CLUSTERS and MIN_PENUMBRA in area.py); a kind is offered when its ``option`` is on.
+
 The count is bounded by ``max_lamps`` (the positions are as many as it allows:
 ``positions_for``), so the cost estimate holds (engine.cost: ``lamp_bound``). Each lamp's source is
 its direct irradiance per W on the patches its light can reach (engine.lamps.lamp_irradiance,

@@ -164,9 +164,16 @@ class LampKind(LightKind):
 
     # -- records ---------------------------------------------------------------------------
     def record(self, lamp) -> dict:
-        """The lamp as the stored result keeps it (JSON; pipeline.stored): name, type (Blender's),
-        energy (Power, W; a sun's Strength), color, gain, power [r, g, b], position, direction,
-        axis_u, axis_v and every RECORD_GEOMETRY field."""
+        """The lamp as the stored result keeps it (JSON; pipeline.stored), whatever its kind: name,
+        type (Blender's Light type), energy (Blender's Power, W; a sun's Strength, W/m^2), color, gain
+        [r, g, b] (what Cycles multiplies colour x Power by: the Light's Exposure, Temperature,
+        Normalize; engine.lamps.Lamp), power [r, g, b] = colour x energy x gain (what it emits),
+        position (m), direction (its -Z), axis_u / axis_v (its X and Y) and every RECORD_GEOMETRY
+        field: radius (m), spot_size and spot_blend (rad, Blender's), size_u / size_v (m), ellipse
+        and spread (rad, Blender's). Its versions: records stored before the spread was kept lack
+        it (their area lamps were 180 degrees), before the gain was kept, it (1); their readers
+        (``blender_light``, blender/results.py) take those defaults. pipeline.kept makes the same
+        record from a report's light (``record_geometry``), and blender/results.new_lamp writes it."""
         def vec(v):
             return [float(x) for x in v]
         return {"name": lamp.name, "type": self.blender_type, "energy": float(lamp.energy), "color": vec(lamp.color),
