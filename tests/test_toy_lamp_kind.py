@@ -24,7 +24,9 @@ from relight_addon.engine.lights.point import point_lamp
 from relight_addon.engine.lights.spot import spot_lamp
 from relight_addon.engine.registry import LIGHT_KINDS
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
-from relight_addon.pipeline.report import placed_record
+from relight_addon.engine.targets import PaintedRadiance
+from relight_addon.pipeline.kept import kept_lamps
+from relight_addon.pipeline.report import json_safe, placed_record
 
 SIZE = (2.0, 1.5, 1.2)
 #: the downlight: under the ceiling's centre, pointing down
@@ -107,8 +109,8 @@ def test_best_k_lights_returns_the_toy_kind_with_the_power_that_made_the_targets
     floor = ps.normal[:, 2] > 0.9
     power = np.array([40.0, 30.0, 20.0])  # W per channel
     B = np.linalg.solve(np.eye(P) - 0.5 * F, 0.5 * H[:, 2:3] * power[None, :])  # what it makes
-    prob = InverseProblem(F, ps.area, np.full((P, 3), 0.5), floor, B, np.zeros(P, bool), ps.center, ps.normal,
-                          lights=lights)
+    prob = InverseProblem(F, ps.area, np.full((P, 3), 0.5), [PaintedRadiance.masked(floor, B)], np.zeros(P, bool),
+                          ps.center, ps.normal, lights=lights)
     best = best_k_for_problem(prob, 2)[0]  # one light
     assert best.lights.tolist() == [2]
     strength = np.zeros((3, 3))
@@ -120,3 +122,7 @@ def test_best_k_lights_returns_the_toy_kind_with_the_power_that_made_the_targets
     assert rec["kind"] == "downlight" and rec["lobe"] == "cosine" and rec["power"] == pytest.approx(90.0)
     np.testing.assert_allclose(rec["normal"], DOWN)
     assert rec["area"] == 0.0
+    # kept (--keep, Keep Lamps): a record of its own kind, written as its Blender type
+    kept, notes = kept_lamps({"command": "solve", "final": {"lights": [json_safe(rec)]}})
+    assert [(r["kind"], r["type"], r["name"]) for r in kept] == [("downlight", "POINT", "d (kept)")] and not notes
+    np.testing.assert_allclose(kept[0]["position"], AT)

@@ -455,7 +455,7 @@ def plan_placed(data, strength) -> list:
         s = np.asarray(strength[j], dtype=np.float64)
         if not np.any(s > 0):
             continue
-        rec = data.lamps[int(data.light_lamp[j])]
+        rec = dict(data.lamps[int(data.light_lamp[j])], kind=LIGHT_KINDS.names()[int(data.light_kind[j])])
         gain = None
         if colour.get("mode") == "blackbody" and HAS_TEMPERATURE:  # the Light's Temperature carries its colour
             t = float(temperature_of(s[None, :], *colour["range_K"])[0])
@@ -471,7 +471,8 @@ def plan_placed(data, strength) -> list:
 def new_lamp(rec, energy, color, owner=None):
     """A new Light object (not linked) of a lamp record (a lamp kind's ``record``, engine/lights/kind.py;
     pipeline.kept's): its type, Power and colour, its kind's own settings (``LampKind.blender_light``:
-    a spot's Spot Size and Blend, a radius, an area lamp's shape, sizes and Spread), its
+    a spot's Spot Size and Blend, a radius, an area lamp's shape, sizes and Spread; its ``kind``, the
+    lamp kind's name, where the record gives one, else the kind of its Blender type), its
     Temperature (a blackbody light's ``temperature_K``, where this Blender has Use Temperature), and
     its frame (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
@@ -483,7 +484,8 @@ def new_lamp(rec, energy, color, owner=None):
         ld.temperature = float(rec["temperature_K"])
     ld.energy = float(energy)
     ld.color = tuple(float(x) for x in color)
-    for attribute, value in lamp_kind(ld).blender_light(rec).items():  # its kind's own settings
+    kind = LIGHT_KINDS[rec["kind"]].impl if "kind" in rec else lamp_kind(ld)
+    for attribute, value in kind.blender_light(rec).items():  # its kind's own settings
         setattr(ld, attribute, value)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)

@@ -20,7 +20,8 @@ import os
 
 import numpy as np
 
-from ..engine.lights import Capability, lamp_kind_of_type
+from ..engine.lights import Capability, LampKind, lamp_kind_of_type
+from ..engine.registry import LIGHT_KINDS
 
 __all__ = ["KEPT_SUFFIX", "kept_lamps", "read_kept", "foreign_notes"]
 
@@ -43,9 +44,19 @@ def _frame(direction, axis_u=None):
     return u, v
 
 
+def _lamp_kind(light):
+    """The lamp kind a report's ``light`` is kept as: its own kind (``kind``: a lamp kind a solve
+    can place), else that of its Blender ``type`` (a reduction's scene lamp); None for a surface light."""
+    named = light.get("kind")
+    kind = LIGHT_KINDS[named].impl if isinstance(named, str) and named in LIGHT_KINDS else None
+    if isinstance(kind, LampKind) and kind.flags & Capability.PLACEABLE:
+        return kind
+    return lamp_kind_of_type(str(light.get("type", "")).upper(), placeable=True)
+
+
 def kept_lamps(report: dict, source: str = "the report") -> tuple:
     """(records, notes): the lamps of ``report``'s final configuration as results.new_lamp makes
-    them (name, type, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
+    them (name, type, kind, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
     size_v, ellipse, spread, energy, color, temperature_K), and what is not kept. Raises ValueError on a report
     that is not a solve's."""
     if not isinstance(report, dict) or report.get("command") not in ("solve", "reduce") \
@@ -53,13 +64,13 @@ def kept_lamps(report: dict, source: str = "the report") -> tuple:
         raise ValueError(f"{source} is not a Relight solve report (no final configuration)")
     records, surface, notes = [], [], []
     for i, li in enumerate(report["final"]["lights"]):
-        kind = lamp_kind_of_type(str(li.get("type", "")).upper(), placeable=True)  # (a lamp a solve can place)
+        kind = _lamp_kind(li)
         if kind is None or li.get("location") is None:
             surface.append(f"{li.get('object')} ({li.get('kind')}, polygons {li.get('polygons', [])[:4]})")
             continue
         try:
             u, v = _frame(li["direction"] if li.get("direction") is not None else (0.0, 0.0, -1.0), li.get("axis_u"))
-            rec = {"name": f"{li['object']}{KEPT_SUFFIX}", "type": kind.blender_type,
+            rec = {"name": f"{li['object']}{KEPT_SUFFIX}", "type": kind.blender_type, "kind": kind.name,
                    "position": [float(x) for x in li["location"]],
                    "direction": [float(x) for x in (li.get("direction") or (0.0, 0.0, -1.0))],
                    "axis_u": u.tolist(), "axis_v": v.tolist(), **kind.record_geometry(li),
