@@ -47,7 +47,7 @@ LAMPS = {
     "area rectangle": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
                                                                       size_y=0.4)),
     "area disk": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6)),
-    # Blender's Spread (Cycles' soft-box grid: engine.lamps.spread_attenuation); 0: a collimated beam
+    # Blender's Spread (Cycles' soft-box grid: engine.lights.area.spread_attenuation); 0: a collimated beam
     "area spread 60": ("AREA", (0.0, 0.3, 1.3), (0.2, 0.0, 0.4), dict(energy=200.0, shape="RECTANGLE", size=0.8,
                                                                       size_y=0.4, spread=math.radians(60))),
     "area disk spread 120": ("AREA", (-0.3, 0.0, 1.0), (0, 0, 0), dict(energy=150.0, shape="DISK", size=0.6,
@@ -81,12 +81,11 @@ def _placed(make, strength):
 
     from relight_addon.blender import results
     from relight_addon.engine.lights.lamp import blender_values
-    from relight_addon.pipeline.stored import lamp_record
 
     lamp = make()
     energy, color = blender_values(np.asarray(strength, dtype=np.float64), lamp.energy, lamp.color)
-    ob = results.new_lamp(lamp_record(lamp), energy, color)
-    if lamp.kind == "AREA":
+    ob = results.new_lamp(lamp.kind.record(lamp), energy, color)
+    if lamp.kind.blender_type == "AREA":
         assert ob.data.spread == pytest.approx(lamp.spread, abs=1e-6)
     bpy.context.scene.collection.objects.link(ob)
     return dataclasses.replace(lamp, power=np.asarray(strength, dtype=np.float64), energy=energy, color=color)
@@ -125,7 +124,7 @@ def test_lamp_direct_irradiance_against_cycles(name):
             kind, loc, rot, props = LAMPS[name]
             light(kind, loc, rot, **props)
             exp = export.export_scene()
-            assert [lamp.kind for lamp in exp.faces.lamps] == [kind]
+            assert [lamp.kind.blender_type for lamp in exp.faces.lamps] == [kind]
             lamps = exp.faces.lamps
             if kind == "AREA":  # Blender's Spread, read as Cycles takes it
                 assert lamps[0].spread == pytest.approx(props.get("spread", math.pi), abs=1e-6)

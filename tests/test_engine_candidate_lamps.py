@@ -16,6 +16,8 @@ import scipy.optimize as sopt
 from relight_addon.engine import candidate_lamps as cl
 from relight_addon.engine.closed_forms import box_polygons
 from relight_addon.engine.lamps import lamp_irradiance
+from relight_addon.engine.lights.area import AREA
+from relight_addon.engine.lights.spot import CONE_MARGIN
 from relight_addon.engine.lights import candidate_mask
 from relight_addon.engine.options import JobOptions
 from relight_addon.engine.patch_models.adaptive import AdaptiveModel
@@ -122,7 +124,7 @@ def test_each_spot_just_covers_a_cluster(plain):
         for c in clusters:
             v = tri[id(c)].reshape(-1, 3) - s.position
             ang = np.arccos(np.clip(v @ s.direction / np.linalg.norm(v, axis=1), -1, 1))
-            if np.all(ang <= half * (1 + 1e-9)) and half <= ang.max() * (1 + cl.CONE_MARGIN) * 1.05:
+            if np.all(ang <= half * (1 + 1e-9)) and half <= ang.max() * (1 + CONE_MARGIN) * 1.05:
                 covering += 1  # every vertex inside, and no more than a few per cent wider
             omega = _solid_angle(tri[id(c)], s.position)
             if abs(2 * math.pi * (1 - math.cos(half)) - omega) < 0.03 * omega:
@@ -176,7 +178,7 @@ def test_the_kinds_and_the_count_follow_the_options(plain):
         lamps, _ = cl.plan_lamps(patches, cand, o, sampler)
         assert 1 <= len(lamps) <= n and len(lamps) <= cl.lamp_bound(patches, cand, o)
         # the receiver-point work the cost estimate counts: an area lamp 4 rays a point, a beam 4 x the points
-        work = sum(1 if lamp.kind != "AREA" else (4 if lamp.spread == math.pi else 16) for lamp in lamps)
+        work = sum(1 if lamp.kind is not AREA else (4 if lamp.spread == math.pi else 16) for lamp in lamps)
         assert work <= cl.lamp_bound(patches, cand, o, work=True), n
     none = JobOptions(spot_lamps=False, area_lamps=False, point_lamps=False).validate()
     assert cl.offered_kinds(none) == () and cl.plan_lamps(patches, cand, none, sampler) == ([], [])
@@ -212,7 +214,7 @@ def test_offered_lamps_are_lights_whose_source_is_their_irradiance(plain):
     front = (patches.normal * (lamps[s].position - patches.center)).sum(axis=1) > 0
     assert np.all(H[seen & front & (full > 0.1 * full.max()), s] > 0)  # (a patch the edge crosses: sampled)
     # an area beam's too: every patch its light reaches (all of them computed) is in its column
-    b = next(j for j, lamp in enumerate(lamps) if lamp.kind == "AREA" and lamp.spread < math.pi)
+    b = next(j for j, lamp in enumerate(lamps) if lamp.kind is AREA and lamp.spread < math.pi)
     full = lamp_irradiance(patches, [lamps[b]], sampler=sampler, seed=5, points_per_patch=cl.LAMP_POINTS)[:, 0, 0]
     assert H[:, b] @ patches.area == pytest.approx(full @ patches.area, rel=0.02)
     assert np.all(H[full > 0.02 * full.max(), b] > 0) and np.count_nonzero(full) < 0.5 * patches.n_patches

@@ -9,6 +9,10 @@ import flatland
 from relight_addon.engine.inverse import InverseProblem
 from relight_addon.engine.targets import PaintedRadiance
 from relight_addon.engine.lamps import Lamp, lamp_irradiance
+from relight_addon.engine.lights.area import AREA
+from relight_addon.engine.lights.point import POINT
+from relight_addon.engine.lights.spot import SPOT
+from relight_addon.engine.lights.sun import SUN
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
 
 DOWN, X, Y = np.array([0, 0, -1.0]), np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
@@ -29,7 +33,7 @@ def _face_mean(f, x0, y0, s, m=60):
 
 def test_point_lamp_is_intensity_times_solid_angle():
     ps, s = _grid()
-    lamp = Lamp("p", "POINT", (0.3, -0.2, 1.0), DOWN, X, Y, (100.0, 50.0, 0.0))
+    lamp = Lamp("p", POINT, (0.3, -0.2, 1.0), DOWN, X, Y, (100.0, 50.0, 0.0))
     H = lamp_irradiance(ps, [lamp])[:, 0]
     I = 100.0 / (4 * math.pi)
     for p in range(ps.n_patches):
@@ -43,21 +47,21 @@ def test_sun_and_its_shadow():
     # a sun straight down; an opaque plate 0.5 m up covering x < 0 exactly: the left half is dark
     plate = [[(-1.5, -1.5, 0.5), (0.0, -1.5, 0.5), (0.0, 1.5, 0.5), (-1.5, 1.5, 0.5)]]
     ps, _ = _grid(extra=plate)
-    lamp = Lamp("sun", "SUN", (0, 0, 5.0), DOWN, X, Y, (3.0, 3.0, 3.0))
+    lamp = Lamp("sun", SUN, (0, 0, 5.0), DOWN, X, Y, (3.0, 3.0, 3.0))
     H = lamp_irradiance(ps, [lamp])[:, 0, 0]
     floor = ps.center[:, 2] < 0.25
     left, right = floor & (ps.center[:, 0] < 0), floor & (ps.center[:, 0] > 0)
     np.testing.assert_allclose(H[right], 3.0, rtol=1e-12)  # E = S cos 0, unshadowed
     np.testing.assert_array_equal(H[left], 0.0)
-    tilted = Lamp("sun", "SUN", (0, 0, 5.0), np.array([math.sin(0.4), 0, -math.cos(0.4)]), X, Y, (3.0,) * 3,
+    tilted = Lamp("sun", SUN, (0, 0, 5.0), np.array([math.sin(0.4), 0, -math.cos(0.4)]), X, Y, (3.0,) * 3,
                   cast_shadow=False)
     np.testing.assert_allclose(lamp_irradiance(ps, [tilted])[floor, 0, 0], 3.0 * math.cos(0.4), rtol=1e-12)
 
 
 def test_spot_cone_without_blend_cuts_at_its_angle():
     ps, s = _grid(n=12)
-    spot = Lamp("s", "SPOT", (0, 0, 1.0), DOWN, X, Y, (100.0,) * 3, spot_size=math.radians(90))
-    point = Lamp("p", "POINT", (0, 0, 1.0), DOWN, X, Y, (100.0,) * 3)
+    spot = Lamp("s", SPOT, (0, 0, 1.0), DOWN, X, Y, (100.0,) * 3, spot_size=math.radians(90))
+    point = Lamp("p", POINT, (0, 0, 1.0), DOWN, X, Y, (100.0,) * 3)
     H = lamp_irradiance(ps, [spot, point])[:, :, 0]
     # the cone's edge on the floor: radius tan(45 deg) x 1 m = 1 m; patches wholly inside / outside
     corner = np.linalg.norm(ps.center[:, :2], axis=1)
@@ -70,7 +74,7 @@ def test_area_lamp_power_on_a_large_floor():
     # a small area lamp 1 m above a 40 x 40 m floor of 1 m patches: the power P lands in the
     # proportion of the floor's form factor seen from the lamp, (4 / pi) x/sqrt(1+x^2) atan(...)
     ps, s = _grid(n=40, side=40.0)
-    lamp = Lamp("a", "AREA", (0.1, 0.2, 1.0), DOWN, X, Y, (10.0,) * 3, size_u=0.5, size_v=0.25)
+    lamp = Lamp("a", AREA, (0.1, 0.2, 1.0), DOWN, X, Y, (10.0,) * 3, size_u=0.5, size_v=0.25)
     H = lamp_irradiance(ps, [lamp])[:, 0, 0]
     x = 20.0 / 1.0
     q = x / math.sqrt(1 + x * x)
@@ -135,7 +139,7 @@ def test_spread_keeps_the_lamps_power(deg):
     h = 0.05; Cycles' Taylor branch below, 3 / h^3, gives (1 + 2 h^2 / 5) of it)."""
     import scipy.integrate as si
 
-    from relight_addon.engine.lamps import spread_attenuation
+    from relight_addon.engine.lights.area import spread_attenuation
 
     h = math.radians(deg) / 2
     got = 2 * math.pi * si.quad(lambda a: float(spread_attenuation(math.cos(a), 2 * h)) * math.cos(a) * math.sin(a),
@@ -163,7 +167,7 @@ def test_a_disk_lamps_irradiance_on_its_axis_is_the_closed_form(deg):
     E = 2 pi L N (tan h sin^2 m / 2 - m / 2 + sin 2m / 4) (pi L sin^2 m at 180 degrees), and
     E = pi L, the exitance, when the disk holds the whole beam (m = h)."""
     R, d = 0.3, 1.0
-    lamp = Lamp("d", "AREA", (0, 0, d), DOWN, X, Y, (1.0,) * 3, size_u=2 * R, size_v=2 * R, ellipse=True,
+    lamp = Lamp("d", AREA, (0, 0, d), DOWN, X, Y, (1.0,) * 3, size_u=2 * R, size_v=2 * R, ellipse=True,
                 spread=math.radians(deg))
     L = 1 / (math.pi * math.pi * R * R)
     h, m = math.radians(deg) / 2, math.atan(R / d)
@@ -204,7 +208,7 @@ def test_a_tilted_area_lamps_irradiance_on_and_off_its_axis_is_the_quadrature(de
     tilt = math.radians(20)
     d = np.array([math.sin(tilt), 0, -math.cos(tilt)])
     u = np.array([math.cos(tilt), 0, math.sin(tilt)])
-    lamp = Lamp("a", "AREA", (0, 0, 1.0), d, u, np.cross(-d, u), (1.0,) * 3, size_u=0.6, size_v=0.3,
+    lamp = Lamp("a", AREA, (0, 0, 1.0), d, u, np.cross(-d, u), (1.0,) * 3, size_u=0.6, size_v=0.3,
                 ellipse=ellipse, spread=math.radians(deg))
     on_axis = lamp.position + d / -d[2]  # where the axis meets the floor
     h = math.radians(deg) / 2
@@ -242,7 +246,7 @@ def test_spread_zero_is_a_collimated_beam():
     # a 1 x 0.5 m lamp whose footprint on the floor is the rectangle x in [-0.5, 0.5], y in [0, 0.5 / cos]
     size_v = 0.5
     c_floor = np.array([0.0, 0.25 / math.cos(tilt), 0.0])
-    lamp = Lamp("c", "AREA", c_floor - 1.2 * d, d, u, np.cross(-d, u), (10.0,) * 3, size_u=1.0, size_v=size_v,
+    lamp = Lamp("c", AREA, c_floor - 1.2 * d, d, u, np.cross(-d, u), (10.0,) * 3, size_u=1.0, size_v=size_v,
                 spread=0.0)
     H = lamp_irradiance(ps, [lamp])[:, 0, 0]
     E = 10.0 / 0.5 * math.cos(tilt)
@@ -261,12 +265,12 @@ def test_spread_zero_is_a_collimated_beam():
 
 def test_bad_spreads_are_refused_and_blenders_float32_pi_is_pi():
     with pytest.raises(ValueError, match="spread"):
-        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=-0.1)
+        Lamp("a", AREA, (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=-0.1)
     with pytest.raises(ValueError, match="spread"):
-        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=3.2)
+        Lamp("a", AREA, (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=3.2)
     with pytest.raises(ValueError, match="spread"):
-        Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=float("nan"))
-    lamp = Lamp("a", "AREA", (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5,
+        Lamp("a", AREA, (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5, spread=float("nan"))
+    lamp = Lamp("a", AREA, (0, 0, 1.0), DOWN, X, Y, (1.0,) * 3, size_u=0.5, size_v=0.5,
                 spread=float(np.float32(math.pi)))
     assert lamp.spread == math.pi
 
@@ -285,7 +289,7 @@ def test_a_narrow_spots_flux_on_the_floor_is_its_cones(deg, blend):
     the points sampled on the patches missed its footprint (1 degree: nothing or +81 %, 3
     degrees: -9 % to +9 %)."""
     ps, _ = _grid(n=6, side=6.0)
-    spot = Lamp("s", "SPOT", (0.13, 0.21, 1.5), DOWN, X, Y, (100.0,) * 3, spot_size=math.radians(deg),
+    spot = Lamp("s", SPOT, (0.13, 0.21, 1.5), DOWN, X, Y, (100.0,) * 3, spot_size=math.radians(deg),
                 spot_blend=blend)
     H = lamp_irradiance(ps, [spot])[:, 0]
     ref = 100.0 / (4 * math.pi) * _spot_flux(math.radians(deg) / 2, blend)
@@ -301,7 +305,7 @@ def test_a_narrow_spots_footprint_across_patches_is_their_quadrature():
     h, half = 1.5, math.radians(5.0)
     pos = (0.02, -0.03, h)
     for radius in (0.0, 0.2):
-        spot = Lamp("s", "SPOT", pos, DOWN, X, Y, (100.0,) * 3, spot_size=2 * half, radius=radius)
+        spot = Lamp("s", SPOT, pos, DOWN, X, Y, (100.0,) * 3, spot_size=2 * half, radius=radius)
         H = lamp_irradiance(ps, [spot])[:, 0, 0]
         I = 100.0 / (4 * math.pi)
 

@@ -100,13 +100,12 @@ def test_an_area_lamps_power_does_not_depend_on_its_spread(box, deg):
 
 def test_an_area_lamps_report_record_and_stored_record_keep_its_spread():
     from relight_addon.pipeline.report import placed_record
-    from relight_addon.pipeline.stored import lamp_record
 
     lamp = area_lamp("a", INSIDE, (0.3, 0.2, -1.0), 0.4, 0.2, ellipse=True, spread=math.radians(45))
     rec = placed_record(lamp, "area", np.array([3.0, 2.0, 1.0]))
     assert rec["shape"] == "ELLIPSE" and rec["size"] == [0.4, 0.2]
     assert rec["spread"] == pytest.approx(math.radians(45)) and rec["spread_deg"] == pytest.approx(45.0)
-    assert lamp_record(lamp)["spread"] == pytest.approx(math.radians(45))
+    assert lamp.kind.record(lamp)["spread"] == pytest.approx(math.radians(45))
 
 
 def test_a_placed_lamps_column_is_A_inverse_rho_H(box):

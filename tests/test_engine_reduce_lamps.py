@@ -16,6 +16,8 @@ import scipy.optimize as sopt
 import flatland
 from relight_addon.engine.inverse import InverseError, direct_lighting_problem
 from relight_addon.engine.lamps import Lamp
+from relight_addon.engine.lights.point import POINT
+from relight_addon.engine.lights.sun import SUN
 from relight_addon.engine.lights import kind_code
 from relight_addon.engine.lights.lamp import add_lamps, blender_values
 from relight_addon.engine.reduction import StopCriteria, reduce_lights
@@ -48,7 +50,7 @@ def closed_form_irradiance(r, position):
 
 
 def lamps_and_lights(r, positions=POSITIONS, powers=POWERS, surface=None):
-    lamps = [Lamp(f"lamp{i}", "POINT", (x, y, 0.0), DOWN, X, Y, p) for i, ((x, y), p) in
+    lamps = [Lamp(f"lamp{i}", POINT, (x, y, 0.0), DOWN, X, Y, p) for i, ((x, y), p) in
              enumerate(zip(positions, powers))]
     H = np.stack([closed_form_irradiance(r, lamp.position[:2]) for lamp in lamps], axis=1)
     P = len(r["area"])
@@ -177,7 +179,7 @@ def test_the_papers_reduction_of_lamps_conserves_their_power(room, distribution)
 def test_a_sun_lights_the_area_its_power_is_counted_over(room):
     r = room
     P = len(r["area"])
-    sun = Lamp("sun", "SUN", (2.0, 2.0, 0.0), DOWN, X, Y, (3.0, 3.0, 3.0))
+    sun = Lamp("sun", SUN, (2.0, 2.0, 0.0), DOWN, X, Y, (3.0, 3.0, 3.0))
     H = np.where(r["wall"] == "floor", 1.0, 0.0)  # 1 W/m^2 per unit strength on the floor
     lights = add_lamps(None, np.zeros(0, dtype=np.int64), P, [sun], H[:, None], r["area"])
     assert lights.kind_names == ["sun"]

@@ -268,9 +268,10 @@ def test_engine_area_lamp_without_area_is_refused_by_name():
     """Case 15 in the engine: an area Lamp of no area (its radiance P / A) is refused naming it,
     not turned into NaN irradiance."""
     from relight_addon.engine.lamps import Lamp
+    from relight_addon.engine.lights.area import AREA
 
     with pytest.raises(ValueError, match="lamp 'Panel': an area lamp of size 0.0 x 0.5 m has no area"):
-        Lamp("Panel", "AREA", (0, 0, 1), (0, 0, -1), (1, 0, 0), (0, 1, 0), (10, 10, 10), size_u=0.0, size_v=0.5)
+        Lamp("Panel", AREA, (0, 0, 1), (0, 0, -1), (1, 0, 0), (0, 1, 0), (10, 10, 10), size_u=0.0, size_v=0.5)
 
 
 # ============================================================================ work planes

@@ -172,7 +172,7 @@ def test_make_area_lights_copies_the_lamps_for_keeps_and_the_export_reads_them(g
         assert len(exported) == len(made)
         got = {}  # each lamp's copy, found by its type and place (it is named after the surface it hangs from)
         for name, li in lamps.items():
-            got[name] = next(v for v in exported if v.kind == li["type"].upper()
+            got[name] = next(v for v in exported if v.kind.blender_type == li["type"].upper()
                              and np.allclose(v.position, li["location"], atol=1e-5))
         assert len({id(v) for v in got.values()}) == len(lamps)
         for name, li in lamps.items():
@@ -180,7 +180,7 @@ def test_make_area_lights_copies_the_lamps_for_keeps_and_the_export_reads_them(g
             np.testing.assert_allclose(lamp.position, li["location"], atol=1e-5)
             np.testing.assert_allclose(lamp.direction, li["direction"], atol=1e-5)
             np.testing.assert_allclose(lamp.power, li["strength"], rtol=1e-5)
-            if lamp.kind == "SPOT":
+            if lamp.kind.blender_type == "SPOT":
                 assert lamp.spot_size == pytest.approx(li["spot_size"], rel=1e-6) and lamp.radius == 0
                 assert lamp.spot_blend == pytest.approx(li["spot_blend"], abs=1e-6)
 

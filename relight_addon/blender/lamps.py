@@ -29,13 +29,18 @@ import bpy
 import numpy as np
 
 from ..engine.lamps import Lamp
+from ..engine.registry import LIGHT_KINDS
 from ..engine.scene import SceneError
 from . import lamp_state
 
 #: W: a lamp of more power is refused (an infinite Power, stored as 3.4e38)
 MAX_LAMP_POWER = 1e15
 
-__all__ = ["export_lamps", "cycles_gain", "make_plain"]
+__all__ = ["export_lamps", "cycles_gain", "make_plain", "KIND_OF_TYPE"]
+
+#: the lamp kind (engine/lights/, its LIGHT_KINDS name) of each Blender Light type Relight reads:
+#: the one place a Light's ``type`` becomes a kind (the kind reads the rest: LampKind.blender_settings)
+KIND_OF_TYPE = {"POINT": "point", "SPOT": "spot", "AREA": "area", "SUN": "sun"}
 
 #: the values of the Light settings Cycles multiplies colour x Power by, at which it emits colour x
 #: Power (what Relight writes on the lamps it makes); Blender 4.2 lacks them
@@ -54,26 +59,9 @@ def make_plain(ld) -> None:
             setattr(ld, k, v)
 
 
-def _area_size(ld, M) -> tuple:
-    """An area Light's (size u, size v, ellipse) in world space: its sizes x its object's X and Y
-    scale, from its world matrix ``M`` (4, 4)."""
-    su = float(ld.size)
-    sv = float(ld.size_y) if ld.shape in ("RECTANGLE", "ELLIPSE") else su
-    return su * float(np.linalg.norm(M[:3, 0])), sv * float(np.linalg.norm(M[:3, 1])), ld.shape in ("DISK", "ELLIPSE")
-
-
-def _cycles_area(ld, M) -> float:
-    """Cycles' ``Light::area`` (intern/cycles/scene/light.cpp), what it divides a Light's strength by
-    when Normalize is on: a point or spot 4 pi r^2 (4 at r = 0), an area lamp its area (world
-    space), a sun pi sin^2(angle / 2) (1 at angle 0)."""
-    if ld.type in ("POINT", "SPOT"):
-        a = 4.0 * np.pi * float(ld.shadow_soft_size) ** 2
-        return a if a > 0 else 4.0
-    if ld.type == "AREA":
-        su, sv, ellipse = _area_size(ld, M)
-        return su * sv * (np.pi / 4 if ellipse else 1.0)
-    angle = float(ld.angle)
-    return float(np.pi * np.sin(0.5 * angle) ** 2) if angle > 0 else 1.0
+def lamp_kind(ld):
+    """The lamp kind (engine.lights.LampKind) of the Blender Light ``ld`` (KIND_OF_TYPE)."""
+    return LIGHT_KINDS[KIND_OF_TYPE[ld.type]].impl
 
 
 def cycles_gain(ld, M) -> np.ndarray:
@@ -84,7 +72,7 @@ def cycles_gain(ld, M) -> np.ndarray:
     if getattr(ld, "use_temperature", False):
         gain = gain * np.array(ld.temperature_color, dtype=np.float64)[:3]
     if not getattr(ld, "normalize", True):
-        gain = gain * _cycles_area(ld, M)
+        gain = gain * lamp_kind(ld).cycles_area(ld, M)
     return gain
 
 
@@ -113,6 +101,57 @@ def _light_linking(ob) -> bool:
     ll = getattr(ob, "light_linking", None)
     return ll is not None and (getattr(ll, "receiver_collection", None) is not None
                                or getattr(ll, "blocker_collection", None) is not None)
+
+
+def _read_lamp(ob, ld, was, warnings, dark):
+    """The engine.lamps.Lamp of the lamp object ``ob`` (its Light ``ld``; ``was``: what a shown
+    reduction keeps of it, lamp_state.before), None when it gives no light (``dark`` gets why, and
+    ``warnings`` what is not modelled, as export_lamps says)."""
+    name = ob.name
+    color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
+    energy = float(ld.energy if was is None else was["energy"])
+    if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
+        raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
+    if not np.any(color * energy != 0):
+        dark.append(f"{name!r} ({'0 W' if energy == 0 else 'colour black'})")
+        return None
+    M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
+    X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
+    sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
+    if min(sx, sy, sz) <= 0:
+        warnings.append(f"lamp {name!r} is scaled to zero: left out")
+        dark.append(f"{name!r} (scaled to zero)")
+        return None
+    kind = lamp_kind(ld)
+    no_light = kind.blender_dark(ld, M)
+    if no_light is not None:
+        warnings.append(f"lamp {name!r} {no_light[0]}")
+        dark.append(f"{name!r} ({no_light[1]})")
+        return None
+    gain = cycles_gain(ld, M)
+    power = color * energy * gain  # what Cycles emits
+    if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
+        raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
+                         "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
+                         "finite values")
+    if not np.any(power != 0):
+        dark.append(f"{name!r} (0 W after its Exposure, Temperature or Normalize)")
+        return None
+    if energy < 0:
+        warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
+                        "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
+                        "reduction leaves it as it is)")
+    kw = dict(name=name, kind=kind, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
+              power=power, energy=energy, color=color, gain=gain,
+              cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
+    own, notes = kind.blender_settings(ld, M)
+    kw.update(own)
+    if not _default_light_nodes(ld):
+        notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
+    if _light_linking(ob):
+        notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")
+    warnings.extend(f"lamp {name!r}: {n}" for n in notes)
+    return Lamp(**kw)
 
 
 def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
@@ -144,69 +183,13 @@ def export_lamps(context, renderable, owner_of, dark=None) -> tuple:
                 else lamp_state.visible_before(ob, view_layer, was)):
             hidden.append(ob.name)  # hidden in the viewport only: Cycles renders it
         ld = ob.data if was is None else was["data"]
-        name = ob.name
         if not getattr(ob, "visible_diffuse", True):
-            warnings.append(f"lamp {name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
+            warnings.append(f"lamp {ob.name!r} does not light diffuse surfaces (Object > Visibility > Diffuse off): "
                             "left out, as Cycles leaves it out of their light")
             continue
-        color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
-        energy = float(ld.energy if was is None else was["energy"])
-        if not (np.all(np.isfinite(color)) and np.isfinite(energy)):
-            raise SceneError(f"lamp {name!r} has a NaN or infinite Power or Color: give it finite values")
-        if not np.any(color * energy != 0):
-            dark.append(f"{name!r} ({'0 W' if energy == 0 else 'colour black'})")
-            continue
-        M = lamp_state.world_matrix(ob)  # (a lamp disabled in the viewports has no matrix_world)
-        X, Y, Z = M[:3, 0], M[:3, 1], M[:3, 2]
-        sx, sy, sz = (float(np.linalg.norm(v)) for v in (X, Y, Z))
-        if min(sx, sy, sz) <= 0:
-            warnings.append(f"lamp {name!r} is scaled to zero: left out")
-            dark.append(f"{name!r} (scaled to zero)")
-            continue
-        if ld.type == "AREA" and min(_area_size(ld, M)[:2]) <= 0:
-            warnings.append(f"lamp {name!r} is an area lamp of size 0 ({ld.size:g} x "
-                            f"{(ld.size_y if ld.shape in ('RECTANGLE', 'ELLIPSE') else ld.size):g} m): Cycles renders "
-                            "no light from it (an area light of size zero does not contribute): left out; give it a "
-                            "size, or make it a Point lamp")
-            dark.append(f"{name!r} (an area lamp of size 0)")
-            continue
-        gain = cycles_gain(ld, M)
-        power = color * energy * gain  # what Cycles emits
-        if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
-            raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
-                             "infinite value? (Blender stores infinity as its largest number, 3.4e+38); give it "
-                             "finite values")
-        if not np.any(power != 0):
-            dark.append(f"{name!r} (0 W after its Exposure, Temperature or Normalize)")
-            continue
-        if energy < 0:
-            warnings.append(f"lamp {name!r} has a negative Power ({energy:.3g} W): Cycles renders it as negative "
-                            "light (it takes light away where it shines); modelled so, as the scene's fixed light (a "
-                            "reduction leaves it as it is)")
-        kw = dict(name=name, kind=ld.type, position=M[:3, 3], direction=-Z / sz, axis_u=X / sx, axis_v=Y / sy,
-                  power=power, energy=energy, color=color, gain=gain,
-                  cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
-        notes = []
-        if ld.type in ("POINT", "SPOT"):
-            kw["radius"] = float(ld.shadow_soft_size)
-            if not getattr(ld, "use_soft_falloff", True) and kw["radius"] > 0:
-                notes.append("soft falloff off: modelled as a point lamp of the same intensity")
-                kw["radius"] = 0.0
-            if ld.type == "SPOT":
-                kw["spot_size"], kw["spot_blend"] = float(ld.spot_size), float(ld.spot_blend)
-                if max(sx, sy, sz) - min(sx, sy, sz) > 1e-6 * max(sx, sy, sz):
-                    notes.append("a non-uniform scale (an elliptic cone) is modelled as a round cone")
-        elif ld.type == "AREA":
-            su, sv, ellipse = _area_size(ld, M)
-            kw.update(size_u=su, size_v=sv, ellipse=ellipse, spread=float(ld.spread))
-        elif ld.type == "SUN":
-            kw["angle"] = float(ld.angle)
-        if not _default_light_nodes(ld):
-            notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
-        if _light_linking(ob):
-            notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")
-        lamps.append(Lamp(**kw))
-        warnings.extend(f"lamp {name!r}: {n}" for n in notes)
+        lamp = _read_lamp(ob, ld, was, warnings, dark)
+        if lamp is not None:
+            lamps.append(lamp)
     n_inst = 0
     depsgraph = context.evaluated_depsgraph_get()
     for inst in depsgraph.object_instances:

@@ -52,7 +52,7 @@ from ..engine.units import radiance_from_exitance
 from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
-from .lamps import cycles_gain, make_plain
+from .lamps import cycles_gain, lamp_kind, make_plain
 from .layers import DISPLAY_ATTRIBUTE, RADIOSITY_ATTRIBUTE
 from .meshes import fingerprint_change, foreach_array, loop_polygons
 from .visibility import RELIGHT_NAME_PROP, RELIGHT_OWNER_PROP, owner_of, tag_owned
@@ -455,7 +455,7 @@ def plan_placed(data, strength) -> list:
         s = np.asarray(strength[j], dtype=np.float64)
         if not np.any(s > 0):
             continue
-        rec = data.lamps[int(data.light_lamp[j])]
+        rec = dict(data.lamps[int(data.light_lamp[j])], kind=LIGHT_KINDS.names()[int(data.light_kind[j])])
         gain = None
         if colour.get("mode") == "blackbody" and HAS_TEMPERATURE:  # the Light's Temperature carries its colour
             t = float(temperature_of(s[None, :], *colour["range_K"])[0])
@@ -469,8 +469,10 @@ def plan_placed(data, strength) -> list:
 
 
 def new_lamp(rec, energy, color, owner=None):
-    """A new Light object (not linked) of a stored lamp record (pipeline.stored.lamp_record): its
-    type, Power and colour, Spot Size and Blend, radius, area shape, sizes and Spread, its
+    """A new Light object (not linked) of a lamp record (a lamp kind's ``record``, engine/lights/kind.py;
+    pipeline.kept's): its type, Power and colour, its kind's own settings (``LampKind.blender_light``:
+    a spot's Spot Size and Blend, a radius, an area lamp's shape, sizes and Spread; its ``kind``, the
+    lamp kind's name, where the record gives one, else the kind of its Blender type), its
     Temperature (a blackbody light's ``temperature_K``, where this Blender has Use Temperature), and
     its frame (X = axis_u, Y = axis_v, -Z = direction) at its position; ``owner``: Relight's owner id."""
     from mathutils import Matrix
@@ -482,18 +484,9 @@ def new_lamp(rec, energy, color, owner=None):
         ld.temperature = float(rec["temperature_K"])
     ld.energy = float(energy)
     ld.color = tuple(float(x) for x in color)
-    if rec["type"] in ("POINT", "SPOT"):
-        ld.shadow_soft_size = float(rec["radius"])
-    if rec["type"] == "SPOT":
-        ld.spot_size, ld.spot_blend = float(rec["spot_size"]), float(rec["spot_blend"])
-        ld.show_cone = True
-    if rec["type"] == "AREA":
-        same = abs(rec["size_u"] - rec["size_v"]) <= 1e-9 * max(rec["size_u"], rec["size_v"])
-        ld.shape = ("DISK" if same else "ELLIPSE") if rec["ellipse"] else ("SQUARE" if same else "RECTANGLE")
-        ld.size = float(rec["size_u"])
-        if not same:
-            ld.size_y = float(rec["size_v"])
-        ld.spread = float(rec.get("spread", math.pi))  # (a record stored before the spread was kept: 180 degrees)
+    kind = LIGHT_KINDS[rec["kind"]].impl if "kind" in rec else lamp_kind(ld)
+    for attribute, value in kind.blender_light(rec).items():  # its kind's own settings
+        setattr(ld, attribute, value)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
     M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]
@@ -754,32 +747,8 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
     cell_b = patch_b[data.cell_patch][cell]
     poly_b = polygon_rows(data, patch_b)
     off = data.polygon_offset
-    layers, skipped, seen_mesh, sharing = [], [], {}, {}
-    for oi, ob in objs.items():
-        why = linked_message(ob)
-        if why:
-            skipped.append(why)
-            continue
-        if ob.data.name in seen_mesh:
-            sharing.setdefault(seen_mesh[ob.data.name], []).append(ob.name)
-            continue
-        seen_mesh[ob.data.name] = ob.name
-        layers.append((ob, poly_b[off[oi]:off[oi + 1]]))
-    for first, others in sharing.items():  # one line per shared mesh, not one per duplicate (a chess set's pieces)
-        skipped.append(f"{len(others)} object(s) share their mesh with {first} ({', '.join(others[:3])}"
-                       f"{', ...' if len(others) > 3 else ''}): the radiosity layer shows {first}'s values")
-    suppress = []
-    if data.meta.get("command") == "reduce":
-        lp_ptr, lp = data.light_polygons_indptr, data.light_polygons
-        for oi, ob in objs.items():
-            sel = np.flatnonzero(data.light_object == oi)
-            polys = np.concatenate([lp[lp_ptr[j]:lp_ptr[j + 1]] for j in sel]) if len(sel) else np.zeros(0, int)
-            if len(polys) and linked_message(ob):
-                skipped.append(f"{ob.name}: its mesh is linked (read-only), so its own emission cannot be switched "
-                               "off: it still emits on top of the reduced lights; make it local to see the reduction "
-                               "alone")
-            elif len(polys):
-                suppress.append((ob, polys - off[oi]))
+    layers, skipped = _radiosity_layers(objs, poly_b, off)
+    suppress = _emission_to_suppress(data, objs, off, skipped) if data.meta.get("command") == "reduce" else []
     lamp_plan, lamp_skipped = plan_lamps(scene, data, exitance)
     skipped.extend(lamp_skipped)
     placed, kept_notes = without_kept(scene, rid, plan_placed(data, exitance))
@@ -802,6 +771,43 @@ def apply_stored_point(scene, index, trusted=False) -> dict:
     rows = data.meta.get("rows") or []  # what the Results panel lists for this row (results written before: none)
     return {"lights": int(lit.sum()), "negative": int(neg.sum()), "negative_cells": n_neg_cells, "skipped": skipped,
             "panel": rows[index] if index < len(rows) else None}
+
+
+def _radiosity_layers(objs, poly_b, off) -> tuple:
+    """([(object, its polygons' radiosity)] to write, [messages]): one layer per mesh (objects sharing
+    a mesh named, one line per mesh), linked objects skipped."""
+    layers, skipped, seen_mesh, sharing = [], [], {}, {}
+    for oi, ob in objs.items():
+        why = linked_message(ob)
+        if why:
+            skipped.append(why)
+            continue
+        if ob.data.name in seen_mesh:
+            sharing.setdefault(seen_mesh[ob.data.name], []).append(ob.name)
+            continue
+        seen_mesh[ob.data.name] = ob.name
+        layers.append((ob, poly_b[off[oi]:off[oi + 1]]))
+    for first, others in sharing.items():  # one line per shared mesh, not one per duplicate (a chess set's pieces)
+        skipped.append(f"{len(others)} object(s) share their mesh with {first} ({', '.join(others[:3])}"
+                       f"{', ...' if len(others) > 3 else ''}): the radiosity layer shows {first}'s values")
+    return layers, skipped
+
+
+def _emission_to_suppress(data, objs, off, skipped) -> list:
+    """A reduction's [(object, its emitting polygons)] whose emission is switched off (``skipped``
+    gets the linked ones, which cannot be)."""
+    suppress = []
+    lp_ptr, lp = data.light_polygons_indptr, data.light_polygons
+    for oi, ob in objs.items():
+        sel = np.flatnonzero(data.light_object == oi)
+        polys = np.concatenate([lp[lp_ptr[j]:lp_ptr[j + 1]] for j in sel]) if len(sel) else np.zeros(0, int)
+        if len(polys) and linked_message(ob):
+            skipped.append(f"{ob.name}: its mesh is linked (read-only), so its own emission cannot be switched "
+                           "off: it still emits on top of the reduced lights; make it local to see the reduction "
+                           "alone")
+        elif len(polys):
+            suppress.append((ob, polys - off[oi]))
+    return suppress
 
 
 def _remove_shown_lights(scene, rid) -> int:
@@ -941,10 +947,40 @@ def make_area_lights(scene, index) -> dict:
     written. Returns {"names": the new lights' names, "collection": its name, "removed": Relight's
     objects removed, "reduce": whether the scene's own emitters and lamps are set by the result (a
     reduction: Clear Results gives them back as they were, beside these lights)}."""
-    from mathutils import Matrix, Vector
-
-    data = load_result(scene)
+    data, index, objs = _row_to_convert(scene, index)
     rid = result_id(scene)
+    exitance = data.exitance[index].astype(np.float64)
+    if not np.all(np.isfinite(exitance)):
+        raise SceneError("the stored result holds non-finite values: solve again")
+    cell_object = _cell_objects(data)
+    plan = _cell_lights_plan(data, exitance, cell_object)
+    holders = [objs[oi] for oi in sorted(set(cell_object.tolist()) & set(objs))] or list(objs.values())
+    placed = _placed_to_copy(scene, data, rid, holders)
+    if not plan and not placed:
+        raise SceneError(f"configuration {index} has no light of Relight's to make yours (its lights are the "
+                         "scene's own lamps and emitters, as it sets them, or none): nothing to convert")
+    # write: replace this result's own earlier lights (by identity), add the new ones, then remove
+    # Relight's lights of the row
+    coll, taken = _area_lights_collection(scene, rid), set(bpy.data.objects.keys())  # (taken: after the old ones went)
+    names = [_new_cell_light(coll, rid, taken, *cell) for cell in plan]
+    for p, base in placed:
+        obj = p.copy()
+        obj.data = p.data.copy()
+        _disown(obj, obj.data)
+        obj.name = obj.data.name = _numbered(base, taken)
+        coll.objects.link(obj)
+        _mark_area_light(obj, rid)
+        names.append(obj.name)
+    removed = _remove_shown_lights(scene, rid)
+    scene[CONVERTED_PROP] = index
+    return {"names": names, "collection": coll.name, "removed": removed,
+            "reduce": data.meta.get("command") == "reduce"}
+
+
+def _row_to_convert(scene, index) -> tuple:
+    """(stored result, index, its objects) of the row make_area_lights converts, checked: it exists,
+    it is the one shown and not converted already, its objects and writers are there."""
+    data = load_result(scene)
     n_points = len(data.n_lights)
     if not 0 <= int(index) < n_points:
         raise ValueError(f"configuration {index} does not exist (0..{n_points - 1})")
@@ -958,12 +994,24 @@ def make_area_lights(scene, index) -> dict:
                          "Relight's): nothing to convert; a click on a row shows it again with Relight's lights")
     objs = check_stored(scene, data)
     check_writers(data)
-    exitance = data.exitance[index].astype(np.float64)
-    if not np.all(np.isfinite(exitance)):
-        raise SceneError("the stored result holds non-finite values: solve again")
+    return data, index, objs
+
+
+def _placed_to_copy(scene, data, rid, holders) -> list:
+    """[(object, base name)] of the lamps result ``rid`` placed, as they are in the scene, in the
+    stored order (stable names), each named after the nearest of ``holders``."""
+    order = {rec["name"]: k for k, rec in enumerate(data.lamps)}
+    placed = sorted((o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)),
+                    key=lambda o: (order.get(o.get(PLACED_LAMP_PROP), len(order)), o.name))
+    return [(o, f"Relight {o.data.type.title()} {_nearest_object(holders, o.matrix_world.translation)}".strip())
+            for o in placed]
+
+
+def _cell_lights_plan(data, exitance, cell_object) -> list:
+    """make_area_lights' area light per light cell that emits at ``exitance`` (n_lights, 3): (base
+    name, shape, size, Power, colour, location, rotation); cells without area are left out."""
     cell_e = data.light_basis() @ exitance
     cells = np.flatnonzero(np.any(cell_e > 0, axis=1) & ~np.any(cell_e < 0, axis=1))
-    cell_object = _cell_objects(data)
     tc = data.cell_triangle_cell
     tri_all = data.cell_triangles.astype(np.float64)
     scale = float(np.ptp(tri_all.reshape(-1, 3), axis=0).max()) if len(tri_all) else 1.0
@@ -978,18 +1026,7 @@ def make_area_lights(scene, index) -> dict:
         center = (tri.mean(axis=1) * a[:, None]).sum(axis=0) / area
         n = data.cell_normal[c]
         power = cell_e[c] * area
-        # the cell's own frame: its longest edge and the side across it
-        pts = tri.reshape(-1, 3)
-        e1 = tri[0, 1] - tri[0, 0]
-        u = e1 - n * (e1 @ n)
-        u /= max(np.linalg.norm(u), 1e-30)
-        v = np.cross(n, u)
-        su, sv = np.ptp(pts @ u), np.ptp(pts @ v)
-        if len(tri) == 2 and abs(su * sv - area) <= 1e-3 * area:  # a rectangle
-            shape, size = "RECTANGLE", (float(sv), float(su))
-        else:
-            shape, size = "SQUARE", (float(np.sqrt(area)), float(np.sqrt(area)))
-        rot = np.column_stack([v, u, -n])  # a rotation; the light shines along its local -Z
+        shape, size, rot = _cell_frame(tri, n, area)
         values = np.concatenate([center, n, power, size, rot.ravel()])
         if not np.all(np.isfinite(values)):
             raise SceneError(f"light cell {int(c)} of the stored result has non-finite geometry: solve again")
@@ -997,18 +1034,28 @@ def make_area_lights(scene, index) -> dict:
         # Cycles: a light emits colour x Power in each channel (intern/cycles/blender/light.cpp)
         plan.append((f"Relight Area {where}".strip(), shape, size, float(power.max()),
                      power / max(power.max(), 1e-30), center + offset * n, rot))
-    # the lamps the solve placed, as they are in the scene, in the stored order (stable names)
-    order = {rec["name"]: k for k, rec in enumerate(data.lamps)}
-    placed = sorted((o for o in scene.objects if o.type == "LIGHT" and _owned(o, rid)),
-                    key=lambda o: (order.get(o.get(PLACED_LAMP_PROP), len(order)), o.name))
-    holders = [objs[oi] for oi in sorted(set(cell_object.tolist()) & set(objs))] or list(objs.values())
-    placed = [(o, f"Relight {o.data.type.title()} {_nearest_object(holders, o.matrix_world.translation)}".strip())
-              for o in placed]
-    if not plan and not placed:
-        raise SceneError(f"configuration {index} has no light of Relight's to make yours (its lights are the "
-                         "scene's own lamps and emitters, as it sets them, or none): nothing to convert")
-    # write: replace this result's own earlier lights (by identity), add the new ones, then remove
-    # Relight's lights of the row
+    return plan
+
+
+def _cell_frame(tri, n, area) -> tuple:
+    """(shape, size, rotation) of a cell's area light: the cell's own frame (its longest edge and the
+    side across it), a rectangle of its sides for a rectangular cell, else a square of its area."""
+    pts = tri.reshape(-1, 3)
+    e1 = tri[0, 1] - tri[0, 0]
+    u = e1 - n * (e1 @ n)
+    u /= max(np.linalg.norm(u), 1e-30)
+    v = np.cross(n, u)
+    su, sv = np.ptp(pts @ u), np.ptp(pts @ v)
+    if len(tri) == 2 and abs(su * sv - area) <= 1e-3 * area:  # a rectangle
+        shape, size = "RECTANGLE", (float(sv), float(su))
+    else:
+        shape, size = "SQUARE", (float(np.sqrt(area)), float(np.sqrt(area)))
+    return shape, size, np.column_stack([v, u, -n])  # a rotation; the light shines along its local -Z
+
+
+def _area_lights_collection(scene, rid):
+    """The collection of make_area_lights' lights of result ``rid``: its earlier one emptied of the
+    lights it made (what the user put there stays), else a new one."""
     old = [c for c in bpy.data.collections if rid is not None and c.get(AREA_LIGHTS_PROP) == rid]
     coll = None
     for c in old:  # Make Area Lights again replaces its own lights of this result, and only those
@@ -1018,34 +1065,27 @@ def make_area_lights(scene, index) -> dict:
         coll = bpy.data.collections.new(AREA_COLLECTION)
         coll[AREA_LIGHTS_PROP] = rid or ""
         scene.collection.children.link(coll)
-    taken, names = set(bpy.data.objects.keys()), []
-    for base, shape, size, energy, color, location, rot in plan:
-        name = _numbered(base, taken)
-        light = bpy.data.lights.new(name, "AREA")
-        make_plain(light)  # Cycles emits colour x Power
-        light.shape = shape
-        light.size = size[0]
-        if shape == "RECTANGLE":
-            light.size_y = size[1]
-        light.energy = energy  # Blender's area-light power is radiant flux (W)
-        light.color = tuple(float(x) for x in color)
-        obj = bpy.data.objects.new(name, light)
-        obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
-        coll.objects.link(obj)
-        _mark_area_light(obj, rid)
-        names.append(obj.name)
-    for p, base in placed:
-        obj = p.copy()
-        obj.data = p.data.copy()
-        _disown(obj, obj.data)
-        obj.name = obj.data.name = _numbered(base, taken)
-        coll.objects.link(obj)
-        _mark_area_light(obj, rid)
-        names.append(obj.name)
-    removed = _remove_shown_lights(scene, rid)
-    scene[CONVERTED_PROP] = index
-    return {"names": names, "collection": coll.name, "removed": removed,
-            "reduce": data.meta.get("command") == "reduce"}
+    return coll
+
+
+def _new_cell_light(coll, rid, taken, base, shape, size, energy, color, location, rot) -> str:
+    """A cell's area light (``_cell_lights_plan``'s entry) made in ``coll``; returns its name."""
+    from mathutils import Matrix, Vector
+
+    name = _numbered(base, taken)
+    light = bpy.data.lights.new(name, "AREA")
+    make_plain(light)  # Cycles emits colour x Power
+    light.shape = shape
+    light.size = size[0]
+    if shape == "RECTANGLE":
+        light.size_y = size[1]
+    light.energy = energy  # Blender's area-light power is radiant flux (W)
+    light.color = tuple(float(x) for x in color)
+    obj = bpy.data.objects.new(name, light)
+    obj.matrix_world = Matrix.Translation(Vector(location)) @ Matrix(rot.tolist()).to_4x4()
+    coll.objects.link(obj)
+    _mark_area_light(obj, rid)
+    return obj.name
 
 
 def _mark_area_light(ob, rid) -> None:
@@ -1216,6 +1256,25 @@ def write_radiosity(objects, radiosity, areas, skipped=None):
         write_radiosity_layer(ob, values, areas[ob.name])
 
 
+def _attribute_emission_material(attribute):
+    """A new material emitting the colour attribute ``attribute`` (Emission of strength 1)."""
+    mat = bpy.data.materials.new("relight_radiosity_view")
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore", DeprecationWarning)
+        if not mat.use_nodes:
+            mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    em = nt.nodes.new("ShaderNodeEmission")
+    at = nt.nodes.new("ShaderNodeAttribute")
+    at.attribute_name = attribute
+    nt.links.new(at.outputs["Color"], em.inputs["Color"])
+    em.inputs["Strength"].default_value = 1.0
+    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
 def render_radiosity(path, context=None, samples=16, resolution=None, attribute=RADIOSITY_ATTRIBUTE,
                      view_transform="Standard"):
     """Render the ``relight_radiosity`` colours with Cycles (CPU) to ``path``, in the format its
@@ -1235,20 +1294,7 @@ def render_radiosity(path, context=None, samples=16, resolution=None, attribute=
     if fmt is None:
         raise SceneError(f"{path}: the picture's format is read from its extension, one of "
                          f"{', '.join(RENDER_FORMATS)}")
-    mat = bpy.data.materials.new("relight_radiosity_view")
-    with _warnings.catch_warnings():
-        _warnings.simplefilter("ignore", DeprecationWarning)
-        if not mat.use_nodes:
-            mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    em = nt.nodes.new("ShaderNodeEmission")
-    at = nt.nodes.new("ShaderNodeAttribute")
-    at.attribute_name = attribute
-    nt.links.new(at.outputs["Color"], em.inputs["Color"])
-    em.inputs["Strength"].default_value = 1.0
-    nt.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    mat = _attribute_emission_material(attribute)
     world = bpy.data.worlds.new("relight_black")
     world.color = (0.0, 0.0, 0.0)
     r = scene.render

@@ -32,6 +32,10 @@ Best k Lights chooses from (engine/lights/spot.py, area.py, point.py; the cells 
   lights): "wide" only 0.864 (no better than the cells), with "cover" 0.350 (docs/benchmarks.md).
 - **Point lamps**: one per position (radius 0).
 
+Each lamp kind offers its own lamps (engine/lights/: LampKind.offer_at at a position, offer_for per
+cluster it sees; the spots' CONES and CONE_MARGIN in spot.py, the area lamps' AREA_BEAMS,
+AREA_CLUSTERS and MIN_PENUMBRA in area.py); a kind is offered when its ``option`` is on.
+
 The count is bounded by ``max_lamps`` (the positions are as many as it allows:
 ``positions_for``), so the cost estimate holds (engine.cost: ``lamp_bound``). Each lamp's source is
 its direct irradiance per W on the patches its light can reach (engine.lamps.lamp_irradiance,
@@ -40,45 +44,29 @@ lights no patch is left out. Deterministic for a seed.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .geometry import unit
-from .lamps import LAMP_SAMPLES, SPREAD_POINTS, lamp_irradiance
-from .lights import append_lamps
-from .lights.area import area_lamp
-from .lights.point import point_lamp
-from .lights.spot import spot_lamp
+from .lamps import lamp_irradiance
+from .lights import append_lamps, lamp_kinds
 from .patch_models.adaptive import normal_bucket
+from .units import TINY
 
-__all__ = ["KIND_OPTIONS", "DROP_FRACTION", "offered_kinds", "default_drop", "lamp_bound", "plan_lamps",
-           "offer_lamps", "target_clusters", "mount_positions", "Cluster"]
+__all__ = ["DROP_FRACTION", "offered_kinds", "default_drop", "lamp_bound", "plan_lamps",
+           "offer_lamps", "target_clusters", "mount_positions", "Cluster", "Mounting"]
 
-#: the job option that offers each kind of candidate lamp (engine/options.py)
-KIND_OPTIONS = {"spot": "spot_lamps", "area": "area_lamps", "point": "point_lamps"}
 #: the default drop in front of the candidate surfaces, x the scene's bounding-box diagonal
 DROP_FRACTION = 0.02
-#: target clusters aimed at by spots, and by area lamps
+#: target clusters aimed at (a kind aims at the first few it sees: engine/lights/spot.py, area.py)
 MAX_CLUSTERS = 6
-AREA_CLUSTERS = 2
 #: a cluster is split across its principal axis while its extent along it is above this many
 #: patch sizes, at most SPLIT_DEPTH times (halves, quarters)
 SPLIT_EXTENT = 2.0
 SPLIT_DEPTH = 2
 #: a position aims at a cluster when at least this share of the cluster's area sees it
 VISIBLE_SHARE = 0.5
-#: a spot's cone: its half-angle is the cluster's and this much more (relative)
-CONE_MARGIN = 0.02
-#: the spots per position and cluster: (cone, Blender's Blend); cone "cover": the smallest cone
-#: holding the whole cluster, "area": the cone of the cluster's solid angle (as large as it)
-CONES = (("cover", 0.3), ("area", 0.3))
-#: the area lamps per position and cluster: "wide" (Spread 180 degrees) and "cover" (the beam whose
-#: footprint just holds the cluster; where the lamp's square alone is wider, a projector whose
-#: penumbra at the cluster is MIN_PENUMBRA x the lamp's size)
-AREA_BEAMS = ("wide", "cover")
-MIN_PENUMBRA = 0.1
 #: receiver points per patch of a candidate lamp's irradiance (engine.lamps)
 LAMP_POINTS = 16
 #: k-means iterations of the mounting positions
@@ -96,10 +84,37 @@ class Cluster:
     power: float
 
 
+@dataclass
+class Mounting:
+    """A mounting position while the lamps are planned: the kinds offer their lamps there
+    (LampKind.offer_at, offer_for: ``add``; ``count``: the lamps planned so far)."""
+
+    patches: object
+    position: np.ndarray
+    normal: np.ndarray
+    size: float  # the light size (m): an area lamp's side
+    lamps: list
+    kinds: list
+
+    @property
+    def count(self) -> int:
+        return len(self.lamps)
+
+    def add(self, kind, lamp) -> None:
+        self.lamps.append(lamp)
+        self.kinds.append(kind.name)
+
+
 def offered_kinds(options) -> tuple:
-    """The kinds of candidate lamps the job offers ("spot", "area", "point"), from its options
-    (none when the chosen selection runs on single-scale cells: engine/options.py)."""
-    return tuple(k for k, name in KIND_OPTIONS.items() if options.param(name, False))
+    """The names of the kinds of candidate lamps the job offers (the lamp kinds whose ``option``
+    is on, in registration order: "spot", "area", "point"), from its options (none when the
+    chosen selection runs on single-scale cells: engine/options.py)."""
+    return tuple(k.name for k in lamp_kinds() if k.option and options.param(k.option, False))
+
+
+def _offered(options) -> list:
+    """The LampKinds the job offers (``offered_kinds``)."""
+    return [k for k in lamp_kinds() if k.option and options.param(k.option, False)]
 
 
 def default_drop(patches) -> float:
@@ -112,13 +127,9 @@ def default_drop(patches) -> float:
 
 
 def _per_position(kinds, n_clusters, work=False) -> int:
-    """The lamps a position holds for ``n_clusters`` clusters; ``work``: their receiver-point
-    work instead, in a spot's (engine.lamps: an area lamp takes LAMP_SAMPLES lamp samples a
-    point, and a beam narrower than 180 degrees SPREAD_POINTS times the points)."""
-    area = sum(LAMP_SAMPLES * (1 if beam == "wide" else SPREAD_POINTS) for beam in AREA_BEAMS) if work \
-        else len(AREA_BEAMS)
-    return (("point" in kinds) + ("spot" in kinds) * len(CONES) * min(n_clusters, MAX_CLUSTERS)
-            + ("area" in kinds) * area * min(n_clusters, AREA_CLUSTERS))
+    """The lamps a position holds for ``n_clusters`` clusters (LampKind.per_position of the
+    ``kinds`` offered); ``work``: their receiver-point work instead, in a spot's."""
+    return sum(k.per_position(min(n_clusters, MAX_CLUSTERS), work) for k in kinds)
 
 
 def positions_for(max_lamps, kinds, n_clusters, n_candidates) -> int:
@@ -134,7 +145,7 @@ def lamp_bound(patches, candidates, options, work=False) -> int:
     most that its positions x lamps per position can be for any number of target clusters (more
     clusters, more lamps per position but fewer positions), and at most ``max_lamps``. ``work``:
     the bound of their receiver-point work instead, in spots (``_per_position``)."""
-    kinds = offered_kinds(options)
+    kinds = _offered(options)
     if not kinds:
         return 0
     n_cand = int(np.count_nonzero(candidates))
@@ -164,7 +175,7 @@ def _splits(patches, idx, size, depth):
         return out
     order = np.argsort(t, kind="stable")
     ts = t[order]
-    cuts = np.flatnonzero(np.diff(ts) > 1e-6 * max(np.ptp(ts), 1e-300)) + 1  # between distinct positions
+    cuts = np.flatnonzero(np.diff(ts) > 1e-6 * max(np.ptp(ts), TINY)) + 1  # between distinct positions
     if not len(cuts):
         return out
     cum = np.concatenate([[0.0], np.cumsum(w[order])])
@@ -243,20 +254,12 @@ def _visible_share(sampler, position, cluster, patches):
     c = patches.center[cluster.patches]
     d = position[None, :] - c
     t = np.linalg.norm(d, axis=1)
-    d = d / np.maximum(t, 1e-300)[:, None]
+    d = d / np.maximum(t, TINY)[:, None]
     o = (c + patches.normal[cluster.patches] * sampler.offset).astype(np.float32)
     ok = sampler.visible(o, d.astype(np.float32), np.maximum(t - 2 * sampler.offset, 0).astype(np.float32))
     ok &= (patches.normal[cluster.patches] * d).sum(axis=1) > 0
     w = patches.area[cluster.patches]
     return float(w[ok].sum() / w.sum())
-
-
-def _solid_angle(patches, cluster, position) -> float:
-    """The solid angle (sr) the cluster's patches subtend at ``position`` (sum of A cos / d^2)."""
-    v = position[None, :] - patches.center[cluster.patches]
-    d2 = np.maximum((v * v).sum(axis=1), 1e-300)
-    cos = np.maximum((patches.normal[cluster.patches] * v).sum(axis=1), 0.0) / np.sqrt(d2)
-    return float(min((patches.area[cluster.patches] * cos / d2).sum(), 4 * math.pi))
 
 
 def enclosing_cone(directions, iterations=64) -> tuple:
@@ -271,21 +274,13 @@ def enclosing_cone(directions, iterations=64) -> tuple:
     return a, float(np.arccos(np.clip((directions @ a).min(), -1.0, 1.0)))
 
 
-def _cover_tan(v, t, size) -> float:
-    """tan(spread / 2) of the "cover" area lamp (a square of side ``size``) whose footprint just
-    holds the points at ``v`` (n, 3) from its centre, of depths ``t`` (n,) along its axis: a point
-    whose projection on the lamp's plane is rho from the centre is lit when the square (holding
-    the disk of radius size / 2) comes within t tan(spread / 2) of the projection, so the largest
-    (rho - size / 2) / t; at least MIN_PENUMBRA size / (2 t) (a projector)."""
-    rho = np.sqrt(np.maximum(np.einsum("ij,ij->i", v, v) - t * t, 0.0))
-    return float(max(np.max((rho - 0.5 * size) / t), 0.5 * MIN_PENUMBRA * size / float(t.max())))
-
-
 def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> tuple:
     """The candidate lamps (no irradiance yet): ([engine.lamps.Lamp], [kind name]) as the module
-    docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``).
-    ``notes``: a list that gets a warning when no lamp can hang (every drop blocked)."""
-    kinds = offered_kinds(options)
+    docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``): at each
+    mounting position, every offered kind's ``offer_at``, then for each cluster the position sees
+    (in front of its mounting surface) every offered kind's ``offer_for``. ``notes``: a list that
+    gets a warning when no lamp can hang (every drop blocked)."""
+    kinds = _offered(options)
     if not kinds:
         return [], []
     clusters = target_clusters(patches)
@@ -298,35 +293,17 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
                      "(something closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
     size = float(patches.light_size or patches.max_patch_size)
     lamps, names = [], []
-
-    def add(kind, lamp):
-        lamps.append(lamp)
-        names.append(kind)
-
     for p, n in zip(pos, nrm):
+        mount = Mounting(patches, p, n, size, lamps, names)
         seen = [c for c in clusters if _visible_share(sampler, p, c, patches) >= VISIBLE_SHARE]
-        if "point" in kinds:
-            add("point", point_lamp(f"Relight Point {len(lamps) + 1}", p))
+        for kind in kinds:
+            kind.offer_at(mount)
         for rank, c in enumerate(seen):
-            d = unit(c.points - p[None, :])
-            axis, half = enclosing_cone(d)
+            axis, half = enclosing_cone(unit(c.points - p[None, :]))
             if axis @ n <= 0:  # the cluster is behind the mounting surface
                 continue
-            for cone, blend in CONES if "spot" in kinds else ():
-                if cone == "cover":
-                    spot = 2.0 * half * (1.0 + CONE_MARGIN)
-                else:  # the cone of the cluster's solid angle: 2 pi (1 - cos(half)) = omega
-                    spot = 2.0 * math.acos(max(-1.0, 1.0 - _solid_angle(patches, c, p) / (2 * math.pi)))
-                if 0 < spot <= math.pi:
-                    add("spot", spot_lamp(f"Relight Spot {len(lamps) + 1}", p, axis, spot, blend))
-            v = c.points - p[None, :]
-            t = v @ axis  # the vertices' depths along the axis
-            for beam in AREA_BEAMS if "area" in kinds and rank < AREA_CLUSTERS else ():
-                if beam == "wide":
-                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, unit((c.center - p)[None, :])[0], size))
-                elif np.all(t > 0):  # "cover" (none for a cluster reaching behind the lamp's plane)
-                    add("area", area_lamp(f"Relight Area {len(lamps) + 1}", p, axis, size,
-                                          spread=2.0 * math.atan(_cover_tan(v, t, size))))
+            for kind in kinds:
+                kind.offer_for(mount, rank, c, axis, half)
     return lamps[:options.max_lamps], names[:options.max_lamps]
 
 
@@ -338,30 +315,10 @@ def patch_radius(patches) -> np.ndarray:
     return radius
 
 
-def _reach(patches, lamps, radius):
-    """Per lamp, the patches its light can reach (a spot: those its cone meets; an area lamp: those
-    in front of its plane, and of a beam those whose bounding sphere's projection on the lamp's plane
-    comes within (t + radius) tan(spread / 2) of the lamp's rectangle, t the depth of its centre:
-    engine.lamps; a point lamp: all)."""
-    out = []
-    for lamp in lamps:
-        v = patches.center - lamp.position[None, :]
-        dist = np.linalg.norm(v, axis=1)
-        if lamp.kind == "SPOT":
-            cos_a = (v @ lamp.direction) / np.maximum(dist, 1e-300)
-            ang = np.arccos(np.clip(cos_a, -1.0, 1.0)) - np.arcsin(np.clip(radius / np.maximum(dist, 1e-300), 0, 1))
-            out.append(np.flatnonzero(ang < 0.5 * lamp.spot_size))
-        elif lamp.kind == "AREA":
-            t = v @ lamp.direction
-            ok = t > -(radius + 0.5 * math.hypot(lamp.size_u, lamp.size_v))
-            if lamp.spread < math.pi:
-                gap = np.hypot(np.maximum(np.abs(v @ lamp.axis_u) - 0.5 * lamp.size_u, 0.0),
-                               np.maximum(np.abs(v @ lamp.axis_v) - 0.5 * lamp.size_v, 0.0))
-                ok &= gap <= (t + radius) * math.tan(0.5 * lamp.spread) + radius
-            out.append(np.flatnonzero(ok))
-        else:
-            out.append(np.arange(patches.n_patches))
-    return out
+def lamp_reach(patches, lamps, radius) -> list:
+    """Per lamp, the patches its light can reach (its kind's ``reach``; ``radius``: the patches'
+    bounding radii, ``patch_radius``)."""
+    return [lamp.kind.reach(lamp, patches, radius) for lamp in lamps]
 
 
 def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
@@ -374,7 +331,7 @@ def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=
         return lights, 0
     radius = patch_radius(patches)
     H = np.zeros((patches.n_patches, len(lamps)))
-    reach = _reach(patches, lamps, radius)
+    reach = lamp_reach(patches, lamps, radius)
     step = 16
     for i in range(0, len(lamps), step):
         H[:, i:i + step] = lamp_irradiance(patches, lamps[i:i + step], sampler=sampler,
@@ -383,6 +340,6 @@ def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=
         if progress is not None:
             progress(min(i + step, len(lamps)) / len(lamps))
     lit = np.flatnonzero(H.max(axis=0) > 0)
-    area = np.array([lamps[i].area if lamps[i].kind == "AREA" else 0.0 for i in lit])
+    area = np.array([lamps[i].kind.area(lamps[i]) for i in lit])
     return append_lamps(lights, np.flatnonzero(candidates), patches.n_patches, [lamps[i] for i in lit],
                         [kinds[i] for i in lit], H[:, lit], area), len(lamps)

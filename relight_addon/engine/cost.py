@@ -136,6 +136,52 @@ def _count(name, value):
     return v
 
 
+def _solve_parts(parts, kind, P, m, L, k, g, nnz, passes, flops) -> float:
+    """estimate_cost's parts of the radiosity system's factorisation (or iterative sweeps) and of the
+    inverse problem (the paper's, or the transfer of the ``k`` targets' rows); returns the time of
+    one right-hand side's solve (flops)."""
+    P2 = float(P) * P
+    if P <= DIRECT_SOLVE_LIMIT:
+        parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)
+        t_rhs = 2.0 * P2
+    else:  # iterative sweeps: F in float64 (and its transpose) plus the iterates
+        parts["lu"] = (16.0 * nnz, 0.0)
+        t_rhs = ITERATIVE_SWEEPS * 2.0 * nnz
+    if kind == "paper":
+        cols = P - m + L
+        parts["inverse"] = (8.0 * P * cols + 8.0 * P2, g * (P2 * cols + P2 * P / 3.0) / flops)
+    else:
+        parts["inverse"] = (3 * 8.0 * m * L + 3 * 8.0 * P * k + 8.0 * m * m,
+                            (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
+    return t_rhs
+
+
+def _kernel_parts(parts, P, m, C, tris, passes, max_lights, patches_per_light) -> None:
+    """estimate_cost's parts of the kernel transfer: its pairs, and the curve's lights' direct light
+    on every patch (pipeline.jobs.direct_stage)."""
+    pairs = float(m) * C
+    parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
+    n_direct = min(C, DIRECT_LIGHTS, max(int(max_lights), 1) + 1)
+    pairs = float(P) * min(C, n_direct * min(max(float(patches_per_light), 1.0), DIRECT_SPREAD_PATCHES - 1))
+    parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR
+                             + n_direct * (DIRECT_SECONDS_PER_LIGHT + DIRECT_SECONDS_PER_TRIANGLE * tris))
+
+
+def _lamp_parts(parts, P, m, n_lamps, lamp_work, refinements, tris, passes) -> None:
+    """estimate_cost's parts of the candidate lamps (their direct irradiance: receiver points on
+    every patch, a shadow ray each at most) and of their refinement (each evaluation a lamp's
+    shadow rays on every patch and its light over the triangles)."""
+    if n_lamps:
+        points = float(lamp_work) * P * LAMP_POINTS
+        parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
+                          (points * LAMP_SECONDS_PER_POINT + LAMP_SECONDS_PER_TRIANGLE * tris) * (passes + 1))
+    if refinements:
+        evaluations = min(float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS, REFINE_BUDGET,
+                          REFINE_EVALUATIONS_EXPECTED)
+        parts["lamp_refinement"] = (3 * 8.0 * P * m, evaluations * (REFINE_SECONDS_PER_PATCH * P
+                                                                    + REFINE_SECONDS_PER_TRIANGLE * tris))
+
+
 def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targets: int,
                   solver: str = "reduced", n_lights: int | None = None, n_triangles: int = 0,
                   refine_passes: int = 0, channel_groups: int = 3, kernel: bool = False,
@@ -176,35 +222,9 @@ def estimate_cost(n_patches: int, rays_per_patch: int, n_candidates: int, n_targ
     rays = float(P) * N * (1.0 + passes / REFINE_RAY_FRACTION)
     parts["form_factors"] = (ff_bytes, rays / rays_per_second)
     if kernel:
-        pairs = float(m) * C
-        parts["kernel"] = (8.0 * 4 * pairs, pairs * KERNEL_SECONDS_PER_PAIR * (passes + 1))
-    if kernel:  # the curve's lights' direct light on every patch (pipeline.jobs.direct_stage)
-        n_direct = min(C, DIRECT_LIGHTS, max(int(max_lights), 1) + 1)
-        pairs = float(P) * min(C, n_direct * min(max(float(patches_per_light), 1.0), DIRECT_SPREAD_PATCHES - 1))
-        parts["direct_light"] = (8.0 * 2 * pairs, pairs * KERNEL_SECONDS_PER_PAIR
-                                 + n_direct * (DIRECT_SECONDS_PER_LIGHT + DIRECT_SECONDS_PER_TRIANGLE * tris))
-    if n_lamps:  # their direct irradiance: receiver points on every patch, a shadow ray each (at most)
-        points = float(lamp_work) * P * LAMP_POINTS
-        parts["lamps"] = (8.0 * 3 * P * n_lamps + RAY_BYTES * P * LAMP_POINTS * 16,
-                          (points * LAMP_SECONDS_PER_POINT + LAMP_SECONDS_PER_TRIANGLE * tris) * (passes + 1))
-    if refinements:  # each evaluation a lamp's shadow rays on every patch and its light over the triangles
-        evaluations = min(float(refinements) * REFINE_ROUNDS * REFINE_EVALUATIONS, REFINE_BUDGET,
-                          REFINE_EVALUATIONS_EXPECTED)
-        parts["lamp_refinement"] = (3 * 8.0 * P * m, evaluations * (REFINE_SECONDS_PER_PATCH * P
-                                                                    + REFINE_SECONDS_PER_TRIANGLE * tris))
-    k = min(m, C)
-    if P <= DIRECT_SOLVE_LIMIT:
-        parts["lu"] = (g * 8.0 * P2 + 8.0 * P2, g * (2.0 / 3.0) * P2 * P * (passes + 1) / flops)
-        t_rhs = 2.0 * P2
-    else:  # iterative sweeps: F in float64 (and its transpose) plus the iterates
-        parts["lu"] = (16.0 * nnz, 0.0)
-        t_rhs = ITERATIVE_SWEEPS * 2.0 * nnz
-    if kind == "paper":
-        cols = P - m + L
-        parts["inverse"] = (8.0 * P * cols + 8.0 * P2, g * (P2 * cols + P2 * P / 3.0) / flops)
-    else:
-        parts["inverse"] = (3 * 8.0 * m * L + 3 * 8.0 * P * k + 8.0 * m * m,
-                            (g * t_rhs * k * (passes + 1) + 3 * (float(m) * m * L + float(m) ** 3 / 3.0)) / flops)
+        _kernel_parts(parts, P, m, C, tris, passes, max_lights, patches_per_light)
+    _lamp_parts(parts, P, m, n_lamps, lamp_work, refinements, tris, passes)
+    t_rhs = _solve_parts(parts, kind, P, m, L, min(m, C), g, nnz, passes, flops)
     if colour_relaxation:
         columns = min(8.0 * 3 * m * CONE_POINTS * L, RELAXATION_BYTES)
         parts["light_colour"] = (RELAXATION_COPIES * columns, RELAXATION_SECONDS_PER_ENTRY * columns / 8.0)

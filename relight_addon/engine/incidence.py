@@ -135,12 +135,7 @@ def first_bounce_matrices(F, center, normal, material, tables, sources):
 def lamp_incidence(lamp, points, normals) -> np.ndarray:
     """(n,) the cosine at which a lamp's light arrives at ``points`` (n, 3) with unit ``normals``:
     from its position (a point, a spot, an area lamp: its centre), a sun from its direction."""
-    if lamp.kind == "SUN":
-        w = np.broadcast_to(-np.asarray(lamp.direction, dtype=np.float64), points.shape)
-    else:
-        w = np.asarray(lamp.position, dtype=np.float64)[None, :] - points
-        w = w / np.maximum(np.linalg.norm(w, axis=1), TINY)[:, None]
-    return np.clip(np.einsum("ij,ij->i", w, normals), 0.0, 1.0)
+    return np.clip(np.einsum("ij,ij->i", lamp.kind.towards(lamp, points), normals), 0.0, 1.0)
 
 
 def lamp_albedo_excess(lamp, center, normal, material, tables, patches=None) -> np.ndarray:

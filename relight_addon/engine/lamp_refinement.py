@@ -36,11 +36,11 @@ import scipy.optimize as sopt
 
 from .light_colour import fit_columns
 from .geometry import unit
-from .candidate_lamps import LAMP_POINTS, _reach as lamp_reach, patch_radius
+from .candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
 
-__all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp", "PARAMETERS"]
+__all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp"]
 
 #: receiver points per patch of a lamp's irradiance while searching (the lamp kept takes
 #: candidate_lamps.LAMP_POINTS)
@@ -54,10 +54,6 @@ BUDGET = 8 * MAX_EVALUATIONS
 MIN_GAIN = 1e-4
 #: a size stays within this range of factors of its first size
 SIZE_RANGE = (0.25, 4.0)
-#: the parameters refined per lamp kind (engine.lamps.Lamp.kind)
-PARAMETERS = {"SPOT": ("aim_u", "aim_v", "log_size", "blend", "slide_u", "slide_v"),
-              "AREA": ("aim_u", "aim_v", "log_size_u", "log_size_v", "slide_u", "slide_v"),
-              "POINT": ("slide_u", "slide_v")}
 
 
 class Transport:
@@ -135,20 +131,23 @@ class RefinedLamp:
 
 
 class _LampParameters:
-    """A lamp's refined parameters as a vector x scaled to unit steps (x = 0: the lamp as it is);
-    it slides along the surface it hangs from (``mount``, Mount.normal_at) if any."""
+    """A lamp's refined parameters (its kind's ``parameters``: slide_u / slide_v along the surface it
+    hangs from, ``mount``'s Mount.normal_at, if any; aim_u / aim_v about its axis; the kind's own,
+    which its ``refined`` applies) as a vector x scaled to unit steps (x = 0: the lamp as it is)."""
+
+    size_range = SIZE_RANGE
 
     def __init__(self, lamp, mount, step_length):
         normal = mount.normal_at(lamp.position)
         self.lamp, self.mount, self.normal = lamp, mount, normal
-        self.names = PARAMETERS[lamp.kind] if normal is not None else \
-            tuple(p for p in PARAMETERS[lamp.kind] if not p.startswith("slide"))
+        self.names = lamp.kind.parameters if normal is not None else \
+            tuple(p for p in lamp.kind.parameters if not p.startswith("slide"))
         self.mount_u = self.mount_v = None
         if normal is not None:  # tangents u and n x u (frame's second axis is -n x u)
             _, self.mount_u, v = frame(normal)
             self.mount_v = -v
         self.step_length = float(step_length)
-        half = 0.5 * lamp.spot_size if lamp.kind == "SPOT" else 0.25
+        half = lamp.kind.aim_half_angle(lamp)
         self.step_angle = 0.25 * half  # radians of aim per unit
         self.step_log = 0.15
         self.step_blend = 0.2
@@ -168,19 +167,8 @@ class _LampParameters:
             if self.normal is not None and direction @ self.normal <= 0:
                 return None  # aimed behind its mounting surface
         d, u, v = frame(direction)
-        out = replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[])
-        if lamp.kind == "SPOT":
-            size = lamp.spot_size * math.exp(self.step_log * values["log_size"])
-            blend = lamp.spot_blend + self.step_blend * values["blend"]
-            if not (0.0 < size <= math.pi and 0.0 <= blend <= 1.0):
-                return None
-            out = replace(out, spot_size=size, spot_blend=blend)
-        if lamp.kind == "AREA":
-            fu, fv = (math.exp(self.step_log * values[k]) for k in ("log_size_u", "log_size_v"))
-            if not all(SIZE_RANGE[0] <= f <= SIZE_RANGE[1] for f in (fu, fv)):
-                return None
-            out = replace(out, size_u=lamp.size_u * fu, size_v=lamp.size_v * fv)
-        return out
+        return lamp.kind.refined(replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[]),
+                                 values, self)
 
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
@@ -191,30 +179,12 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     refinement lowered the error, the columns with theirs replaced, the relative error before and
     after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET). ``exitance``
     (k, 3): the configuration's strengths, whose colours a constrained light colour keeps."""
-    patches = mount.patches
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
     budget = BUDGET if budget is None else int(budget)
-    b = problem.b_target
-    norm = problem.target_norm if problem.target_norm > 0 else 1.0
+    search = _Search(problem, transport, mount, seed, exitance)
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
-    radius = patch_radius(patches)
-
-    def error(cs):  # the best strengths of the problem's light colour (NNLS per channel when free)
-        return fit_columns(problem, cs, exitance, refit=False)[1] / norm
-
-    def irradiance(lamp, points=SEARCH_POINTS):
-        return lamp_irradiance(patches, [lamp], sampler=mount.sampler, seed=seed, points_per_patch=points,
-                               only=lamp_reach(patches, [lamp], radius))[:, 0, 0]
-
-    def with_column(cs, j, h, lamp):
-        col = transport.column(h, lamp)
-        out = [c.copy() for c in cs]
-        for c in range(3):
-            out[c][:, j] = col[:, c]
-        return out
-
-    start = error(cols)
+    start = search.error(cols)
     best, evaluations, refined = start, 0, {}
     current = dict(lamps)
     for _ in range(rounds):
@@ -223,31 +193,63 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             if (cancel is not None and cancel()) or evaluations >= budget:
                 break
             params = _LampParameters(current[j], mount, step_length)
-            seen = {}
-
-            def f(x):
-                key = tuple(np.round(x, 9))
-                if key not in seen:
-                    cand = params.lamp_at(x)
-                    h = None if cand is None else irradiance(cand)
-                    val = error(with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
-                    seen[key] = (val, cand)
-                return seen[key][0]
-
-            x0 = np.zeros(len(params.names))
-            base = f(x0)  # this lamp as it is, with the search's receiver points
-            res = sopt.minimize(f, x0, method="Nelder-Mead",
-                                options={"maxfev": min(max_evaluations, budget - evaluations), "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
-                                         "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
-            evaluations += len(seen)
-            val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
-            if cand is not None and val < base - 1e-12:  # kept if it lowers the error at the full points
-                h = irradiance(cand, LAMP_POINTS)
-                kept = with_column(cols, j, h, cand)
-                err = error(kept)
+            lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
+            evaluations += used
+            if cand is not None and lowered:  # kept if it lowers the error at the full points
+                h = search.irradiance(cand, LAMP_POINTS)
+                kept = search.with_column(cols, j, h, cand)
+                err = search.error(kept)
                 if err < best:
                     cols, best, current[j] = kept, err, cand
                     refined[j] = RefinedLamp(j, cand, h)
         if round_start - best < MIN_GAIN * max(round_start, 1e-12):
             break
     return list(refined.values()), cols, start, best, evaluations
+
+
+class _Search:
+    """What refine_configuration evaluates: a configuration's relative error (the best strengths of
+    the problem's light colour: NNLS per channel when free), a lamp's irradiance on the patches it
+    reaches (one seed: the same receiver points at every evaluation), and its column of T."""
+
+    def __init__(self, problem, transport, mount, seed, exitance):
+        self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
+        self.norm = problem.target_norm if problem.target_norm > 0 else 1.0
+        self.radius = patch_radius(mount.patches)
+
+    def error(self, cs):
+        return fit_columns(self.problem, cs, self.exitance, refit=False)[1] / self.norm
+
+    def irradiance(self, lamp, points=SEARCH_POINTS):
+        patches = self.mount.patches
+        return lamp_irradiance(patches, [lamp], sampler=self.mount.sampler, seed=self.seed, points_per_patch=points,
+                               only=lamp_reach(patches, [lamp], self.radius))[:, 0, 0]
+
+    def with_column(self, cs, j, h, lamp):
+        col = self.transport.column(h, lamp)
+        out = [c.copy() for c in cs]
+        for c in range(3):
+            out[c][:, j] = col[:, c]
+        return out
+
+    def minimize(self, params, cols, j, max_evaluations) -> tuple:
+        """Nelder-Mead on lamp ``j``'s parameters (``params``, _LampParameters), at most
+        ``max_evaluations``: (whether the lamp it found lowers the error, that lamp or None, evaluations)."""
+        seen = {}
+
+        def f(x):
+            key = tuple(np.round(x, 9))
+            if key not in seen:
+                cand = params.lamp_at(x)
+                h = None if cand is None else self.irradiance(cand)
+                val = self.error(self.with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
+                seen[key] = (val, cand)
+            return seen[key][0]
+
+        x0 = np.zeros(len(params.names))
+        base = f(x0)  # this lamp as it is, with the search's receiver points
+        res = sopt.minimize(f, x0, method="Nelder-Mead",
+                            options={"maxfev": max_evaluations, "initial_simplex": np.vstack([x0, np.eye(len(x0))]),
+                                     "xatol": 1e-2, "fatol": 1e-5 * max(base, 1e-12)})
+        val, cand = seen.get(tuple(np.round(res.x, 9)), (math.inf, None))
+        return val < base - 1e-12, cand, len(seen)

@@ -39,7 +39,7 @@ def scene_light(faces: FaceSet, patches: PatchSet, F, seed=0) -> tuple:
     column). Shadow and sky rays are cast on the form factors' sampler (one Embree scene)."""
     sampler = getattr(F, "sampler", None)
     cols = [lamp_irradiance(patches, faces.lamps, sampler=sampler, seed=seed)]
-    names = [(lamp.name, lamp.kind.lower(), lamp.power) for lamp in faces.lamps]
+    names = [(lamp.name, lamp.kind.blender_type.lower(), lamp.power) for lamp in faces.lamps]
     if faces.world_radiance is not None:
         M = getattr(F, "matrix", F)
         rows = np.asarray(M.sum(axis=1), dtype=np.float64).reshape(-1)

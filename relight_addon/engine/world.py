@@ -25,6 +25,7 @@ import numpy as np
 from .rays import cosine_directions
 from .kernel_transfer import _sample_patches, kernel_geometry
 from .lamps import CHUNK_PATCHES, Lamp, _tangents, lamp_irradiance
+from .lights.sun import SUN
 from .sampling import SceneSampler
 from .units import TINY, exitance_from_radiance, luminance_weighted, radiance_from_exitance
 
@@ -214,7 +215,7 @@ class EnvironmentMap:
                 num = left.reshape(h, k, w, k, 3).sum(axis=(1, 3))
                 rest[rs, cs] = num / om_f.reshape(h, k, w, k).sum(axis=(1, 3))[..., None]
             t1, t2 = (t[0] for t in _tangents(d[None, :]))
-            suns.append(Lamp(name=f"{name} (sun in the texture)", kind="SUN", position=np.zeros(3), direction=-d,
+            suns.append(Lamp(name=f"{name} (sun in the texture)", kind=SUN, position=np.zeros(3), direction=-d,
                              axis_u=t1, axis_v=t2, power=power, angle=angle))
         return suns, EnvironmentMap(rest)
 

@@ -9,7 +9,8 @@ The kept lamps are written as the scene's lamps (the CLI's --out copy, the add-o
 never removed as Relight's.
 
 ``kept_lamps(report)`` reads the final configuration of a report (the CLI's JSON) into lamp
-records that blender/results.new_lamp makes; surface lights (emissive cells and polygons) are not
+records (a lamp kind's record: engine/lights/kind.py, ``record_geometry``) that
+blender/results.new_lamp makes; surface lights (emissive cells and polygons) are not
 kept, and named.
 """
 from __future__ import annotations
@@ -19,11 +20,13 @@ import os
 
 import numpy as np
 
+from ..engine.lights import Capability, LampKind, lamp_kind_of_type
+from ..engine.registry import LIGHT_KINDS
+
 __all__ = ["KEPT_SUFFIX", "kept_lamps", "read_kept", "foreign_notes"]
 
 #: the kept lamps' names: the answer's name and this
 KEPT_SUFFIX = " (kept)"
-_TYPES = {"point": "POINT", "spot": "SPOT", "area": "AREA"}
 
 
 def _frame(direction, axis_u=None):
@@ -41,9 +44,19 @@ def _frame(direction, axis_u=None):
     return u, v
 
 
+def _lamp_kind(light):
+    """The lamp kind a report's ``light`` is kept as: its own kind (``kind``: a lamp kind a solve
+    can place), else that of its Blender ``type`` (a reduction's scene lamp); None for a surface light."""
+    named = light.get("kind")
+    kind = LIGHT_KINDS[named].impl if isinstance(named, str) and named in LIGHT_KINDS else None
+    if isinstance(kind, LampKind) and kind.flags & Capability.PLACEABLE:
+        return kind
+    return lamp_kind_of_type(str(light.get("type", "")).upper(), placeable=True)
+
+
 def kept_lamps(report: dict, source: str = "the report") -> tuple:
     """(records, notes): the lamps of ``report``'s final configuration as results.new_lamp makes
-    them (name, type, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
+    them (name, type, kind, position, direction, axis_u, axis_v, radius, spot_size, spot_blend, size_u,
     size_v, ellipse, spread, energy, color, temperature_K), and what is not kept. Raises ValueError on a report
     that is not a solve's."""
     if not isinstance(report, dict) or report.get("command") not in ("solve", "reduce") \
@@ -51,21 +64,16 @@ def kept_lamps(report: dict, source: str = "the report") -> tuple:
         raise ValueError(f"{source} is not a Relight solve report (no final configuration)")
     records, surface, notes = [], [], []
     for i, li in enumerate(report["final"]["lights"]):
-        kind = _TYPES.get(str(li.get("type", "")).lower())
+        kind = _lamp_kind(li)
         if kind is None or li.get("location") is None:
             surface.append(f"{li.get('object')} ({li.get('kind')}, polygons {li.get('polygons', [])[:4]})")
             continue
         try:
             u, v = _frame(li["direction"] if li.get("direction") is not None else (0.0, 0.0, -1.0), li.get("axis_u"))
-            size = li.get("size") or [0.0, 0.0]
-            rec = {"name": f"{li['object']}{KEPT_SUFFIX}", "type": kind,
+            rec = {"name": f"{li['object']}{KEPT_SUFFIX}", "type": kind.blender_type, "kind": kind.name,
                    "position": [float(x) for x in li["location"]],
                    "direction": [float(x) for x in (li.get("direction") or (0.0, 0.0, -1.0))],
-                   "axis_u": u.tolist(), "axis_v": v.tolist(), "radius": float(li.get("radius", 0.0)),
-                   "spot_size": float(li.get("spot_size", np.pi)), "spot_blend": float(li.get("spot_blend", 0.0)),
-                   "size_u": float(size[0]), "size_v": float(size[1]),
-                   "ellipse": str(li.get("shape", "")).upper() in ("DISK", "ELLIPSE"),
-                   "spread": float(li.get("spread", np.pi)),
+                   "axis_u": u.tolist(), "axis_v": v.tolist(), **kind.record_geometry(li),
                    "energy": float(li["energy"]), "color": [float(x) for x in li["color"]],
                    "power": float(li["power"]),
                    # a blackbody light's Temperature (its energy and color are with it)
@@ -75,7 +83,7 @@ def kept_lamps(report: dict, source: str = "the report") -> tuple:
         if not all(np.all(np.isfinite(rec[k])) for k in ("position", "direction", "energy", "color")) \
                 or rec["energy"] < 0:
             raise ValueError(f"{source}: light {i} ({li.get('object')}) has a non-finite or negative value")
-        if kind == "AREA" and li.get("axis_u") is None and abs(rec["size_u"] - rec["size_v"]) > 1e-9:
+        if kind.flags & Capability.EMITTING_AREA and li.get("axis_u") is None and abs(rec["size_u"] - rec["size_v"]) > 1e-9:
             notes.append(f"{rec['name']}: the report does not give the rectangle's orientation; kept turned "
                          "about its axis as Relight chose")
         records.append(rec)

@@ -66,7 +66,7 @@ def lamp_records(model, strength) -> list:
             energy, color = blender_values(s, lamp.energy, lamp.color, lamp.gain) if kept else (0.0, lamp.color)
         except ValueError as e:
             energy, color, problem = None, None, str(e)
-        out.append({"name": lamp.name, "type": lamp.kind.lower(), "kind": model.lights.kind_names[j], "kept": kept,
+        out.append({"name": lamp.name, "type": lamp.kind.blender_type.lower(), "kind": model.lights.kind_names[j], "kept": kept,
                     "unit": model.lights.kind_of(j).strength_unit,
                     "power_before": lamp.power, "power_after": s if kept else np.zeros(3), "gain": lamp.gain,
                     "energy_before": float(lamp.energy), "energy_after": None if energy is None else float(energy),
@@ -83,28 +83,20 @@ def placed_record(lamp, kind, strength, temperature=None) -> dict:
     spot_size and spot_blend (Blender's, rad) and cone_angle_deg (its full angle), an area lamp's
     shape, size [u, v] (m), spread (Blender's Spread, rad: the full angle) and spread_deg.
     ``temperature`` (K, a blackbody light's): the Light's Temperature (Use Temperature on: Cycles
-    multiplies colour x Power by its blackbody colour), and energy and color with it."""
-    from ..engine.lights.area import blender_shape
+    multiplies colour x Power by its blackbody colour), and energy and color with it. The kind's own
+    fields are its ``report_fields`` (engine/lights/)."""
     from ..engine.lights.lamp import blender_values
 
     s = np.asarray(strength, dtype=np.float64).reshape(3)
     gain = lamp.gain if temperature is None else blackbody_rec709(temperature)
     energy, color = blender_values(s, lamp.energy, lamp.color, gain)
-    rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.lower(),
+    rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.blender_type.lower(),
            "location": lamp.position, "direction": lamp.direction, "axis_u": lamp.axis_u, "center": lamp.position,
-           "normal": np.zeros(3) if lamp.kind == "POINT" else lamp.direction,
-           "area": float(lamp.area) if lamp.kind == "AREA" else 0.0, "exitance": None, "strength": s,
+           "normal": lamp.kind.normal(lamp), "area": lamp.kind.area(lamp), "exitance": None, "strength": s,
            "power": float(s.sum()), "energy": float(energy), "color": color}
     if temperature is not None:
         rec["temperature_K"] = float(temperature)
-    if lamp.kind in ("POINT", "SPOT"):
-        rec["radius"] = float(lamp.radius)
-    if lamp.kind == "SPOT":
-        rec.update(spot_size=float(lamp.spot_size), spot_blend=float(lamp.spot_blend),
-                   cone_angle_deg=float(np.degrees(lamp.spot_size)))
-    if lamp.kind == "AREA":
-        rec.update(shape=blender_shape(lamp), size=[float(lamp.size_u), float(lamp.size_v)],
-                   spread=float(lamp.spread), spread_deg=float(np.degrees(lamp.spread)))
+    rec.update(lamp.kind.report_fields(lamp))
     return rec
 
 
@@ -171,17 +163,8 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
     final = red.curve[red.final_index]
     pmap = curve.polygons
     E_patch = model.lights.patch_exitance(curve.exitance[fi], patches.n_patches) + model.background
-    objects = None
-    if per_face:
-        radiosity = pmap.split(curve.final_polygon_radiosity())
-        exitance = pmap.split(pmap.mean(E_patch))
-        target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
-                                     pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)),
-                                     np.nan))
-        objects = {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]),
-                          "exitance": exitance[name]} for name in radiosity}
+    objects = _per_face(pmap, patches, curve, E_patch) if per_face else None
     photometric = target_photometry(model, curve.radiosity[fi], E_patch) if model.mode == "inverse" else None
-    n_targets_faces = int(np.sum(faces.target)) if model.mode == "inverse" else None
     norm = problem.target_norm if problem.target_norm > 0 else 1.0
     lamps = lamp_records(model, curve.exitance[fi]) if model.mode != "inverse" else None
     warnings = list(warnings) + [f"lamp {r['name']!r}: {r['problem']}: the written copy cannot show this configuration "
@@ -205,24 +188,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "lights_by_kind": (model.lamp_refinement or {}).get("offered") or model.lights.count_by_kind(),
                   "refinement": model.refinement, "lamp_refinement": model.lamp_refinement,
                   "direct_light": model.direct},
-        "inverse": {
-            # (a Live stroke whose selection does not read e_x solves none: the solver, and no e_x)
-            "solver": inv.solver if inv else options.solver if model.mode == "inverse" else "direct-lighting",
-            "solved": inv is not None or model.mode != "inverse",
-            "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
-            "error_over": target_rows_text(patches, problem.targets) if model.mode == "inverse" else
-            "every patch that does not emit (the scene's radiosity)",
-            "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
-            "n_candidate_patches": int(len(problem.candidates)),
-            "rank": inv.rank if inv else None,
-            "rcond": inv.rcond if inv else None,
-            "error": inv.error if inv else None if model.mode == "inverse" else 0.0,
-            "relative_error": inv.relative_error if inv else None if model.mode == "inverse" else 0.0,
-            "n_negative": inv.n_negative if inv else None if model.mode == "inverse" else 0,
-            "seconds": inv.seconds if inv else 0.0,
-            "condition_estimate": float(problem.condition),
-            "target_norm": problem.target_norm,
-        },
+        "inverse": _inverse_record(model, options, inv),
         "reduction": {"selection": red.selection, "distribution": red.distribution, "seconds": red.seconds,
                       "final_index": red.final_index},
         "light_colour": light_colour_record(problem, options),
@@ -245,6 +211,41 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
         "lamps": lamps,
         "objects": objects,
         "warnings": warnings,
+    }
+
+
+def _per_face(pmap, patches, curve, E_patch) -> dict:
+    """The report's ``objects``: per object, its faces' final radiosity, painted target and exitance."""
+    radiosity = pmap.split(curve.final_polygon_radiosity())
+    exitance = pmap.split(pmap.mean(E_patch))
+    target = pmap.split(np.where(pmap.mean(patches.target.astype(float)[:, None]) > 0.5,
+                                 pmap.mean(np.where(patches.target[:, None], patches.target_radiosity, 0.0)),
+                                 np.nan))
+    return {name: {"radiosity": radiosity[name], "target": _nan_to_none(target[name]),
+                   "exitance": exitance[name]} for name in radiosity}
+
+
+def _inverse_record(model, options, inv) -> dict:
+    """The report's ``inverse``: the inverse problem and its solve (e_x; none in direct mode)."""
+    problem, patches = model.problem, model.patches
+    n_targets_faces = int(np.sum(model.faces.target)) if model.mode == "inverse" else None
+    return {
+        # (a Live stroke whose selection does not read e_x solves none: the solver, and no e_x)
+        "solver": inv.solver if inv else options.solver if model.mode == "inverse" else "direct-lighting",
+        "solved": inv is not None or model.mode != "inverse",
+        "n_targets": int(problem.m), "n_target_faces": n_targets_faces,
+        "error_over": target_rows_text(patches, problem.targets) if model.mode == "inverse" else
+        "every patch that does not emit (the scene's radiosity)",
+        "n_candidates": int(problem.n_lights),  # candidate lights, at all scales
+        "n_candidate_patches": int(len(problem.candidates)),
+        "rank": inv.rank if inv else None,
+        "rcond": inv.rcond if inv else None,
+        "error": inv.error if inv else None if model.mode == "inverse" else 0.0,
+        "relative_error": inv.relative_error if inv else None if model.mode == "inverse" else 0.0,
+        "n_negative": inv.n_negative if inv else None if model.mode == "inverse" else 0,
+        "seconds": inv.seconds if inv else 0.0,
+        "condition_estimate": float(problem.condition),
+        "target_norm": problem.target_norm,
     }
 
 

@@ -237,7 +237,7 @@ def _refine_setup(model: Model, options: JobOptions) -> tuple:
 def _with_lamps(model: Model, done: _Refined) -> Model:
     """The model with the refined lamps appended to its lights and to (a copy of) its problem."""
     patches = model.patches
-    area = np.array([lamp.area if lamp.kind == "AREA" else 0.0 for lamp in done.lamps])
+    area = np.array([lamp.kind.area(lamp) for lamp in done.lamps])
     H_new = np.stack(done.irradiance, axis=1)
     lights = append_lamps(model.lights, model.lights.patches, patches.n_patches, done.lamps, done.kinds, H_new, area)
     problem = copy.copy(model.problem)  # (add_lights replaces what it extends: the model's problem stays)

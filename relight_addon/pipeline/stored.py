@@ -74,7 +74,7 @@ class StoredResult:
     target_value: np.ndarray
     target_norm: np.ndarray
     meta: dict = field(default_factory=dict)
-    #: the lights that are lamps, as the solve saw them (``lamp_record``: the scene's lamps of a
+    #: the lights that are lamps, as the solve saw them (their kind's ``record``, engine/lights/kind.py: the scene's lamps of a
     #: reduction, as the user set them), and per light the lamp it is (index into ``lamps``; -1 for a
     #: surface light). Results written before lamps were lights have neither (read as no lamp).
     lamps: list = field(default_factory=list)
@@ -111,7 +111,7 @@ class StoredResult:
             lamp = lights.lamp(j)
             if lamp is not None:
                 light_lamp[j] = len(lamps)
-                lamps.append(lamp_record(lamp))
+                lamps.append(lamp.kind.record(lamp))
         return cls(
             objects=list(model.faces.object_names),
             polygon_offset=pmap.offset,
@@ -232,24 +232,6 @@ class StoredResult:
 _JSON = {"objects": list, "meta": dict, "lamps": list}
 #: the array fields a result written by an earlier version may lack (None: not stored)
 _OPTIONAL = {"patch_reflectance"}
-
-
-def lamp_record(lamp) -> dict:
-    """An engine.lamps.Lamp as the stored result keeps it (JSON): name, type (POINT, SPOT, AREA,
-    SUN), energy (Blender's Power, W; a sun's Strength, W/m^2), color, gain [r, g, b] (what Cycles
-    multiplies colour x Power by: the Light's Exposure, Temperature, Normalize; engine.lamps.Lamp),
-    power [r, g, b] = colour x energy x gain (what it emits), position (m), direction (its -Z),
-    axis_u / axis_v (its X and Y), radius (m), spot_size and spot_blend (rad, Blender's), size_u /
-    size_v (m), ellipse (an area lamp's shape) and spread (rad, Blender's; records stored before it
-    was kept lack it: their area lamps were 180 degrees; before the gain was kept, it: 1)."""
-    vec = lambda v: [float(x) for x in v]  # noqa: E731
-    return {"name": lamp.name, "type": lamp.kind, "energy": float(lamp.energy), "color": vec(lamp.color),
-            "gain": vec(lamp.gain), "power": vec(lamp.power), "position": vec(lamp.position),
-            "direction": vec(lamp.direction),
-            "axis_u": vec(lamp.axis_u), "axis_v": vec(lamp.axis_v), "radius": float(lamp.radius),
-            "spot_size": float(lamp.spot_size), "spot_blend": float(lamp.spot_blend),
-            "size_u": float(lamp.size_u), "size_v": float(lamp.size_v), "ellipse": bool(lamp.ellipse),
-            "spread": float(lamp.spread)}
 
 
 def stored_points(n_lights, final_index):

@@ -45,11 +45,8 @@ def normal_radiance(faces, patches, F, B, face_material, material_lobes, polygon
             lamp = faces.lamps[k] if k < len(faces.lamps) else None  # the columns after the lamps: the World
             if lamp is None:
                 towards = None
-            elif lamp.kind == "SUN":
-                towards = np.broadcast_to(-lamp.direction, (P, 3))
             else:
-                d = lamp.position[None, :] - patches.center
-                towards = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY)
+                towards = lamp.kind.towards(lamp, patches.center)
             lamp_light.append((towards, H[:, k]))
     for lamp, H in placed or ():
         d = lamp.position[None, :] - patches.center

@@ -14,13 +14,17 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
 
 - ``kind.py``: LightKind, the interface; ``lightset.py``: LightSet, candidate_mask.
 - ``surface.py``: what the surface kinds share; ``cell.py``, ``group.py``, ``polygon.py``.
-- ``lamp.py``: the scene's own lamps (``lamp``: Point, Spot, Area; ``sun``), irradiance sources of the
+- ``lamp.py``: the scene's own Point, Spot and Area lamps (``lamp``), irradiance sources of the
   direct-lighting mode.
-- ``placed.py``: what the lamps a solve places share; ``spot.py``, ``area.py``, ``point.py`` (candidate
-  lights beside the cells, engine/candidate_lamps.py; written as real Blender lights).
+- Lamp kinds (``kind.py``'s LampKind: a LightKind that is also what an engine.lamps.Lamp *is*, its
+  whole behaviour in one file): ``sun.py`` (a scene's Sun lamps), ``spot.py``, ``area.py``,
+  ``point.py`` (``point_source.py``: what point and spot lamps share; ``placed.py``: what the lamps
+  a solve places share: candidate lights beside the cells, engine/candidate_lamps.py, written as
+  real Blender lights). A lamp kind registered at run time (a LampKind subclass in LIGHT_KINDS)
+  is a lamp like these.
 """
-from . import cell, group, polygon, lamp, spot, area, point  # noqa: F401  (registration order = the stored kind codes)
-from .kind import LightKind
+from . import cell, group, polygon, lamp, sun, spot, area, point  # noqa: F401  (registration order = the stored kind codes)
+from .kind import Capability, LampKind, LightKind, lamp_kind_of_type, lamp_kinds
 from .lightset import LightSet, append_lamps, candidate_mask, kind_code, lights_from_groups
 
-__all__ = ["LightKind", "LightSet", "append_lamps", "candidate_mask", "kind_code", "lights_from_groups"]
+__all__ = ["Capability", "LampKind", "LightKind", "lamp_kind_of_type", "lamp_kinds", "LightSet", "append_lamps", "candidate_mask", "kind_code", "lights_from_groups"]

@@ -8,9 +8,12 @@ sets the Light's Power or Strength and colour, or disables the lamp, restorably)
 - ``lamp``: a Point, Spot or Area lamp. Strength: its power per channel in W, what Cycles emits
   (engine.lamps.Lamp.power: the scene's own configuration is the lamp as the user set it);
   ``watts`` = 1.
-- ``sun``: a Sun lamp. Strength: what it emits in W/m^2 per channel (Lamp.power). Its ``area`` is the area
-  it lights (m^2: the sum over the patches of its irradiance per unit strength x their area), so
-  that its power (``watts`` x strength) is the power it puts on the scene's faces.
+- ``sun``: a Sun lamp (engine/lights/sun.py, registered after this one). Strength: what it emits in
+  W/m^2 per channel (Lamp.power). Its ``area`` is the area it lights (m^2: the sum over the patches of
+  its irradiance per unit strength x their area), so that its power (``watts`` x strength) is the
+  power it puts on the scene's faces.
+
+Which of the two a scene lamp is: its kind's ``scene_kind`` (engine.lamps.Lamp.kind, a LampKind).
 
 A Blender Light has one Power and one colour: ``blender_values`` turns a strength per channel
 into them (the user's colour kept when the reduction scaled every channel alike), through what
@@ -25,17 +28,11 @@ from ..registry import LIGHT_KINDS
 from .kind import LightKind
 from .lightset import LightSet, append_lamps
 
-__all__ = ["LAMP", "SUN", "LAMP_KINDS", "add_lamps", "blender_values"]
+__all__ = ["LAMP", "add_lamps", "blender_values"]
 
 LAMP = LightKind("lamp", "Lamp", "One of the scene's Point, Spot or Area lamps: its power per channel (W)",
                  source="irradiance", strength_unit="W", shape="lamp", writer="lamp")
-SUN = LightKind("sun", "Sun", "One of the scene's Sun lamps: its strength per channel (W/m^2)",
-                source="irradiance", strength_unit="W/m^2", shape="sun", writer="lamp")
-for _kind in (LAMP, SUN):
-    LIGHT_KINDS.register(_kind.name, _kind.label, _kind.description)(_kind)
-
-#: the LightKind of each engine.lamps.Lamp kind
-LAMP_KINDS = {"POINT": "lamp", "SPOT": "lamp", "AREA": "lamp", "SUN": "sun"}
+LIGHT_KINDS.register(LAMP.name, LAMP.label, LAMP.description)(LAMP)
 
 
 def add_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, irradiance, patch_area) -> LightSet:
@@ -45,9 +42,8 @@ def add_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, irradi
     ``patch_area`` (P,) m^2 gives a sun its lit area."""
     H = sp.csc_matrix(np.asarray(irradiance, dtype=np.float64).reshape(n_patches, len(lamps)))
     lit = np.asarray(H.T @ np.asarray(patch_area, dtype=np.float64)).reshape(-1)
-    area = np.array([lit[i] if lamp.kind == "SUN" else (lamp.area if lamp.kind == "AREA" else 0.0)
-                     for i, lamp in enumerate(lamps)], dtype=np.float64)
-    return append_lamps(lights, candidates, n_patches, lamps, [LAMP_KINDS[lamp.kind] for lamp in lamps], H, area)
+    area = np.array([lamp.kind.light_area(lamp, lit[i]) for i, lamp in enumerate(lamps)], dtype=np.float64)
+    return append_lamps(lights, candidates, n_patches, lamps, [lamp.kind.scene_kind for lamp in lamps], H, area)
 
 
 #: relative difference between channels' scale factors below which a lamp keeps its colour

@@ -156,8 +156,7 @@ def append_lamps(lights: LightSet | None, candidates, n_patches: int, lamps, kin
     n0 = lights.n_lights
     codes = np.array([kind_code(k) for k in kinds], dtype=np.int8).reshape(n)
     center = np.array([lamp.position for lamp in lamps], dtype=np.float64).reshape(-1, 3)
-    normal = np.array([np.zeros(3) if lamp.kind == "POINT" else lamp.direction for lamp in lamps],
-                      dtype=np.float64).reshape(-1, 3)
+    normal = np.array([lamp.kind.normal(lamp) for lamp in lamps], dtype=np.float64).reshape(-1, 3)
     old = lights.irradiance if lights.irradiance is not None else sp.csc_matrix((n_patches, n0))
     basis = sp.hstack([lights.basis, sp.csr_matrix((lights.basis.shape[0], n))]).tocsr()
     own = list(lights.lamps) if lights.lamps is not None else [None] * n0

@@ -18,22 +18,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import unit
-from ..registry import LIGHT_KINDS
-from .kind import LightKind
 
-__all__ = ["register_placed_kind", "frame", "WRITER"]
+__all__ = ["frame", "check_length", "UNIT_POWER", "WRITER"]
 
 #: the writer of the placed lamps in the Blender layer (results.py)
 WRITER = "placed"
 #: the power per channel of a placed lamp's Lamp: its irradiance is per W
 UNIT_POWER = np.ones(3)
-
-
-def register_placed_kind(name, label, description, shape):
-    """Register a kind of placed lamp (irradiance source, strength = power per channel in W)."""
-    kind = LightKind(name, label, description, source="irradiance", strength_unit="W", shape=shape, writer=WRITER)
-    LIGHT_KINDS.register(name, label, description)(kind)
-    return kind
 
 
 def frame(direction) -> tuple:
