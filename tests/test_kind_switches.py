@@ -23,10 +23,8 @@ NAMES = {"POINT": "point", "SPOT": "spot", "AREA": "area", "SUN": "sun",
 ALLOWED = [
     ("blender/lamps.py", 'KIND_OF_TYPE = {"POINT": "point", "SPOT": "spot", "AREA": "area", "SUN": "sun"}',
      "the one table from a bpy Light's type to its lamp kind"),
-    ("blender/export.py", 'DOMAIN_NAMES = {"POINT": "Vertex"',
+    ("blender/layers.py", 'DOMAIN_NAMES = {"POINT": "Vertex"',
      "Blender's attribute domain POINT (a vertex), not a lamp"),
-    ("blender/ui/panels.py", 'FIXED_LIGHT_ICONS = {"point": "LIGHT_POINT"',
-     "the add-on's icon per Blender Light type of the report's fixed light rows (UI)"),
 ]
 
 

@@ -35,6 +35,7 @@ def test_solve_operator_lists_the_lamps_and_the_world_with_their_shares(tmp_path
     shares = {name: float(share) for _, name, share in rows}
     assert all(0 < s < 1 for s in shares.values()), shares
     assert sum(shares.values()) > 0.2, shares  # a large share of the painted light
-    assert all(k in panels.FIXED_LIGHT_ICONS for k in kinds.values())
+    assert [panels.fixed_light_icon(kinds[n]) for n in ("lamp_point", "lamp_spot", "sky")] == \
+        ["LIGHT_POINT", "LIGHT_SPOT", "WORLD"]
     for name, share in shares.items():  # the same numbers as the summary line
         assert f"{name} {100 * share:.0f} %" in summary, summary

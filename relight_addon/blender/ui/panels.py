@@ -15,6 +15,7 @@ import bpy
 import bpy.utils.previews
 import numpy as np
 
+from ...engine.lights.kind import lamp_kind_of_type
 from ...pipeline import chart
 from ...pipeline.notes import sidebar_lines
 from .. import layers, results, visibility
@@ -487,8 +488,16 @@ def last_chart_geometry():
 
 
 #: the icon of each kind of the scene's own light (pipeline.jobs.fixed_light)
-FIXED_LIGHT_ICONS = {"point": "LIGHT_POINT", "spot": "LIGHT_SPOT", "area": "LIGHT_AREA", "sun": "LIGHT_SUN",
-                     "world": "WORLD", "emission": "MESH_DATA"}
+#: the icons of the fixed light's rows that are not a scene lamp (a lamp's: its Blender type's)
+FIXED_SOURCE_ICONS = {"world": "WORLD", "emission": "MESH_DATA"}
+
+
+def fixed_light_icon(kind: str) -> str:
+    """A fixed-light row's icon: a scene lamp's is its Blender Light type's (the report's kind is
+    that type, lower case), the World's and the emissive faces' their own."""
+    if lamp_kind_of_type(kind.upper()) is not None:
+        return "LIGHT_" + kind.upper()
+    return FIXED_SOURCE_ICONS.get(kind, "LIGHT")
 
 
 class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
@@ -547,7 +556,7 @@ def _draw_fixed_light(layout, s):
         col = layout.box().column(align=True)
         col.label(text="Scene light kept (share of the targets)", icon="OUTLINER_OB_LIGHT")
         for kind, name, share in rows:
-            col.label(text=f"{name}: {100 * float(share):.0f} %", icon=FIXED_LIGHT_ICONS.get(kind, "LIGHT"))
+            col.label(text=f"{name}: {100 * float(share):.0f} %", icon=fixed_light_icon(kind))
 
 
 def _draw_shown_light(layout, s):
