@@ -48,7 +48,7 @@ from ..engine.light_colour import blackbody_rec709, temperature_of
 from ..engine.scene import SceneError
 from ..engine import lights  # noqa: F401  (registers the light kinds)
 from ..engine.registry import LIGHT_KINDS
-from ..engine.units import radiance_from_exitance
+from ..engine.units import TINY, radiance_from_exitance
 from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
@@ -568,7 +568,7 @@ def without_kept(scene, rid, plan) -> tuple:
         same = (ld.type == rec["type"] and np.isclose(ld.energy, energy, rtol=1e-5, atol=1e-9)
                 and np.allclose(np.array(ld.color)[:3], color, rtol=1e-5, atol=1e-6)
                 and np.allclose(M[:3, 3], rec["position"], atol=1e-6)
-                and np.allclose(-M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300), rec["direction"], atol=1e-6))
+                and np.allclose(-M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), TINY), rec["direction"], atol=1e-6))
         if not same:
             notes.append(f"lamp {rec['name']!r} is kept as {ob.name!r}, which differs from this configuration's "
                          f"(Power {ld.energy:.4g} W, {energy:.4g} W here, or moved): it is not placed again, and "
@@ -672,7 +672,7 @@ def plan_lamps(scene, data, strength) -> tuple:
         energy = float(ld.energy if was is None else was["energy"])
         color = np.array(ld.color if was is None else was["color"], dtype=np.float64)[:3]
         M = lamp_state.world_matrix(ob)
-        direction = -M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), 1e-300)
+        direction = -M[:3, 2] / max(float(np.linalg.norm(M[:3, 2])), TINY)
         gain = cycles_gain(ld, M)  # (Relight changes only a lamp's Power and colour: its Exposure etc. are the user's)
         why = None
         if ld.type != rec["type"]:

@@ -294,7 +294,7 @@ def check_memory(cost: dict, what: str = "this solve"):
     return cost
 
 
-#: estimates before meshing are capped here (a patch size of 1e-300 m would overflow)
+#: estimates before meshing are capped here (a patch size of TINY m would overflow)
 _MAX_COUNT = 1e30
 
 
