@@ -17,7 +17,7 @@ from __future__ import annotations
 import dataclasses
 import os
 
-from . import colours, distributions, estimators, patch_models, selections, solvers  # noqa: F401  (register the methods)
+from . import colours, distributions, estimators, patch_models, selections, solvers, targets  # noqa: F401  (register the methods and kinds)
 from .registry import DISTRIBUTIONS, ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
