@@ -119,6 +119,14 @@ def case(name, source, obj, model, clustered=False):
         if out is not None:
             row.update(live=face_error(out, faces), live_report=out.report["final"]["relative_error"],
                        live_n=out.report["final"]["n_lights"])
+            best = out
+            for step, what in enumerate(prepared.REFINE_STEPS):  # Live's later answers, each kept if better
+                t0 = time.perf_counter()
+                better = live_state.refine_live(best, step, counts)
+                row[f"step{step}_s"] = time.perf_counter() - t0
+                best = better or best
+            row.update(later=face_error(best, faces), later_report=best.report["final"]["relative_error"],
+                       later_n=best.report["final"]["n_lights"])
         t0 = time.perf_counter()
         out = warm_state.solve(faces, counts)
         row.update(warm_s=time.perf_counter() - t0, warm=face_error(out, faces), warm_from_state=warm_state.reason is None,
@@ -137,16 +145,21 @@ def fmt(x, spec=".4f"):
 
 
 def table(rows):
-    print("| case | stroke | targets | Live: error (n) | Live / cold | warm: error (n) | warm / cold | cold: error (n) "
-          "| Live s | warm s | cold s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    """Errors: the report's (the curve's, over the target patches) and, in brackets, the
+    painted-face one; each answer's / the cold solve's."""
+    print("| case | stroke | targets | Live quick | Live, later answers | warm solve | cold solve "
+          "| s: quick / full search / warm step / warm / cold |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        live, warm, cold = r.get("live"), r.get("warm"), r["cold"]
-        print(f"| {r['case']} | {r['stroke']} | {r['targets']} | {fmt(live)} ({r.get('live_n', '-')}) "
-              f"| {fmt(live and live / cold, '.3f')} | {fmt(warm)} ({r.get('warm_n', '-')})"
-              f"{'' if r.get('warm_from_state', True) else ' (from scratch)'} | {fmt(warm and warm / cold, '.3f')} "
-              f"| {fmt(cold)} ({r.get('cold_n', '-')}) | {fmt(r.get('live_s'), '.2f')} | {fmt(r.get('warm_s'), '.2f')} "
-              f"| {fmt(r.get('cold_s'), '.2f')} |")
+        def cell(k):
+            if r.get(k) is None:
+                return "-"
+            return (f"{r[k + '_report']:.4f} ({r[k]:.4f}): {r[k + '_report'] / r['cold_report']:.3f} "
+                    f"({r[k] / r['cold']:.3f})")
+        times = " / ".join(fmt(r.get(k), ".2f") for k in ("live_s", "step0_s", "step1_s", "warm_s", "cold_s"))
+        print(f"| {r['case']} | {r['stroke']} | {r['targets']} | {cell('live')} | {cell('later')} | {cell('warm')}"
+              f"{'' if r.get('warm_from_state', True) else ' (from scratch)'} | {r['cold_report']:.4f} ({r['cold']:.4f}) "
+              f"| {times} |")
 
 
 def main():

@@ -179,6 +179,59 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     assert state.live(moved) is None and state.reason == "the geometry changed since it was prepared"
 
 
+def _strokes(faces, name, avoid):
+    """Four strokes on object ``name``, each on the paint the previous left, as (kind, faces):
+    ``extend`` its 12 unpainted faces nearest its painted ones (not in ``avoid``), ``new spot`` 12
+    nearest a point away from the paint, ``erase`` the extension unpainted, ``lux fill`` the
+    extension back and both at 1.5 x the paint's radiosity (as Fill Selected (lx) sets a value)."""
+    on = faces.face_object == faces.object_names.index(name)
+    cen = np.zeros((faces.n_faces, 3))
+    np.add.at(cen, faces.triangle_face, faces.vertices[faces.triangles].mean(axis=1))
+    cen /= np.maximum(np.bincount(faces.triangle_face, minlength=faces.n_faces), 1)[:, None]
+    hub = cen[faces.target & on].mean(axis=0)
+    rgb = faces.target_radiosity[np.flatnonzero(faces.target & on)[0]]
+    free = np.flatnonzero(on & ~faces.target & ~avoid)
+    ext = free[np.argsort(np.linalg.norm(cen[free] - hub, axis=1))[:12]]
+    rest = np.setdiff1d(free, ext)
+    far = rest[np.argmax(np.linalg.norm(cen[rest] - hub, axis=1))]
+    spot = rest[np.argsort(np.linalg.norm(cen[rest] - (0.7 * cen[far] + 0.3 * hub), axis=1))[:12]]
+    t, r, out = faces.target.copy(), faces.target_radiosity.copy(), []
+    for kind, ids, on_, value in (("extend", ext, True, rgb), ("new spot", spot, True, rgb),
+                                  ("erase", ext, False, 0.0), ("lux fill", np.r_[ext, spot], True, 1.5 * rgb)):
+        t[ids], r[ids] = on_, value
+        out.append((kind, replace(faces, target=t.copy(), target_radiosity=r.copy())))
+    return out
+
+
+@pytest.mark.slow
+def test_every_kind_of_stroke_is_answered_live_as_well_as_a_cold_solve():
+    """Live's answer to each kind of stroke (extend, a new spot, erase, a lux fill), from the
+    prepared state (its quick answer, then its second, PreparedScene.refine_live: the lamps refined
+    for the stroke's targets, kept when better), within 5 % of a cold solve of the same paint."""
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(**OPTIONS).validate()
+    size = exp.settings.get("max_patch_size")
+    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    state.solve(exp.faces)
+    state.prepare_live(exp.faces)
+    kept = (state.model, state.patches)
+    worse = {}
+    for kind, faces in _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool)):
+        quick = state.live(faces)
+        assert state.reason is None, (kind, state.reason)  # answered from the prepared state
+        answer = quick
+        for step in range(len(prepared.REFINE_STEPS)):  # (Live's answers after the quick one, each kept if better)
+            better = state.refine_live(answer, step)
+            assert better is None or _final(better)[1] < _final(answer)[1]
+            answer = better or answer
+        cold = jobs.run_solve(faces, options, default_max_patch_size=size)
+        worse[kind] = (_final(quick)[1], _final(answer)[1], _final(cold)[1])
+    assert state.model is kept[0] and state.patches is kept[1] and state.refined_solves == 8
+    print(worse)
+    assert all(answer <= 1.05 * cold for _, answer, cold in worse.values()), worse
+
+
 def _full(problem, point):
     e = np.zeros((problem.n_lights, 3))
     e[point.lights] = point.exitance

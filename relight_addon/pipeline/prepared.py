@@ -58,7 +58,10 @@ from . import notes as texts
 from .checks import check_solvable, face_areas
 from .model import move_scene_light, retarget_model
 
-__all__ = ["PreparedScene", "scene_key", "paint_independent"]
+__all__ = ["PreparedScene", "scene_key", "paint_independent", "REFINE_STEPS"]
+
+#: a Live stroke's answers after its quick one (PreparedScene.refine_live), in order
+REFINE_STEPS = ("full search", "warm solve")
 
 #: the FaceSet arrays a solve depends on apart from the paint
 _SCENE_ARRAYS = ("vertices", "triangles", "triangle_face", "loop_vertices", "loop_start", "loop_total",
@@ -142,6 +145,7 @@ class PreparedScene:
     reason: str = None  # why the last solve started from scratch (None: from the kept state)
     model: object = None  # pipeline.model.Model of the last solve (``live`` retargets it)
     live_solves: int = 0  # live re-solves made
+    refined_solves: int = 0  # live strokes' second answers made (refine_live)
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
     _clustered: tuple = None  # (patches, clustered_faces of them): paint-independent, computed once
     _face_area: np.ndarray = None  # checks.face_areas of the prepared scene's faces (geometry only)
@@ -308,6 +312,41 @@ class PreparedScene:
         bounds = outcome.reduction.certificate
         self._nnls_start = None if bounds is None else bounds.nnls_exitance
         outcome.warnings.append(texts.live_note(self.model.problem.m))
+        return outcome
+
+    def refine_live(self, best, step=0, polygon_counts=None, progress=None, cancel=None):
+        """A stroke's better answers (Live, in its worker, once the quick one, ``live``'s, is
+        shown), step by step (REFINE_STEPS), each kept when its final error is lower than
+        ``best``'s (the answer shown: the quick one, or an earlier step's): the outcome, else None.
+
+        - step 0, "full search": what a solve does after building its model, on the stroke's
+          retargeted model (``best.model``; jobs.solve_model: the inverse solve, the selection's
+          full search instead of the quick one, the kernel's direct light of the curve's lights not
+          corrected yet, the certificate, the placed lamps refined for the stroke's targets; the
+          last solve's lamps, refined for its paint, stay candidates);
+        - step 1, "warm solve": the solve of the stroke's paint from the prepared state as
+          ``solve`` makes it (the kept patches, rays and kernel rows; the lamps offered for the new
+          targets, the new target patches' kernel rows, the problem factorised again), not kept:
+          the strokes after it still start from the last solve.
+
+        Neither step re-meshes the adaptive model for the new paint. Nothing kept changes but the
+        kernel's rows of the new target patches (step 1; the next solve's)."""
+        faces = best.faces
+        if step == 0:
+            outcome = jobs.solve_model(best.model, self.options, polygon_counts, progress, cancel)
+        else:
+            patches = self.painted(faces)
+            self._cast_for = patches  # (the kept mesh: its rays and kernel rows serve)
+            options = self.options
+            if options.param("refine_passes", 0):
+                options = replace(options, refine_passes=0)
+            outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
+                                     patches=patches, estimate=self.estimate)
+        self.refined_solves += 1
+        if not outcome.reduction.final.relative_error < best.reduction.final.relative_error:
+            return None
+        outcome.warnings.append(texts.LIVE_NOTE.format(why=f"its {REFINE_STEPS[step]} for these {outcome.problem.m} "
+                                                           "target patches, after the quick answer"))
         return outcome
 
 
