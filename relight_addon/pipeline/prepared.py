@@ -17,7 +17,11 @@ paint changed:
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
   the refinement passes' ones);
 - the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
-  patch), per patch, for every patch painted so far: a stroke computes only its new rows.
+  patch) of the last solve's targets: a solve of the same target patches (a lux fill, a colour)
+  reuses them; a stroke that adds or removes target patches draws them all again, in one draw as
+  the cold solve does, so that the warm solve on the same mesh is the cold solve (rows drawn for
+  the new patches alone are other samples of the kernel: 14 % apart in error on the adaptive
+  staircase).
 
 The rest (the lights offered for the targets, the inverse problem, the selection, the certificate
 and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the kept patches and
@@ -138,6 +142,7 @@ class PreparedScene:
     form_factors: object = None  # formfactors.FormFactors of ``_cast_for``, ray-cast only (no kernel pairs)
     _cast_for: object = None  # the PatchSet the form factors were cast for
     kernel_sources: np.ndarray = None  # the candidate patches the kernel rows are for
+    kernel_targets: np.ndarray = None  # the target patches of the kernel rows' draw
     kernel_rows: dict = field(default_factory=dict)  # target patch -> (n_sources,) kernel form factors
     seconds: dict = field(default_factory=dict)  # "rays": s of the last cast, "kernel rows": of the last solve
     solves: int = 0  # solves made
@@ -199,20 +204,22 @@ class PreparedScene:
             t0 = time.perf_counter()
             self.form_factors = compute_form_factors(patches, rays_per_patch=rays, seed=options.seed,
                                                      threads=options.threads, progress=progress, cancel=cancel)
-            self._cast_for, self.kernel_sources, self.kernel_rows = patches, None, {}
+            self._cast_for, self.kernel_sources, self.kernel_targets, self.kernel_rows = patches, None, None, {}
             self.seconds["rays"] = cast = time.perf_counter() - t0
         F = self.form_factors
         if pairs is None or not ESTIMATORS[options.estimator].traits.kernel_pairs:
             return replace(F, matrix=F.matrix.copy(), seconds=cast)
         t0 = time.perf_counter()
         rec, src = (np.asarray(p, dtype=np.int64) for p in pairs)
-        if self.kernel_sources is None or not np.array_equal(src, self.kernel_sources):
-            self.kernel_sources, self.kernel_rows = src, {}
-        new = np.array([r for r in rec if int(r) not in self.kernel_rows], dtype=np.int64)
-        if len(new):
-            K = kernel_form_factors(patches, new, src, seed=options.seed, threads=options.threads, cancel=cancel,
-                                    sampler=F.sampler)
-            self.kernel_rows.update({int(r): K[i] for i, r in enumerate(new)})
+        if self.kernel_sources is None or not np.array_equal(src, self.kernel_sources) \
+                or not np.array_equal(rec, self.kernel_targets):
+            # every target's row in one draw, as the cold solve draws them (rows drawn apart, for a
+            # stroke's new targets alone, are other samples: on the adaptive staircase that moved
+            # the warm solve's error 14 % from the cold one's, 0.138 against 0.121; issue 37)
+            K = kernel_form_factors(patches, rec, src, seed=options.seed, threads=options.threads, cancel=cancel,
+                                    sampler=F.sampler) if len(rec) else np.zeros((0, len(src)))
+            self.kernel_sources, self.kernel_targets = src, rec
+            self.kernel_rows = {int(r): K[i] for i, r in enumerate(rec)}
         K = np.stack([self.kernel_rows[int(r)] for r in rec]) if len(rec) else np.zeros((0, len(src)))
         # the pairs replace F's entries before the sending scale of partly buried patches, as
         # compute_form_factors applies them
