@@ -1,7 +1,10 @@
 """Live strokes against a cold solve (issue 37): for each stroke, the painted-face error of
 
-- Live's answer (PreparedScene.live: the last solve's model retargeted, jobs.solve_stroke), every
-  stroke from the first solve, as Live mode answers it;
+- Live's quick answer (PreparedScene.live: the last solve's model retargeted, jobs.solve_stroke),
+  every stroke from the first solve, as Live mode answers it, and its later answers
+  (PreparedScene.refine_live, prepared.REFINE_STEPS: the full search and the lamps refined on the
+  retargeted model, then the warm solve, unkept; each kept when its error is lower), as Live
+  writes them after the quick one;
 - the warm solve (PreparedScene.solve: Solve & Reduce after the stroke, from the prepared state),
   pressed after every stroke;
 - a cold solve (jobs.run_solve) of the same paint,
@@ -15,9 +18,10 @@ extension unpainted again; ``lux fill`` the extension's and the new spot's faces
 faces it clustered is not answered from the prepared state (``-`` in the table): the benchmark paints
 the faces it keeps whole unless ``--clustered``.
 
-The painted-face error: sqrt(sum a_f |B_f - T_f|^2 / sum a_f |T_f|^2) over the painted faces f
+The table's errors: the report's (the curve's, over the target patches: what the chart shows) and,
+in brackets, the painted-face error sqrt(sum a_f |B_f - T_f|^2 / sum a_f |T_f|^2) over the painted faces f
 (areas a_f, T_f their target radiosity, B_f the final configuration's radiosity averaged over the
-face), the same measure for every patch model; the report's own (over target patches) is printed too.
+face), the same measure for every patch model; each also as a ratio to the cold solve's.
 
     .venv/bin/python benchmarks/bench_live_quality.py [--only staircase-adaptive ...] [--clustered]
 """
@@ -129,7 +133,8 @@ def case(name, source, obj, model, clustered=False):
                        later_n=best.report["final"]["n_lights"])
         t0 = time.perf_counter()
         out = warm_state.solve(faces, counts)
-        row.update(warm_s=time.perf_counter() - t0, warm=face_error(out, faces), warm_from_state=warm_state.reason is None,
+        row.update(warm_s=time.perf_counter() - t0, warm=face_error(out, faces),
+                   warm_from_state=warm_state.reason is None,
                    warm_report=out.report["final"]["relative_error"], warm_n=out.report["final"]["n_lights"])
         t0 = time.perf_counter()
         out = jobs.run_solve(faces, options, counts, size, notes=inputs["notes"])
@@ -158,7 +163,8 @@ def table(rows):
                     f"({r[k] / r['cold']:.3f})")
         times = " / ".join(fmt(r.get(k), ".2f") for k in ("live_s", "step0_s", "step1_s", "warm_s", "cold_s"))
         print(f"| {r['case']} | {r['stroke']} | {r['targets']} | {cell('live')} | {cell('later')} | {cell('warm')}"
-              f"{'' if r.get('warm_from_state', True) else ' (from scratch)'} | {r['cold_report']:.4f} ({r['cold']:.4f}) "
+              f"{'' if r.get('warm_from_state', True) else ' (from scratch)'} "
+              f"| {r['cold_report']:.4f} ({r['cold']:.4f}) "
               f"| {times} |")
 
 

@@ -15,6 +15,13 @@ operator's timer):
   newer paint waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
 - an answer for the newest paint is written into the scene (operators.show_solve), and the
   time of the update and its cost are shown;
+- once a stroke's quick answer is written and no newer paint waits, its later answers are
+  computed in the worker, step by step (pipeline.prepared.REFINE_STEPS: the selection's full search
+  and the lamps refined for its targets on the retargeted model, then the warm solve from the
+  prepared state), each written when its error is lower than the answer shown (``refined``; not
+  better: ``kept_quick``); a newer stroke, a pause or ``stop()`` cancels the one running. The quick
+  answer lost up to 17 % against a cold solve's error; the later ones are within 1 % of it on the
+  staircase and the living room (docs/benchmarks.md, issue 37);
 - paint on faces the patch model clustered with others is solved in full (in the worker);
 - a lamp of the scene moved, turned or set to another power (a kept one, say): its light is cast
   again on the kept scene and taken through the kept factorisation (PreparedScene.move_lamps),

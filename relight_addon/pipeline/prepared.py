@@ -34,7 +34,11 @@ problem retargeted on the transfer from every light to every patch (InverseProbl
 all_rows_transfer), then the selection's quick search from the last solve's configurations, the
 certificate and the curve (jobs.solve_stroke); and for a lamp of the scene moved or set
 anew (``move_lamps``: the model's fixed light cast again). A stroke's live answer is of the paint
-alone (it starts from the last *solve*, never from an earlier stroke).
+alone (it starts from the last *solve*, never from an earlier stroke). Its later answers
+(``refine_live``, REFINE_STEPS, in Live's worker once the quick one is shown) close what the
+quick answer loses against a cold solve (up to 17 % in error on the staircase, issue 37): the
+selection's full search and the lamps refined for the stroke's targets on the retargeted model,
+then the warm solve (``solve``'s, not kept).
 
 Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
 stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
