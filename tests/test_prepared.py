@@ -236,7 +236,6 @@ def test_every_kind_of_stroke_is_answered_live_as_well_as_a_cold_solve():
         cold = jobs.run_solve(faces, options, default_max_patch_size=size)
         worse[kind] = (_final(quick)[1], _final(answer)[1], _final(cold)[1])
     assert state.model is kept[0] and state.patches is kept[1] and state.refined_solves == 8
-    print(worse)
     assert all(answer <= 1.05 * cold for _, answer, cold in worse.values()), worse
 
 
