@@ -94,13 +94,16 @@ def _direct_lights(model: Model, red: ReductionResult, options: JobOptions) -> t
     non-negative configurations' of at most ``max_lights`` (or the final one's) lights, the smaller
     first, up to DIRECT_LIGHTS lights; a light of DIRECT_SPREAD_PATCHES patches or more keeps F's."""
     lights = model.lights
+    DC = model.problem.direct_correction  # (a re-solved stroke's model: the lights corrected already)
+    done = set() if DC is None else set(np.flatnonzero(np.diff(DC.tocsc().indptr) > 0).tolist())
     top = max(int(options.max_lights), red.final.n_lights)  # the rows above it are not the answer's
     order = sorted((i for i, pt in enumerate(red.curve) if pt.n_negative == 0 and pt.n_lights <= top),
                    key=lambda i: red.curve[i].n_lights)
     todo, spread = [], set()
     for i in order:
         for j in red.curve[i].lights:
-            if int(j) in todo or int(j) in spread or lights.lamp(int(j)) is not None or len(todo) >= DIRECT_LIGHTS:
+            if int(j) in todo or int(j) in spread or int(j) in done or lights.lamp(int(j)) is not None \
+                    or len(todo) >= DIRECT_LIGHTS:
                 continue
             if len(lights.members(int(j))) >= DIRECT_SPREAD_PATCHES:  # F's gather of it stays (cost.py)
                 spread.add(int(j))
