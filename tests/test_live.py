@@ -98,6 +98,8 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     assert float(scene.relight.curve[scene.relight.curve_index].relative_error) == pytest.approx(
         answer.report["final"]["relative_error"], rel=1e-6)
     assert "live" in live.status_text(s).lower() and "updated" in live.status_text(s)
+    # the later answers written are counted on the sidebar's line (none written: not said)
+    assert (f"{s.refined} improved later" in live.status_text(s)) == (s.refined > 0), live.status_text(s)
 
     # a newer stroke while a re-solve runs supersedes it: only the newest answer is written
     _stroke(6, "flight_1", avoid)

@@ -577,5 +577,6 @@ def status_text(s: LiveSession) -> str:
     last = ""
     if s.last_update:
         solve, write = s.last_seconds
-        last = f"; updated {s.last_update} ({solve:.2f} s solve, {write:.2f} s write, {s.updates} update(s))"
+        better = f", {s.refined} improved later" if s.refined else ""
+        last = f"; updated {s.last_update} ({solve:.2f} s solve, {write:.2f} s write, {s.updates} update(s){better})"
     return f"Live: {s.status}{last}"
