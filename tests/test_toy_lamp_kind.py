@@ -126,3 +126,42 @@ def test_best_k_lights_returns_the_toy_kind_with_the_power_that_made_the_targets
     kept, notes = kept_lamps({"command": "solve", "final": {"lights": [json_safe(rec)]}})
     assert [(r["kind"], r["type"], r["name"]) for r in kept] == [("downlight", "POINT", "d (kept)")] and not notes
     np.testing.assert_allclose(kept[0]["position"], AT)
+
+
+def test_a_toy_lamp_kind_answers_a_toy_target_kind(box, downlight, monkeypatch):
+    """Both new kinds at once, neither in a project file: the targets are the mean radiosity of each
+    quarter of the floor (test_toy_target_kind's MeanRadiosity, registered here), made by 20 W of the
+    downlight; offered it, a point lamp in a corner and a spot aimed off-centre, Best k Lights
+    returns the downlight alone, at 20 W, with no error, and the forward solve (A^-1 formed by
+    numpy) of its answer gives each quarter's mean."""
+    from test_toy_target_kind import MeanRadiosity
+    from relight_addon.engine.registry import TARGET_KINDS
+
+    monkeypatch.setattr(TARGET_KINDS, "_methods", dict(TARGET_KINDS._methods))
+    TARGET_KINDS.register("toy-mean", "Mean Radiosity", "The mean radiosity of a set of patches")(MeanRadiosity)
+    ps, P = box, box.n_patches
+    rng = np.random.default_rng(5)
+    F = rng.uniform(0, 1, (P, P)) * (1 - np.eye(P))
+    F *= 0.9 / F.sum(axis=1, keepdims=True)
+    lamps = [point_lamp("p", (0.3, 0.3, 1.0)), spot_lamp("s", (1.6, 1.1, 1.0), (0.3, 0.2, -1), math.radians(40)),
+             Lamp("d", downlight, AT, DOWN, X, Y, np.ones(3))]
+    H = lamp_irradiance(ps, lamps, seed=0)[:, :, 0]
+    lights = append_lamps(None, np.zeros(0, dtype=np.int64), P, lamps, [lamp.kind.name for lamp in lamps], H,
+                          [lamp.kind.area(lamp) for lamp in lamps])
+    A = np.eye(P) - 0.5 * F
+    B = np.linalg.solve(A, 0.5 * H[:, 2:3] * np.full((1, 3), 20.0))
+    floor = ps.normal[:, 2] > 0.9
+    quarters = [np.flatnonzero(floor & ((ps.center[:, 0] < 1.0) == left) & ((ps.center[:, 1] < 0.75) == front))
+                for left in (True, False) for front in (True, False)]
+    assert all(len(q) >= 4 for q in quarters)
+    means = [ps.area[q] @ B[q] / ps.area[q].sum() for q in quarters]
+    targets = [TARGET_KINDS["toy-mean"].impl(q, ps.area, m) for q, m in zip(quarters, means)]
+    prob = InverseProblem(F, ps.area, np.full((P, 3), 0.5), targets, np.zeros(P, bool), ps.center, ps.normal,
+                          lights=lights)
+    assert prob.m == 4  # one row a quarter, each averaging its patches
+    best = best_k_for_problem(prob, 2)[0]
+    assert best.lights.tolist() == [2] and best.relative_error < 1e-6
+    np.testing.assert_allclose(best.exitance[0], [20.0] * 3, rtol=1e-6)
+    B_answer = np.linalg.solve(A, 0.5 * H[:, 2:3] * best.exitance[0][None, :])
+    for q, m in zip(quarters, means):
+        np.testing.assert_allclose(ps.area[q] @ B_answer[q] / ps.area[q].sum(), m, rtol=1e-6)
