@@ -84,7 +84,7 @@ def override():
 
 def mods():
     return {k: sys.modules[f"{PKG}.{k}"] for k in ("blender.results", "blender.ui.panels", "blender.ui.operators",
-                                                   "blender.ui.viewport", "blender.export", "blender.live",
+                                                   "blender.ui.viewport", "blender.layers", "blender.live",
                                                    "blender.preparation", "pipeline.notes")}
 
 
@@ -427,7 +427,7 @@ def check_marker(name, path):
 def floor_strokes(floor, n_strokes=4, per_stroke=12):
     """Groups of unpainted polygons of ``floor`` (a mesh object) next to its painted ones (as a
     brush extends the paint)."""
-    painted = mods()["blender.export"].face_flags(floor, "target")
+    painted = mods()["blender.layers"].face_flags(floor, "target")
     M = floor.matrix_world
     centres = [M @ p.center for p in floor.data.polygons]
     hub = sum((centres[k] for k in np.flatnonzero(painted)), centres[0] * 0) / max(int(painted.sum()), 1)
@@ -696,7 +696,7 @@ def scenario():
 
     # 5. Edit Mode: the panel keeps working (defect 1); Fill Selected then Unpaint
     t0, c0, f0, _ = counts()
-    targets0 = m["blender.export"].face_flags(floor, "target")
+    targets0 = m["blender.layers"].face_flags(floor, "target")
     fill = [int(k) for k in np.flatnonzero(~targets0)[:4]]
     tabbed = yield from edit_faces(floor, fill)
     check("Tab enters Edit Mode", tabbed, bpy.context.mode)
@@ -727,7 +727,7 @@ def scenario():
         if bpy.context.mode != "OBJECT":
             bpy.ops.object.mode_set(mode="OBJECT")
     set_active(wall)
-    cand = np.flatnonzero(m["blender.export"].face_flags(wall, "candidate"))[:6]
+    cand = np.flatnonzero(m["blender.layers"].face_flags(wall, "candidate"))[:6]
     c_before = counts()[1]
     yield from edit_faces(wall, [int(k) for k in cand])
     yield 1.0
