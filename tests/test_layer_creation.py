@@ -64,3 +64,22 @@ def test_paint_targets_creates_an_unpainted_layer(addon):
     assert ob.data.color_attributes.get(layers.TARGET_ATTRIBUTE) is not None
     bpy.ops.object.mode_set(mode="OBJECT")
     assert not layers.face_flags(ob, "target").any()
+
+
+def test_the_sidebar_counts_targets_in_edit_mode_as_a_solve_reads_them():
+    """The panel's counts in Edit Mode are read from the BMesh (panels.object_counts): painted
+    faces (a colour layer, and a lux layer's) counted as layers.face_flags counts them in Object
+    Mode. (A local name shadowing the layers module broke this path with an AttributeError in the
+    window; no headless test drew the panel in Edit Mode.)"""
+    from artist_scenes import paint
+    from relight_addon.blender.ui import panels
+
+    obs = _cubes(("A",))
+    bpy.ops.object.mode_set(mode="OBJECT")
+    paint(obs[0], [0, 4], (0.5, 0.5, 0.5))
+    want = int(layers.face_flags(obs[0], "target").sum())
+    assert want == 2
+    bpy.ops.object.mode_set(mode="EDIT")
+    t, c, f, note = panels.object_counts(obs[0])
+    assert (t, f) == (want, 6), (t, c, f, note)
+    bpy.ops.object.mode_set(mode="OBJECT")

@@ -35,8 +35,8 @@ def _bmesh_counts(obj):
     faces = len(bm.faces)
     if faces > EDIT_COUNT_LIMIT:
         return None, None, faces
-    layers = bm.loops.layers
-    tl = layers.float_color.get(layers.TARGET_ATTRIBUTE) or layers.color.get(layers.TARGET_ATTRIBUTE)
+    loop_layers = bm.loops.layers
+    tl = loop_layers.float_color.get(layers.TARGET_ATTRIBUTE) or loop_layers.color.get(layers.TARGET_ATTRIBUTE)
     lux = bm.faces.layers.float.get(layers.LUX_ATTRIBUTE)  # (illuminance targets count too)
     targets = 0
     if tl is not None or lux is not None:
