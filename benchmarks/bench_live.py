@@ -101,7 +101,9 @@ def stroke_faces(ob, n, k):
     return free[:n].tolist(), tuple(col[starts[np.flatnonzero(painted)[0]], :3])
 
 
-def case(name, source, paint_on, model):
+def open_case(source, model):
+    """A fresh session with ``source``: the living room of that detail (an int) or a shipped sample;
+    the add-on's patch model set to ``model``. Returns the scene."""
     bpy.ops.wm.read_factory_settings(use_empty=True)
     if isinstance(source, int):
         artist_scenes.living_room(source)
@@ -109,6 +111,11 @@ def case(name, source, paint_on, model):
         bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "sample_blends", source))
     scene = bpy.context.scene
     scene.relight.patch_model = model
+    return scene
+
+
+def case(name, source, paint_on, model):
+    scene = open_case(source, model)
     preparation.PREPARED.clear()
     s = live.start(bpy.context, operators.job_options, operators.show_solve)
     t0 = time.perf_counter()

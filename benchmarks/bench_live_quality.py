@@ -39,12 +39,12 @@ sys.path.insert(0, os.path.join(ROOT, "tests"))
 
 import bpy  # noqa: E402
 
-import artist_scenes  # noqa: E402
 import relight_addon  # noqa: E402
 from relight_addon.blender import export  # noqa: E402
 from relight_addon.blender.ui import operators  # noqa: E402
 from relight_addon.engine.scene import face_mean  # noqa: E402
 from relight_addon.pipeline import jobs, prepared  # noqa: E402
+from bench_live import open_case  # noqa: E402
 
 #: (name, living_room detail or a sample, paint object, patch model, a point for the new spot)
 CASES = [("staircase-adaptive", "staircase_targets.blend", "flight_1", "adaptive"),
@@ -91,13 +91,7 @@ def strokes(faces, obj, avoid):
 
 
 def case(name, source, obj, model, clustered=False):
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    if isinstance(source, int):
-        artist_scenes.living_room(source)
-    else:
-        bpy.ops.wm.open_mainfile(filepath=os.path.join(ROOT, "sample_blends", source))
-    scene = bpy.context.scene
-    scene.relight.patch_model = model
+    scene = open_case(source, model)
     exp = export.export_scene()
     inputs = export.job_inputs(exp)
     options = operators.job_options(scene.relight).validate()
