@@ -305,6 +305,8 @@ def test_live_pauses_naming_an_object_deleted_or_hidden_and_follows_lamps(addon)
     _stroke(4, "flight_1", avoid)
     _run(s, lambda: s.paused is not None, timeout=30, pause=True)
     assert s.paused == "object 'ceiling' hidden from renders: Solve & Reduce prepares again", s.paused
+    # (a later answer running when the pause came is cancelled at its next check: let it end)
+    _run(s, lambda: s.worker is None, timeout=60, pause=True)
     for _ in range(5):
         bpy.context.view_layer.update()
         s.tick(bpy.context)
