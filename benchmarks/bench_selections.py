@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import bpy  # noqa: E402
 
 from relight_addon.blender import blend_files, export
+from relight_addon.engine.best_lights import total_power
 from relight_addon.pipeline import stages  # noqa: E402
 from relight_addon.pipeline.model import build_inverse_model  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
@@ -98,7 +99,7 @@ def main():
                 p = at_k(red.curve, k)
                 if p is not None:
                     row["by_k"][k] = {"n_lights": p.n_lights, "relative_error": p.relative_error,
-                                      "n_negative": p.n_negative, "power": jobs._power(m.problem, p)}
+                                      "n_negative": p.n_negative, "power": total_power(p.exitance, m.problem.light_watts, p.lights)}
             rows.append(row)
             r3 = row["by_k"].get(3)
             print(f"{name:42s} {sel.name:22s} {m.problem.n_lights:5d} lights {seconds:7.2f} s  k=3: "
