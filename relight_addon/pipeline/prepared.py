@@ -231,6 +231,16 @@ class PreparedScene:
         self.seconds["kernel rows"] = time.perf_counter() - t0
         return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
 
+    def _warm(self, faces: FaceSet) -> tuple:
+        """(the kept patches with ``faces``' paint, the options a solve on them runs with): the same
+        mesh, so its rays and kernel rows serve (``_cast_for``), and no refinement pass re-meshes it."""
+        patches = self.painted(faces)
+        self._cast_for = patches
+        options = self.options
+        if options.param("refine_passes", 0):
+            options = replace(options, refine_passes=0)
+        return patches, options
+
     def solve(self, faces: FaceSet, polygon_counts=None, progress=None, cancel=None, notes=None, meshed=None,
               key=None):
         """The inverse solve of ``faces`` (this scene with its current paint): from the kept state
@@ -243,10 +253,7 @@ class PreparedScene:
         self.reason = self.unmappable(faces)
         options, patches = self.options, meshed
         if self.reason is None:  # the kept patches, their rays, with the new paint
-            patches = self.painted(faces)
-            self._cast_for = patches  # the same mesh: its rays and kernel rows serve
-            if options.param("refine_passes", 0):
-                options = replace(options, refine_passes=0)
+            patches, options = self._warm(faces)
             self.warm += 1
         self.solves += 1
         try:
@@ -346,11 +353,7 @@ class PreparedScene:
         if step == 0:
             outcome = jobs.solve_model(best.model, self.options, polygon_counts, progress, cancel)
         else:
-            patches = self.painted(faces)
-            self._cast_for = patches  # (the kept mesh: its rays and kernel rows serve)
-            options = self.options
-            if options.param("refine_passes", 0):
-                options = replace(options, refine_passes=0)
+            patches, options = self._warm(faces)
             outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
                                      patches=patches, estimate=self.estimate)
         self.refined_solves += 1
