@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from ..engine.best_lights import total_power
 from ..engine.candidate_lamps import default_drop, offered_kinds
 from ..engine.light_colour import blackbody_rec709
 from ..engine.plausibility import implausible_mark, implausible_notes
@@ -193,7 +194,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                       "final_index": red.final_index},
         "light_colour": light_colour_record(problem, options),
         "curve": [{"n_lights": p.n_lights, "error": p.error, "relative_error": p.relative_error,
-                   "n_negative": p.n_negative, "power": _power(problem, p),
+                   "n_negative": p.n_negative, "power": total_power(p.exitance, problem.light_watts, p.lights),
                    "bound_relative_error": None if point_bounds is None else float(point_bounds[i] / norm)}
                   for i, p in enumerate(red.curve)],
         "certificate": None if bounds is None else {
@@ -203,7 +204,7 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
             "by_lights": [{"n_lights": int(k), "bound_relative_error": float(r), "exact": bool(x)}
                           for k, r, x in zip(bounds.k, bounds.bound / norm, bounds.exact)]},
         "final": {"n_lights": final.n_lights, "error": final.error, "relative_error": final.relative_error,
-                  "n_negative": final.n_negative, "power": _power(problem, final),
+                  "n_negative": final.n_negative, "power": total_power(final.exitance, problem.light_watts, final.lights),
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": final_lights},
         "fixed_light": fixed_light,
@@ -389,11 +390,6 @@ def kinds_text(report) -> str:
     for li in report["final"]["lights"]:
         chosen[li["kind"]] = chosen.get(li["kind"], 0) + 1
     return f"offered {', '.join(offered) or 'none'}; chose {', '.join(f'{n} {k}' for k, n in chosen.items()) or 'none'}"
-
-
-def _power(problem, point) -> float:
-    """Total power (W) of a configuration: sum over its lights and channels of exitance x area."""
-    return float(np.sum(point.exitance.sum(axis=1) * problem.light_watts[point.lights]))
 
 
 def _nan_to_none(rows):
