@@ -385,3 +385,51 @@ def test_live_follows_undo_by_name(addon):
     _run(s, lambda: s.paused is not None and "replaced" in s.paused, timeout=30, pause=True)
     assert s.paused == "object 'wall_east' replaced: Solve & Reduce prepares again", s.paused
     live.stop(scene.name)
+
+
+def test_the_sidebar_keeps_as_many_status_rows_whatever_live_says(addon, monkeypatch):
+    """Live's status grows from "starting" to an update's times and a pause's reason between two
+    redraws; a panel that grew between redraws drew its last line under the next sub-panel's header
+    (the window test's screenshot). The sidebar draws STATUS_ROWS rows whatever it says, and every
+    part of a short status is on them."""
+    from types import SimpleNamespace
+
+    from relight_addon.blender import live
+    from relight_addon.blender.ui import panels
+
+    class Column:
+        def __init__(self):
+            self.labels = []
+
+        def label(self, text=""):
+            self.labels.append(text)
+
+    class Layout:
+        def __init__(self):
+            self.columns = []
+
+        def row(self, **kw):
+            return SimpleNamespace(operator=lambda *a, **k: None)
+
+        def column(self, **kw):
+            self.columns.append(Column())
+            return self.columns[-1]
+
+    base = dict(paused=None, status="starting", last_update="", last_seconds=(0.0, 0.0), updates=0, refined=0)
+    sessions = [SimpleNamespace(**base),
+                SimpleNamespace(**{**base, "status": "improving the answer (full search)", "last_update": "14:06:03",
+                                   "last_seconds": (4.7, 0.05), "updates": 12, "refined": 3}),
+                SimpleNamespace(**{**base, "paused": "object 'ceiling' hidden from renders: Solve & Reduce "
+                                                     "prepares again " + "and more words " * 20})]
+    for s in sessions:
+        monkeypatch.setattr(live, "session", lambda scene, s=s: s)
+        layout = Layout()
+        panels.draw_live(layout, bpy.context)
+        (col,) = layout.columns
+        assert len(col.labels) == panels.STATUS_ROWS, col.labels
+        assert all(len(t) <= 44 for t in col.labels), col.labels
+        if s.refined:  # the whole status, each part from a row of its own
+            assert col.labels[0].startswith("Live: improving") and "3 improved later" in " ".join(col.labels)
+            assert col.labels[1].startswith("updated 14:06:03"), col.labels
+        if s.paused:
+            assert col.labels[-1].endswith("..."), col.labels

@@ -54,7 +54,7 @@ from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import REFINE_STEPS, scene_lamps_differ
 
-__all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "status_text"]
+__all__ = ["LiveSession", "SESSIONS", "TICK", "session", "start", "stop", "status_parts", "status_text"]
 
 #: scene name -> LiveSession (at most one per scene)
 SESSIONS = {}
@@ -570,13 +570,20 @@ def _on_depsgraph(scene, depsgraph=None):
         s.changed.add(f"{kind} {idb.name!r} changed" if kind != "the World" else "the World changed")
 
 
-def status_text(s: LiveSession) -> str:
-    """The sidebar's line: what Live is doing, and the time and cost of the last update."""
+def status_parts(s: LiveSession) -> list[str]:
+    """What Live is doing, then the time and cost of the last update: the sidebar's lines, each
+    wrapped on its own (panels.draw_live), and, joined, the status bar's and the report's line."""
     if s.paused:
-        return f"Live paused: {s.paused}"
-    last = ""
+        return [f"Live paused: {s.paused}"]
+    parts = [f"Live: {s.status}"]
     if s.last_update:
         solve, write = s.last_seconds
         better = f", {s.refined} improved later" if s.refined else ""
-        last = f"; updated {s.last_update} ({solve:.2f} s solve, {write:.2f} s write, {s.updates} update(s){better})"
-    return f"Live: {s.status}{last}"
+        parts.append(f"updated {s.last_update} ({solve:.2f} s solve, {write:.2f} s write, "
+                     f"{s.updates} update(s){better})")
+    return parts
+
+
+def status_text(s: LiveSession) -> str:
+    """The status in one line (the status bar's, an operator's report, the tests')."""
+    return "; ".join(status_parts(s))

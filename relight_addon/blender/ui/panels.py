@@ -377,6 +377,10 @@ class RELIGHT_PT_solve(RELIGHT_PT_base, bpy.types.Panel):
         draw_live(layout, context)
 
 
+#: the rows of Live's status in the sidebar (blender/live.status_parts, wrapped)
+STATUS_ROWS = 4
+
+
 def draw_live(layout, context):
     """The Live toggle and, while it is on, what it is doing (blender/live.py)."""
     from .. import live
@@ -386,8 +390,13 @@ def draw_live(layout, context):
     row.operator("relight.live", text="Live: On (ESC: off)" if s else "Live", icon="PAUSE" if s else "PLAY",
                  depress=s is not None)
     if s is not None:
+        # Always STATUS_ROWS rows while Live is on: the panel keeps its height as the status
+        # changes (a panel that grows between redraws drew its lines under the next header).
+        lines = [ln for part in live.status_parts(s) for ln in textwrap.wrap(part, 44)]
+        if len(lines) > STATUS_ROWS:
+            lines = lines[:STATUS_ROWS - 1] + [lines[STATUS_ROWS - 1][:41] + "..."]
         col = layout.column(align=True)
-        for line in textwrap.wrap(live.status_text(s), 44)[:4]:
+        for line in lines + [""] * (STATUS_ROWS - len(lines)):
             col.label(text=line)
 
 
