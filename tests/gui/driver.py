@@ -485,29 +485,34 @@ def live_mode(scene, settings, floor):
     rgb = tuple(settings.paint_color)
     state = mods()["blender.preparation"].PREPARED
     # on the stairs (faces the adaptive model keeps whole: the live re-solve), on the floor (faces it
-    # clustered: solved in full in the worker), then Fill Selected on the stairs
-    for i, (ob, faces) in enumerate([(stairs, steps[0]), (floor, groups[0]), (stairs, steps[1])]):
+    # clustered), then Fill Selected on the stairs and, last, Unpaint of the same faces (an erase)
+    strokes = [(stairs, steps[0], "paint"), (floor, groups[0], "paint"), (stairs, steps[1], "fill"),
+               (stairs, steps[1], "unpaint")]
+    for i, (ob, faces, action) in enumerate(strokes):
         n0, rid0, targets0 = s.updates, results.result_id(scene), counts()[0]
         t_stroke = time.monotonic()
-        if i < 2:  # in Vertex Paint: what a brush stroke writes
+        if action == "paint":  # in Vertex Paint: what a brush stroke writes
             attr_stroke(ob, faces, rgb)
             kind = "vertex paint layer"
-        else:  # Fill Selected in Edit Mode, its button clicked
-            with override():
-                bpy.ops.object.mode_set(mode="OBJECT")
-            set_active(ob)
-            yield from edit_faces(ob, faces)
+        else:  # Fill Selected / Unpaint in Edit Mode, its button clicked
+            if bpy.context.mode != "EDIT_MESH" or bpy.context.object is not ob:
+                with override():
+                    bpy.ops.object.mode_set(mode="OBJECT")
+                set_active(ob)
+                yield from edit_faces(ob, faces)
             found = yield from probe_sidebar()
             t_stroke = time.monotonic()  # (the pauses from the click on: the probe is the driver's own)
-            yield from press(found, "bpy.ops.relight.fill_targets(unpaint=False)", settle=0.5)
-            kind = "Fill Selected"
+            unpaint = action == "unpaint"
+            yield from press(found, f"bpy.ops.relight.fill_targets(unpaint={unpaint})", settle=0.5)
+            kind = "Unpaint" if unpaint else "Fill Selected"
         t_up = time.monotonic()
         while s.updates == n0 and not s.paused and time.monotonic() - t_up < 120:
             yield 0.1
         t_done = time.monotonic()
         waits.append(round(t_done - t_up, 2))
         pauses.append(round(max_gap(t_stroke, t_done), 2))
-        changed.append(s.updates > n0 and results.result_id(scene) != rid0 and counts()[0] > targets0)
+        changed.append(s.updates > n0 and results.result_id(scene) != rid0
+                       and (counts()[0] < targets0 if action == "unpaint" else counts()[0] > targets0))
         st = state.get(scene.name)
         how.append(f"{ob.name}, {kind}: {'live re-solve' if st is not None and st.reason is None else 'full'}")
         log("live stroke", i, live.status_text(s), "targets", targets0, "->", counts()[0])
