@@ -73,6 +73,16 @@ class _Tokens:
             lines.append(line)
         return np.array(vals), lines
 
+    def whole_line(self, n, what) -> None:
+        """Check that the next n values are one line of exactly n (LM-63's two header lines)."""
+        if self.i >= len(self.items):
+            raise PhotometryError(f"{self.name}: the file ends at line {self.last_line} before {what}: truncated")
+        line = self.items[self.i][0]
+        k = sum(1 for ln, _ in self.items if ln == line)
+        if k != n:
+            raise PhotometryError(f"{self.name}: line {line}: {k} value(s) where LM-63 has {n} ({what}): a missing "
+                                  "or extra field")
+
     def rest(self) -> int:
         return len(self.items) - self.i
 
@@ -129,6 +139,8 @@ def parse_lm63(text, name="IES file") -> Photometry:
         notes.append("its tilt data (TILT=INCLUDE) is not applied, as Blender's IES node does not apply it")
     elif tilt.upper() != "NONE":
         notes.append(f"its tilt file ({tilt!r}) is not applied, as Blender's IES node does not apply it")
+    tok.whole_line(10, "lamps, lumens per lamp, candela multiplier, angles, photometric type, units, width, "
+                       "length, height")
     n_lamps, _ = tok.integer("the number of lamps", 1)
     lumens, _ = tok.number("the lumens per lamp")
     multiplier, mline = tok.number("the candela multiplier")
@@ -146,6 +158,7 @@ def parse_lm63(text, name="IES file") -> Photometry:
     if units not in (1, 2):
         raise PhotometryError(f"{name}: line {uline}: units type {units} is neither feet (1) nor metres (2)")
     size = tuple(tok.number(w)[0] * (FEET if units == 1 else 1.0) for w in ("the width", "the length", "the height"))
+    tok.whole_line(3, "ballast factor, ballast-lamp photometric factor, input watts")
     ballast, bline = tok.number("the ballast factor")
     lamp_factor, lline = tok.number("the ballast-lamp photometric factor")
     for x, line, what in ((ballast, bline, "ballast factor"), (lamp_factor, lline, "ballast-lamp photometric factor")):
@@ -167,6 +180,9 @@ def parse_lm63(text, name="IES file") -> Photometry:
         if len(bad):
             raise PhotometryError(f"{name}: line {rlines[bad[0]]}: a negative candela value ({row[bad[0]]:g})")
         cd[i] = row
+    if ptype == TYPE_C and abs(h[0] - 90.0) < 1e-4:
+        notes.append(f"its horizontal angles {h[0]:g}..{h[-1]:g} are turned by 90 degrees (its C90 plane along the "
+                     "lamp's C0), as Blender's IES node turns them")
     if tok.rest():
         notes.append(f"{tok.rest()} value(s) after its candela table are not read")
     ph = Photometry(ptype, v, h, cd * multiplier * ballast * lamp_factor,
