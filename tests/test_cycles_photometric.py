@@ -98,8 +98,8 @@ def _fixture_room(path, tmp_path):
     remove_lamps()
     ies_file = tmp_path / "downlight.ies"
     ies_file.write_text(pf.lm63_text("downlight"))
-    pf.ies_point_lamp(bpy, "downlight", (1.2, 1.5, 2.4), (0.0, 0.0, 0.0), None, 60.0, path=ies_file, radius=0.05)
-    pf.ies_point_lamp(bpy, "batwing", (3.0, 1.2, 2.4), (0.0, 0.0, 0.4), pf.lm63_text("batwing"), 50.0,
+    pf.ies_point_lamp(bpy, "downlight", (1.2, 1.5, 2.4), (0.0, 0.0, 0.0), None, 7.5, path=ies_file, radius=0.05)
+    pf.ies_point_lamp(bpy, "batwing", (3.0, 1.2, 2.4), (0.0, 0.0, 0.4), pf.lm63_text("batwing"), 6.25,
                       color=(1.0, 0.9, 0.75), radius=0.05)
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
@@ -130,5 +130,5 @@ def test_solve_counts_the_fixtures_closed_loop(tmp_path):
     report, e, signed, share, summary = solve_closed_loop(
         blend, tmp_path, [j * n + i for j in range(1, 3) for i in range(0, 3)], (2.2, 2.0, 1.8))
     assert {r["name"] for r in report["fixed_light"]} >= {"downlight", "batwing"}, report["fixed_light"]
-    assert 0.1 < share < 0.95, summary
+    assert 0.3 < share < 0.95, summary  # a large share of the painted light, not all of it
     assert e.mean() < 0.02, summary
