@@ -45,7 +45,36 @@ FIXTURES = {
 
 
 def lm63_text(name) -> str:
+    if name in TEXTS:
+        return TEXTS[name]()
     return write_lm63(FIXTURES[name](), {"LUMINAIRE": name})
+
+
+def _tilted_downlight() -> str:
+    """The downlight with what Cycles ignores changed: a TILT=INCLUDE block halving every angle's
+    intensity, another lumens field, a luminous opening of 0.3 x 0.3 x 0.1 m."""
+    text = write_lm63(FIXTURES["downlight"](), {"LUMINAIRE": "tilted"})
+    text = text.replace("TILT=NONE\n1 -1 1", "TILT=INCLUDE\n1\n3\n0 45 90\n0.5 0.5 0.5\n1 12345 1")
+    return text.replace(" 1 2 0 0 0\n", " 1 2 0.3 0.3 0.1\n")
+
+
+def type_b_cd(hb, vb):
+    return 500.0 * (0.3 + 0.7 * np.cos(np.radians(hb)) ** 2) * (1.0 + 0.5 * np.sin(np.radians(vb)))
+
+
+def _type_b() -> str:
+    """A type B file (horizontal 0..90, mirrored by Cycles; vertical -90..90)."""
+    vb = np.arange(-90.0, 90.1, 10.0)
+    hb = np.arange(0.0, 90.1, 10.0)
+    lines = ["IESNA:LM-63-2002", "[TEST] type B", "TILT=NONE",
+             f"1 -1 1 {len(vb)} {len(hb)} 2 2 0 0 0", "1 1 10",
+             " ".join(f"{x:g}" for x in vb), " ".join(f"{x:g}" for x in hb)]
+    lines += [" ".join(f"{type_b_cd(h, v):.6g}" for v in vb) for h in hb]
+    return "\n".join(lines) + "\n"
+
+
+#: LM-63 texts written by hand (what the writer does not write)
+TEXTS = {"tilted downlight": _tilted_downlight, "type B": _type_b}
 
 
 def ies_point_lamp(bpy, name, location, rotation, text, energy, strength=1.0, color=(1.0, 1.0, 1.0), path=None,

@@ -28,6 +28,10 @@ CASES = {
     "batwing": ("batwing", (0.0, 0.1, 1.2), (0.0, 0.0, 0.3), 30.0, 1.0, (1.0, 1.0, 1.0), 0.0),
     "asymmetric turned": ("asymmetric", (0.2, 0.0, 1.3), (0.35, -0.2, 0.9), 25.0, 1.5, (1.0, 0.8, 0.6), 0.0),
     "asymmetric soft": ("asymmetric", (-0.1, 0.2, 1.3), (0.0, 0.0, 2.2), 25.0, 1.0, (1.0, 1.0, 1.0), 0.15),
+    # what Cycles ignores (the tilt block, the lumens field, the opening's size): predicted without them
+    "tilted downlight": ("tilted downlight", (0.1, -0.2, 1.4), (0.0, 0.0, 0.0), 40.0, 1.0, (1.0, 1.0, 1.0), 0.0),
+    # type B, transposed as Cycles does (distribution.py)
+    "type B": ("type B", (0.0, 0.0, 1.3), (0.0, 0.0, 0.5), 30.0, 1.0, (1.0, 1.0, 1.0), 0.0),
 }
 
 
