@@ -78,11 +78,13 @@ TEXTS = {"tilted downlight": _tilted_downlight, "type B": _type_b}
 
 
 def ies_point_lamp(bpy, name, location, rotation, text, energy, strength=1.0, color=(1.0, 1.0, 1.0), path=None,
-                   radius=0.0):
-    """A Point lamp whose node tree is an IES Texture node (internal text, or the file ``path``)
-    feeding its Emission's Strength."""
-    ld = bpy.data.lights.new(name, "POINT")
+                   radius=0.0, light_type="POINT", **settings):
+    """A Point lamp (or ``light_type``, with ``settings``) whose node tree is an IES Texture node
+    (internal text, or the file ``path``) feeding its Emission's Strength."""
+    ld = bpy.data.lights.new(name, light_type)
     ld.energy, ld.shadow_soft_size = energy, radius
+    for k, v in settings.items():
+        setattr(ld, k, v)
     ld.use_nodes = True
     nt = ld.node_tree
     em = next(n for n in nt.nodes if n.type == "EMISSION")

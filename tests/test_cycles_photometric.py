@@ -32,6 +32,9 @@ CASES = {
     "tilted downlight": ("tilted downlight", (0.1, -0.2, 1.4), (0.0, 0.0, 0.0), 40.0, 1.0, (1.0, 1.0, 1.0), 0.0),
     # type B, transposed as Cycles does (distribution.py)
     "type B": ("type B", (0.0, 0.0, 1.3), (0.0, 0.0, 0.5), 30.0, 1.0, (1.0, 1.0, 1.0), 0.0),
+    # a Spot lamp: its cone x the profile (engine/lights/photometric_spot.py)
+    "spot asymmetric": ("asymmetric", (0.1, 0.1, 1.4), (0.3, 0.1, 0.6), 40.0, 1.0, (1.0, 1.0, 1.0), 0.0,
+                        dict(light_type="SPOT", spot_size=1.4, spot_blend=0.4)),
 }
 
 
@@ -54,15 +57,18 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
     from relight_addon.blender import export
     from relight_addon.engine.lamps import lamp_irradiance
     from relight_addon.engine.lights.photometric import PHOTOMETRIC
+    from relight_addon.engine.lights.photometric_spot import PHOTOMETRIC_SPOT
     from relight_addon.engine.scene import mesh_patches
 
-    fixture, loc, rot, energy, strength, colour, radius = CASES[name]
+    fixture, loc, rot, energy, strength, colour, radius, *spot = CASES[name]
+    settings = spot[0] if spot else {}
     try:
         floor = _floor_with_blocker()
-        pf.ies_point_lamp(bpy, "fixture", loc, rot, pf.lm63_text(fixture), energy, strength, colour, radius=radius)
+        pf.ies_point_lamp(bpy, "fixture", loc, rot, pf.lm63_text(fixture), energy, strength, colour, radius=radius,
+                          **settings)
         exp = export.export_scene()
         lamps = exp.faces.lamps
-        assert [lamp.kind for lamp in lamps] == [PHOTOMETRIC]
+        assert [lamp.kind for lamp in lamps] == [PHOTOMETRIC_SPOT if spot else PHOTOMETRIC]
         assert not [w for w in exp.faces.warnings if "fixture" in w and "not modelled" in w], exp.faces.warnings
         patches = mesh_patches(exp.faces, 10.0)
         H = lamp_irradiance(patches, lamps, seed=0)[:, 0, :]

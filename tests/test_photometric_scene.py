@@ -47,15 +47,29 @@ def test_an_ies_point_lamp_is_read_as_a_photometric_lamp_with_its_gain():
     assert not [w for w in exp.faces.warnings if "fixture" in w], exp.faces.warnings
 
 
-@pytest.mark.parametrize("setup", ["spot", "math node"])
+def test_an_ies_spot_lamp_is_read_as_a_photometric_spot():
+    from relight_addon.engine.lights.photometric_spot import PHOTOMETRIC_SPOT
+    try:
+        _floor()
+        pf.ies_point_lamp(bpy, "fixture", (0, 0, 1.0), (0, 0, 0), pf.lm63_text("batwing"), 20.0, light_type="SPOT",
+                          spot_size=1.2, spot_blend=0.3)
+        exp = _export()
+    finally:
+        cr.reset_blender()
+    (lamp,) = exp.faces.lamps
+    assert lamp.kind is PHOTOMETRIC_SPOT and lamp.profile is not None
+    assert lamp.spot_size == pytest.approx(1.2) and lamp.spot_blend == pytest.approx(0.3)
+
+
+@pytest.mark.parametrize("setup", ["area", "math node"])
 def test_ies_trees_not_reduced_stay_named(setup):
-    """An IES node on a Spot lamp, or a Math node between the IES node and the Emission: read as a
+    """An IES node on an Area lamp, or a Math node between the IES node and the Emission: read as a
     plain lamp, named in a warning as before."""
     try:
         _floor()
         ob = pf.ies_point_lamp(bpy, "fixture", (0, 0, 1.0), (0, 0, 0), pf.lm63_text("downlight"), 20.0)
-        if setup == "spot":
-            ob.data.type = "SPOT"
+        if setup == "area":
+            ob.data.type = "AREA"
         else:
             nt = ob.data.node_tree
             ies = next(n for n in nt.nodes if n.type == "TEX_IES")

@@ -1,12 +1,12 @@
 """A Light's IES Texture node read as Cycles renders it (bpy): the measured distribution of a
 scene's luminaire (engine/photometry/, engine/lights/photometric.py).
 
-Read: a Point lamp whose node tree is an IES Texture node (its file from disk, relative paths
+Read: a Point or Spot lamp whose node tree is an IES Texture node (its file from disk, relative paths
 against the .blend, or its internal text) whose Fac feeds an Emission's Strength, the Emission
 into the Light Output; the IES node's Vector unlinked (the direction the light leaves, in the
 lamp's frame, as Cycles takes it by default). Cycles' emission is then colour x Power x the
 lamp's gain x the Emission's Color x the IES node's Strength x the profile's value, so those two
-(unlinked) are a factor of the lamp's gain. Any other tree with an IES node (a Spot or Area lamp's,
+(unlinked) are a factor of the lamp's gain. Any other tree with an IES node (an Area lamp's,
 a Math node between, a linked Strength) is not reduced: ``photometric`` returns None and the lamp
 is named as today (its light nodes not modelled). A missing or unreadable file is refused, named.
 """
@@ -17,11 +17,13 @@ from dataclasses import dataclass
 import bpy
 import numpy as np
 
-from ..engine.lights.photometric import PHOTOMETRIC
+from ..engine.lights.photometric import measured_kind
 from ..engine.photometry import CyclesProfile, PhotometryError, parse_lm63
 from ..engine.scene import SceneError
 
 __all__ = ["IESLight", "photometric", "has_ies"]
+
+#: (an IES node on a Point lamp: engine/lights/photometric.py; on a Spot lamp: photometric_spot.py)
 
 #: the node types of a tree read as a photometric lamp
 IES, EMISSION, OUTPUT = "TEX_IES", "EMISSION", "OUTPUT_LIGHT"
@@ -29,9 +31,10 @@ IES, EMISSION, OUTPUT = "TEX_IES", "EMISSION", "OUTPUT_LIGHT"
 
 @dataclass
 class IESLight:
-    """A Light's IES node read: its Cycles profile, the factor (3,) it adds to the lamp's gain (the
+    """A Light's IES node read: its lamp kind, its Cycles profile, the factor (3,) it adds to the lamp's gain (the
     Emission's Color x the node's Strength), notes on what is not modelled, the file's name."""
 
+    kind: object  # its lamp kind (engine.lights.photometric.measured_kind)
     profile: CyclesProfile
     gain: np.ndarray
     notes: list
@@ -63,7 +66,8 @@ def _text(node, lamp_name) -> tuple:
 def photometric(ld, lamp_name) -> IESLight | None:
     """The IES light of the Light ``ld`` when its tree is the one this module reads (its docstring),
     else None; SceneError when its file is missing or is not a photometric file Relight reads."""
-    if ld.type != PHOTOMETRIC.blender_type or not has_ies(ld):
+    kind = measured_kind(ld.type)
+    if kind is None or not has_ies(ld):
         return None
     nodes = list(ld.node_tree.nodes)
     if sorted(n.type for n in nodes) != sorted([IES, EMISSION, OUTPUT]):
@@ -88,5 +92,5 @@ def photometric(ld, lamp_name) -> IESLight | None:
     if not (np.all(np.isfinite(colour)) and np.isfinite(strength)):
         raise SceneError(f"lamp {lamp_name!r}: its Emission Color or IES Strength is NaN or infinite: give them "
                          "finite values")
-    return IESLight(CyclesProfile.of(ph), colour * strength, [f"its IES file {source!r}: {n}" for n in ph.notes],
+    return IESLight(kind, CyclesProfile.of(ph), colour * strength, [f"its IES file {source!r}: {n}" for n in ph.notes],
                     source)

@@ -6,9 +6,9 @@ Read: Point (power, colour, radius = soft size), Spot (and its cone: size and bl
 which Cycles takes as it is: ``light->set_spread(b_area_light.spread())``,
 intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (visible in the
 view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
-(Cast Shadow); a Point lamp whose node tree is an IES Texture node feeding its Emission
+(Cast Shadow); a Point or Spot lamp whose node tree is an IES Texture node feeding its Emission
 (blender/ies_nodes.py: a photometric lamp). Named in a warning, and not modelled: other light node
-trees (an IES node on a Spot or Area lamp among them), light and shadow
+trees (an IES node on an Area lamp among them), light and shadow
 linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
 exact where the whole sphere is seen) and instanced lamps. As Cycles renders them (issue 35): a
 lamp of negative Power is negative light (named; fixed light), an area lamp of size 0 gives none
@@ -125,7 +125,7 @@ def _read_lamp(ob, ld, was, warnings, dark):
         dark.append(f"{name!r} (scaled to zero)")
         return None
     ies = None if _default_light_nodes(ld) else ies_nodes.photometric(ld, name)
-    kind = lamp_kind(ld) if ies is None else ies_nodes.PHOTOMETRIC
+    kind = lamp_kind(ld) if ies is None else ies.kind
     no_light = kind.blender_dark(ld, M)
     if no_light is not None:
         warnings.append(f"lamp {name!r} {no_light[0]}")

@@ -23,9 +23,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..registry import LIGHT_KINDS
+from .kind import lamp_kinds
 from .point_source import PointSourceKind
 
-__all__ = ["PHOTOMETRIC", "PhotometricKind", "local_directions"]
+__all__ = ["PHOTOMETRIC", "PhotometricKind", "local_directions", "measured_kind", "check_profile"]
 
 
 def local_directions(lamp, w_out) -> np.ndarray:
@@ -33,16 +34,29 @@ def local_directions(lamp, w_out) -> np.ndarray:
     return np.column_stack([w_out @ lamp.axis_u, w_out @ lamp.axis_v, -(w_out @ lamp.direction)])
 
 
+def measured_kind(blender_type):
+    """The registered lamp kind of a Blender Light type with an IES Texture node (a kind whose
+    ``measured`` is True: this one, photometric_spot.py's), None when there is none."""
+    return next((k for k in lamp_kinds() if getattr(k, "measured", False) and k.blender_type == blender_type), None)
+
+
+def check_profile(lamp) -> None:
+    """ValueError when ``lamp`` has no distribution (Lamp.profile)."""
+    if not callable(getattr(lamp.profile, "along", None)):
+        raise ValueError(f"lamp {lamp.name!r}: a photometric lamp needs its distribution "
+                         "(Lamp.profile: an engine.photometry.CyclesProfile)")
+
+
 @dataclass(frozen=True)
 class PhotometricKind(PointSourceKind):
     """Blender's Point light with an IES Texture node (see the module docstring)."""
 
     blender_type = "POINT"
+    #: a lamp kind of a Light with an IES Texture node (measured_kind)
+    measured = True
 
     def check(self, lamp) -> None:
-        if not callable(getattr(lamp.profile, "along", None)):
-            raise ValueError(f"lamp {lamp.name!r}: a photometric lamp needs its distribution "
-                             "(Lamp.profile: an engine.photometry.CyclesProfile)")
+        check_profile(lamp)
 
     def irradiance_at(self, lamp, y, n, u, far) -> tuple:
         e, w, t, ref = super().irradiance_at(lamp, y, n, u, far)
