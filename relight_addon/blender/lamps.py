@@ -6,7 +6,9 @@ Read: Point (power, colour, radius = soft size), Spot (and its cone: size and bl
 which Cycles takes as it is: ``light->set_spread(b_area_light.spread())``,
 intern/cycles/blender/light.cpp) and Sun (strength, angle) lamps that render (visible in the
 view layer, not disabled for rendering, diffuse visibility on), in world space; their shadows
-(Cast Shadow). Named in a warning, and not modelled: light node trees, light and shadow
+(Cast Shadow); a Point or Spot lamp whose node tree is an IES Texture node feeding its Emission
+(blender/ies_nodes.py: a photometric lamp). Named in a warning, and not modelled: other light node
+trees (an IES node on an Area lamp among them), light and shadow
 linking, a point or spot lamp with soft falloff off (modelled as a point of the same intensity:
 exact where the whole sphere is seen) and instanced lamps. As Cycles renders them (issue 35): a
 lamp of negative Power is negative light (named; fixed light), an area lamp of size 0 gives none
@@ -31,7 +33,7 @@ import numpy as np
 from ..engine.lamps import Lamp
 from ..engine.registry import LIGHT_KINDS
 from ..engine.scene import SceneError
-from . import lamp_state
+from . import ies_nodes, lamp_state
 
 #: W: a lamp of more power is refused (an infinite Power, stored as 3.4e38)
 MAX_LAMP_POWER = 1e15
@@ -122,13 +124,14 @@ def _read_lamp(ob, ld, was, warnings, dark):
         warnings.append(f"lamp {name!r} is scaled to zero: left out")
         dark.append(f"{name!r} (scaled to zero)")
         return None
-    kind = lamp_kind(ld)
+    ies = None if _default_light_nodes(ld) else ies_nodes.photometric(ld, name)
+    kind = lamp_kind(ld) if ies is None else ies.kind
     no_light = kind.blender_dark(ld, M)
     if no_light is not None:
         warnings.append(f"lamp {name!r} {no_light[0]}")
         dark.append(f"{name!r} ({no_light[1]})")
         return None
-    gain = cycles_gain(ld, M)
+    gain = cycles_gain(ld, M) if ies is None else cycles_gain(ld, M) * ies.gain
     power = color * energy * gain  # what Cycles emits
     if not np.all(np.isfinite(power)) or float(np.max(np.abs(power))) > MAX_LAMP_POWER:
         raise SceneError(f"lamp {name!r} has a power of {energy:.3g} W and colour {tuple(color)}: a NaN or "
@@ -146,7 +149,10 @@ def _read_lamp(ob, ld, was, warnings, dark):
               cast_shadow=bool(_cycles(ld, "cast_shadow", getattr(ld, "use_shadow", True))))
     own, notes = kind.blender_settings(ld, M)
     kw.update(own)
-    if not _default_light_nodes(ld):
+    if ies is not None:  # a measured distribution (blender/ies_nodes.py)
+        kw["profile"] = ies.profile
+        notes.extend(ies.notes)
+    elif not _default_light_nodes(ld):
         notes.append("its light nodes (textures, IES, a changed Emission) are not modelled: read as a plain lamp")
     if _light_linking(ob):
         notes.append("light or shadow linking is not modelled: it lights and is shadowed by every object")

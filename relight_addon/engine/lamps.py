@@ -105,6 +105,8 @@ class Lamp:
     angle: float = 0.0
     cast_shadow: bool = True
     notes: list = field(default_factory=list)
+    #: a photometric lamp's distribution (engine.photometry.CyclesProfile: engine/lights/photometric.py)
+    profile: object = None
     #: Blender's Power (W; a sun's Strength, W/m^2) and colour, and what Cycles multiplies their
     #: product by (3,): power = colour x energy x gain (blender/lamps.py, ``cycles_gain``: the
     #: Light's Exposure, Temperature and Normalize; default 1). Defaults: gain 1, energy the

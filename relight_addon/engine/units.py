@@ -18,7 +18,7 @@ import numpy as np
 
 __all__ = ["TINY", "MAX_REFLECTANCE", "MIN_REFLECTANCE_LUX", "LUMENS_PER_WATT", "REC709_LUMINANCE", "exitance_from_radiance",
            "radiance_from_exitance", "illuminance_lux", "irradiance_from_lux", "luminous_flux_lm", "luminance_cd",
-           "luminance_weighted"]
+           "luminance_weighted", "CYCLES_IES_LUMENS_PER_WATT", "CYCLES_IES_CANDELA_FACTOR", "cycles_ies_candela"]
 
 #: a floor under a divisor (a norm, a length, a sum of weights), so that a zero stays zero instead
 #: of dividing by zero: ``x / max(d, TINY)`` is ``x / d`` for any d a scene holds, and 0 where
@@ -74,3 +74,24 @@ def luminance_cd(radiance_rgb) -> np.ndarray:
 def luminance_weighted(rgb) -> np.ndarray:
     """The Rec.709 luminance-weighted mean of RGB values (..., 3) (the weights sum to 1)."""
     return np.asarray(rgb, dtype=np.float64) @ np.asarray(REC709_LUMINANCE)
+
+
+#: the luminous efficacy Cycles assumes for an IES profile's candela (intern/cycles/util/ies.cpp,
+#: ``IESFile::parse``: D65's 177.83 lm/W), not LUMENS_PER_WATT: the spectrum of a file is unknown
+CYCLES_IES_LUMENS_PER_WATT = 177.83
+
+#: what Cycles multiplies an IES file's candela by (with its multipliers) to get the IES Texture
+#: node's value: 4 pi / 177.83 (its literal 0.0706650768394). A Point lamp of Power P (colour x
+#: gain c) whose emission Strength is that value x the node's Strength S has the radiant intensity
+#: I = c P S cd(direction) / 177.83 W/sr per channel (P / (4 pi) of an isotropic Point lamp, times
+#: the node's value); Relight reads it in candela with 683 lm/W (``cycles_ies_candela``)
+CYCLES_IES_CANDELA_FACTOR = 4.0 * math.pi / CYCLES_IES_LUMENS_PER_WATT
+
+
+def cycles_ies_candela(power_rgb, candela) -> np.ndarray:
+    """The luminous intensity (cd, Relight's 683 lm/W and Rec.709 weights) that Cycles renders from
+    an IES profile of ``candela`` (as the file gives it, multipliers applied) on a Point lamp emitting
+    ``power_rgb`` (3,) W per channel (colour x Power x its gain x the node's Strength):
+    683 / 177.83 x luminance(power) x candela, 3.84 x the file's candela at 1 W of white."""
+    return LUMENS_PER_WATT * luminance_weighted(power_rgb) * np.asarray(candela, dtype=np.float64) / \
+        CYCLES_IES_LUMENS_PER_WATT

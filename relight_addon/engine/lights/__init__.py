@@ -21,9 +21,11 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
   ``point.py`` (``point_source.py``: what point and spot lamps share; ``placed.py``: what the lamps
   a solve places share: candidate lights beside the cells, engine/candidate_lamps.py, written as
   real Blender lights). A lamp kind registered at run time (a LampKind subclass in LIGHT_KINDS)
-  is a lamp like these.
+  is a lamp like these. ``photometric.py``: a scene's Point lamp with an IES Texture node (a
+  measured distribution, engine/photometry/); ``photometric_spot.py``: a Spot lamp with one (its
+  cone x the distribution).
 """
-from . import cell, group, polygon, lamp, sun, spot, area, point  # noqa: F401  (registration order = the stored kind codes)
+from . import cell, group, polygon, lamp, sun, spot, area, point, photometric, photometric_spot  # noqa: F401  (registration order = the stored kind codes)
 from .kind import Capability, LampKind, LightKind, lamp_kind_of_type, lamp_kinds
 from .lightset import LightSet, append_lamps, candidate_mask, kind_code, lights_from_groups
 

@@ -157,7 +157,7 @@ def _spot_footprint(lamp, g, s, grid):
     e = np.zeros(n * m)
     got = np.flatnonzero(np.isfinite(t_hit))
     if len(got):
-        a = _spot_attenuation(lamp, w[got])
+        a = lamp.kind.attenuation(lamp, w[got])  # (its kind's: a photometric spot's cone x profile)
         t = t_hit[got]
         e[got] = a * t * t / (t * t + lamp.radius ** 2) / (4.0 * math.pi)
         if lamp.cast_shadow:
