@@ -190,6 +190,80 @@ def test_cie171_area_source_on_a_work_plane():
     assert np.max(np.abs(E - ref) / ref) < 0.01
 
 
+
+# ------------------------------------------------------------------ an internal obstruction (5.7)
+#: a black partition in the plane x = 0 standing on the receiving plane, up to PARTITION_TOP (below
+#: the source): it hides from a point (x_p, y_p) at PLANE_Z the source's far side beyond
+#: x_p (1 - 1/t), t = (PARTITION_TOP - PLANE_Z) / (SRC_Z - PLANE_Z), whatever y: the part it sees
+#: is still a rectangle, so the reference stays Howell B-3 (of the unobstructed part, as CIE 171 5.7)
+PARTITION_TOP = 2.0
+
+
+def _seen_part(x):
+    """The source's x-interval a point at x on the plane sees over the partition."""
+    t = (PARTITION_TOP - PLANE_Z) / (SRC_Z - PLANE_Z)
+    return (SRC_U[0], min(SRC_U[1], x * (1 - 1 / t))) if x < 0 else (max(SRC_U[0], x * (1 - 1 / t)), SRC_U[1])
+
+
+def _obstructed(x, y):
+    a, b = _seen_part(x)
+    return 0.0 if b <= a else cf.point_to_parallel_rectangle(a - x, b - x, SRC_V[0] - y, SRC_V[1] - y,
+                                                             SRC_Z - PLANE_Z)
+
+
+def _partition_scene(partition):
+    """The source, the half plane y in [0, 2] (8 x 4 patches; the other half is its mirror) and
+    ``partition`` (faces), black; the closed form per receiver patch (16 x 16 Gauss points: the
+    seen part's edge bends the integrand; 8 x 8 differ from 32 x 32 by 2.4e-4, 16 x 16 by 3e-5)."""
+    quads = _grid((-2.0, 2.0), (0.0, 2.0), 8, 4, lambda x, y: (x, y, PLANE_Z))
+    g, w = np.polynomial.legendre.leggauss(16)
+    ref = []
+    for q in quads:
+        lo, hi = q.min(axis=0), q.max(axis=0)
+        s, t = lo[0] + 0.5 * (g + 1) * (hi[0] - lo[0]), lo[1] + 0.5 * (g + 1) * (hi[1] - lo[1])
+        ref.append(M * sum(wi * wj * _obstructed(si, tj) for si, wi in zip(s, w) for tj, wj in zip(t, w)) / 4)
+    n, k = len(quads), len(partition)
+    faces = polygon_faceset([_source()] + quads + partition, reflectance=np.r_[0.0, np.full(n, RHO), np.zeros(k)],
+                            exitance=np.r_[M, np.zeros(n + k)])
+    return faces, np.array(ref)
+
+
+#: the partition: one face (occluding from both sides, as Cycles' does), facing -x
+PARTITION = np.array([(0, -2.5, PLANE_Z), (0, -2.5, PARTITION_TOP), (0, 2.5, PARTITION_TOP), (0, 2.5, PLANE_Z)],
+                     dtype=np.float64)
+
+
+def test_cie171_area_source_with_an_obstruction():
+    """CIE 171 5.7's point: an obstruction hides part of a diffuse source. The partition hides the
+    source's far side from each floor patch (fully from the patches next to it, partly further
+    out); through the forward job (2^19 rays a patch) every patch within 1 % of M x the
+    configuration factor of the part it sees. (The kernel transport the solve uses from lights to
+    targets is 3 % to 6 % off at most, 1 % on average, in the partly shadowed patches (seeds 0
+    and 1): its shadow rays sample the penumbra; measured, not asserted.)"""
+    faces, ref = _partition_scene([PARTITION])
+    _, res = run_radiosity(faces, JobOptions(patch_model="polygon", max_patch_size=10.0,
+                                             rays_per_patch=FORWARD_RAYS, threads=2))
+    E = res.face_radiosity[1:len(ref) + 1, 0] / RHO
+    rel = np.abs(E - ref) / ref
+    print(f"obstruction: {len(ref)} patches, mean {rel.mean():.5f} max {rel.max():.5f}")
+    assert rel.max() < 0.01
+    seen = np.array([_seen_part(x)[1] - _seen_part(x)[0] for x in (-1.75, -0.25)])
+    assert seen[1] < 0.65 * seen[0]  # the partition does hide 40 % of it next to it: not the unobstructed case
+
+
+@pytest.mark.xfail(strict=True, reason="two coincident back-to-back faces (a partition drawn as both its "
+                   "sides): the floor on the second face's side gets up to 20 % too little (not held)")
+def test_cie171_obstruction_of_two_coincident_faces():
+    """The same partition drawn as two coincident faces back to back (one facing -x, one +x), as
+    a model with both sides of a thin wall has them. Fails: the side the second face faces is 7 %
+    low on average, 20 % next to the partition (2^16 rays; listed the other way round, the other
+    side is), while one face or two faces 1 cm apart hold it (1.3 %, 1.8 % at 2^16 rays)."""
+    faces, ref = _partition_scene([PARTITION, PARTITION[::-1].copy()])
+    _, res = run_radiosity(faces, JobOptions(patch_model="polygon", max_patch_size=10.0,
+                                             rays_per_patch=1 << 16, threads=2))
+    E = res.face_radiosity[1:len(ref) + 1, 0] / RHO
+    assert np.max(np.abs(E - ref) / ref) < 0.02
+
 # ------------------------------------------------------------------ the empty room (5.8)
 ROOM = 4.0  # CIE 171 5.8: a 4 m x 4 m x 4 m room, S_T = 96 m^2
 PHI = 1000.0  # the source's flux (W per channel)
