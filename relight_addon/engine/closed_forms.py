@@ -3,7 +3,9 @@ Heat Transfer Configure Factors", cases C-11, C-14, C-41).
 
 Pure math, used as the independent reference for the ray-cast form factors.
 All three are the fraction of the power leaving surface 1 (a Lambertian
-emitter) that arrives at surface 2. ``*_polygons`` return the matching
+emitter) that arrives at surface 2. The point-to-rectangle configuration
+factors (Howell B-3, B-2) and the enclosure's mean interreflected illuminance
+are CIE 171:2006's analytical references (tests/test_cie171.py). ``*_polygons`` return the matching
 geometry (surface 1 then surface 2, as (n, 3) vertex arrays whose fan
 triangulation faces the other surface) for building test scenes with
 ``scene.polygon_faceset``; ``box_polygons`` is a closed box with
@@ -23,6 +25,11 @@ __all__ = [
     "perpendicular_rectangles_polygons",
     "coaxial_disks_polygons",
     "box_polygons",
+    "point_parallel_rectangle",
+    "point_perpendicular_rectangle",
+    "point_to_parallel_rectangle",
+    "point_to_perpendicular_rectangle",
+    "enclosure_interreflected_illuminance",
 ]
 
 
@@ -113,3 +120,62 @@ def box_polygons(size=(1.0, 1.0, 1.0)):
         q([[0, 0, 0], [0, 0, sz], [sx, 0, sz], [sx, 0, 0]], dtype=np.float64),  # y=0, +y
         q([[0, sy, 0], [sx, sy, 0], [sx, sy, sz], [0, sy, sz]], dtype=np.float64),  # y=sy, -y
     ]
+
+
+def point_parallel_rectangle(a: float, b: float, c: float) -> float:
+    """A planar point element facing a parallel rectangle a x b at distance c, its normal through
+    a corner of the rectangle (Howell B-3): the configuration factor, so that a Lambertian
+    rectangle of exitance M gives the point the illuminance M x this. Odd in ``a`` and in ``b``
+    (a signed corner, for superposition: ``point_to_parallel_rectangle``)."""
+    _positive(c=c)
+    if a == 0.0 or b == 0.0:
+        return 0.0
+    X, Y = abs(a) / c, abs(b) / c
+    sx, sy = math.sqrt(1 + X * X), math.sqrt(1 + Y * Y)
+    f = (X / sx * math.atan(Y / sx) + Y / sy * math.atan(X / sy)) / (2 * math.pi)
+    return math.copysign(1.0, a) * math.copysign(1.0, b) * f
+
+
+def point_perpendicular_rectangle(w: float, h: float, d: float) -> float:
+    """A planar point element and a rectangle in a plane perpendicular to the element's, the
+    rectangle's edge of length ``w`` lying in the element's plane at distance ``d`` from it, one end
+    of that edge at the foot of the perpendicular from the element, the other side ``h`` rising in
+    front of the element (Howell B-2): F = (atan(w/d) - d/s atan(w/s)) / (2 pi), s = sqrt(d^2 + h^2).
+    Odd in ``w`` (a signed corner, for superposition: ``point_to_perpendicular_rectangle``)."""
+    _positive(d=d)
+    if w == 0.0 or h <= 0.0:
+        return 0.0
+    s = math.hypot(d, h)
+    aw = abs(w)
+    return math.copysign(1.0, w) * (math.atan(aw / d) - d / s * math.atan(aw / s)) / (2 * math.pi)
+
+
+def point_to_parallel_rectangle(u0: float, u1: float, v0: float, v1: float, c: float) -> float:
+    """A point element facing a parallel rectangle [u0, u1] x [v0, v1] (coordinates in the
+    rectangle's plane, measured from the foot of the element's normal) at distance c: four
+    signed corners of ``point_parallel_rectangle``."""
+    f = point_parallel_rectangle
+    return f(u1, v1, c) - f(u0, v1, c) - f(u1, v0, c) + f(u0, v0, c)
+
+
+def point_to_perpendicular_rectangle(u0: float, u1: float, h0: float, h1: float, d: float) -> float:
+    """A point element and a rectangle in a perpendicular plane at distance d: [u0, u1] along the
+    line where the two planes meet (measured from the foot of the perpendicular from the element),
+    [h0, h1] (0 <= h0 < h1) the heights above the element's plane, on the side it faces:
+    ``point_perpendicular_rectangle`` by superposition."""
+    if not (0.0 <= h0 < h1):
+        raise ValueError(f"the rectangle must lie in front of the element: heights 0 <= h0 < h1, got {h0}, {h1}")
+    f = point_perpendicular_rectangle
+    return f(u1, h1, d) - f(u0, h1, d) - f(u1, h0, d) + f(u0, h0, d)
+
+
+def enclosure_interreflected_illuminance(flux: float, area: float, reflectance: float) -> float:
+    """A closed enclosure of total area ``area`` and one reflectance rho (< 1) everywhere, into
+    which a source sends ``flux``: its area-mean interreflected illuminance Phi rho / (A (1 - rho))
+    (flux conservation: every reflected lumen lands on the enclosure again; the integrating
+    sphere's formula, CIE 171:2006's reference of its empty room). Uniform over a sphere; over
+    any other enclosure this is the mean only."""
+    if not (0.0 <= reflectance < 1.0):
+        raise ValueError(f"reflectance must be in [0, 1), got {reflectance}")
+    _positive(area=area)
+    return flux * reflectance / (area * (1.0 - reflectance))
