@@ -268,3 +268,31 @@ def test_a_patch_under_an_open_card_is_not_buried():
     ff = compute_form_factors(ps, 8192, seed=1)
     assert np.all(ff.visible == 1.0)
     assert ff.row_sums()[0] < 0.95
+
+
+def test_reciprocity_keeps_a_work_planes_own_rays_dense_and_sparse():
+    """Rays pass through a work plane: no other patch's ray counts a hit on it. Its row keeps its
+    own rays (not averaged with the zeros of the others'), the others are weighed among themselves
+    exactly as without it, and the dense and sparse forms agree."""
+    import scipy.sparse as sp
+
+    from relight_addon.engine.formfactors import weigh_reciprocity
+
+    rng = np.random.default_rng(3)
+    P = 7
+    M = rng.uniform(0.0, 0.15, (P, P)).astype(np.float32)
+    np.fill_diagonal(M, 0.0)
+    passes = np.zeros(P, dtype=bool)
+    passes[[2, 5]] = True
+    M[:, passes] = 0.0  # nothing sees a work plane
+    area = rng.uniform(0.5, 2.0, P)
+    W = weigh_reciprocity(M, area, 4096, passes=passes)
+    np.testing.assert_array_equal(W[passes], M[passes])
+    assert not W[:, passes].any()
+    keep = ~passes
+    np.testing.assert_allclose(W[np.ix_(keep, keep)], weigh_reciprocity(M[np.ix_(keep, keep)], area[keep], 4096),
+                               rtol=0, atol=0)
+    S = weigh_reciprocity(sp.csr_matrix(M), area, 4096, passes=passes)
+    np.testing.assert_allclose(S.toarray(), W, rtol=1e-6, atol=1e-7)
+    # without the mask, the work plane's row is pulled toward the others' zeros (the old bias)
+    assert weigh_reciprocity(M, area, 4096)[passes].sum() < 0.9 * M[passes].sum()
