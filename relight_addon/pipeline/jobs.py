@@ -175,8 +175,7 @@ def _few_rays_named(options: JobOptions):
 
 def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
               default_max_patch_size: float | None = None, progress=None, cancel=None,
-              patches: PatchSet | None = None, notes: dict | None = None, estimate=None, offer=None,
-              refined=None) -> SolveOutcome:
+              patches: PatchSet | None = None, notes: dict | None = None, estimate=None, offer=None) -> SolveOutcome:
     """Inverse lighting ("solve") of ``faces``: targets are the painted faces; candidates as
     ``engine.lights.candidate_mask``; the scene's own emitters, lamps and World are fixed background
     light (subtracted from the targets). The inverse system is solved (``options.solver``), then
@@ -185,7 +184,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
     over the whole job; ``cancel()`` returning True raises Cancelled. ``patches``: the meshed faces
     when the caller already has them (the operator meshes first to estimate the cost). ``notes``:
     export's notes, repeated in the errors they explain (checks.check_solvable). ``estimate``:
-    and ``offer``: build_inverse_model's; ``refined``: refine_stage's ``kept``. Returns a SolveOutcome."""
+    and ``offer``: build_inverse_model's. Returns a SolveOutcome."""
     options = (options or JobOptions()).validate()
     check_solvable(faces, notes)
     check_light_kinds(options)
@@ -194,7 +193,7 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
         model = build_inverse_model(faces, options, default_max_patch_size, progress, cancel, patches, estimate,
                                     offer)
         with transport_named(model.patches, faces):
-            return solve_model(model, options, polygon_counts, progress, cancel, t0, refined)
+            return solve_model(model, options, polygon_counts, progress, cancel, t0)
 
 
 def run_reduce(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
@@ -220,11 +219,10 @@ def _inverse_done(progress, cancel) -> None:
 
 
 def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None,
-                t0=None, refined=None) -> SolveOutcome:
+                t0=None) -> SolveOutcome:
     """Stages 2-5 of a solve on a built model (build_inverse_model's): the inverse solve, the
     reduction, the direct light, the certificate, the lamp refinement, the curve and the report.
-    ``t0``: when the job started (perf_counter), for the report's total; ``refined``: refine_stage's
-    ``kept``."""
+    ``t0``: when the job started (perf_counter), for the report's total."""
     t0 = time.perf_counter() if t0 is None else t0
     t1 = time.perf_counter()
     e_x, inv = solve_stage(model, options)
@@ -241,7 +239,7 @@ def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress
     red = replace(red, certificate=bounds)
     positive = positive_bound(model.problem, inv, red.final, bounds)
     t4 = time.perf_counter()
-    model, red = refine_stage(model, red, options, progress, cancel, refined)
+    model, red = refine_stage(model, red, options, progress, cancel)
     seconds["lamp_refinement"] = time.perf_counter() - t4
     seconds["reduction"] = time.perf_counter() - t2 - seconds["lamp_refinement"] - seconds["direct_light"]
     return _inverse_outcome(model, options, inv, red, bounds, positive, polygon_counts, seconds, t0, per_face=True)

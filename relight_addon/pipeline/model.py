@@ -59,7 +59,6 @@ class Model:
     direct: dict = None  # direct_stage: the curve's lights' direct light by the kernel
     polygons: PolygonMap = None  # the curve's patches -> polygons map (paint-independent: a retargeted
     #                              model keeps it)
-    refined_from: list = None  # refine_stage: [(the candidate Lamp, the light refined from it)]
 
 
 def progress_slice(progress, name, lo, hi):
@@ -292,8 +291,7 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     problem = model.problem.retarget(scene_targets(faces, patches))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
-                   refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None,
-                   refined_from=None)
+                   refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)
 
 
 def move_scene_light(model: Model, faces: FaceSet, seed=0) -> Model:

@@ -29,7 +29,7 @@ paint changed:
 Every solve says in its report (``prepared``, ``account``) what it kept and what it computed.
 The rest (the lamps' plan, the inverse problem and its factorisation, the selection, the
 certificate, the direct light, the lamp refinement and the curve) is the cold solve's own code
-(pipeline.jobs.run_solve), given the kept patches, form factors, kernel rows, lamps and refined lamps. A change
+(pipeline.jobs.run_solve), given the kept patches, form factors, kernel rows and lamps' irradiance. A change
 the fingerprint sees (an object moved, a material, a forbidden face, an option) is not followed:
 ``stale_reason`` names it, and the caller prepares again.
 
@@ -229,9 +229,7 @@ class PreparedScene:
     _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
     lamps: KeptLamps = field(default_factory=KeptLamps)  # the candidate lamps' irradiance on the kept mesh
-    drawn: dict = field(default_factory=dict)
-    _refined: dict = field(default_factory=dict)  # digest(candidate lamp) -> (its refined Lamp, patches, irradiance)
-    refined_kept: int = 0  # refined lamps the last solve took from the one before (``_kept_refined``)  # the last estimate's work: {"rays cast", "kernel rows drawn", ...}
+    drawn: dict = field(default_factory=dict)  # the last estimate's work: {"rays cast", "kernel rows drawn", ...}
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -349,45 +347,12 @@ class PreparedScene:
         return {"from_prepared_state": self.reason is None, "reason": self.reason,
                 "kept": {"form factors (hemisphere rays)": self.reason is None and not self.drawn.get("rays cast"),
                          "kernel rows": self.drawn.get("kernel rows kept", 0),
-                         "candidate lamps' irradiance": self.lamps.reused,
-                         "refined lamps (their targets unchanged)": self.refined_kept},
+                         "candidate lamps' irradiance": self.lamps.reused},
                 "computed": {"rays cast": self.drawn.get("rays cast", 0),
                              "kernel rows": self.drawn.get("kernel rows drawn", 0),
                              "candidate lamps' irradiance": self.lamps.computed},
                 "computed anew": ["the candidate lamps' plan (aimed at the targets)", "the inverse problem and its "
-                                  "factorisation", "the reduction", "the direct light",
-                                  "the refinement of the lamps whose light reaches a changed target"]}
-
-    def _kept_refined(self, faces: FaceSet):
-        """refine_stage's ``kept`` for a warm solve of ``faces``: a candidate lamp the last solve
-        refined is taken as refined then when neither it nor its refined lamp lights a patch whose
-        paint changed since (its targets the same: the stroke is out of its light); None when
-        nothing is kept."""
-        if not self._refined or self.paint is None:
-            return None
-        target, radiosity = self.paint
-        changed = ((faces.target != target) | np.any(faces.target_radiosity != radiosity, axis=1))[self.patches.face]
-
-        def kept(lamp, reach):
-            got = self._refined.get(digest(lamp))
-            if got is None or changed[reach].any() or changed[got[1]].any():
-                return None
-            h = np.zeros(self.patches.n_patches)
-            h[got[1]] = got[2]
-            self.refined_kept += 1
-            return got[0], h
-        return kept
-
-    def _keep_refined(self, model) -> None:
-        """The lamps ``model``'s refinement made, by the candidate each was refined from (the final
-        configuration's first: refine_stage refines it first)."""
-        self._refined = {}
-        if model is None or not model.refined_from:
-            return
-        H = model.lights.irradiance.tocsc()
-        for lamp, j in model.refined_from:
-            at = H.indices[H.indptr[j]:H.indptr[j + 1]].copy()
-            self._refined.setdefault(digest(lamp), (model.lights.lamp(j), at, H.data[H.indptr[j]:H.indptr[j + 1]].copy()))
+                                  "factorisation", "the reduction", "the direct light", "the lamp refinement"]}
 
     def _warm(self, faces: FaceSet) -> tuple:
         """(the kept patches with ``faces``' paint, the options a solve on them runs with): the same
@@ -409,28 +374,23 @@ class PreparedScene:
         if stale is not None:
             raise ValueError(f"the prepared scene is stale: {stale}")
         self.reason = self.unmappable(faces)
-        options, patches, kept = self.options, meshed, None
-        self.refined_kept = 0
+        options, patches = self.options, meshed
         if self.reason is None:  # the kept patches, their rays, with the new paint
             patches, options = self._warm(faces)
-            kept = self._kept_refined(faces)
             self.warm += 1
         self.solves += 1
         try:
             outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
                                      patches=patches, notes=notes, estimate=self.estimate,
-                                     offer=self.offer, refined=kept)
+                                     offer=self.offer)
         except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
             self.patches = self._cast_for = self.form_factors = self.model = None
-            self._refined = {}
             raise
         outcome.report["prepared"] = self.account()
         if self._cast_for is not outcome.patches:  # not the mesh the rays were cast for: keep nothing
             self.patches = self._cast_for = self.form_factors = self.model = None
-            self._refined = {}
         else:
             self.patches, self.model = outcome.patches, outcome.model
-            self._keep_refined(outcome.model)
             # (the first stroke's certificate starts from this solve's all-lights NNLS: its lights)
             bounds = outcome.reduction.certificate
             self._nnls_start = None if bounds is None else bounds.nnls_exitance
@@ -513,7 +473,8 @@ class PreparedScene:
           the strokes after it still start from the last solve.
 
         Neither step re-meshes the adaptive model for the new paint. Nothing kept changes but the
-        kernel's rows of the new target patches (step 1; the next solve's)."""
+        kernel's rows of the new target patches and the irradiance of the lamps it planned (step 1;
+        the next solve's)."""
         faces = best.faces
         if step == 0:
             outcome = jobs.solve_model(best.model, self.options, polygon_counts, progress, cancel)

@@ -25,7 +25,7 @@ from ..engine.curve_refits import carry_refined, refit_curve
 from ..engine.first_reflection import lamp_excess_of, lights_excess
 from ..engine.inverse import solve_inverse
 from ..engine.kernel_transfer import lights_direct_correction
-from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, ROUNDS as LAMP_ROUNDS, Mount, RefinedLamp, Transport, \
+from ..engine.lamp_refinement import BUDGET as REFINE_BUDGET, ROUNDS as LAMP_ROUNDS, Mount, Transport, \
     refine_configuration
 from ..engine.light_colour import fit_columns
 from ..engine.lights import append_lamps
@@ -194,49 +194,19 @@ class _Refined:
     carried: dict
     rows: list
     evaluations: int = 0
-    origins: list = None  # per new lamp, the candidate Lamp it was refined from
 
 
-def _kept_lamps(lights, pt, placed, columns, transport, kept) -> list:
-    """The placed lamps of ``pt`` that ``kept`` (a prepared scene's: candidate Lamp, the patches it
-    lights -> (its refined Lamp, that lamp's irradiance (P,)) or None) gives as an earlier solve
-    refined them: taken out of ``placed``, their columns of ``columns`` theirs; [RefinedLamp]."""
-    out = []
-    if kept is None:
-        return out
-    H = lights.irradiance.tocsc()
-    for pos in list(placed):
-        j = int(pt.lights[pos])
-        given = kept(placed[pos], H.indices[H.indptr[j]:H.indptr[j + 1]])
-        if given is None:
-            continue
-        lamp, h = given
-        col = transport.column(h, lamp)
-        for c in range(3):
-            columns[c][:, pos] = col[:, c]
-        out.append(RefinedLamp(pos, lamp, h))
-        del placed[pos]
-    return out
-
-
-def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, kept=None):
+def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check):
     """The placed lamps of one configuration refined (engine.lamp_refinement), each refined lamp
-    appended to ``done`` as a new light; the configuration with them, re-fitted (None: unchanged).
-    ``kept``: _kept_lamps' (the lamps it gives are not refined again)."""
+    appended to ``done`` as a new light; the configuration with them, re-fitted (None: unchanged)."""
     T, transport, mount, step, seed = setup
     placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights) if _placed(lights, j)}
-    columns = [np.array(T[c][:, pt.lights], dtype=np.float64) for c in range(3)]
-    given = _kept_lamps(lights, pt, placed, columns, transport, kept)
     refined, cols, before, after, n_eval = refine_configuration(
-        problem, placed, columns, transport, mount, step,
+        problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
         seed=seed, budget=REFINE_BUDGET - done.evaluations, exitance=pt.exitance, cancel=check(len(placed)))
-    refined = given + refined
     done.evaluations += n_eval
-    row = {"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
-           "lamps_refined": len(refined), "evaluations": n_eval}
-    if kept is not None:  # (a warm solve's: of them, taken as an earlier solve refined them)
-        row["lamps_kept"] = len(given)
-    done.rows.append(row)
+    done.rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
+                      "lamps_refined": len(refined), "evaluations": n_eval})
     if not refined:
         return None
     ids = np.array(pt.lights, dtype=np.int64)
@@ -245,7 +215,6 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, k
         if is_final:
             done.carried[int(pt.lights[r.index])] = int(ids[r.index])
         done.lamps.append(r.lamp)
-        done.origins.append(lights.lamp(int(pt.lights[r.index])))
         done.kinds.append(lights.kind_names[int(pt.lights[r.index])])
         done.irradiance.append(r.irradiance)
         for c in range(3):
@@ -277,12 +246,10 @@ def _with_lamps(model: Model, done: _Refined) -> Model:
     problem = copy.copy(model.problem)  # (add_lights replaces what it extends: the model's problem stays)
     problem.add_lights(lights, [np.stack(done.columns[c], axis=1) for c in range(3)],
                        lights_excess(model.faces, patches, None, done.lamps, H_new))
-    return replace(model, lights=lights, problem=problem,
-                   refined_from=list(zip(done.origins, range(model.lights.n_lights, lights.n_lights))))
+    return replace(model, lights=lights, problem=problem)
 
 
-def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progress=None, cancel=None,
-                 kept=None) -> tuple:
+def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progress=None, cancel=None) -> tuple:
     """Stage 3b: the placed lamps of the final configuration and of the curve's smaller ones refined
     (engine.lamp_refinement), the final one first, then from the largest down while its BUDGET
     lasts: each refined lamp becomes a new light of the problem (its kind, its column of T), the
@@ -291,8 +258,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     refined; the reduction re-fitted). A selection with its own programme (``refit``: least power
     within a tolerance, and its uniformity goal) is not refined: the refinement lowers the error
     and refits by least squares, which broke the programme's band and goal (the gallery's strip:
-    U0 0.563 reported against the 0.6 'met'). ``kept``: a prepared scene's lamps refined by an
-    earlier solve, taken as they were (_kept_lamps; pipeline.prepared)."""
+    U0 0.563 reported against the 0.6 'met')."""
     if not options.param("refine_lamps", False) or not offered_kinds(options) \
             or SELECTIONS[options.selection].traits.refit is not None:
         return model, red
@@ -306,21 +272,19 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         return model, red
     t0 = time.perf_counter()
     setup = _refine_setup(model, options)
-    done, curve = _Refined([], [], [], [[], [], []], {}, [], origins=[]), list(red.curve)
+    done, curve = _Refined([], [], [], [[], [], []], {}, []), list(red.curve)
     for n_done, i in enumerate(todo):
         if cancel is not None and cancel():
             raise Cancelled("solve cancelled")
         if done.evaluations >= REFINE_BUDGET:
             break
         point = _refine_point(model.problem, lights, curve[i], i == red.final_index, setup, done,
-                              lambda n_lamps: _refining(progress, cancel, n_done, len(todo), n_lamps), kept)
+                              lambda n_lamps: _refining(progress, cancel, n_done, len(todo), n_lamps))
         curve[i] = curve[i] if point is None else point
         if progress is not None:
             progress("refining lamps", 0.95 + 0.03 * (n_done + 1) / len(todo))
     account = {"points": done.rows, "offered": lights.count_by_kind(), "lamps_refined": len(done.lamps),
                "evaluations": done.evaluations}
-    if kept is not None:
-        account["lamps_kept"] = sum(r["lamps_kept"] for r in done.rows)
     if done.lamps:
         model = _with_lamps(model, done)
         curve = carry_refined(model.problem, curve, red.final_index, done.carried)
