@@ -11,9 +11,12 @@ paint changed:
   targets. Its patches are kept as the solve made them and the new paint is *mapped* onto them:
   a patch asks for the target of the face it lies on (as engine.scene.build_patches does), which
   is exact for every face that is a patch of its own or split into several (no patch spans it and
-  another face). A stroke that changes the paint of a face clustered with others cannot be
-  mapped: that solve starts from scratch, and says so (``unmappable``). The kept patches are not
-  refined again for the new targets (refinement passes 0 from the prepared state);
+  another face). Paint on faces clustered with others maps onto the kept cluster (``painted``: a
+  touched cluster is a target at its painted faces' area-weighted mean radiosity; painted-face
+  error 1.03 x a cold solve's for 12 clustered faces, 1.11 x for 24); only an illuminance target
+  changed on a clustered face cannot be mapped (a patch reads its first face's lux): that solve
+  starts from scratch, and says so (``unmappable``). The kept patches are not refined again for
+  the new targets (refinement passes 0 from the prepared state);
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
   the refinement passes' ones);
 - the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
@@ -48,8 +51,8 @@ then the warm solve (``solve``'s, not kept).
 Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
 stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
 977 patches to 1,451 and moved the predicted error from 0.063 / 0.051 (seeds 3 / 4) to 0.073 / 0.074,
-so it is not done until Cycles says which prediction is right: a stroke on clustered faces solves
-from scratch and says so (Live solves it in full in its worker).
+so it is not done until Cycles says which prediction is right: paint on clustered faces maps onto
+the kept clusters instead (above).
 """
 from __future__ import annotations
 
