@@ -542,7 +542,9 @@ def run_solve_command(args, progress=None, cancel=None):
     patches, cost = _job(args, job.mesh)
     _print_estimate(args, patches, cost)
     outcome = _job(args, job.run)
-    job.finish(bpy.context.scene, outcome, input_path=os.path.abspath(args.scene))
+    # (a view target's glossy rows read every patch they gather from: radiance_normal, of the patches
+    # the rows read, is left out of its report)
+    job.finish(bpy.context.scene, outcome, view_radiance=view is None, input_path=os.path.abspath(args.scene))
     report = outcome.report
     if view is not None:
         from .pipeline import view_targets

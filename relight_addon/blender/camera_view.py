@@ -52,13 +52,13 @@ def read_image(path) -> tuple:
     except RuntimeError as exc:
         raise ValueError(f"the view target {path} cannot be read ({' '.join(str(exc).split())})") from None
     try:
+        w, h = img.size  # (0 x 0: Blender could not decode it)
+        if w == 0 or h == 0:
+            raise ValueError(f"the view target {path} cannot be read (not an image Blender decodes)")
         fmt = img.file_format
         if fmt not in FORMATS:
             raise ValueError(f"the view target {path} is {fmt}: give an OpenEXR (linear radiance) or a PNG")
         img.colorspace_settings.name = "Non-Color"  # (the stored values, unconverted)
-        w, h = img.size
-        if w == 0 or h == 0:
-            raise ValueError(f"the view target {path} cannot be read (no pixels)")
         px = np.empty(w * h * 4, dtype=np.float32)
         img.pixels.foreach_get(px)
         return px.reshape(h, w, 4)[::-1].astype(np.float64), FORMATS[fmt]
