@@ -20,7 +20,7 @@ patch seen by many pixels would give as many rows; pixels that share a row are o
 sqrt(n) asking sqrt(n) x their mean (the least-squares problem unchanged, its values non-negative):
 a matte patch's pixels all read B_i; a glossy patch's rows are evaluated on tiles of the image
 (TILE_LOBE: a fraction of its lobe's width, about 4 pixels for Roughness 0.25 at 480 pixels over
-a 60 degree view), its pixels in a tile sharing the row at their mean point and direction. Then
+a 57 degree view), its pixels in a tile sharing the row at their mean point and direction. Then
 ||R B - t||^2 over the pixels is ||R' B - t'||^2 plus the constant ``offset`` (the spread of the
 pixels that share a row, which no B changes): the same solution; the pixels' own error is
 ``pixel_error`` (the report's), not the rows'.
@@ -264,6 +264,10 @@ class ViewTarget(Target):
     def predict(self, B) -> np.ndarray:
         """(n, 3) the radiance the hit pixels show under radiosity ``B`` (P, 3), W m^-2 sr^-1."""
         return _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces, self.spec.camera)
+
+    def image(self, B, samples=4) -> tuple:
+        """predicted_image of the whole frame under radiosity ``B`` (``samples`` rays a pixel)."""
+        return predicted_image(self.spec.camera, self._faces, self._patches, self._F, B, samples)
 
     def pixel_error(self, B) -> dict:
         """The error over the painted pixels under radiosity ``B``: the pixels seen, the free ones,
