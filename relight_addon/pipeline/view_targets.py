@@ -80,7 +80,8 @@ def resample(values, height, width) -> np.ndarray:
     """(height, width, C) box-filtered ``values`` (h, w, C) (row 0 at the top)."""
     values = np.asarray(values, dtype=np.float64)
     Ay, Ax = _overlap(height, values.shape[0]), _overlap(width, values.shape[1])
-    return np.einsum("yh,hwc,xw->yxc", Ay, values, Ax)
+    rows = np.tensordot(Ay, values, axes=(1, 0))  # (height, w, C)
+    return np.tensordot(rows, Ax, axes=(1, 1)).transpose(0, 2, 1)  # (two products: not one 4-index sum)
 
 
 def view_spec(camera, rgba, linear, view, name, side=WORKING_SIDE) -> ViewSpec:
