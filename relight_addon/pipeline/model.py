@@ -127,7 +127,7 @@ def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> Inv
     """The solve's InverseProblem: the painted targets, the candidate lights, their first reflection,
     the scene's own emitters (``background``) and lamps and World (``lamp_H``) as fixed light."""
     emitting = np.any(patches.exitance > 0, axis=1)
-    return InverseProblem(F, patches.area, patches.reflectance, scene_targets(faces, patches),
+    return InverseProblem(F, patches.area, patches.reflectance, scene_targets(faces, patches, F),
                           mask, patches.center, patches.normal, lights=lights,
                           first_bounce=first_bounce(faces, patches, F, mask | emitting),
                           background=background, background_irradiance=lamp_H.sum(axis=1),
@@ -288,7 +288,7 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     refined for the earlier targets among them), form factors, solvers and fixed light; the
     problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
     t0 = time.perf_counter()
-    problem = model.problem.retarget(scene_targets(faces, patches))
+    problem = model.problem.retarget(scene_targets(faces, patches, model.F))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)
