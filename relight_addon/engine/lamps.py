@@ -184,26 +184,34 @@ def _lamp_uniforms(rng, m, k, j, ns):
 
 def _patch_means(lamp, g, s, k, ns, rng, far, exact):
     """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
-    each and ns lamp samples per point; for a point or a spot, ``exact`` (P,) the bare point
-    lamp's exact patch means, times the sampled ratio (shadows, cone, disk). And (len(s),) whether
-    the patch is partly lit: some of its points got light, some none (an edge crosses it)."""
+    each and ns lamp samples per point; for a point or a spot, the bare point lamp's exact patch
+    means (``exact(patches)``: LampJob.exact) times the sampled ratio (shadows, cone, disk), asked
+    only for the patches some point of which got light (elsewhere the mean is 0 whatever the exact
+    one: a spot's cone or a shadow leaves most of a dense prop's triangles out of the sum). And
+    (len(s),) whether the patch is partly lit: some of its points got light, some none (an edge
+    crosses it)."""
     sm = g.sampler
     y, ny = _sample_patches(g, s, k, rng)
     y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
     ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
     acc = np.zeros(len(y))
-    ref = np.zeros(len(y))
+    ref = None
     for j in range(ns):
         e, r = _irradiance_at(lamp, y, ny, _lamp_uniforms(rng, len(s), k, j, ns), sm, far)
         acc += e
         if r is not None:
-            ref += r
+            ref = r if ref is None else ref + r
     lit = (acc > 0).reshape(len(s), k)
     per_patch = (acc / ns).reshape(len(s), k).mean(axis=1)
-    if exact is not None:
+    if ref is not None:
         rs = ref.reshape(len(s), k).sum(axis=1) / ns
         ok = rs > 0
-        per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
+        need = np.flatnonzero(ok & (per_patch > 0))
+        mean = exact(s[need])
+        if mean is not None:
+            full = np.zeros(len(s))
+            full[need] = mean
+            per_patch = np.where(ok, full * per_patch * k / np.where(ok, rs, 1.0), per_patch)
     return per_patch, lit.any(axis=1) & ~lit.all(axis=1)
 
 
@@ -236,10 +244,15 @@ class LampJob:
         self.n_patches, self.seed, self.far = out.shape[0], int(seed), far
         self.ns = lamp.kind.samples_per_point(lamp)
         self._rng = self.rng(7)
-        self.exact = lamp.kind.point_means(lamp, g.sampler, todo, restricted, self.n_patches)
 
     def rng(self, stream):
         return np.random.default_rng([self.seed, stream, self.index])
+
+    def exact(self, s):
+        """(len(s),) the exact patch means of the lamp's control variate on patches ``s`` (its
+        kind's ``point_means``), or None for a kind without one."""
+        means = self.lamp.kind.point_means(self.lamp, self.g.sampler, s, True, self.n_patches)
+        return None if means is None else means[s]
 
     def put(self, s, mean) -> None:
         """The means ``mean`` (len(s),) per unit power on patches ``s``."""
