@@ -77,6 +77,7 @@ def main():
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     folder = args.out or tempfile.mkdtemp(prefix="bench_view_")
+    os.makedirs(folder, exist_ok=True)
     surface, pixel, image = build(folder)
     print("uptime:", os.popen("uptime").read().strip())
     # a first solve fills the caches both solves share (the form factors' on disk): not timed
