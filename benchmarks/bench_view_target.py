@@ -1,8 +1,8 @@
 """Cost of a camera-view target (issue 40): the living room (tests/artist_scenes.py) with a camera,
 solved by the command line for its painted surface targets (the floor area and the table top), and
 for a view target at 480 x 270 instead (an OpenEXR asking every pixel for a uniform radiance, the
-paint removed). Prints each solve's timings (the report's timings_s), the view target's rows and
-pixels, and the ratio pixel / surface of the solve time and of the total.
+paint removed). Prints each solve's timings (the report's timings_s), its peak memory, the view target's rows and
+pixels (one ray a painted pixel), and the ratio pixel / surface of the solve time and of the total.
 
     flock /tmp/relight-bench.lock .venv/bin/python benchmarks/bench_view_target.py [--out DIR]
 """
@@ -10,13 +10,14 @@ import argparse
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
 import time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "tests"))
+sys.path[:0] = [ROOT, os.path.join(ROOT, "tests")]
 
 import bpy  # noqa: E402
 import numpy as np  # noqa: E402
@@ -62,6 +63,9 @@ def solve(blend, report, *extra):
     proc = subprocess.run([sys.executable, "-m", "relight_addon", "solve", blend, "--report", report, "--quiet",
                            *extra], cwd=ROOT, capture_output=True, text=True, env={**os.environ, "PYTHONPATH": ROOT})
     wall = time.perf_counter() - t0
+    # (the largest resident set of the children waited for so far: run the smaller solve first)
+    print(f"  {os.path.basename(blend)}: peak memory of the solves so far "
+          f"{resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024:.0f} MB")
     if proc.returncode:
         raise SystemExit(proc.stderr)
     with open(report) as f:
@@ -73,8 +77,11 @@ def main():
     ap.add_argument("--out", default=None)
     args = ap.parse_args()
     folder = args.out or tempfile.mkdtemp(prefix="bench_view_")
+    os.makedirs(folder, exist_ok=True)
     surface, pixel, image = build(folder)
     print("uptime:", os.popen("uptime").read().strip())
+    # a first solve fills the caches both solves share (the form factors' on disk): not timed
+    solve(surface, os.path.join(folder, "warm.json"))
     rs, ws = solve(surface, os.path.join(folder, "surface.json"))
     rp, wp = solve(pixel, os.path.join(folder, "pixel.json"), "--view-target", image)
     for name, r, w in (("surface", rs, ws), ("pixel", rp, wp)):

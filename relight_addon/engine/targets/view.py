@@ -19,8 +19,8 @@ Rows are in W/m^2 (pi L: the radiosity's units, so they mix with painted and lux
 patch seen by many pixels would give as many rows; pixels that share a row are one row of weight
 sqrt(n) asking sqrt(n) x their mean (the least-squares problem unchanged, its values non-negative):
 a matte patch's pixels all read B_i; a glossy patch's rows are evaluated on tiles of the image
-(TILE_LOBE: a fraction of its lobe's width, about 4 pixels for Roughness 0.25 at 480 pixels over
-a 57 degree view), its pixels in a tile sharing the row at their mean point and direction. Then
+(TILE_LOBE: a fraction of its lobe's width, about 13 pixels for Roughness 0.25 at 480 pixels over
+a 57 degree view; the radiance reported and shown on finer tiles, PREDICT_LOBE), its pixels in a tile sharing the row at their mean point and direction. Then
 ||R B - t||^2 over the pixels is ||R' B - t'||^2 plus the constant ``offset`` (the spread of the
 pixels that share a row, which no B changes): the same solution; the pixels' own error is
 ``pixel_error`` (the report's), not the rows'.
@@ -38,12 +38,19 @@ from ..units import TINY
 from ..view_radiance import view_rows
 from .kind import Target
 
-__all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "predicted_image", "TILE_LOBE"]
+__all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "predicted_image", "TILE_LOBE", "PREDICT_LOBE"]
 
-#: the angle of the image tiles on which a glossy patch's rows are evaluated, relative to its
-#: narrowest lobe's GGX alpha (Roughness^2, at least principled.VIEW_ALPHA_MIN): the pixels of a
-#: patch in one tile share the row at their mean point and direction (a lobe is about 2 alpha wide)
-TILE_LOBE = 0.15
+#: the angle of the image tiles on which a glossy patch's rows are evaluated for the solve, relative
+#: to its narrowest lobe's GGX alpha (Roughness^2, at least principled.VIEW_ALPHA_MIN): the pixels
+#: of a patch in one tile share the row at their mean point and direction (a lobe is about 2 alpha
+#: wide). 0.5: 13 pixels for Roughness 0.25 at 480 pixels over a 57 degree view; against each
+#: pixel's own row 0.5 % mean, 2.2 % at the 95th percentile (tests/test_view_target.py), with 7 x
+#: fewer rows than 0.15 (the solve's cost grows with the rows: docs/benchmarks.md)
+TILE_LOBE = 0.5
+#: the same for the radiance reported and shown (``predict``, ``predicted_image``: a forward
+#: evaluation, no solve): finer, the pixels' error and the predicted image within 0.2 % of each
+#: pixel's own row on average
+PREDICT_LOBE = 0.15
 
 
 @dataclass
@@ -157,16 +164,18 @@ def _patch_materials(faces, patches):
     return material, lobes, np.array([_narrowest(m) for m in lobes])[material]
 
 
-def _tile(camera, alpha) -> int:
-    """The side in pixels of the tiles a glossy patch's rows are evaluated on (TILE_LOBE)."""
+def _tile(camera, alpha, lobe=None) -> int:
+    """The side in pixels of the tiles a glossy patch's rows are evaluated on (``lobe`` of its
+    alpha; default TILE_LOBE)."""
     pixel = 2 * camera.half[0] / camera.width  # (at distance 1: the pixel's angle near the centre)
-    return max(1, int(TILE_LOBE * max(alpha, VIEW_ALPHA_MIN) / pixel))
+    return max(1, int((TILE_LOBE if lobe is None else lobe) * max(alpha, VIEW_ALPHA_MIN) / pixel))
 
 
-def _pixel_blocks(hits, patches, F, faces, camera):
+def _pixel_blocks(hits, patches, F, faces, camera, lobe=None):
     """Per patch seen: (patch, pixel positions in ``hits``, columns js, W (n_tiles, J, 3), tile (n,)):
     the rows of its pixels, pixel k's row W[tile[k]] (view_rows at the mean point and direction of
-    the patch's pixels in each tile of the image; a Lambertian patch reads itself alone, weight 1)."""
+    the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile); a Lambertian patch reads
+    itself alone, weight 1)."""
     material, lobes, alpha = _patch_materials(faces, patches)
     order = np.argsort(hits.patch, kind="stable")
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
@@ -175,7 +184,7 @@ def _pixel_blocks(hits, patches, F, faces, camera):
         if np.isinf(alpha[i]):
             yield i, group, np.array([i]), np.ones((1, 1, 3)), np.zeros(len(group), dtype=np.int64)
             continue
-        side = _tile(camera, alpha[i])
+        side = _tile(camera, alpha[i], lobe)
         n_cols = -(-camera.width // side)
         r, c = np.divmod(hits.pixel[group], camera.width)
         tiles, tile = np.unique((r // side) * n_cols + c // side, return_inverse=True)
@@ -192,14 +201,17 @@ def _pixel_blocks(hits, patches, F, faces, camera):
 class ViewTarget(Target):
     """The painted pixels of a ViewSpec seen through the patches (module docstring): ``matrix`` (k, P)
     the rows (pixels sharing a row merged), ``values`` (k, 3) W/m^2, ``offset`` (3,) the pixels' squared error no B
-    changes, ``hits`` the pixels' first hits, ``channel_spread`` the largest relative spread of a
-    glossy row between channels."""
+    changes, ``hits`` the pixels' first hits, ``pixel_row`` (n,) the row of each, ``channel_spread``
+    the largest relative spread of a glossy row between channels. The rows are on TILE_LOBE's tiles,
+    what is predicted and reported (``predict``, ``image``, ``pixel_error``) on PREDICT_LOBE's."""
 
     kind = "view"
     unit = "W/(m^2 sr)"
 
-    def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces):
+    def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces, pixel_row=None):
         self.spec, self.hits = spec, hits
+        #: (n,) the row each hit pixel shares (its weight: sqrt of how many pixels share it)
+        self.pixel_row = pixel_row
         self.matrix = sp.csr_matrix(matrix)
         self.values = np.asarray(values, dtype=np.float64).reshape(-1, 3)
         self.offset = np.asarray(offset, dtype=np.float64)
@@ -240,6 +252,7 @@ class ViewTarget(Target):
                              f"or the back of faces)")
         t = np.pi * spec.radiance.reshape(-1, 3)[hits.pixel]  # (n, 3) W/m^2
         rows, cols, data, values, spread = [], [], [], [], 0.0
+        pixel_row = np.empty(len(hits.pixel), dtype=np.int64)
         k = 0
         for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, spec.camera):
             # the pixels sharing a row (a tile's, a matte patch's): one row of weight sqrt(n) asking
@@ -255,11 +268,12 @@ class ViewTarget(Target):
             cols.append(js[c])
             data.append(Gc[r, c])
             values.append(tc)
+            pixel_row[group] = k + tile
             k += len(Gc)
         matrix = sp.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(k, P))
         values = np.concatenate(values)
         offset = np.sum(t * t, axis=0) - np.sum(values * values, axis=0)
-        return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces)
+        return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row)
 
     def predict(self, B) -> np.ndarray:
         """(n, 3) the radiance the hit pixels show under radiosity ``B`` (P, 3), W m^-2 sr^-1."""
@@ -288,7 +302,7 @@ class ViewTarget(Target):
 
 def _radiance(hits, B, patches, F, faces, camera) -> np.ndarray:
     out = np.zeros((len(hits.pixel), 3))
-    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera):
+    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE):
         out[group] = np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
     return out
 
