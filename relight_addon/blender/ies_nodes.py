@@ -105,6 +105,7 @@ def write_ies(ld, name, text, owner=None):
 
     txt = bpy.data.texts.new(name)
     txt.write(text)
+    txt.use_fake_user = False  # (a Text keeps itself by default: its lamp's node is its one user)
     ld.use_nodes = True
     tree = ld.node_tree
     for node in list(tree.nodes):
