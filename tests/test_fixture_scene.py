@@ -117,3 +117,45 @@ def test_keep_from_a_report_writes_the_fixture(addon, room, tmp_path):
         _check_ies(ob)
         assert ob.data.energy == pytest.approx(li["energy"], rel=1e-6)
         assert next(n for n in ob.data.node_tree.nodes if n.type == "TEX_IES").ies.as_string() == li["ies_lm63"]
+
+
+def test_live_follows_a_stroke_with_fixtures(addon, tmp_path):
+    """Live with the fixtures offered (issue 20's Live, issue 37's later answers): its first answer (a
+    full solve) and a stroke's answers are written as fixtures with their IES nodes, no text left behind
+    by the answers they replace."""
+    from test_hostile import _grid, _mesh, _paint
+    from test_live import _run
+    from test_prepared import _stroke
+
+    from relight_addon.blender import live, preparation
+    from relight_addon.blender.ui import operators
+
+    _reset()
+    fv, ff = _grid(4, size=2.0)
+    floor = _mesh("floor", fv, ff)
+    floor["relight_no_lights"] = True
+    _paint(floor, polys=[0, 1, 4, 5])
+    cv, cf = _grid(2, size=2.0, z=1.5, flip=True)
+    _mesh("ceiling", cv, cf)
+    path = _save(tmp_path / "live.blend")
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    st = scene.relight
+    st.rays_per_patch, st.surface_lights, st.spot_lamps, st.fixtures = 256, False, False, "builtin"
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
+    try:
+        _run(s, lambda: s.updates == 1)
+        first = _fixtures(scene)
+        assert first and len(bpy.data.texts) == len(first)
+        _stroke(4, "floor")
+        _run(s, lambda: s.updates == 2)
+        _run(s, lambda: s.worker is None and s.to_refine is None)
+        shown = _fixtures(scene)
+        assert shown and len(bpy.data.texts) == len(shown)
+        for ob in shown:
+            _check_ies(ob)
+        assert any(ln.startswith(SCHEDULE_LINE + "\t") for ln in st.last_lights.split("\n"))
+    finally:
+        live.stop(scene.name)
+    assert_scene_finite()
