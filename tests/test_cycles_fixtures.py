@@ -20,7 +20,7 @@ import cycles_reference as cr  # noqa: E402
 from lit_rooms import relight  # noqa: E402
 
 from relight_addon.engine.photometry import CyclesProfile, parse_lm63  # noqa: E402
-from relight_addon.engine.units import LUMENS_PER_WATT  # noqa: E402
+from relight_addon.engine.units import LUMENS_PER_WATT, luminance_weighted  # noqa: E402
 
 SCENES = {"living_room": lambda: artist_scenes.living_room(2), "gallery": artist_scenes.gallery}
 
@@ -47,7 +47,7 @@ def _written_fixtures(report):
         # is in the Light's Temperature and the strength; Cycles' IES flux per W is flux / (4 pi))
         flux = CyclesProfile.of(parse_lm63(li["ies_lm63"])).flux() / (4 * math.pi)
         if li.get("temperature_K") is None:
-            lum = LUMENS_PER_WATT * ld.energy * flux * np.asarray(li["color"]) @ [0.2126, 0.7152, 0.0722]
+            lum = LUMENS_PER_WATT * ld.energy * flux * luminance_weighted(li["color"])
             assert lum == pytest.approx(li["luminous_flux_lm"], rel=1e-5)
     return fixtures
 

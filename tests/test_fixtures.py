@@ -17,7 +17,7 @@ from relight_addon.engine.lights.fixture import FIXTURE, FixtureProfile, dimming
 from relight_addon.engine.photometry import CyclesProfile, PhotometryError, parse_lm63
 from relight_addon.engine.photometry import library as lib
 from relight_addon.engine.scene import mesh_patches, polygon_faceset
-from relight_addon.engine.units import LUMENS_PER_WATT, cycles_ies_candela
+from relight_addon.engine.units import CYCLES_IES_CANDELA_FACTOR, LUMENS_PER_WATT, cycles_ies_candela
 
 SPECS = {s[1]: s for s in lib.SPECS}
 
@@ -100,7 +100,7 @@ def test_a_fixture_at_full_strength_gives_its_rated_lumens_in_cycles(builtin):
         lamp = fixture_lamp("f", f, (0, 0, 2), (0, 0, -1))
         power_written = s / lamp.gain
         dirs = _local(np.arange(0.0, 180.0, 7.0), np.full(26, 30.0))
-        cd_file = f.profile.along(dirs) / (4 * math.pi / 177.83)  # the file's candela along them
+        cd_file = f.profile.along(dirs) / CYCLES_IES_CANDELA_FACTOR  # the file's candela along them (Cycles' factor)
         ours = LUMENS_PER_WATT * s[0] * lamp.profile.along(dirs) / (4 * math.pi)  # cd the engine transports
         np.testing.assert_allclose(cycles_ies_candela(power_written, cd_file), ours, rtol=1e-6, atol=1e-9)
         assert lamp.kind is FIXTURE and lamp.energy == pytest.approx(1.0 / lamp.gain[0])
@@ -202,3 +202,18 @@ def test_the_schedule_counts_dims_and_sums():
     assert "'c' (X) needs 250 % of its rated 1000 lm" in note and "3 of X there at 83 % each" in note
     assert schedule_lines([row]) == ["2 x X at 70-250 %: 3200 lm, 32.0 W (over rating)",
                                      "in all 2 fixtures: 3200 lm, 32.0 W"]
+
+
+def test_a_eulumdat_fixture_is_offered_with_its_lm63_for_blenders_node(tmp_path):
+    """A .ldt in a user's folder: its name (its luminaire number), its input watts, its rated lumens the
+    flux its table renders, and the LM-63 its IES node will hold renders the same distribution."""
+    from test_photometry import _directions, _ldt, _ldt_cd
+
+    (tmp_path / "a.ldt").write_text(_ldt(2, 24, 15.0, 19, 10.0, _ldt_cd, flux=2000.0), encoding="latin-1",
+                                    newline="")
+    (f,) = lib.load_library(tmp_path)
+    assert f.name == "L-1" and f.watts == 20.0 and not f.symmetric
+    assert f.lumens == pytest.approx(f.photometry.flux_lm())
+    d = _directions()
+    np.testing.assert_allclose(CyclesProfile.of(parse_lm63(f.lm63)).along(d), f.profile.along(d), rtol=1e-5,
+                               atol=1e-6)

@@ -28,6 +28,7 @@ import numpy as np
 from .distribution import TYPE_C, CyclesProfile, Photometry, PhotometryError
 from .lm63 import parse_lm63, write_lm63
 from .eulumdat import parse_eulumdat
+from ..units import TINY
 
 __all__ = ["Fixture", "BUILTIN", "BUILTIN_DIR", "load_library", "builtin_photometry", "write_builtin", "SPECS"]
 
@@ -62,7 +63,7 @@ class Fixture:
     def symmetric(self) -> bool:
         """Its distribution is the same in every C plane."""
         c = self.photometry.candela
-        return bool(np.all(np.abs(c - c[:1]) <= 1e-9 * max(float(c.max()), 1e-300)))
+        return bool(np.all(np.abs(c - c[:1]) <= 1e-9 * max(float(c.max()), TINY)))
 
 
 # -- the built-in library's closed forms ------------------------------------------------------
