@@ -86,7 +86,7 @@ def _wide(v, h):
 
 
 def _batwing(v, h):
-    """cos v (0.15 + sin^2 v) below the horizontal: its peak near 55 degrees, the nadir dimmer."""
+    """cos v (0.15 + sin^2 v) below the horizontal: its peak at asin(sqrt(1.85 / 3)) = 51.8 degrees, the nadir dimmer."""
     c = np.cos(np.radians(v))
     return np.where(c > 0, c * (0.15 + np.sin(np.radians(v)) ** 2), 0.0)
 
@@ -107,7 +107,7 @@ SPECS = (
      800.0, 9.0, True, True),
     ("relight-wide-downlight", "RL-DW90", "Wide downlight (cos^1.5, 102 degrees to half peak)", _wide,
      1500.0, 14.0, False, True),
-    ("relight-batwing", "RL-BW", "Batwing (cos v (0.15 + sin^2 v), peak near 55 degrees)", _batwing,
+    ("relight-batwing", "RL-BW", "Batwing (cos v (0.15 + sin^2 v), peak at 52 degrees)", _batwing,
      2500.0, 24.0, False, True),
     ("relight-wall-washer", "RL-WW35", "Wall washer (cos^6 lobe 35 degrees towards C0)", _washer,
      1200.0, 12.0, False, False),
