@@ -28,7 +28,7 @@ def builtin():
 
 
 def test_the_committed_files_are_what_the_generator_writes():
-    files = sorted(p.name for p in lib.BUILTIN_DIR.iterdir())
+    files = sorted(p.name for p in lib.BUILTIN_DIR.iterdir() if p.name != "README.md")
     assert files == sorted(f"{s[0]}.ies" for s in lib.SPECS)
     for spec in lib.SPECS:
         assert (lib.BUILTIN_DIR / f"{spec[0]}.ies").read_text(encoding="utf-8") == lib.builtin_text(spec), spec[0]
