@@ -217,3 +217,14 @@ def test_a_eulumdat_fixture_is_offered_with_its_lm63_for_blenders_node(tmp_path)
     d = _directions()
     np.testing.assert_allclose(CyclesProfile.of(parse_lm63(f.lm63)).along(d), f.profile.along(d), rtol=1e-5,
                                atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["RL-UP130", "RL-WW35", "RL-BW"])
+@pytest.mark.parametrize("gap", [0.05, 0.15])
+def test_a_fixture_in_a_closed_box_puts_its_whole_flux_on_the_walls(builtin, name, gap):
+    """A closed box receives all of a fixture's 1 W, however close it hangs to a surface (an uplight
+    ``gap`` m under the ceiling's 0.5 m patches: its near patches are sampled more, light_patches)."""
+    box = mesh_patches(polygon_faceset(cf.box_polygons((4.0, 4.0, 2.5)), reflectance=0.5), max_patch_size=0.5)
+    lamp = fixture_lamp("f", builtin[name], (1.7, 2.1, 2.5 - gap), (0.0, 0.0, -1.0), towards=(1.0, 0.3, 0.0))
+    H = lamp_irradiance(box, [lamp], seed=0, points_per_patch=16)[:, 0, 0]
+    assert float(H @ box.area) == pytest.approx(1.0, abs=0.005)

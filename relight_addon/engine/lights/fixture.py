@@ -42,6 +42,10 @@ __all__ = ["FIXTURE", "FixtureKind", "FixtureProfile", "fixture_lamp", "FIXTURE_
 
 #: the target clusters an aimable or asymmetric fixture is offered for at each position (the first it sees)
 FIXTURE_CLUSTERS = 2
+#: a patch is near a fixture within this many of its bounding radii (light_patches), and gets this many
+#: times the receiver points
+NEAR_RADII = 4.0
+NEAR_POINTS = 64
 #: a fixture's irradiance work in a spot's (engine.cost): each sample interpolates its profile
 #: (measured: 0.31 s a fixture against 0.13 s a spot, docs/benchmarks.md, "Catalogue fixtures as candidates")
 FIXTURE_WORK = 2.4
@@ -142,6 +146,18 @@ class FixtureKind(PhotometricKind):
         super().check(lamp)
         if not isinstance(lamp.profile, FixtureProfile):
             raise ValueError(f"lamp {lamp.name!r}: a fixture's distribution is a FixtureProfile (fixture_lamp)")
+
+    def light_patches(self, lamp, job) -> None:
+        """The patches near it (their centre within NEAR_RADII of their bounding radius from the lamp:
+        the ceiling an uplight hangs under) get NEAR_POINTS x the points: there its distribution
+        varies across the patch, which the bare point's control variate does not follow (an uplight
+        0.15 m under a 0.5 m patch: +12.6 % of its flux with 16 points, +0.05 % with 4096); the
+        others ``job.k`` points."""
+        g, todo = job.g, job.todo
+        d = np.linalg.norm(g.center[todo] - lamp.position, axis=1)
+        near = d < NEAR_RADII * g.radius[todo]
+        job.run(todo[~near], job.k)
+        job.run(todo[near], job.k * NEAR_POINTS)
 
     def offered(self, options):
         """This kind bound to the job's fixture library (its ``option``: a folder, or "builtin")."""
