@@ -228,3 +228,21 @@ def test_a_fixture_in_a_closed_box_puts_its_whole_flux_on_the_walls(builtin, nam
     lamp = fixture_lamp("f", builtin[name], (1.7, 2.1, 2.5 - gap), (0.0, 0.0, -1.0), towards=(1.0, 0.3, 0.0))
     H = lamp_irradiance(box, [lamp], seed=0, points_per_patch=16)[:, 0, 0]
     assert float(H @ box.area) == pytest.approx(1.0, abs=0.005)
+
+
+def test_the_cli_refuses_a_bad_library_in_one_line(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "b.ies").write_text("\n".join(lib.builtin_text(lib.SPECS[2]).split("\n")[:12]) + "\n")
+    proc = subprocess.run([sys.executable, "-m", "relight_addon", "solve",
+                           os.path.join(root, "sample_blends", "staircase_targets.blend"), "--report",
+                           str(tmp_path / "r.json"), "--fixtures", str(tmp_path / "lib")], cwd=root,
+                          capture_output=True, text=True, env={**os.environ, "PYTHONPATH": root})
+    assert proc.returncode == 2 and proc.stderr.strip().count("\n") == 0, proc.stderr
+    assert proc.stderr.startswith("relight: error: fixtures: b.ies: the file ends at line 13") and \
+        "move it out of the folder" in proc.stderr
+    assert not (tmp_path / "r.json").exists()
