@@ -138,7 +138,7 @@ def test_every_method_and_parameter_is_a_property_of_the_sidebar(addon):
         if p.ui == "toggle":
             assert props["use_" + name].type == "BOOLEAN"
             assert props["use_" + name].default == (p.default is not None)
-        want = {bool: "BOOLEAN", int: "INT", float: "FLOAT", str: "ENUM"}[p.type]
+        want = {bool: "BOOLEAN", int: "INT", float: "FLOAT", str: "ENUM" if p.registry is not None else "STRING"}[p.type]
         assert rna.type == want, name
         if p.type in (int, float) and p.ui != "zero":
             if p.default is not None:

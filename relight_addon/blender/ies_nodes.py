@@ -21,7 +21,7 @@ from ..engine.lights.photometric import measured_kind
 from ..engine.photometry import CyclesProfile, PhotometryError, parse_lm63
 from ..engine.scene import SceneError
 
-__all__ = ["IESLight", "photometric", "has_ies"]
+__all__ = ["IESLight", "photometric", "has_ies", "write_ies"]
 
 #: (an IES node on a Point lamp: engine/lights/photometric.py; on a Spot lamp: photometric_spot.py)
 
@@ -94,3 +94,33 @@ def photometric(ld, lamp_name) -> IESLight | None:
                          "finite values")
     return IESLight(kind, CyclesProfile.of(ph), colour * strength, [f"its IES file {source!r}: {n}" for n in ph.notes],
                     source)
+
+
+def write_ies(ld, name, text, owner=None):
+    """Give the Light ``ld`` the node tree ``photometric`` reads: an IES Texture node (Internal: a new
+    Text ``name`` holding the LM-63 ``text``, saved in the .blend) whose Fac feeds an Emission's Strength
+    (Color white, the node's Strength 1: Cycles emits colour x Power x the profile), into the Light
+    Output. ``owner``: the result id the Text is tagged with (results.tag_owned). Returns the Text."""
+    from .visibility import tag_owned
+
+    txt = bpy.data.texts.new(name)
+    txt.write(text)
+    txt.use_fake_user = False  # (a Text keeps itself by default: its lamp's node is its one user)
+    ld.use_nodes = True
+    tree = ld.node_tree
+    for node in list(tree.nodes):
+        tree.nodes.remove(node)
+    out = tree.nodes.new("ShaderNodeOutputLight")
+    em = tree.nodes.new("ShaderNodeEmission")
+    ies = tree.nodes.new("ShaderNodeTexIES")
+    ies.mode = "INTERNAL"
+    ies.ies = txt
+    ies.inputs["Strength"].default_value = 1.0
+    em.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    em.inputs["Strength"].default_value = 1.0
+    tree.links.new(ies.outputs["Fac"], em.inputs["Strength"])
+    tree.links.new(em.outputs["Emission"], out.inputs["Surface"])
+    ies.location, em.location, out.location = (-400, 0), (-150, 0), (100, 0)
+    if owner is not None:
+        tag_owned(txt, owner)
+    return txt

@@ -52,6 +52,7 @@ from ..engine.units import TINY, radiance_from_exitance
 from ..pipeline.files import atomic_output
 from ..pipeline.stored import StoredResult
 from . import lamp_state
+from .ies_nodes import write_ies
 from .lamps import cycles_gain, lamp_kind, make_plain
 from .layers import DISPLAY_ATTRIBUTE, RADIOSITY_ATTRIBUTE
 from .meshes import fingerprint_change, foreach_array, loop_polygons
@@ -456,10 +457,10 @@ def plan_placed(data, strength) -> list:
         if not np.any(s > 0):
             continue
         rec = dict(data.lamps[int(data.light_lamp[j])], kind=LIGHT_KINDS.names()[int(data.light_kind[j])])
-        gain = None
+        gain = np.asarray(rec.get("gain", np.ones(3)), dtype=np.float64)  # (a fixture's: its IES node's flux)
         if colour.get("mode") == "blackbody" and HAS_TEMPERATURE:  # the Light's Temperature carries its colour
             t = float(temperature_of(s[None, :], *colour["range_K"])[0])
-            rec, gain = dict(rec, temperature_K=t), blackbody_rec709(t)
+            rec, gain = dict(rec, temperature_K=t), blackbody_rec709(t) * gain
         energy, color = blender_values(s, rec["energy"], rec["color"], gain)
         values = np.concatenate([[energy], color, rec["position"], rec["direction"], rec["axis_u"], rec["axis_v"]])
         if not np.all(np.isfinite(values)):
@@ -487,6 +488,9 @@ def new_lamp(rec, energy, color, owner=None):
     kind = LIGHT_KINDS[rec["kind"]].impl if "kind" in rec else lamp_kind(ld)
     for attribute, value in kind.blender_light(rec).items():  # its kind's own settings
         setattr(ld, attribute, value)
+    ies = kind.blender_ies(rec)
+    if ies is not None:  # an IES Texture node holding its LM-63 as an internal text (saved in the .blend)
+        write_ies(ld, *ies, owner=owner)
     ob = bpy.data.objects.new(rec["name"], ld)
     M = np.eye(4)
     M[:3, 0], M[:3, 1] = rec["axis_u"], rec["axis_v"]
@@ -639,6 +643,8 @@ def _remove_placed(rid) -> int:
     """Remove the lamps (objects, their Light data) that result ``rid`` placed, and its collection
     unless the artist's objects are in it (``empty_collection``)."""
     n = _remove_objects([o for o in bpy.data.objects if o.type == "LIGHT" and _owned(o, rid)], lambda d: _owned(d, rid))
+    for text in [t for t in bpy.data.texts if _owned(t, rid) and t.users == 0]:  # a placed fixture's LM-63
+        bpy.data.texts.remove(text)
     for coll in [c for c in bpy.data.collections if _owned(c, rid)]:
         empty_collection(coll, lambda o: False)
     return n

@@ -113,8 +113,8 @@ def offered_kinds(options) -> tuple:
 
 
 def _offered(options) -> list:
-    """The LampKinds the job offers (``offered_kinds``)."""
-    return [k for k in lamp_kinds() if k.option and options.param(k.option, False)]
+    """The LampKinds the job offers (``offered_kinds``), each as it offers for the job (``LampKind.offered``)."""
+    return [k.offered(options) for k in lamp_kinds() if k.option and options.param(k.option, False)]
 
 
 def default_drop(patches) -> float:

@@ -18,6 +18,7 @@ import dataclasses
 import os
 
 from . import colours, distributions, estimators, patch_models, selections, solvers, targets  # noqa: F401  (register the methods and kinds)
+from .photometry.library import BUILTIN, load_library
 from .registry import DISTRIBUTIONS, ESTIMATORS, LIGHT_COLOURS, PATCH_MODELS, SELECTIONS, SOLVERS, Param
 
 DEFAULT_RAYS_PER_PATCH = 0  # 0 / None = automatic: engine.formfactors.auto_rays_per_patch
@@ -70,8 +71,8 @@ def _unused_without_lamps(o):
     why = _unused_by_single_scale(o)
     if why:
         return why
-    if not any(getattr(o, name) for name in LAMP_OPTIONS):
-        return "no candidate lamp is offered (spot, area and point lamps all off)"
+    if not any(getattr(o, name) for name in LAMP_OPTIONS) and not o.fixtures:
+        return "no candidate lamp is offered (spot, area and point lamps all off, no --fixtures)"
     return ""
 
 
@@ -98,7 +99,8 @@ class OptionError(ValueError):
 def check_light_kinds(options) -> None:
     """Refuse, before any work, an inverse solve that offers no kind of candidate light: the cells
     off and no lamp kind on (OptionError naming the flags, or the sidebar's Offer buttons)."""
-    if not options.uses("surface_lights") or options.surface_lights or any(getattr(options, n) for n in LAMP_OPTIONS):
+    if not options.uses("surface_lights") or options.surface_lights or any(getattr(options, n) for n in LAMP_OPTIONS) \
+            or options.fixtures:
         return
     given = [PARAM_FLAGS[n] for n in LAMP_OPTIONS if DEFAULT_LAMPS[n]]  # the flags that turned them off
     not_given = [PARAM_FLAGS[n] for n in LAMP_OPTIONS if not DEFAULT_LAMPS[n]]  # those that would turn them on
@@ -163,6 +165,11 @@ JOB_PARAMS = (
           flag=PARAM_FLAGS["point_lamps"], invert=DEFAULT_LAMPS["point_lamps"],
           inverse_only=True, unused=_unused_by_single_scale,
           description="Candidate lights: point lamps mounted in front of the candidate surfaces"),
+    Param("fixtures", str, None, label="Fixtures", inverse_only=True, unused=_unused_by_single_scale,
+          none="no fixtures",
+          description="Candidate lights: the catalogue fixtures of a fixture library, a folder of .ies / .ldt "
+                      f"files or {BUILTIN!r} (the library Relight ships), each hung at the mounting positions and "
+                      "dimmed between 0 and 100 % of its rated lumens; empty: none (engine/photometry/library.py)"),
     Param("lamp_drop", float, None, min=0.0, min_exclusive=True, unit="LENGTH", label="Lamp Drop", ui="zero",
           inverse_only=True, unused=_unused_without_lamps,
           none="2 % of the diagonal of the region that decides the answer",
@@ -259,6 +266,8 @@ class _JobOptionsBase:
                 reason = self.unused_reason(name)
                 if reason:
                     raise ValueError(f"{p.cli_flag} {reason}")
+        if self.param("fixtures"):  # (the library read, a bad file refused naming its line, before any work)
+            load_library(self.fixtures)
         LIGHT_COLOURS[self.light_colour].bind(self)()  # (its own checks: a blackbody range, before any work)
         return self
 

@@ -20,7 +20,7 @@ from ..engine.light_colour import blackbody_rec709
 from ..engine.plausibility import implausible_mark, implausible_notes
 from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
 
-__all__ = ["json_safe", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
+__all__ = ["json_safe", "fixture_schedule", "schedule_notes", "schedule_lines", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
            "kinds_text"]
 
 
@@ -89,7 +89,7 @@ def placed_record(lamp, kind, strength, temperature=None) -> dict:
     from ..engine.lights.lamp import blender_values
 
     s = np.asarray(strength, dtype=np.float64).reshape(3)
-    gain = lamp.gain if temperature is None else blackbody_rec709(temperature)
+    gain = lamp.gain if temperature is None else blackbody_rec709(temperature) * lamp.gain  # (x a fixture's IES gain)
     energy, color = blender_values(s, lamp.energy, lamp.color, gain)
     rec = {"object": lamp.name, "polygons": [], "kind": kind, "type": lamp.kind.blender_type.lower(),
            "location": lamp.position, "direction": lamp.direction, "axis_u": lamp.axis_u, "center": lamp.position,
@@ -172,6 +172,9 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                                  "(turn its Temperature off, or raise it, and reduce again)"
                                  for r in lamps or [] if "problem" in r]
     final_lights = light_records(model, curve, fi)
+    schedule = fixture_schedule(final_lights) if options.param("fixtures") else None
+    if schedule:
+        warnings += schedule_notes(schedule)
     if model.mode == "inverse":  # (each record gets its utilisation; the implausible ones named)
         warnings += implausible_notes(problem, final_lights, np.flatnonzero(np.any(curve.exitance[fi] != 0, axis=1)))
     return {
@@ -208,11 +211,63 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
                   "bound_relative_error": None if point_bounds is None else float(point_bounds[red.final_index] / norm),
                   "lights": final_lights},
         "fixed_light": fixed_light,
+        **({"fixture_schedule": schedule} if options.param("fixtures") else {}),
         "targets_photometric": photometric,
         "lamps": lamps,
         "objects": objects,
         "warnings": warnings,
     }
+
+
+def fixture_schedule(lights) -> list:
+    """The fixture schedule of a configuration's lights (``light_records``: the records of catalogue
+    fixtures, engine/lights/fixture.py, those with a ``fixture``), per fixture type in order of its
+    first light: fixture (its catalogue name), description, count, rated_lumens and rated_watts (one
+    fixture's), lumens and watts in all (lm at the dimming solved; W its rated input watts x the
+    dimming: dimming taken as linear in the input power), and per light its object, location,
+    direction and dimming (1 = 100 % of its rated lumens). A light dimmed above 1 needs more than its
+    rating: ``over_rating`` lists those, each with ``fixtures_needed`` (as many of its type there,
+    each at dimming / that, give its light); the written lamp gives the light solved (its Power above
+    the rating's), and schedule_notes names it."""
+    out = {}
+    for rec in lights:
+        if rec.get("fixture") is None:
+            continue
+        row = out.setdefault(rec["fixture"], {"fixture": rec["fixture"], "description": rec.get("fixture_description"),
+                                              "count": 0, "rated_lumens": float(rec["rated_lumens"]),
+                                              "rated_watts": float(rec["rated_watts"]), "lumens": 0.0, "watts": 0.0,
+                                              "lights": [], "over_rating": []})
+        dim = float(rec["luminous_flux_lm"]) / row["rated_lumens"]
+        row["count"] += 1
+        row["lumens"] += float(rec["luminous_flux_lm"])
+        row["watts"] += dim * row["rated_watts"]
+        row["lights"].append({"object": rec["object"], "location": rec["location"], "direction": rec["direction"],
+                              "dimming": dim, "lumens": float(rec["luminous_flux_lm"])})
+        if dim > 1.0:
+            row["over_rating"].append({"object": rec["object"], "dimming": dim, "fixtures_needed": int(math.ceil(dim))})
+    return list(out.values())
+
+
+def schedule_notes(schedule) -> list:
+    """The warnings of a fixture schedule: each fixture whose light needs more than its rated lumens."""
+    return [f"fixture {o['object']!r} ({row['fixture']}) needs {100 * o['dimming']:.0f} % of its rated "
+            f"{row['rated_lumens']:.0f} lm: written so (its Power above its rating's); {o['fixtures_needed']} of "
+            f"{row['fixture']} there at {100 * o['dimming'] / o['fixtures_needed']:.0f} % each give it, or a "
+            "brighter fixture of its distribution" for row in schedule for o in row["over_rating"]]
+
+
+def schedule_lines(schedule) -> list:
+    """The fixture schedule as the sidebar shows it: a line per fixture type (how many, their dimming,
+    lumens and watts in all) and a total."""
+    lines = []
+    for row in schedule:
+        dims = [li["dimming"] for li in row["lights"]]
+        lines.append(f"{row['count']} x {row['fixture']} at {100 * min(dims):.0f}-{100 * max(dims):.0f} %: "
+                     f"{row['lumens']:.0f} lm, {row['watts']:.1f} W" + (" (over rating)" if row["over_rating"] else ""))
+    if schedule:
+        lines.append(f"in all {sum(r['count'] for r in schedule)} fixtures: {sum(r['lumens'] for r in schedule):.0f} lm, "
+                     f"{sum(r['watts'] for r in schedule):.1f} W")
+    return lines
 
 
 def _per_face(pmap, patches, curve, E_patch) -> dict:
@@ -361,9 +416,15 @@ def light_rows(report) -> str:
 
 
 def _light_text(records) -> str:
-    return "\n".join(f"{li['object']}\t{li['kind']}\t{li['power']:.6g}\t{li.get('luminous_flux_lm', 0.0):.6g}\t"
-                     f"{'' if li.get('temperature_K') is None else format(li['temperature_K'], '.0f')}\t"
-                     f"{implausible_mark(li)}" for li in records)
+    """A line per light (5 tabs), then the fixture schedule's lines (SCHEDULE_LINE, tab, the line) if any."""
+    return "\n".join([f"{li['object']}\t{li['kind']}\t{li['power']:.6g}\t{li.get('luminous_flux_lm', 0.0):.6g}\t"
+                      f"{'' if li.get('temperature_K') is None else format(li['temperature_K'], '.0f')}\t"
+                      f"{implausible_mark(li)}" for li in records]
+                     + [f"{SCHEDULE_LINE}\t{line}" for line in schedule_lines(fixture_schedule(records))])
+
+
+#: the first field of the sidebar's lines of a fixture schedule (blender/ui/panels.py draws them)
+SCHEDULE_LINE = "schedule"
 
 
 def row_panels(model, curve) -> list:

@@ -17,6 +17,7 @@ import numpy as np
 
 from ...engine.lights.kind import lamp_kind_of_type
 from ...pipeline import chart
+from ...pipeline.report import SCHEDULE_LINE
 from ...pipeline.notes import sidebar_lines
 from .. import layers, results, visibility
 from ...engine.formfactors import auto_rays_per_patch
@@ -291,6 +292,7 @@ def draw_light_kinds(layout, settings):
         row = col.row(align=True)
         for name in names[k:k + 2]:
             row.prop(settings, name, toggle=True)
+    col.prop(settings, "fixtures", text="Fixtures", icon="FILE_FOLDER")  # a library folder or "builtin" (empty: none)
     sub = col.column(align=True)
     sub.active = used and options.uses("lamp_drop")
     draw_option(sub, settings, PARAMS["lamp_drop"])
@@ -589,6 +591,12 @@ def _draw_shown_light(layout, s):
                 col.label(text=f"implausible: {mark}", icon="BLANK1")
         if len(rows) > 8:
             col.label(text=f"... and {len(rows) - 8} more")
+    schedule = [line.split("\t", 1)[1] for line in s.last_lights.split("\n") if line.startswith(SCHEDULE_LINE + "\t")]
+    if schedule:  # the catalogue fixtures shown: per type how many, dimmed to what, lumens and watts
+        col = layout.box().column(align=True)
+        col.label(text="Fixture schedule", icon="LIGHT_POINT")
+        for line in schedule:
+            col.label(text=line)
 
 
 CLASSES = (RELIGHT_PT_main, RELIGHT_PT_targets, RELIGHT_PT_candidates, RELIGHT_PT_model, RELIGHT_PT_solve,

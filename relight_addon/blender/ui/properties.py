@@ -24,6 +24,8 @@ def option_property(p):
         return BoolProperty(default=bool(p.default), **kw)
     if p.registry is not None:  # the enum items derive from the registry
         return EnumProperty(items=p.registry.enum_items(), default=p.default, **kw)
+    if p.type is str:  # a free text (a fixture library: a folder or "builtin"); empty = None
+        return StringProperty(default=p.default or "", **kw)
     if p.ui == "zero":
         default, lo = 0, 0
         kw["description"] += f" (0 = {p.none or 'automatic'})"
@@ -66,7 +68,7 @@ def option_properties():
 def ui_value(settings, p):
     """The option's value from the scene's property (None where the property says "not set")."""
     value = getattr(settings, p.name)
-    if p.ui == "zero" and not value:
+    if (p.ui == "zero" or (p.type is str and p.registry is None)) and not value:
         return None
     if p.ui == "toggle" and not getattr(settings, "use_" + p.name):
         return None

@@ -142,6 +142,12 @@ class LampKind(LightKind):
         candidate_lamps.MAX_CLUSTERS), or ``work``: their receiver-point work in spots'."""
         return 0
 
+    def offered(self, options):
+        """What offers its lamps for a job of ``options`` (``per_position``, ``offer_at``,
+        ``offer_for``, ``name``): itself; a kind whose offer depends on the job (a fixture library,
+        fixture.py) returns one bound to it."""
+        return self
+
     def offer_at(self, mount) -> None:
         """Offer its lamps at a mounting position (``mount.add``, candidate_lamps.Mounting)."""
 
@@ -201,6 +207,11 @@ class LampKind(LightKind):
         """Its Blender Light's own settings from a record (``record``), {attribute: value} in the
         order they are set (blender/results.new_lamp sets them)."""
         return {}
+
+    def blender_ies(self, record):
+        """(an internal text's name, its LM-63 text) that its Blender Light's IES Texture node holds
+        (blender/results.new_lamp writes the node), None for a Light without one."""
+        return None
 
     # -- a scene's Blender Light read (blender/lamps.py; ``light``: a bpy Light, read by attribute) --
     def blender_settings(self, light, matrix) -> tuple:

@@ -5,6 +5,8 @@
 - ``lm63.py``: IES LM-63 read (types C and B; type A refused) and written (type C, for Blender's
   IES node).
 - ``eulumdat.py``: EULUMDAT (.ldt) read into the same Photometry.
+- ``library.py``: fixture libraries (a folder of .ies / .ldt files, or the built-in one it generates:
+  relight_addon/fixtures/), each fixture with its name, rated lumens and watts.
 
 ``read_photometry`` reads either by the file's extension (.ldt: EULUMDAT; else LM-63).
 """
