@@ -32,6 +32,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
+from .coincident import Twins
 from .rays import RAY_OFFSET
 from .scene import PatchSet, SceneError, patch_triangles
 from .units import TINY
@@ -120,14 +121,17 @@ class SceneSampler:
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
         tv = self.tv if self._occluders is None else self.tv[self._occluders]
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
+        # coincident triangles back to back: a ray hits the one facing it (engine.coincident)
+        self._twins = Twins.of(self.tv, self.tn, self.ta, self.offset, among=self._occluders)
 
     def first_hit(self, org, d) -> np.ndarray:
-        """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a miss."""
+        """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a
+        miss; of coincident triangles back to back, the one facing the ray (engine.coincident)."""
         prim = self.scene.run(org, d)
-        if self._occluders is None:
-            return prim
-        prim = np.asarray(prim)
-        return np.where(prim >= 0, self._occluders[np.maximum(prim, 0)], -1)
+        if self._occluders is not None:
+            prim = np.asarray(prim)
+            prim = np.where(prim >= 0, self._occluders[np.maximum(prim, 0)], -1)
+        return prim if self._twins is None else self._twins.facing(org, d, prim)
 
     def front_hit_patches(self, org, d) -> np.ndarray:
         """The patch whose front side each ray hits first; n_patches for a miss or a hit on a back side."""

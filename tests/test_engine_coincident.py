@@ -1,0 +1,142 @@
+"""engine.coincident: a ray that reaches two coincident faces back to back hits the one facing it.
+
+The cause of CIE 171's obstruction drawn as two coincident faces (tests/test_cie171.py): Embree
+returns either of two triangles hit at the same distance, so the rays of one side hit the back of
+the face that turns away from them, absorbed and counted for no patch.
+"""
+import numpy as np
+import pytest
+
+from relight_addon.engine import closed_forms as cf
+from relight_addon.engine.coincident import NORMAL_TOL, Twins
+from relight_addon.engine.formfactors import compute_form_factors, visible_fraction
+from relight_addon.engine.sampling import SceneSampler
+from relight_addon.engine.scene import mesh_patches, polygon_faceset
+
+#: a 2 m x 1 m wall in the plane x = 0, facing -x (its corners in this order)
+WALL = np.array([(0, -1.0, 0), (0, -1.0, 1.0), (0, 1.0, 1.0), (0, 1.0, 0)])
+
+
+def _sampler(polys):
+    return SceneSampler(mesh_patches(polygon_faceset(polys, reflectance=0.5), 10.0))
+
+
+def _rays_at(x, n, rng, y=(-0.9, 0.9), z=(0.1, 0.9)):
+    """n rays from the plane at ``x`` towards x = 0 (perpendicular and oblique), aimed at points
+    of [y] x [z] on it."""
+    target = np.stack([np.zeros(n), rng.uniform(*y, n), rng.uniform(*z, n)], axis=1)
+    org = target + np.stack([np.full(n, x), rng.uniform(-1, 1, n), rng.uniform(-1, 1, n)], axis=1)
+    d = target - org
+    return org.astype(np.float32), (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+
+
+def _faces_the_ray(sm, org, d, prim):
+    return (prim >= 0) & (np.einsum("ij,ij->i", sm.tn[np.maximum(prim, 0)], d) < 0)
+
+
+@pytest.mark.parametrize("order", [1, -1])
+def test_rays_hit_the_twin_that_faces_them(order):
+    """The wall and its flipped copy (triangulated along the other diagonal: the two faces' triangles
+    differ), listed either way: from each side every ray hits the wall, on the front of the face
+    turned towards it. Embree alone hits the face turned away for one side's rays (the defect)."""
+    sm = _sampler([WALL, WALL[::-1].copy()][::order])
+    assert sm._twins is not None and sm._twins.flag.all()
+    rng = np.random.default_rng(3)
+    raw_back = 0
+    for x in (-2.0, 2.0):
+        org, d = _rays_at(x, 4000, rng)
+        raw = np.asarray(sm.scene.run(org, d))
+        assert np.all(raw >= 0)
+        raw_back += int((~_faces_the_ray(sm, org, d, raw)).sum())
+        prim = sm.first_hit(org, d)
+        assert np.all(_faces_the_ray(sm, org, d, prim))
+        facing = np.sign(np.einsum("ij,ij->i", sm.tn[prim], [[x, 0, 0]]))
+        assert np.all(facing == 1)  # the face turned towards the ray's side
+        assert np.all(sm.front_hit_patches(org, d) == sm.tri_patch[prim])
+    assert raw_back >= 4000  # Embree's own answer: one side's rays all on the back of a face
+
+
+def test_only_where_the_copy_covers():
+    """A copy covering the wall's upper half only: rays that reach the upper half from the back
+    hit the copy's front; those that reach the lower half still hit the wall's back (counted for no
+    patch), and rays to the front side all hit the wall's front."""
+    half = np.array([(0, 1.0, 0.5), (0, 1.0, 1.0), (0, -1.0, 1.0), (0, -1.0, 0.5)])  # facing +x
+    sm = _sampler([WALL, half])
+    rng = np.random.default_rng(4)
+    for z, copy in (((0.55, 0.95), True), ((0.05, 0.45), False)):
+        org, d = _rays_at(2.0, 2000, rng, z=z)  # from +x: the wall's back side
+        prim = sm.first_hit(org, d)
+        front = _faces_the_ray(sm, org, d, prim)
+        assert np.all(front) if copy else not np.any(front)
+        assert np.all((sm.tri_patch[prim] == 1) == copy)
+        org, d = _rays_at(-2.0, 2000, rng, z=z)
+        assert np.all(sm.tri_patch[sm.first_hit(org, d)] == 0)
+
+
+def test_what_is_not_a_twin():
+    """No twins where none lie back to back: a room with a box in it (Twins.of: None, first_hit is
+    Embree's answer unchanged); two faces 1 cm apart, or a copy facing the same way (both fronts),
+    or one tilted by 10 x NORMAL_TOL: Embree's nearest hit stands, and a copy turned 0.5 NORMAL_TOL
+    still counts as the wall's other side."""
+    room = cf.box_polygons((4.0, 4.0, 3.0))
+    box = [p * 0.5 + 1.0 for p in cf.box_polygons((1.0, 1.0, 1.0))]
+    assert _sampler(room + [q[::-1].copy() for q in box])._twins is None
+    rng = np.random.default_rng(5)
+    apart = WALL[::-1] + [0.01, 0, 0]  # facing +x, 1 cm in front: the +x side sees it first anyway
+    sm = _sampler([WALL, apart])
+    org, d = _rays_at(2.0, 1000, rng)
+    assert np.all(sm.tri_patch[sm.first_hit(org, d)] == 1)
+    org, d = _rays_at(-2.0, 1000, rng)
+    assert np.all(sm.tri_patch[sm.first_hit(org, d)] == 0)
+    assert _sampler([WALL, WALL.copy()])._twins is None  # the same way: no back side involved
+
+    def turned(angle):  # the wall's flipped copy turned about the vertical axis through its middle
+        c, s = np.cos(angle), np.sin(angle)
+        return WALL[::-1] @ np.array([[c, s, 0], [-s, c, 0], [0, 0, 1.0]])
+
+    for angle, twin in ((0.5 * NORMAL_TOL, True), (10 * NORMAL_TOL, False)):
+        sm = _sampler([WALL, turned(angle)])
+        org, d = _rays_at(2.0, 2000, rng, y=(-0.9, -0.1))  # off the axis: the planes part by up to 1 cm
+        prim = sm.first_hit(org, d)
+        if twin:
+            assert np.all(_faces_the_ray(sm, org, d, prim))
+        else:
+            raw = np.asarray(sm.scene.run(org, d))
+            assert np.array_equal(prim, raw)
+
+
+def test_a_corridor_between_twinned_walls_is_not_buried():
+    """A floor strip 0.1 m wide between two 2 m walls, each drawn as two coincident faces, listed
+    either way: the strip's points see mostly wall. Its visible share (formfactors.visible_fraction)
+    is 1, and its ray-cast row (reciprocity "rays") sums to what the same corridor with one-faced
+    walls facing it gives. Embree alone (the sampler without its twins) buries the strip for one
+    of the two orders: its rays reach the walls' backs."""
+    floor = np.array([(-0.05, -1, 0), (0.05, -1, 0), (0.05, 1, 0), (-0.05, 1, 0)])
+
+    def wall(x, facing):
+        q = np.array([(x, -1, 0), (x, 1, 0), (x, 1, 2), (x, -1, 2)])  # facing +x
+        return q if facing > 0 else q[::-1].copy()
+
+    def row(polys):
+        ps = mesh_patches(polygon_faceset(polys, reflectance=0.5), 10.0)
+        return ps, float(compute_form_factors(ps, rays_per_patch=1 << 14, threads=1, reciprocity="rays").row_sums()[0])
+
+    ps, single = row([floor, wall(-0.05, 1), wall(0.05, -1)])
+    assert single > 0.9 and visible_fraction(ps, SceneSampler(ps))[0] == 1.0
+    alone = []
+    for order in (1, -1):
+        ps, twins = row([floor, *[wall(-0.05, s) for s in (-1, 1)][::order], *[wall(0.05, s) for s in (1, -1)][::order]])
+        sm = SceneSampler(ps)
+        assert visible_fraction(ps, sm)[0] == 1.0
+        assert twins == pytest.approx(single, abs=0.01)
+        sm._twins = None
+        alone.append(visible_fraction(ps, sm)[0])
+    assert min(alone) < 0.5, alone
+
+
+def test_twins_of_counts_only_the_scene_s_triangles():
+    """Twins.of with ``among`` (the triangles in the ray scene; work planes are not): a face whose
+    only partner is left out is no twin."""
+    sm = _sampler([WALL, WALL[::-1].copy()])
+    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset, among=np.flatnonzero(sm.tri_patch == 0)) is None
+    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset).flag.sum() == 4
