@@ -138,5 +138,40 @@ def test_twins_of_counts_only_the_scene_s_triangles():
     """Twins.of with ``among`` (the triangles in the ray scene; work planes are not): a face whose
     only partner is left out is no twin."""
     sm = _sampler([WALL, WALL[::-1].copy()])
-    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset, among=np.flatnonzero(sm.tri_patch == 0)) is None
-    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset).flag.sum() == 4
+    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset, sm._own_hit, among=np.flatnonzero(sm.tri_patch == 0)) is None
+    assert Twins.of(sm.tv, sm.tn, sm.ta, sm.offset, sm._own_hit).flag.sum() == 4
+
+
+@pytest.mark.parametrize("floor_first", [True, False])
+def test_a_solid_on_a_floor_is_not_a_thin_wall(floor_first):
+    """A closed box standing on a floor plane: its bottom and the floor are coincident faces facing
+    each other, locally the same pair as a thin wall's two sides. A ray from inside the box (a
+    floor point under it: buried) that reaches them keeps Embree's answer, and every patch's visible
+    share is what it is without twins (the floor under the box buried, the floor beside it not);
+    only a ray from the open side below the floor, reaching the floor's back under the box, lands on
+    the box's bottom, as on a thin slab's other side. (Listed either way: Embree answers one of the
+    two for both sides; without the inside test, the rays from inside the box land on the floor.)"""
+    floor = np.array([(-2.0, -2, 0), (2.0, -2, 0), (2.0, 2, 0), (-2.0, 2, 0)])
+    box = [q[::-1] * 0.5 - [0.5, 0.5, 0] for q in cf.box_polygons((2.0, 2.0, 1.0))]  # 1 x 1 x 0.5, facing out
+    ps = mesh_patches(polygon_faceset([floor] + box if floor_first else box + [floor], reflectance=0.5), 0.5)
+    sm = SceneSampler(ps)
+    assert sm._twins is not None
+    ground = 0 if floor_first else 6
+    bottom = np.flatnonzero(ps.face[sm.tri_patch] == (1 if floor_first else 0))  # box_polygons: its floor first
+    assert sm.tn[bottom, 2] == pytest.approx(-1.0)
+    rng = np.random.default_rng(6)
+    n = 3000
+    inside = np.stack([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n), rng.uniform(0.01, 0.4, n)], axis=1)
+    down = np.stack([rng.uniform(-0.2, 0.2, n), rng.uniform(-0.2, 0.2, n), -np.ones(n)], axis=1)
+    down /= np.linalg.norm(down, axis=1, keepdims=True)
+    org, d = inside.astype(np.float32), down.astype(np.float32)
+    assert np.array_equal(sm.first_hit(org, d), np.asarray(sm._own_hit(org, d)))
+    below = (inside - [0, 0, 1.0]).astype(np.float32)
+    prim = sm.first_hit(below, -d)
+    assert np.all(np.isin(prim, bottom))  # the box's bottom, facing the ray
+    v = visible_fraction(ps, sm)
+    sm._twins = None
+    np.testing.assert_array_equal(v, visible_fraction(ps, sm))
+    under = (ps.face == ground) & (np.abs(ps.center[:, :2]).max(axis=1) < 0.5)
+    assert under.any() and np.all(v[under] == 0.0)
+    assert np.all(v[(ps.face == ground) & ~under] > 0.9)

@@ -122,16 +122,21 @@ class SceneSampler:
         tv = self.tv if self._occluders is None else self.tv[self._occluders]
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
         # coincident triangles back to back: a ray hits the one facing it (engine.coincident)
-        self._twins = Twins.of(self.tv, self.tn, self.ta, self.offset, among=self._occluders)
+        self._twins = Twins.of(self.tv, self.tn, self.ta, self.offset, self._own_hit, among=self._occluders)
 
     def first_hit(self, org, d) -> np.ndarray:
         """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a
         miss; of coincident triangles back to back, the one facing the ray (engine.coincident)."""
-        prim = self.scene.run(org, d)
-        if self._occluders is not None:
-            prim = np.asarray(prim)
-            prim = np.where(prim >= 0, self._occluders[np.maximum(prim, 0)], -1)
+        prim = self._own_hit(org, d)
         return prim if self._twins is None else self._twins.facing(org, d, prim)
+
+    def _own_hit(self, org, d):
+        """Embree's first hit, a sorted triangle (-1: a miss), of two coincident ones either."""
+        prim = self.scene.run(org, d)
+        if self._occluders is None:
+            return prim
+        prim = np.asarray(prim)
+        return np.where(prim >= 0, self._occluders[np.maximum(prim, 0)], -1)
 
     def front_hit_patches(self, org, d) -> np.ndarray:
         """The patch whose front side each ray hits first; n_patches for a miss or a hit on a back side."""
