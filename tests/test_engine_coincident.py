@@ -175,3 +175,61 @@ def test_a_solid_on_a_floor_is_not_a_thin_wall(floor_first):
     under = (ps.face == ground) & (np.abs(ps.center[:, :2]).max(axis=1) < 0.5)
     assert under.any() and np.all(v[under] == 0.0)
     assert np.all(v[(ps.face == ground) & ~under] > 0.9)
+
+
+# ------------------------------------------------------------------ at export (engine.two_sided)
+def _two_sided():
+    from test_engine_two_sided import DARK, ROOM, box, card, chunks, mesh, normals
+    return DARK, ROOM, box, card, chunks, mesh, normals
+
+
+@pytest.mark.parametrize("drawn", ["two objects", "one mesh"])
+def test_a_shelf_drawn_as_both_its_sides_is_neither_doubled_nor_turned(drawn):
+    """A shelf in a room drawn as two coincident faces back to back (two objects, or one mesh with
+    the copy's vertices not welded): each face's back lies against the other's front, so neither is
+    given a back of its own nor turned (a single card there is doubled:
+    test_engine_two_sided.test_a_card_in_a_room_seen_from_both_sides_is_doubled). Doubled, each
+    back was set BACK_OFFSET in front of the other face, hiding it from the room."""
+    from relight_addon.engine import two_sided
+
+    DARK, ROOM, box, card, chunks, mesh, normals = _two_sided()
+    room = ("Room", box(*ROOM, inward=True), DARK)
+    if drawn == "two objects":
+        b = chunks(room, ("Top", card(1.5, 1.0, up=True), DARK), ("Under", card(1.5, 1.0, up=False), DARK))
+    else:
+        V = [[-0.5, -0.5, 1.5], [0.5, -0.5, 1.5], [0.5, 0.5, 1.5], [-0.5, 0.5, 1.5]]
+        b = chunks(room, ("Shelf", mesh(V + V, [[0, 1, 2, 3], [4, 7, 6, 5]]), DARK))
+    assert two_sided.faces_seen_from_behind(b) == []
+    assert b.nf == 8
+    n = np.concatenate([normals(b, ci) for ci in range(1, len(b.e))])[:, 2]
+    assert sorted(np.unique(np.round(n))) == [-1.0, 1.0]  # one face up, one down, as drawn
+
+
+def test_a_card_lying_on_a_box_is_judged_as_before():
+    """A card lying face down on a closed crate in a room (its front against the crate's top:
+    coincident, facing each other) is no thin wall's side: covered_share pairs faces of open
+    islands only, and the card is judged as without it (seen from both sides: its back doubled, as
+    main does)."""
+    from relight_addon.engine import two_sided
+
+    DARK, ROOM, box, card, chunks, mesh, normals = _two_sided()
+    b = chunks(("Room", box(*ROOM, inward=True), DARK), ("Crate", box((-0.5, -0.5, 0.0), (0.5, 0.5, 0.8)), DARK),
+               ("Card", card(0.8, 0.4, up=False), DARK))
+    warnings = two_sided.faces_seen_from_behind(b)
+    assert len(warnings) == 1 and "(1 of 'Card') are seen from both sides" in warnings[0]
+    assert b.nf == 14
+
+
+def test_covered_share():
+    """covered_share: a wall and its flipped copy cover each other whole; a copy of one of the
+    wall's two triangles covers half of it; faces 1 cm apart, none (no pair: None)."""
+    from relight_addon.engine.coincident import covered_share
+
+    def share(polys):
+        fs = polygon_faceset(polys)
+        return covered_share(fs.vertices, fs.triangles, fs.triangle_face, len(polys))
+
+    np.testing.assert_allclose(share([WALL, WALL[::-1].copy()]), [1.0, 1.0])
+    half = share([WALL, WALL[[2, 1, 0]].copy()])  # the triangle (0, 1, 2) of the wall, flipped
+    assert half[1] == pytest.approx(1.0) and half[0] == pytest.approx(0.5)
+    assert share([WALL, WALL[::-1] + [0.01, 0, 0]]) is None

@@ -190,11 +190,11 @@ COVER_POINTS = np.array([(1 / 3, 1 / 3), (1 / 6, 1 / 6), (2 / 3, 1 / 6), (1 / 6,
                          (0.1, 0.45), (0.45, 0.1), (0.45, 0.45)])
 
 
-def covered_share(vertices, triangles, triangle_face, n_faces: int):
+def covered_share(vertices, triangles, triangle_face, n_faces: int, among=None):
     """(n_faces,) the share of each face's area (a FaceSet's or FaceChunks' world-space
     ``vertices``, ``triangles``, ``triangle_face``) whose back lies against a coincident face that
-    faces the other way (at COVER_POINTS of each triangle, weighted by area), or None when no
-    triangle of the scene has such a partner."""
+    faces the other way (at COVER_POINTS of each triangle, weighted by area), among the faces
+    ``among`` ((n_faces,) bool; default all), or None when no such pair exists."""
     V = np.asarray(vertices, dtype=np.float64)
     tv = V[np.asarray(triangles, dtype=np.int64)]
     cross = triangle_cross(tv)
@@ -203,7 +203,9 @@ def covered_share(vertices, triangles, triangle_face, n_faces: int):
     lo, hi = V.min(axis=0), V.max(axis=0)
     offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(V).max())
     scene = embree_scene(V, triangles)
-    twins = Twins.of(tv, tn, ta, offset, scene.run)
+    face = np.asarray(triangle_face, dtype=np.int64)
+    twins = Twins.of(tv, tn, ta, offset, scene.run, among=None if among is None else np.flatnonzero(
+        np.asarray(among, dtype=bool)[face]))
     if twins is None:
         return None
     t = np.flatnonzero(twins.flag)
@@ -214,7 +216,6 @@ def covered_share(vertices, triangles, triangle_face, n_faces: int):
     n = tn[tt]
     # a ray reaching each point from behind its triangle: answered by the twin facing it, if any
     got = twins.facing(p - n, n, tt)
-    face = np.asarray(triangle_face, dtype=np.int64)
     covered = np.bincount(face[tt], weights=(got != tt) * np.repeat(ta[t], k) / k, minlength=n_faces)
     area = np.bincount(face, weights=ta, minlength=n_faces)
     return covered / np.where(area > 0, area, 1.0)
