@@ -109,6 +109,9 @@ class Twins:
         # PLANE_TOL offsets, or tilted by NORMAL_TOL over half the scene, are within 2 NORMAL_TOL
         span = PLANE_TOL * float(offset) + NORMAL_TOL * 0.5 * float(np.linalg.norm(hi - lo))
         X = np.concatenate([n, (c * (NORMAL_TOL / span))[:, None]], axis=1)
+        # moved apart by 1e-9 (a fixed draw): a k-d tree of many equal points (a floor of 180,000
+        # coplanar triangles) cannot split them and took 180 s to build
+        X += np.random.default_rng(0).uniform(-1e-9, 1e-9, X.shape)
         dist, _ = cKDTree(X).query(-X, k=1, distance_upper_bound=3 * NORMAL_TOL)
         flagged = idx[np.isfinite(dist)]
         return cls(tv, tn, flagged, offset, trace) if len(flagged) else None
