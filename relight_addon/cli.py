@@ -132,6 +132,14 @@ def build_parser():
         if name == "solve":
             s.add_argument("--target-scale", type=_target_scale, default=None,
                            help="multiplies the painted target colours, > 0 (default: the scene's)")
+            s.add_argument("--view-target", metavar="IMAGE",
+                           help="the scene camera's image painted with the radiance it should show: an OpenEXR "
+                                "(linear radiance) or PNG (read through the scene's view transform: Standard or "
+                                "Raw) at the camera's aspect, alpha 0 where a pixel is free; solved at 480 pixels "
+                                "on the longer side, with the painted faces")
+            s.add_argument("--view-prediction", metavar="IMAGE",
+                           help="with --view-target: write the radiance the solved lights show the camera (OpenEXR, "
+                                "linear; alpha: the share of a pixel that sees a surface)")
             s.add_argument("--keep", metavar="REPORT",
                            help="keep the lamps of an earlier report's final configuration at their place and "
                                 "power (written as the scene's lamps) and find Max Lights more around them")
@@ -235,14 +243,20 @@ def _check_paths(args):
     """Before any work: no output may be the input file or another output, and every output
     must be writable."""
     scene_path = os.path.abspath(args.scene)
-    outputs = [(name, getattr(args, name)) for name in ("report", "out", "render") if getattr(args, name, None)]
+    outputs = [(name, getattr(args, name)) for name in ("report", "out", "render", "view_prediction")
+               if getattr(args, name, None)]
+    if getattr(args, "view_prediction", None) and not getattr(args, "view_target", None):
+        raise UsageError("--view-prediction needs --view-target (the camera's painted image)")
     for name, path in outputs:
         if _same_file(path, scene_path):
-            raise UsageError(f"--{name} must not be the input file {args.scene}")
+            raise UsageError(f"--{name.replace('_', '-')} must not be the input file {args.scene}")
+        if getattr(args, "view_target", None) and _same_file(path, args.view_target):
+            raise UsageError(f"--{name.replace('_', '-')} must not be the view target {args.view_target}")
     for i, (a, pa) in enumerate(outputs):
         for b, pb in outputs[i + 1:]:
             if _same_file(pa, pb):
-                raise UsageError(f"--{a} and --{b} name the same file {pa}: give them different paths")
+                raise UsageError(f"--{a.replace('_', '-')} and --{b.replace('_', '-')} name the same file {pa}: "
+                                 "give them different paths")
     for name, path in outputs:
         _check_writable(name, path)
     if getattr(args, "render", None):
@@ -515,16 +529,32 @@ def run_solve_command(args, progress=None, cancel=None):
             raise UsageError(str(exc)) from None
     blend_files.open_blend(args.scene)
     _check_not_read(args)
+    view = None
+    if getattr(args, "view_target", None):
+        from .blender.camera_view import read_view_target
+
+        view = read_view_target(bpy.context.scene, args.view_target)
     names = results.add_kept_lamps(bpy.context.scene, keep[0]) if keep else []
     job = SolveJob.export(None, options, "inverse" if args.command == "solve" else "direct",
-                          target_scale=getattr(args, "target_scale", None))
+                          target_scale=getattr(args, "target_scale", None), view_target=view)
     if args.command == "reduce" and (args.out or args.render):  # before the work: what apply will write
         _check_lamps_not_animated(bpy.context.scene, job.exp.faces.lamps)
     patches, cost = _job(args, job.mesh)
     _print_estimate(args, patches, cost)
     outcome = _job(args, job.run)
-    job.finish(bpy.context.scene, outcome, input_path=os.path.abspath(args.scene))
+    # (a view target's glossy rows read every patch they gather from: radiance_normal, of the patches
+    # the rows read, is left out of its report)
+    job.finish(bpy.context.scene, outcome, view_radiance=view is None, input_path=os.path.abspath(args.scene))
     report = outcome.report
+    if view is not None:
+        from .pipeline import view_targets
+
+        report["view_target"] = view_targets.view_report(outcome)
+        report["warnings"].extend(view_targets.view_notes(outcome.problem))
+        if args.view_prediction:
+            from .blender.camera_view import write_image
+
+            write_image(args.view_prediction, view_targets.predicted_rgba(outcome))
     if keep:
         report["kept"] = {"from": os.path.abspath(args.keep), "lamps": [
             {"object": n, "type": r["type"].lower(), "location": r["position"], "energy": r["energy"],

@@ -91,23 +91,33 @@ def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeyp
     assert state.reason is None and state.warm == 1
     assert rows == [int(warm.patches.target.sum())] and rows[0] >= n_before + len(near)
     assert warm.report["timings_s"]["form_factors"] == pytest.approx(state.seconds["kernel rows"])
-    # a lux fill (the same target patches at another radiosity): no kernel row drawn again
+    account = warm.report["prepared"]  # what the warm solve did not recompute, in its report
+    assert account["from_prepared_state"] and account["kept"]["form factors (hemisphere rays)"]
+    assert account["kept"]["kernel rows"] == 0 and account["computed"]["kernel rows"] == rows[0]
+    assert account["computed"]["rays cast"] == 0
+    assert first.report["prepared"]["computed"]["rays cast"] > 0 and not first.report["prepared"]["kept"]["kernel rows"]
+    # a lux fill (the same target patches at another radiosity): no kernel row drawn again, and no
+    # candidate lamp's irradiance computed again (the same plan: the lamps of the stroke's solve)
     brighter = replace(exp2.faces, target_radiosity=1.5 * exp2.faces.target_radiosity)
     rows = _counting(monkeypatch)
-    state.solve(brighter)
+    lux = state.solve(brighter)
     monkeypatch.undo()
     assert state.reason is None and rows == []
+    assert lux.report["prepared"]["computed"]["candidate lamps' irradiance"] == 0
+    assert lux.report["prepared"]["kept"]["candidate lamps' irradiance"] > 0
 
     # the warm solve is as good as the cold solve of the painted file, within 1 % (issue 37: it was
     # 12.5 % worse on the adaptive model, 0.167 against 0.149, its new rows drawn apart; now 0.148);
-    # on the polygon model, whose mesh is the cold solve's, the same answer
+    # on the polygon model, whose mesh is the cold solve's, the same answer (the lamps kept are the
+    # numbers offer_lamps computes at their place in the plan: within 1 %, the same lamp drawn at
+    # another place of an earlier plan is another sample)
     for faces in (exp2.faces, brighter):
         warm = state.solve(faces)
         cold2 = jobs.run_solve(faces, options, default_max_patch_size=size)
         assert _final(warm)[0] == _final(cold2)[0]
         assert _final(warm)[1] <= 1.01 * _final(cold2)[1], (_final(warm), _final(cold2))
         if model == "polygon":
-            assert _final(warm)[1] == pytest.approx(_final(cold2)[1], rel=1e-4), (_final(warm), _final(cold2))
+            assert _final(warm)[1] == pytest.approx(_final(cold2)[1], rel=0.01), (_final(warm), _final(cold2))
         assert np.all(np.isfinite(warm.stored.exitance))
 
 
@@ -239,6 +249,49 @@ def test_every_kind_of_stroke_is_answered_live_as_well_as_a_cold_solve():
     assert all(answer <= 1.05 * cold for _, answer, cold in worse.values()), worse
 
 
+def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kept(monkeypatch):
+    """The warm solve's candidate lamps (prepared.KeptLamps.offer): with nothing kept, the lights
+    offer_lamps makes, the same numbers; offered again for the same plan, no lamp computed and the
+    same lights; in another plan a lamp kept is its earlier number, a new one offer_lamps' number
+    at its place in the new plan (issue 37: a warm solve computes only the lamps it has not)."""
+    from relight_addon.engine import candidate_lamps
+    from relight_addon.engine.lights import candidate_mask
+    from relight_addon.engine.sampling import SceneSampler
+    from relight_addon.pipeline.meshing import mesh_for_job
+
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(**OPTIONS).validate()
+    patches = mesh_for_job(exp.faces, options, exp.settings.get("max_patch_size"))
+    mask, sampler = candidate_mask(patches, "inverse"), SceneSampler(patches)
+    cold, n_cold = candidate_lamps.offer_lamps(None, patches, mask, options, sampler, options.seed)
+    kept = prepared.KeptLamps()
+    warm, n_warm = kept.offer(None, patches, mask, options, sampler, options.seed)
+    assert n_cold == n_warm > 0 and kept.computed == n_cold and kept.reused == 0
+    assert list(map(prepared.digest, warm.lamps)) == list(map(prepared.digest, cold.lamps))
+    assert (warm.irradiance != cold.irradiance).nnz == 0  # bit for bit
+    calls = []
+    real = prepared.lamp_irradiance
+    monkeypatch.setattr(prepared, "lamp_irradiance", lambda *a, **k: calls.append(len(a[1])) or real(*a, **k))
+    again, _ = kept.offer(None, patches, mask, options, sampler, options.seed)
+    assert calls == [] and kept.reused == n_cold and kept.computed == 0
+    assert (again.irradiance != cold.irradiance).nnz == 0
+    # another plan (half the paint erased: other clusters, other aims): only its new lamps computed
+    t = exp.faces.target.copy()
+    t[np.flatnonzero(t)[: max(1, int(t.sum()) // 2)]] = False
+    other = replace(patches, target=t[patches.face])
+    fresh, n_fresh = candidate_lamps.offer_lamps(None, other, mask, options, sampler, options.seed)
+    moved, n_moved = kept.offer(None, other, mask, options, sampler, options.seed)
+    before = set(map(prepared.digest, cold.lamps))
+    new = [j for j, lamp in enumerate(moved.lamps) if prepared.digest(lamp) not in before]
+    assert n_moved == n_fresh and kept.computed + kept.reused == n_fresh and 0 < len(new) <= kept.computed
+    assert kept.reused == n_fresh - kept.computed > 0
+    H_new, H_fresh = moved.irradiance.tocsc(), fresh.irradiance.tocsc()
+    at = {prepared.digest(lamp): j for j, lamp in enumerate(fresh.lamps)}
+    for j in new:  # as offer_lamps computes it at its place in the new plan
+        assert np.array_equal(H_new[:, j].toarray(), H_fresh[:, at[prepared.digest(moved.lamps[j])]].toarray())
+
+
 def _full(problem, point):
     e = np.zeros((problem.n_lights, 3))
     e[point.lights] = point.exitance
@@ -264,27 +317,100 @@ def test_what_the_prepared_state_cannot_follow_is_named():
         state.solve(moved)
 
 
-def test_paint_on_clustered_faces_is_solved_from_scratch_and_named():
-    """The adaptive model clusters the staircase floor's unpainted faces; paint that lands on one
-    of them cannot be mapped onto the kept patches (a cluster never mixes painted and unpainted
-    faces): that solve starts from scratch, says why, and meshes for the new paint."""
+def _clustered_stroke(faces, patches, n=12):
+    """``faces`` with ``n`` more faces painted: unpainted faces the patches cluster with others, on
+    the object with the most of them that is painted, nearest its paint, at its paint's colour."""
+    free = prepared.clustered_faces(patches) & ~faces.target
+    objs = np.unique(faces.face_object[faces.target])
+    o = max(objs, key=lambda k: int(np.sum(free & (faces.face_object == k))))
+    cen = np.zeros((faces.n_faces, 3))
+    np.add.at(cen, faces.triangle_face, faces.vertices[faces.triangles].mean(axis=1))
+    cen /= np.maximum(np.bincount(faces.triangle_face, minlength=faces.n_faces), 1)[:, None]
+    painted = np.flatnonzero(faces.target & (faces.face_object == o))
+    ids = np.flatnonzero(free & (faces.face_object == o))
+    ids = ids[np.argsort(np.linalg.norm(cen[ids] - cen[painted].mean(axis=0), axis=1))[:n]]
+    target, radiosity = faces.target.copy(), faces.target_radiosity.copy()
+    target[ids], radiosity[ids] = True, faces.target_radiosity[painted[0]]
+    return replace(faces, target=target, target_radiosity=radiosity), ids
+
+
+def _face_error(outcome, faces):
+    """The painted-face relative error of the final configuration: sqrt(sum a_f |B_f - T_f|^2 /
+    sum a_f |T_f|^2) over the painted faces f, B_f its patches' radiosity averaged over the face
+    (the same measure for any mesh: benchmarks/bench_live_quality.py)."""
+    from relight_addon.engine.scene import face_mean
+    from relight_addon.pipeline.checks import face_areas
+
+    B = face_mean(outcome.patches, outcome.stored.radiosity[outcome.final_index])
+    t = faces.target
+    a = face_areas(faces)[t][:, None]
+    d = B[t] - faces.target_radiosity[t]
+    return float(np.sqrt((a * d * d).sum() / (a * faces.target_radiosity[t] ** 2).sum()))
+
+
+def test_paint_on_clustered_faces_maps_onto_the_kept_clusters():
+    """The adaptive model clusters the staircase's unpainted faces; paint that lands on them maps
+    onto the kept patches (issue 37: every stroke answered from the prepared state): a cluster is a
+    target when any of its faces is painted, at their area-weighted mean radiosity;
+    a patch of one face keeps its face's target; an illuminance target on a clustered face cannot
+    be mapped (a patch reads its first face's) and is named."""
+    from relight_addon.engine.geometry import triangle_areas
+
     blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
     exp = export.export_scene()
     options = JobOptions(seed=3).validate()  # the default patch model: adaptive
     size = exp.settings.get("max_patch_size")
     state = prepared.PreparedScene.prepare(exp.faces, options, size)
     state.solve(exp.faces)
-    face = np.flatnonzero(prepared.clustered_faces(state.patches) & ~exp.faces.target)[0]
-    target, radiosity = exp.faces.target.copy(), exp.faces.target_radiosity.copy()
-    target[face], radiosity[face] = True, 0.3
-    painted = replace(exp.faces, target=target, target_radiosity=radiosity)
-    obj = exp.faces.object_names[exp.faces.face_object[face]]
-    assert state.unmappable(painted) == (f"the paint changed on 1 face(s) the patch model had clustered with "
-                                         f"others (objects: {obj})")
-    outcome = state.solve(painted)
-    assert state.reason.startswith("the paint changed on 1 face(s)") and state.warm == 0
-    assert outcome.patches.target[outcome.patches.face == face].all()  # meshed for the new paint
-    assert state.patches is outcome.patches and state.unmappable(painted) is None
+    faces, ids = _clustered_stroke(exp.faces, state.patches)
+    assert state.unmappable(faces) is None
+    mapped = state.painted(faces)
+    ps = state.patches
+    clustered = prepared.clustered_faces(ps)
+    single = ~np.isin(np.arange(ps.n_patches), ps.tri_patch[clustered[ps.tri_face]])
+    assert np.array_equal(mapped.target[single], faces.target[ps.face[single]])
+    assert np.array_equal(mapped.target_radiosity[single], faces.target_radiosity[ps.face[single]])
+    # each cluster the stroke touched, from its own triangles
+    area = triangle_areas(ps.tri_vertices)
+    touched = np.unique(ps.tri_patch[np.isin(ps.tri_face, ids)])
+    assert len(touched) > 0
+    for p in touched:
+        tri = ps.tri_patch == p
+        on = faces.target[ps.tri_face[tri]]
+        assert mapped.target[p] == on.any()
+        if mapped.target[p]:
+            want = (area[tri][on, None] * faces.target_radiosity[ps.tri_face[tri][on]]).sum(0) / area[tri][on].sum()
+            np.testing.assert_allclose(mapped.target_radiosity[p], want, rtol=1e-12)
+        else:
+            assert not mapped.target_radiosity[p].any()
+    assert mapped.target[touched].all()
+    # an illuminance target on a clustered face: named, solved from scratch
+    lux = np.zeros(faces.n_faces)
+    lux[ids[0]] = 300.0
+    obj = faces.object_names[faces.face_object[ids[0]]]
+    assert state.unmappable(replace(faces, target_lux=lux)) == (
+        f"an illuminance target (lx) changed on 1 face(s) the patch model had clustered with others (objects: {obj})")
+
+
+@pytest.mark.slow
+def test_paint_on_clustered_faces_is_solved_from_the_prepared_state_as_well_as_cold():
+    """A stroke of 12 faces the adaptive model had clustered, solved from the prepared state (the
+    paint mapped onto the kept clusters, no ray cast) against a cold solve of the same paint (its
+    mesh meshes them at the patch size): the painted-face error within 5 % (issue 37's acceptance;
+    here 0.0784 against 0.0761, 1.03 x; 24 faces painted: 1.11 x, docs/benchmarks.md)."""
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = JobOptions(seed=3).validate()
+    size = exp.settings.get("max_patch_size")
+    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    state.solve(exp.faces)
+    faces, _ = _clustered_stroke(exp.faces, state.patches)
+    warm = state.solve(faces)
+    assert state.reason is None and state.warm == 1 and warm.report["prepared"]["computed"]["rays cast"] == 0
+    cold = jobs.run_solve(faces, options, default_max_patch_size=size)
+    assert cold.patches.n_patches > warm.patches.n_patches  # (the cold mesh meshes the new paint finer)
+    e_warm, e_cold = _face_error(warm, faces), _face_error(cold, faces)
+    assert e_warm <= 1.05 * e_cold, (e_warm, e_cold, _final(warm), _final(cold))
 
 
 def _clustered_polygons(state, name):

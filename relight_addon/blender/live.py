@@ -22,7 +22,9 @@ operator's timer):
   better: ``kept_quick``); a newer stroke, a pause or ``stop()`` cancels the one running. The quick
   answer lost up to 17 % against a cold solve's error; the later ones are within 1 % of it on the
   staircase and the living room (docs/benchmarks.md, issue 37);
-- paint on faces the patch model clustered with others is solved in full (in the worker);
+- paint on faces the patch model clustered with others is mapped onto the kept clusters
+  (PreparedScene.painted) and answered as any stroke; an illuminance target changed on such a
+  face cannot be mapped and is solved in full (in the worker);
 - a lamp of the scene moved, turned or set to another power (a kept one, say): its light is cast
   again on the kept scene and taken through the kept factorisation (PreparedScene.move_lamps),
   and the rest re-solved around it, without a full solve;
@@ -270,7 +272,7 @@ class LiveSession:
             out = state.live(faces, job.inputs["polygon_counts"], cancel=self.cancel.is_set,
                              notes=job.inputs["notes"], key=state.key)
             self.result["quick"] = out  # (its second answer, refine_live, comes after it is shown)
-            if out is None:  # paint on clustered faces: the full solve, from the state (meshed for the paint)
+            if out is None:  # lx on clustered faces: the full solve, from the state (meshed for the paint)
                 full = preparation.SolveJob(replace(job.exp, faces=faces), job.options, job.mode, job.inputs,
                                             session=job.session)
                 out = full.run(cancel=self.cancel.is_set)

@@ -48,12 +48,14 @@ class SolveJob:
     session: str = None  # the scene's name when the job keeps a prepared scene (the add-on)
 
     @classmethod
-    def export(cls, context, options, mode="inverse", target_scale=None, session=False) -> "SolveJob":
+    def export(cls, context, options, mode="inverse", target_scale=None, session=False, view_target=None) -> "SolveJob":
         """Export the scene and check, from the faces alone, that the job can be solved.
-        ``session``: keep and re-use the scene's prepared state (see the module docstring)."""
+        ``session``: keep and re-use the scene's prepared state (see the module docstring).
+        ``view_target``: an engine.targets.view.ViewSpec (blender/camera_view.py), the camera's pixels."""
         if mode == "inverse":
             check_light_kinds(options)  # (the options alone: before the export's work)
         exp = export.export_scene(context, target_scale=target_scale)
+        exp.faces.view_target = view_target
         if mode == "inverse":
             checks.check_solvable(exp.faces, exp.notes)
         else:

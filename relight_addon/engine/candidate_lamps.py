@@ -307,8 +307,14 @@ def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> 
     return lamps[:options.max_lamps], names[:options.max_lamps]
 
 
-def patch_radius(patches) -> np.ndarray:
-    """(P,) m: each patch's bounding radius about its centre (its farthest triangle vertex)."""
+def patch_radius(patches, sampler=None) -> np.ndarray:
+    """(P,) m: each patch's bounding radius about its centre (its farthest triangle vertex); kept
+    on ``sampler`` (the solve's, of these patches) when given: the candidate lamps and the lamp
+    refinement both ask (1 s on a million triangles)."""
+    if sampler is not None:
+        if "_patch_radius" not in sampler.__dict__:
+            sampler._patch_radius = patch_radius(patches)
+        return sampler._patch_radius
     radius = np.zeros(patches.n_patches)
     corner = np.linalg.norm(patches.tri_vertices - patches.center[patches.tri_patch][:, None, :], axis=2)
     np.maximum.at(radius, patches.tri_patch, corner.max(axis=1))
@@ -329,7 +335,7 @@ def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=
     lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
     if not lamps:
         return lights, 0
-    radius = patch_radius(patches)
+    radius = patch_radius(patches, sampler)
     H = np.zeros((patches.n_patches, len(lamps)))
     reach = lamp_reach(patches, lamps, radius)
     step = 16

@@ -834,7 +834,7 @@ class InverseProblem:
         ``faces`` it was meshed from when given; candidates as ``lights.candidate_mask``) and its
         form factors; with ``lights_per_face`` a light is a whole face (all its patches), as
         Blender shows it."""
-        return cls(F, patches.area, patches.reflectance, scene_targets(faces, patches),
+        return cls(F, patches.area, patches.reflectance, scene_targets(faces, patches, F),
                    candidate_mask(patches), patches.center, patches.normal,
                    light_groups=patches.face if lights_per_face else None)
 

@@ -215,7 +215,7 @@ class _Search:
     def __init__(self, problem, transport, mount, seed, exitance):
         self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
         self.norm = problem.target_norm if problem.target_norm > 0 else 1.0
-        self.radius = patch_radius(mount.patches)
+        self.radius = patch_radius(mount.patches, mount.sampler)
 
     def error(self, cs):
         return fit_columns(self.problem, cs, self.exitance, refit=False)[1] / self.norm

@@ -163,19 +163,6 @@ def _disk_offsets(u, radius, normal):
     return (rr * np.cos(phi))[:, None] * t1 + (rr * np.sin(phi))[:, None] * t2
 
 
-def _solid_angles(tv, x):
-    """(T,) solid angle (sr) of each triangle tv (T, 3, 3) seen from point x (3,), 0 when x lies
-    behind the triangle's plane (Van Oosterom and Strackee)."""
-    a, b, c = tv[:, 0] - x, tv[:, 1] - x, tv[:, 2] - x
-    la, lb, lc = (np.linalg.norm(v, axis=1) for v in (a, b, c))
-    num = np.einsum("ij,ij->i", a, np.cross(b, c))
-    den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb + \
-        np.einsum("ij,ij->i", b, c) * la
-    omega = 2.0 * np.arctan2(np.abs(num), den)
-    # the lamp must be in front: on the side of the triangle's normal (e1 x e2)
-    return np.where(num < 0, omega, 0.0)  # num = a . (b x c) < 0 <=> x on the normal's side
-
-
 def _cell(idx, n):
     """(origin (len(idx), 2), size (2,)) of cells ``idx`` of an n-grid of [0, 1)^2: square when n
     is a square, else strips along the first coordinate."""
@@ -199,26 +186,34 @@ def _lamp_uniforms(rng, m, k, j, ns):
 
 def _patch_means(lamp, g, s, k, ns, rng, far, exact):
     """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
-    each and ns lamp samples per point; for a point or a spot, ``exact`` (P,) the bare point
-    lamp's exact patch means, times the sampled ratio (shadows, cone, disk). And (len(s),) whether
-    the patch is partly lit: some of its points got light, some none (an edge crosses it)."""
+    each and ns lamp samples per point; for a point or a spot, the bare point lamp's exact patch
+    means (``exact(patches)``: LampJob.exact) times the sampled ratio (shadows, cone, disk), asked
+    only for the patches some point of which got light (elsewhere the mean is 0 whatever the exact
+    one: a spot's cone or a shadow leaves most of a dense prop's triangles out of the sum). And
+    (len(s),) whether the patch is partly lit: some of its points got light, some none (an edge
+    crosses it)."""
     sm = g.sampler
     y, ny = _sample_patches(g, s, k, rng)
     y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
     ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
     acc = np.zeros(len(y))
-    ref = np.zeros(len(y))
+    ref = None
     for j in range(ns):
         e, r = _irradiance_at(lamp, y, ny, _lamp_uniforms(rng, len(s), k, j, ns), sm, far)
         acc += e
         if r is not None:
-            ref += r
+            ref = r if ref is None else ref + r
     lit = (acc > 0).reshape(len(s), k)
     per_patch = (acc / ns).reshape(len(s), k).mean(axis=1)
-    if exact is not None:
+    if ref is not None:
         rs = ref.reshape(len(s), k).sum(axis=1) / ns
         ok = rs > 0
-        per_patch = np.where(ok, exact[s] * per_patch * k / np.where(ok, rs, 1.0), per_patch)
+        need = np.flatnonzero(ok & (per_patch > 0))
+        mean = exact(s[need])
+        if mean is not None:
+            full = np.zeros(len(s))
+            full[need] = mean
+            per_patch = np.where(ok, full * per_patch * k / np.where(ok, rs, 1.0), per_patch)
     return per_patch, lit.any(axis=1) & ~lit.all(axis=1)
 
 
@@ -251,10 +246,15 @@ class LampJob:
         self.n_patches, self.seed, self.far = out.shape[0], int(seed), far
         self.ns = lamp.kind.samples_per_point(lamp)
         self._rng = self.rng(7)
-        self.exact = lamp.kind.point_means(lamp, g.sampler, todo, restricted, self.n_patches)
 
     def rng(self, stream):
         return np.random.default_rng([self.seed, stream, self.index])
+
+    def exact(self, s):
+        """(len(s),) the exact patch means of the lamp's control variate on patches ``s`` (its
+        kind's ``point_means``), or None for a kind without one."""
+        means = self.lamp.kind.point_means(self.lamp, self.g.sampler, s, True, self.n_patches)
+        return None if means is None else means[s]
 
     def put(self, s, mean) -> None:
         """The means ``mean`` (len(s),) per unit power on patches ``s``."""
@@ -272,6 +272,14 @@ class LampJob:
         return np.concatenate(partly)
 
 
+def _far(sampler) -> float:
+    """A distance beyond the scene (m): 4 x its bounding box's diagonal + 1, computed once per
+    sampler (0.1-0.3 s on a million triangles, at each of the lamp refinement's evaluations)."""
+    if "_far" not in sampler.__dict__:
+        sampler._far = 4.0 * float(np.linalg.norm(np.ptp(sampler.tv.reshape(-1, 3), axis=0))) + 1.0
+    return sampler._far
+
+
 def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: int = 0,
                     points_per_patch: int = POINTS_PER_PATCH, only=None) -> np.ndarray:
     """(P, n_lamps, 3) direct irradiance (W/m^2) of each lamp on each patch (area mean), with
@@ -284,8 +292,7 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
     if not lamps:
         return out
     g = kernel_geometry(patches, points_per_patch, sampler)
-    sm = g.sampler
-    far = 4.0 * float(np.linalg.norm(np.ptp(sm.tv.reshape(-1, 3), axis=0))) + 1.0
+    far = _far(g.sampler)
     per_lamp = only is not None and not isinstance(only, np.ndarray) and len(only) == len(lamps) and \
         all(np.ndim(o) == 1 for o in only)
     for li, lamp in enumerate(lamps):

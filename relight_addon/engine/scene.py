@@ -78,6 +78,8 @@ class FaceSet:
     #: ``world_name`` names it in the report
     world_radiance: object = None
     world_name: str = ""
+    #: optional engine.targets.view.ViewSpec: pixels of the camera's image asked for a radiance
+    view_target: object = None
 
     def __post_init__(self):
         self.loop_vertices = np.asarray(self.loop_vertices, dtype=np.int64).reshape(-1)

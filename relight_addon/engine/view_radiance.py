@@ -37,7 +37,7 @@ import scipy.sparse as sp
 from .principled import BRDFTable
 from .units import TINY, radiance_from_exitance
 
-__all__ = ["view_radiance", "HORIZON"]
+__all__ = ["view_radiance", "view_rows", "HORIZON"]
 
 #: smallest cosine of a source direction: a patch seen by i (F_ij > 0) may have its centre
 #: behind i's plane (a large patch reaching under i); it is taken just above the horizon
@@ -174,3 +174,42 @@ def _above(loc):
     loc = np.array(loc, dtype=np.float64)
     loc[..., 2] = np.maximum(loc[..., 2], HORIZON)
     return loc / np.linalg.norm(loc, axis=-1, keepdims=True)
+
+
+def view_rows(F, reflectance, center, normal, patch, points, views, material, material_lobes):
+    """The radiance seen along ``views`` (n, 3) unit world directions from the viewer at ``points``
+    (n, 3) on patches ``patch`` (n,), as rows on the radiosity: (js, W), W (n, len(js), 3) the
+    coefficients such that pi L_c = sum_j W[:, j, c] B[js[j], c] (pi times the radiance: W/m^2, the
+    radiosity's units), per channel c.
+
+    It is ``view_radiance`` without the sources' glossy reflection (source_glossy=False: every
+    source sends B_j/pi), written linearly in B with e_i = B_i - rho_i (F B)_i:
+
+        pi L_i(v) = B_i + sum_j (pi f_i(l_xj, v) - rho_i) F_ij B_j,
+
+    l_xj the direction from the viewed point x (not the patch's centre: a highlight moves across a
+    patch with the point) to source j's centre. A Lambertian patch (f = rho/pi) reads B_i alone.
+    A lamp's direct light (in B_i, not in F B) is seen Lambertian. Every patch of ``patch`` is one
+    patch (group the points by patch first); ``views`` point from the viewer to the surface."""
+    M = getattr(F, "matrix", F)
+    i = int(np.unique(np.asarray(patch, dtype=np.int64))[0]) if len(patch) else 0
+    if np.any(np.asarray(patch) != i):
+        raise ValueError("view_rows reads one patch at a time")
+    row = M[i]
+    row = row.tocsr() if sp.issparse(row) else sp.csr_matrix(np.asarray(row).reshape(1, -1))
+    js, fij = row.indices, np.asarray(row.data, dtype=np.float64)
+    keep = js != i
+    js, fij = js[keep], fij[keep]
+    n = len(points)
+    R = _frame(np.asarray(normal[i], dtype=np.float64))
+    v_loc = _above(-np.asarray(views, dtype=np.float64) @ R.T)  # towards the viewer, local
+    d = center[js][None, :, :] - np.asarray(points, dtype=np.float64)[:, None, :]  # (n, J, 3)
+    d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), TINY)
+    l_loc = _above(d @ R.T)
+    table = BRDFTable(material_lobes[int(material[i])])
+    f = table(np.repeat(v_loc, len(js), axis=0), l_loc.reshape(-1, 3)).reshape(n, len(js), 3)
+    rho = np.asarray(reflectance[i], dtype=np.float64)
+    W = np.empty((n, len(js) + 1, 3))
+    W[:, 0, :] = 1.0
+    W[:, 1:, :] = (np.pi * f - rho[None, None, :]) * fij[None, :, None]
+    return np.r_[i, js], W

@@ -32,12 +32,13 @@ def check_solvable(faces: FaceSet, notes: dict | None = None, area=None):
     area = face_areas(faces) if area is None else area
     scale = float(np.linalg.norm(np.ptp(faces.vertices, axis=0))) if len(faces.vertices) else 0.0
     has_area = area > (1e-10 * max(scale, TINY)) ** 2
-    if not np.any(faces.target):
+    view = faces.view_target is not None  # (its pixels were checked when it was read)
+    if not view and not np.any(faces.target):
         raise SceneError(_with_notes("no target: paint a radiosity on at least one face (relight_target, "
                                      "alpha >= 0.5)", notes.get("target")))
-    if not np.any(faces.target & has_area):
+    if not view and not np.any(faces.target & has_area):
         raise SceneError(_with_notes("no target: every painted face has no area", notes.get("candidates")))
-    if not np.any(faces.target_radiosity[faces.target & has_area] > 0):
+    if not view and not np.any(faces.target_radiosity[faces.target & has_area] > 0):
         raise SceneError(_with_notes("every target asks for radiosity 0 (painted black, or a target scale of "
                                      "0): there is nothing to light", notes.get("target")))
     free = ~faces.forbidden & ~np.any(faces.exitance > 0, axis=1)

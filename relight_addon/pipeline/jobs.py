@@ -175,7 +175,7 @@ def _few_rays_named(options: JobOptions):
 
 def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=None,
               default_max_patch_size: float | None = None, progress=None, cancel=None,
-              patches: PatchSet | None = None, notes: dict | None = None, estimate=None) -> SolveOutcome:
+              patches: PatchSet | None = None, notes: dict | None = None, estimate=None, offer=None) -> SolveOutcome:
     """Inverse lighting ("solve") of ``faces``: targets are the painted faces; candidates as
     ``engine.lights.candidate_mask``; the scene's own emitters, lamps and World are fixed background
     light (subtracted from the targets). The inverse system is solved (``options.solver``), then
@@ -184,13 +184,14 @@ def run_solve(faces: FaceSet, options: JobOptions | None = None, polygon_counts=
     over the whole job; ``cancel()`` returning True raises Cancelled. ``patches``: the meshed faces
     when the caller already has them (the operator meshes first to estimate the cost). ``notes``:
     export's notes, repeated in the errors they explain (checks.check_solvable). ``estimate``:
-    build_inverse_model's. Returns a SolveOutcome."""
+    and ``offer``: build_inverse_model's. Returns a SolveOutcome."""
     options = (options or JobOptions()).validate()
     check_solvable(faces, notes)
     check_light_kinds(options)
     with _few_rays_named(options):
         t0 = time.perf_counter()
-        model = build_inverse_model(faces, options, default_max_patch_size, progress, cancel, patches, estimate)
+        model = build_inverse_model(faces, options, default_max_patch_size, progress, cancel, patches, estimate,
+                                    offer)
         with transport_named(model.patches, faces):
             return solve_model(model, options, polygon_counts, progress, cancel, t0)
 

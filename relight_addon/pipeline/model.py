@@ -127,7 +127,7 @@ def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> Inv
     """The solve's InverseProblem: the painted targets, the candidate lights, their first reflection,
     the scene's own emitters (``background``) and lamps and World (``lamp_H``) as fixed light."""
     emitting = np.any(patches.exitance > 0, axis=1)
-    return InverseProblem(F, patches.area, patches.reflectance, scene_targets(faces, patches),
+    return InverseProblem(F, patches.area, patches.reflectance, scene_targets(faces, patches, F),
                           mask, patches.center, patches.normal, lights=lights,
                           first_bounce=first_bounce(faces, patches, F, mask | emitting),
                           background=background, background_irradiance=lamp_H.sum(axis=1),
@@ -135,19 +135,22 @@ def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> Inv
                           background_excess=scene_light_excess(faces, patches, lamp_H))
 
 
-def _offer(lights, patches, mask, options, F, warnings, seconds, progress, cancel):
-    """The candidate lamps offered beside the surface lights (engine.candidate_lamps)."""
+def _offer(lights, patches, mask, options, F, warnings, seconds, progress, cancel, offer=None):
+    """The candidate lamps offered beside the surface lights (engine.candidate_lamps; ``offer``:
+    offer_lamps' replacement, a prepared scene's that keeps the lamps' irradiance)."""
     t1 = time.perf_counter()
     sampler = getattr(F, "sampler", None) or SceneSampler(patches)
     lamp_notes = []
-    lights, _ = offer_lamps(lights, patches, mask, options, sampler, options.seed, progress, notes=lamp_notes)
+    lights, _ = (offer or offer_lamps)(lights, patches, mask, options, sampler, options.seed, progress,
+                                       notes=lamp_notes)
     warnings.extend(n for n in lamp_notes if n not in warnings)
     seconds["lamps"] += time.perf_counter() - t1
     _check_cancel(cancel)
     return lights
 
 
-def _inverse_pass(faces, patches, options, pm, scales, estimate, p, passes, warnings, seconds, progress, cancel):
+def _inverse_pass(faces, patches, options, pm, scales, estimate, p, passes, warnings, seconds, progress, cancel,
+                  offer=None):
     """One pass of the solve's problem on ``patches``: (lights, F, problem, background, lamp_H,
     lamp_names)."""
     mask = candidate_mask(patches, "inverse")
@@ -164,7 +167,7 @@ def _inverse_pass(faces, patches, options, pm, scales, estimate, p, passes, warn
     seconds["form_factors"] += F.seconds
     if offered_kinds(options):  # the candidate lamps, beside the cells
         lights = _offer(lights, patches, mask, options, F, warnings, seconds,
-                        progress_slice(progress, "lamps", hi, hi + 0.05 / (passes + 1)), cancel)
+                        progress_slice(progress, "lamps", hi, hi + 0.05 / (passes + 1)), cancel, offer)
     if lights.n_lights == 0:
         raise _no_light_error(options)
     t1 = time.perf_counter()
@@ -196,12 +199,13 @@ def _refined_mesh(faces, patches, options, pm, problem, history, p, seconds):
 
 
 def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_size=None, progress=None,
-                        cancel=None, patches: PatchSet | None = None, estimate=None) -> Model:
+                        cancel=None, patches: PatchSet | None = None, estimate=None, offer=None) -> Model:
     """Stage 1 of a solve: mesh the faces (the patch model), choose the candidate lights, estimate
     the form factors and set up the inverse problem (the painted targets, with the scene's own
     emitters, lamps and World as fixed background); the adaptive model's refinement passes.
     ``estimate``: the form-factor estimator to call instead of ``options.estimator``'s, with its
-    signature (a prepared scene's: pipeline.prepared)."""
+    signature (a prepared scene's: pipeline.prepared); ``offer``: the candidate lamps' offer
+    (engine.candidate_lamps.offer_lamps' signature; a prepared scene's keeps their irradiance)."""
     pm = patch_model(options, default_max_patch_size)
     refines = hasattr(pm, "refine") and options.refine_passes > 0
     patches, t_mesh, cost = _mesh(faces, options, pm, patches, default_max_patch_size, "inverse", refines)
@@ -213,7 +217,7 @@ def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_s
     scales = None if SELECTIONS[options.selection].traits.multiscale else ("cell",)
     for p in range(passes + 1):
         lights, F, problem, background, lamp_H, lamp_names = _inverse_pass(
-            faces, patches, options, pm, scales, estimate, p, passes, warnings, seconds, progress, cancel)
+            faces, patches, options, pm, scales, estimate, p, passes, warnings, seconds, progress, cancel, offer)
         if p == passes:
             break
         refined = _refined_mesh(faces, patches, options, pm, problem, history, p, seconds)
@@ -284,7 +288,7 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     refined for the earlier targets among them), form factors, solvers and fixed light; the
     problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
     t0 = time.perf_counter()
-    problem = model.problem.retarget(scene_targets(faces, patches))
+    problem = model.problem.retarget(scene_targets(faces, patches, model.form_factors))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

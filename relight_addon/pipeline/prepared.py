@@ -11,9 +11,12 @@ paint changed:
   targets. Its patches are kept as the solve made them and the new paint is *mapped* onto them:
   a patch asks for the target of the face it lies on (as engine.scene.build_patches does), which
   is exact for every face that is a patch of its own or split into several (no patch spans it and
-  another face). A stroke that changes the paint of a face clustered with others cannot be
-  mapped: that solve starts from scratch, and says so (``unmappable``). The kept patches are not
-  refined again for the new targets (refinement passes 0 from the prepared state);
+  another face). Paint on faces clustered with others maps onto the kept cluster (``painted``: a
+  touched cluster is a target at its painted faces' area-weighted mean radiosity; painted-face
+  error 1.03 x a cold solve's for 12 clustered faces, 1.11 x for 24); only an illuminance target
+  changed on a clustered face cannot be mapped (a patch reads its first face's lux): that solve
+  starts from scratch, and says so (``unmappable``). The kept patches are not refined again for
+  the new targets (refinement passes 0 from the prepared state);
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
   the refinement passes' ones);
 - the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
@@ -21,12 +24,17 @@ paint changed:
   reuses them; a stroke that adds or removes target patches draws them all again, in one draw as
   the cold solve does, so that the warm solve on the same mesh is the cold solve (rows drawn for
   the new patches alone are other samples of the kernel: 14 % apart in error on the adaptive
-  staircase).
+  staircase on the first draw's seed, 7 % on a seed of their own);
+- the candidate lamps' direct irradiance (``KeptLamps``), keyed by the lamp: a solve plans its
+  lamps for its targets (the spots aimed at the painted regions) and computes those not kept, as
+  offer_lamps computes them at their place in the plan.
 
-The rest (the lights offered for the targets, the inverse problem, the selection, the certificate
-and the curve) is the cold solve's own code (pipeline.jobs.run_solve), given the kept patches and
-form factors. A change the fingerprint sees (an object moved, a material, a forbidden face, an
-option) is not followed: ``stale_reason`` names it, and the caller prepares again.
+Every solve says in its report (``prepared``, ``account``) what it kept and what it computed.
+The rest (the lamps' plan, the inverse problem and its factorisation, the selection, the
+certificate, the direct light, the lamp refinement and the curve) is the cold solve's own code
+(pipeline.jobs.run_solve), given the kept patches, form factors, kernel rows and lamps' irradiance. A change
+the fingerprint sees (an object moved, a material, a forbidden face, an option) is not followed:
+``stale_reason`` names it, and the caller prepares again.
 
 The last solve's model (pipeline.model.Model: its lights, the lamps offered and refined for its targets
 among them, its factorised radiosity system) is kept too, for Live mode's strokes (``live``): the
@@ -43,8 +51,8 @@ then the warm solve (``solve``'s, not kept).
 Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
 stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
 977 patches to 1,451 and moved the predicted error from 0.063 / 0.051 (seeds 3 / 4) to 0.073 / 0.074,
-so it is not done until Cycles says which prediction is right: a stroke on clustered faces solves
-from scratch and says so (Live solves it in full in its worker).
+so it is not done until Cycles says which prediction is right: paint on clustered faces maps onto
+the kept clusters instead (above).
 """
 from __future__ import annotations
 
@@ -56,11 +64,16 @@ import numpy as np
 
 from ..engine.blas_threads import one_blas_thread
 from ..engine.bounces import ColumnProducts
+from ..engine.candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius, plan_lamps
+from ..engine.geometry import triangle_areas
 from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
 from ..engine.kernel_transfer import kernel_form_factors
+from ..engine.lamps import lamp_irradiance
+from ..engine.lights import append_lamps
 from ..engine.options import JobOptions
 from ..engine.registry import ESTIMATORS, PATCH_MODELS
 from ..engine.scene import FaceSet, PatchSet
+from ..engine.units import TINY
 from . import jobs
 from . import notes as texts
 from .checks import check_solvable, face_areas
@@ -120,6 +133,64 @@ def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) 
     }
 
 
+#: lamps offer_lamps computes in one call of lamp_irradiance (its seed is per batch; KeptLamps keeps it)
+LAMP_BATCH = 16
+#: KeptLamps keeps the irradiance of at most this many x max_lamps lamps (the latest plans')
+KEPT_PLANS = 4
+
+
+class KeptLamps:
+    """The candidate lamps' direct irradiance per W on one mesh, kept between solves, keyed by the
+    lamp (its kind, position, aim, cone, size: ``digest`` of the engine.lamps.Lamp): a solve's
+    ``offer`` (engine.candidate_lamps.offer_lamps' signature, build_inverse_model's ``offer``)
+    plans the lamps for its targets as offer_lamps does and computes only the lamps not kept.
+    A lamp computed here is computed as offer_lamps computes it at its place in the plan (its
+    batch's seed, its index in the batch: the same numbers); a kept one is the number of the
+    solve that first planned it, at its place then (the same lamp, another sample of its
+    LAMP_POINTS points). Their irradiance does not depend on the paint: only the plan does (the
+    spots aimed at the painted regions)."""
+
+    def __init__(self):
+        self.columns = {}  # digest(lamp) -> (patch indices, irradiance per W there): its column of H
+        self.reused = self.computed = 0  # of the last offer
+
+    def offer(self, lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
+        lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
+        self.reused = self.computed = 0
+        if not lamps:
+            return lights, 0
+        keys = [digest(lamp) for lamp in lamps]
+        H = np.zeros((patches.n_patches, len(lamps)))
+        todo = np.array([k not in self.columns for k in keys])
+        radius = patch_radius(patches) if todo.any() else None
+        for i in range(0, len(lamps), LAMP_BATCH):  # offer_lamps' batches and seeds; a kept lamp lights nothing
+            batch = lamps[i:i + LAMP_BATCH]
+            new = np.flatnonzero(todo[i:i + LAMP_BATCH])
+            if len(new):
+                reach = [r if todo[i + j] else np.zeros(0, dtype=np.int64)
+                         for j, r in enumerate(lamp_reach(patches, batch, radius))]
+                H[:, i + new] = lamp_irradiance(patches, batch, sampler=sampler,
+                                                seed=int(seed) + 1_000_003 * (i // LAMP_BATCH + 1),
+                                                points_per_patch=LAMP_POINTS, only=reach)[:, new, 0]
+            if progress is not None:
+                progress(min(i + LAMP_BATCH, len(lamps)) / len(lamps))
+        for j, k in enumerate(keys):
+            if todo[j]:
+                at = np.flatnonzero(H[:, j])
+                self.columns[k] = (at, H[at, j])
+            else:
+                at, value = self.columns.pop(k)  # (re-inserted: the latest plans' are kept)
+                H[at, j] = value
+                self.columns[k] = (at, value)
+        self.reused, self.computed = int((~todo).sum()), int(todo.sum())
+        for k in list(self.columns)[:max(0, len(self.columns) - KEPT_PLANS * max(len(lamps), 1))]:
+            del self.columns[k]
+        lit = np.flatnonzero(H.max(axis=0) > 0)
+        area = np.array([lamps[i].kind.area(lamps[i]) for i in lit])
+        return append_lamps(lights, np.flatnonzero(candidates), patches.n_patches, [lamps[i] for i in lit],
+                            [kinds[i] for i in lit], H[:, lit], area), len(lamps)
+
+
 def paint_independent(options: JobOptions) -> bool:
     """Whether the options' patch model meshes the faces without looking at the paint."""
     return PATCH_MODELS[options.patch_model].traits.paint_independent
@@ -160,6 +231,8 @@ class PreparedScene:
     _face_area: np.ndarray = None  # checks.face_areas of the prepared scene's faces (geometry only)
     _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
+    lamps: KeptLamps = field(default_factory=KeptLamps)  # the candidate lamps' irradiance on the kept mesh
+    drawn: dict = field(default_factory=dict)  # the last estimate's work: {"rays cast", "kernel rows drawn", ...}
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -176,32 +249,61 @@ class PreparedScene:
         return f"the {', '.join(changed)} changed since it was prepared" if changed else None
 
     def unmappable(self, faces: FaceSet) -> str | None:
-        """None when the paint of ``faces`` maps onto the kept patches; else why not."""
+        """None when the paint of ``faces`` maps onto the kept patches (``painted``); else why not:
+        an illuminance target (lx) that changed on a face the patch model clustered with others (a
+        patch reads the illuminance target of its first face: a kept cluster cannot ask for it)."""
         if self.patches is None:
             return "nothing is kept yet"
-        if paint_independent(self.options):
+        if paint_independent(self.options) or faces.target_lux is None:
             return None
         target, radiosity = self.paint
         changed = (faces.target != target) | np.any(faces.target_radiosity != radiosity, axis=1)
-        if self._clustered is None or self._clustered[0] is not self.patches:
-            self._clustered = (self.patches, clustered_faces(self.patches))
-        hit = changed & self._clustered[1]
+        hit = changed & self._clustered_faces() & (faces.target_lux > 0)
         if hit.any():
             names = sorted({faces.object_names[o] for o in faces.face_object[hit]})
-            return (f"the paint changed on {int(hit.sum())} face(s) the patch model had clustered with others "
-                    f"(objects: {', '.join(names[:5])}{' ...' if len(names) > 5 else ''})")
+            return (f"an illuminance target (lx) changed on {int(hit.sum())} face(s) the patch model had clustered "
+                    f"with others (objects: {', '.join(names[:5])}{' ...' if len(names) > 5 else ''})")
         return None
 
+    def _clustered_faces(self) -> np.ndarray:
+        """clustered_faces of the kept patches (paint-independent: computed once per mesh)."""
+        if self._clustered is None or self._clustered[0] is not self.patches:
+            self._clustered = (self.patches, clustered_faces(self.patches))
+        return self._clustered[1]
+
     def painted(self, faces: FaceSet) -> PatchSet:
-        """The kept patches with the paint of ``faces`` (each patch its face's target)."""
-        return replace(self.patches, target=faces.target[self.patches.face].copy(),
-                       target_radiosity=faces.target_radiosity[self.patches.face].copy())
+        """The kept patches with the paint of ``faces``: each patch its face's target; a cluster
+        (a patch over several faces, which the adaptive model made of unpainted faces) a target
+        when any of its faces is painted, at the area-weighted mean radiosity of its painted faces
+        (their least-squares target on one uniform patch). Measured on the staircase against a cold
+        solve, which meshes the new paint at the patch size (977 patches -> 988 and 1,001): the
+        painted-face error 1.03 x the cold solve's for 12 clustered faces painted, 1.11 x for 24; a
+        cluster a target only when painted over half its area, 1.06 x and 1.30 x
+        (docs/benchmarks.md, "The button after a stroke")."""
+        patches = self.patches
+        target = faces.target[patches.face].copy()
+        radiosity = faces.target_radiosity[patches.face].copy()
+        if not paint_independent(self.options):
+            tris = np.flatnonzero(self._clustered_faces()[patches.tri_face])  # the clusters' triangles
+            if len(tris):
+                tp, tf = patches.tri_patch[tris], patches.tri_face[tris]
+                area = triangle_areas(patches.tri_vertices[tris])
+                on = faces.target[tf]
+                share = np.bincount(tp, weights=area * on, minlength=patches.n_patches)
+                cl = np.unique(tp)
+                target[cl] = share[cl] > 0
+                for c in range(3):
+                    sums = np.bincount(tp, weights=area * on * faces.target_radiosity[tf, c],
+                                       minlength=patches.n_patches)
+                    radiosity[cl, c] = np.where(target[cl], sums[cl] / np.maximum(share[cl], TINY), 0.0)
+        return replace(patches, target=target, target_radiosity=radiosity)
 
     def estimate(self, patches, options, progress=None, cancel=None, pairs=None):
         """build_inverse_model's estimator: the prepared ray-cast form factors and, for the estimators
         with kernel pairs, the kernel's rows of the targets (the new ones computed, the others
         kept), applied as compute_form_factors applies them."""
         cast = 0.0
+        self.drawn = {"rays cast": 0, "kernel rows drawn": 0, "kernel rows kept": 0}
         if patches is not self._cast_for:  # a new mesh (a first solve, a refinement pass): cast its rays
             rays = (int(options.rays_per_patch) if options.rays_per_patch is not None
                     else auto_rays_per_patch(patches.n_patches, kernel=pairs is not None))
@@ -209,7 +311,9 @@ class PreparedScene:
             self.form_factors = compute_form_factors(patches, rays_per_patch=rays, seed=options.seed,
                                                      threads=options.threads, progress=progress, cancel=cancel)
             self._cast_for, self.kernel_sources, self.kernel_targets, self.kernel_rows = patches, None, None, {}
+            self.lamps = KeptLamps()  # (another mesh: another irradiance)
             self.seconds["rays"] = cast = time.perf_counter() - t0
+            self.drawn["rays cast"] = int(rays) * patches.n_patches
         F = self.form_factors
         if pairs is None or not ESTIMATORS[options.estimator].traits.kernel_pairs:
             return replace(F, matrix=F.matrix.copy(), seconds=cast)
@@ -219,17 +323,39 @@ class PreparedScene:
                 or not np.array_equal(rec, self.kernel_targets):
             # every target's row in one draw, as the cold solve draws them (rows drawn apart, for a
             # stroke's new targets alone, are other samples: on the adaptive staircase that moved
-            # the warm solve's error 14 % from the cold one's, 0.138 against 0.121; issue 37)
+            # the warm solve's error 14 % from the cold one's, 0.138 against 0.121, drawn on the
+            # first draw's seed, and 7 % again, 0.161 against 0.150, on a seed of their own; issue 37)
             K = kernel_form_factors(patches, rec, src, seed=options.seed, threads=options.threads, cancel=cancel,
                                     sampler=F.sampler) if len(rec) else np.zeros((0, len(src)))
             self.kernel_sources, self.kernel_targets = src, rec
             self.kernel_rows = {int(r): K[i] for i, r in enumerate(rec)}
+            self.drawn["kernel rows drawn"] = len(rec)
+        else:
+            self.drawn["kernel rows kept"] = len(rec)
         K = np.stack([self.kernel_rows[int(r)] for r in rec]) if len(rec) else np.zeros((0, len(src)))
         # the pairs replace F's entries before the sending scale of partly buried patches, as
         # compute_form_factors applies them
         M = pairs_then_sending_scale(F.matrix, patches.area, F.send, rec, src, K, unscale=True)
         self.seconds["kernel rows"] = time.perf_counter() - t0
         return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
+
+    def offer(self, *args, **kw):
+        """build_inverse_model's ``offer``: the candidate lamps, their irradiance kept (KeptLamps)."""
+        return self.lamps.offer(*args, **kw)
+
+    def account(self) -> dict:
+        """What the last solve took from the prepared state and what it made anew (its report's
+        ``prepared``): the rays and kernel rows kept or cast, the candidate lamps' irradiance kept or
+        computed; the rest is computed anew on every solve."""
+        return {"from_prepared_state": self.reason is None, "reason": self.reason,
+                "kept": {"form factors (hemisphere rays)": self.reason is None and not self.drawn.get("rays cast"),
+                         "kernel rows": self.drawn.get("kernel rows kept", 0),
+                         "candidate lamps' irradiance": self.lamps.reused},
+                "computed": {"rays cast": self.drawn.get("rays cast", 0),
+                             "kernel rows": self.drawn.get("kernel rows drawn", 0),
+                             "candidate lamps' irradiance": self.lamps.computed},
+                "computed anew": ["the candidate lamps' plan (aimed at the targets)", "the inverse problem and its "
+                                  "factorisation", "the reduction", "the direct light", "the lamp refinement"]}
 
     def _warm(self, faces: FaceSet) -> tuple:
         """(the kept patches with ``faces``' paint, the options a solve on them runs with): the same
@@ -258,10 +384,12 @@ class PreparedScene:
         self.solves += 1
         try:
             outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
-                                     patches=patches, notes=notes, estimate=self.estimate)
+                                     patches=patches, notes=notes, estimate=self.estimate,
+                                     offer=self.offer)
         except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
             self.patches = self._cast_for = self.form_factors = self.model = None
             raise
+        outcome.report["prepared"] = self.account()
         if self._cast_for is not outcome.patches:  # not the mesh the rays were cast for: keep nothing
             self.patches = self._cast_for = self.form_factors = self.model = None
         else:
@@ -293,7 +421,7 @@ class PreparedScene:
         """What every live stroke reads, made once before the first (Live's worker): the transfer
         from every light to every patch, the faces the patch model clustered, the face areas."""
         self.model.problem.all_rows_transfer()
-        self._clustered = (self.patches, clustered_faces(self.patches))
+        self._clustered_faces()
         self._face_area = face_areas(faces)
 
     def column_products(self):
@@ -348,14 +476,16 @@ class PreparedScene:
           the strokes after it still start from the last solve.
 
         Neither step re-meshes the adaptive model for the new paint. Nothing kept changes but the
-        kernel's rows of the new target patches (step 1; the next solve's)."""
+        kernel's rows of the new target patches and the irradiance of the lamps it planned (step 1;
+        the next solve's)."""
         faces = best.faces
         if step == 0:
             outcome = jobs.solve_model(best.model, self.options, polygon_counts, progress, cancel)
         else:
             patches, options = self._warm(faces)
             outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
-                                     patches=patches, estimate=self.estimate)
+                                     patches=patches, estimate=self.estimate,
+                                     offer=self.offer)
         self.refined_solves += 1
         if not outcome.reduction.final.relative_error < best.reduction.final.relative_error:
             return None

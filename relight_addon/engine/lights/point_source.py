@@ -4,21 +4,70 @@ Blender's soft falloff) of an intensity, times a kind's attenuation (a spot's co
 Cycles' point light (engine.lamps' docstring): radiant intensity I = c P / (4 pi) W/sr; radius
 0: E = I cos(theta) / d^2; radius r > 0: a disk of radius r facing the shading point, of radiance
 I / (pi r^2), sampled over the disk. Its patch means use the bare point lamp's exact mean (I x
-the patch's solid angle / its area) as a control variate.
+the patch's solid angle / its area) as a control variate: the solid angle of every triangle of the
+patches it lights, seen from the lamp (``_solid_angles``), kept per sampler for the last
+KEPT_POSITIONS positions (the candidate lamps of a mounting position share them: issue 37).
 """
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..geometry import unit
-from ..lamps import LAMP_SAMPLES, _disk_offsets, _solid_angles
+from ..kernel_transfer import _ragged
+from ..lamps import LAMP_SAMPLES, _disk_offsets
 from ..units import TINY
 from .kind import LampKind
 
 __all__ = ["PointSourceKind"]
+
+#: lamp positions whose patches' solid angles a sampler keeps (the candidate lamps hang at a few
+#: mounting positions, several spots each; a refined lamp at each position it tries): P floats each
+KEPT_POSITIONS = 32
+
+
+def _solid_angles(tv, x):
+    """(T,) solid angle (sr) of each triangle tv (T, 3, 3) seen from point x (3,), 0 when x lies
+    behind the triangle's plane (Van Oosterom and Strackee), in float64. The cross product and
+    the norms are written out per component (numpy's np.cross and np.linalg.norm build several
+    temporaries of every triangle; the same operations in the same order: the same bits)."""
+    tv = np.asarray(tv, dtype=np.float64)
+    a, b, c = tv[:, 0] - x, tv[:, 1] - x, tv[:, 2] - x
+    la, lb, lc = (np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]) for v in (a, b, c))
+    bc = np.empty_like(b)
+    bc[:, 0] = b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1]
+    bc[:, 1] = b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2]
+    bc[:, 2] = b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]
+    num = np.einsum("ij,ij->i", a, bc)
+    den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb + \
+        np.einsum("ij,ij->i", b, c) * la
+    omega = 2.0 * np.arctan2(np.abs(num), den)
+    # the lamp must be in front: on the side of the triangle's normal (e1 x e2)
+    return np.where(num < 0, omega, 0.0)  # num = a . (b x c) < 0 <=> x on the normal's side
+
+
+def _patch_solid_angles(sampler, position, todo, n_patches) -> np.ndarray:
+    """(n_patches,) the solid angle (sr) of each patch of ``todo`` seen from ``position`` (the sum
+    over its triangles, in the sampler's order), kept on ``sampler`` per position
+    (KEPT_POSITIONS, the least recently used dropped): a patch's triangles are summed once."""
+    kept = sampler.__dict__.setdefault("_patch_solid_angles", OrderedDict())
+    key = np.asarray(position, dtype=np.float64).tobytes()
+    if key not in kept:
+        kept[key] = (np.zeros(n_patches), np.zeros(n_patches, dtype=bool))
+        while len(kept) > KEPT_POSITIONS:
+            kept.popitem(last=False)
+    kept.move_to_end(key)
+    om, done = kept[key]
+    new = todo[~done[todo]]
+    if len(new):
+        tri = _ragged(sampler.tstart[new], sampler.tcount[new])
+        om[new] = np.bincount(sampler.tri_patch[tri] if len(tri) else np.zeros(0, dtype=np.int64),
+                              weights=_solid_angles(sampler.tv[tri], position), minlength=n_patches)[new]
+        done[new] = True
+    return om
 
 
 @dataclass(frozen=True)
@@ -29,10 +78,10 @@ class PointSourceKind(LampKind):
         return LAMP_SAMPLES if lamp.radius > 0 else 1
 
     def point_means(self, lamp, sampler, todo, restricted, n_patches):
-        """The bare point lamp's patch means per W: I x solid angle / area."""
-        tri = slice(None) if not restricted else np.flatnonzero(np.isin(sampler.tri_patch, todo))
-        om = np.bincount(sampler.tri_patch[tri], weights=_solid_angles(sampler.tv[tri].astype(np.float64),
-                                                                       lamp.position), minlength=n_patches)
+        """The bare point lamp's patch means per W: I x solid angle / area (0 outside ``todo``)."""
+        todo = np.unique(np.asarray(todo, dtype=np.int64)) if restricted else np.arange(n_patches)
+        om = np.zeros(n_patches)
+        om[todo] = _patch_solid_angles(sampler, lamp.position, todo, n_patches)[todo]
         return om / (4.0 * math.pi * np.maximum(sampler.area, TINY))
 
     def attenuation(self, lamp, w_from_lamp):

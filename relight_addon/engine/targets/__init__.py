@@ -12,7 +12,7 @@ kind here) that gives
 
 ``TargetRows.stack`` puts the targets of a problem into one system (``InverseProblem``): rows
 ordered by the first patch they read (stable), so a scene's painted and illuminance targets keep
-the patches' order. A kind's ``from_scene(faces, patches)`` makes its target of a scene (None
+the patches' order. A kind's ``from_scene(faces, patches, F)`` (F: the form factors) makes its target of a scene (None
 when the scene has none); ``scene_targets`` asks every registered kind.
 """
 from __future__ import annotations
@@ -26,8 +26,9 @@ from ..registry import TARGET_KINDS
 from .kind import Target, selection_rows
 from .radiance import PaintedRadiance  # (the kinds register themselves, in this order)
 from .illuminance import Illuminance
+from .view import ViewTarget
 
-__all__ = ["Target", "TargetRows", "scene_targets", "selection_rows", "PaintedRadiance", "Illuminance"]
+__all__ = ["Target", "TargetRows", "scene_targets", "selection_rows", "PaintedRadiance", "Illuminance", "ViewTarget"]
 
 
 @dataclass
@@ -92,8 +93,8 @@ class TargetRows:
         return self.matrix.T.toarray()
 
 
-def scene_targets(faces, patches) -> list:
-    """The targets of a scene (FaceSet ``faces`` meshed into ``patches``): every registered kind's
-    (``from_scene``), in registration order."""
-    found = (kind.impl.from_scene(faces, patches) for kind in TARGET_KINDS)
+def scene_targets(faces, patches, F=None) -> list:
+    """The targets of a scene (FaceSet ``faces`` meshed into ``patches``, form factors ``F``): every
+    registered kind's (``from_scene``), in registration order."""
+    found = (kind.impl.from_scene(faces, patches, F) for kind in TARGET_KINDS)
     return [t for t in found if t is not None]

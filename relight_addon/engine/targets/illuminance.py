@@ -36,7 +36,7 @@ class Illuminance(Target):
         return np.repeat(self.lux[:, None], 3, axis=1)
 
     @classmethod
-    def from_scene(cls, faces, patches):
+    def from_scene(cls, faces, patches, F=None):
         """The patches of faces with an illuminance target (FaceSet.target_lux > 0)."""
         if faces is None or faces.target_lux is None:
             return None

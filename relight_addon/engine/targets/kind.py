@@ -34,6 +34,6 @@ class Target:
         return np.asarray(self.values, dtype=np.float64)
 
     @classmethod
-    def from_scene(cls, faces, patches):
+    def from_scene(cls, faces, patches, F=None):
         """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None."""
         return None

@@ -29,7 +29,7 @@ class PaintedRadiance(Target):
         return selection_rows(self.patches, n_patches)
 
     @classmethod
-    def from_scene(cls, faces, patches):
+    def from_scene(cls, faces, patches, F=None):
         """The painted patches that are no illuminance target (engine/targets/illuminance.py)."""
         mask = np.asarray(patches.target, dtype=bool)
         if faces is not None and faces.target_lux is not None:

@@ -1,0 +1,329 @@
+"""Camera-view targets (issue 40): pixels of the scene camera's image painted with the radiance
+the camera should see there (W m^-2 sr^-1, the render's units); unpainted pixels are free.
+
+A painted pixel is a row of the inverse problem: its centre's ray hits patch i at point x, and
+the radiance seen there is linear in the radiosity (engine.view_radiance.view_rows):
+
+    pi L = B_i + sum_j (pi f_i(l_xj, v) - rho_i) F_ij B_j,
+
+so a matte patch shows B_i / pi and a glossy one adds the reflection of what it sees through its
+BSDF towards the camera: a light cell's highlight on a glossy table moves with the cell, and a
+painted highlight pulls a cell to where its reflection lands. The rows are the same in every
+channel (the target interface's): a glossy patch's coefficients are the mean of its channels'
+(exact for a neutral specular layer over any diffuse colour when the layers' weights agree; the
+largest relative spread is ``channel_spread``). Left out: the reflection of lamps' direct light
+through a glossy BSDF (a lamp's light on a patch is seen Lambertian), the sources' own glossy
+reflection, pixels that see the World or a face's back (free, counted in ``free``).
+
+Rows are in W/m^2 (pi L: the radiosity's units, so they mix with painted and lux targets). A
+patch seen by many pixels would give as many rows; pixels that share a row are one row of weight
+sqrt(n) asking sqrt(n) x their mean (the least-squares problem unchanged, its values non-negative):
+a matte patch's pixels all read B_i; a glossy patch's rows are evaluated on tiles of the image
+(TILE_LOBE: a fraction of its lobe's width, about 13 pixels for Roughness 0.25 at 480 pixels over
+a 57 degree view; the radiance reported and shown on finer tiles, PREDICT_LOBE), its pixels in a tile sharing the row at their mean point and direction. Then
+||R B - t||^2 over the pixels is ||R' B - t'||^2 plus the constant ``offset`` (the spread of the
+pixels that share a row, which no B changes): the same solution; the pixels' own error is
+``pixel_error`` (the report's), not the rows'.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..registry import TARGET_KINDS
+from ..principled import VIEW_ALPHA_MIN, BRDFTable
+from ..units import TINY
+from ..view_radiance import view_rows
+from .kind import Target
+
+__all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "predicted_image", "TILE_LOBE", "PREDICT_LOBE"]
+
+#: the angle of the image tiles on which a glossy patch's rows are evaluated for the solve, relative
+#: to its narrowest lobe's GGX alpha (Roughness^2, at least principled.VIEW_ALPHA_MIN): the pixels
+#: of a patch in one tile share the row at their mean point and direction (a lobe is about 2 alpha
+#: wide). 0.5: 13 pixels for Roughness 0.25 at 480 pixels over a 57 degree view; against each
+#: pixel's own row 0.5 % mean, 2.2 % at the 95th percentile (tests/test_view_target.py), with 7 x
+#: fewer rows than 0.15 (the solve's cost grows with the rows: docs/benchmarks.md)
+TILE_LOBE = 0.5
+#: the same for the radiance reported and shown (``predict``, ``predicted_image``: a forward
+#: evaluation, no solve): finer, the pixels' error and the predicted image within 0.2 % of each
+#: pixel's own row on average
+PREDICT_LOBE = 0.15
+
+
+@dataclass
+class Camera:
+    """A perspective camera: ``origin`` (3,), ``axes`` (3, 3) rows = the camera's right, up and
+    back directions in world space (Blender's camera looks down its local -Z), the image ``width``
+    x ``height`` pixels, ``half`` (2,): the image plane's half extent at distance 1 (x, y), ``shift``
+    (2,): its centre's offset at distance 1 (Blender's Shift X/Y)."""
+
+    origin: np.ndarray
+    axes: np.ndarray
+    width: int
+    height: int
+    half: np.ndarray
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def __post_init__(self):
+        self.origin = np.asarray(self.origin, dtype=np.float64).reshape(3)
+        self.axes = np.asarray(self.axes, dtype=np.float64).reshape(3, 3)
+        self.half = np.asarray(self.half, dtype=np.float64).reshape(2)
+        self.shift = np.asarray(self.shift, dtype=np.float64).reshape(2)
+        self.width, self.height = int(self.width), int(self.height)
+
+    def directions(self, pixels, offset=(0.5, 0.5)) -> np.ndarray:
+        """(n, 3) unit world directions through flat pixel indices ``pixels`` (row-major, row 0 at
+        the top) at ``offset`` (x, y in [0, 1)) within each pixel ((n, 2) per pixel, or one pair)."""
+        pixels = np.asarray(pixels, dtype=np.int64)
+        off = np.broadcast_to(np.asarray(offset, dtype=np.float64), (len(pixels), 2))
+        r, c = np.divmod(pixels, self.width)
+        x = self.shift[0] + ((c + off[:, 0]) / self.width * 2 - 1) * self.half[0]
+        y = self.shift[1] + (1 - (r + off[:, 1]) / self.height * 2) * self.half[1]
+        d = x[:, None] * self.axes[0] + y[:, None] * self.axes[1] - self.axes[2]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+@dataclass
+class ViewSpec:
+    """What the camera should see: ``radiance`` (H, W, 3) W m^-2 sr^-1 at the camera's working
+    resolution (row 0 at the top), ``painted`` (H, W) bool (False: a free pixel); ``name`` says
+    where it came from (the image's file)."""
+
+    camera: Camera
+    radiance: np.ndarray
+    painted: np.ndarray
+    name: str = ""
+
+    def __post_init__(self):
+        shape = (self.camera.height, self.camera.width)
+        self.radiance = np.asarray(self.radiance, dtype=np.float64).reshape(shape + (3,))
+        self.painted = np.asarray(self.painted, dtype=bool).reshape(shape)
+        if not np.all(np.isfinite(self.radiance[self.painted])) or np.any(self.radiance[self.painted] < 0):
+            raise ValueError(f"the view target {self.name!r} has negative or non-finite radiance in painted pixels")
+
+
+@dataclass
+class PixelHits:
+    """The pixels whose ray hits a patch's front: ``pixel`` (n,) flat indices, ``patch`` (n,),
+    ``point`` (n, 3), ``direction`` (n, 3) from the camera; ``missed`` and ``back``: how many
+    asked pixels see nothing (the World) or a face's back."""
+
+    pixel: np.ndarray
+    patch: np.ndarray
+    point: np.ndarray
+    direction: np.ndarray
+    missed: int = 0
+    back: int = 0
+
+
+def _sampler(F, patches):
+    sampler = getattr(F, "sampler", None)
+    if sampler is None:
+        from ..sampling import SceneSampler
+        sampler = SceneSampler(patches)
+    return sampler
+
+
+def cast_pixels(camera: Camera, sampler, pixels, offset=(0.5, 0.5)) -> PixelHits:
+    """The first hit of each pixel's ray (``sampler``: engine.sampling.SceneSampler)."""
+    pixels = np.asarray(pixels, dtype=np.int64)
+    d = camera.directions(pixels, offset)
+    org = np.repeat(camera.origin[None, :], len(pixels), axis=0)
+    prim = np.asarray(sampler.first_hit(org.astype(np.float32), d.astype(np.float32)))
+    hit = prim >= 0
+    tri = np.maximum(prim, 0)
+    n = sampler.tn[tri]
+    cos = np.einsum("ij,ij->i", n, d)
+    front = hit & (cos < 0)
+    t = np.einsum("ij,ij->i", sampler.tv[tri, 0] - org, n) / np.where(np.abs(cos) > TINY, cos, -1.0)
+    point = org + t[:, None] * d
+    return PixelHits(pixels[front], sampler.tri_patch[tri[front]], point[front], d[front],
+                     missed=int(np.sum(~hit)), back=int(np.sum(hit & ~front)))
+
+
+def _narrowest(lobes) -> float:
+    """A material's narrowest GGX alpha; inf for Lambert's BSDF (diffuse lobes of roughness 0), 1 for
+    another BSDF without a GGX lobe (Oren-Nayar)."""
+    if all(kind == "diffuse" and float(d[1]) == 0.0 for _, kind, d in lobes):
+        return np.inf
+    return min([float(d.alpha) for kind, _, d in BRDFTable(lobes).terms if kind == "ggx"] or [1.0])
+
+
+def _patch_materials(faces, patches):
+    """(material (P,) int, material_lobes, alpha (P,): the narrowest GGX alpha of each patch's
+    material, inf where it is Lambertian)."""
+    lobes = getattr(faces, "material_lobes", None)
+    fm = getattr(faces, "face_material", None)
+    if lobes is None or fm is None:
+        P = patches.n_patches
+        return np.zeros(P, dtype=np.int64), None, np.full(P, np.inf)
+    material = np.asarray(fm, dtype=np.int64)[patches.face]
+    return material, lobes, np.array([_narrowest(m) for m in lobes])[material]
+
+
+def _tile(camera, alpha, lobe=None) -> int:
+    """The side in pixels of the tiles a glossy patch's rows are evaluated on (``lobe`` of its
+    alpha; default TILE_LOBE)."""
+    pixel = 2 * camera.half[0] / camera.width  # (at distance 1: the pixel's angle near the centre)
+    return max(1, int((TILE_LOBE if lobe is None else lobe) * max(alpha, VIEW_ALPHA_MIN) / pixel))
+
+
+def _pixel_blocks(hits, patches, F, faces, camera, lobe=None):
+    """Per patch seen: (patch, pixel positions in ``hits``, columns js, W (n_tiles, J, 3), tile (n,)):
+    the rows of its pixels, pixel k's row W[tile[k]] (view_rows at the mean point and direction of
+    the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile); a Lambertian patch reads
+    itself alone, weight 1)."""
+    material, lobes, alpha = _patch_materials(faces, patches)
+    order = np.argsort(hits.patch, kind="stable")
+    cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
+    for group in np.split(order, cuts) if len(order) else []:
+        i = int(hits.patch[group[0]])
+        if np.isinf(alpha[i]):
+            yield i, group, np.array([i]), np.ones((1, 1, 3)), np.zeros(len(group), dtype=np.int64)
+            continue
+        side = _tile(camera, alpha[i], lobe)
+        n_cols = -(-camera.width // side)
+        r, c = np.divmod(hits.pixel[group], camera.width)
+        tiles, tile = np.unique((r // side) * n_cols + c // side, return_inverse=True)
+        count = np.bincount(tile, minlength=len(tiles))[:, None]
+        point = np.stack([np.bincount(tile, hits.point[group, a], len(tiles)) for a in range(3)], 1) / count
+        d = np.stack([np.bincount(tile, hits.direction[group, a], len(tiles)) for a in range(3)], 1)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(len(tiles), i), point, d,
+                          material, lobes)
+        yield i, group, js, W, tile
+
+
+@TARGET_KINDS.register("view", "Camera View", "Pixels of the camera's image painted with the radiance they should show")
+class ViewTarget(Target):
+    """The painted pixels of a ViewSpec seen through the patches (module docstring): ``matrix`` (k, P)
+    the rows (pixels sharing a row merged), ``values`` (k, 3) W/m^2, ``offset`` (3,) the pixels' squared error no B
+    changes, ``hits`` the pixels' first hits, ``pixel_row`` (n,) the row of each, ``channel_spread``
+    the largest relative spread of a glossy row between channels. The rows are on TILE_LOBE's tiles,
+    what is predicted and reported (``predict``, ``image``, ``pixel_error``) on PREDICT_LOBE's."""
+
+    kind = "view"
+    unit = "W/(m^2 sr)"
+
+    def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces, pixel_row=None):
+        self.spec, self.hits = spec, hits
+        #: (n,) the row each hit pixel shares (its weight: sqrt of how many pixels share it)
+        self.pixel_row = pixel_row
+        self.matrix = sp.csr_matrix(matrix)
+        self.values = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        self.offset = np.asarray(offset, dtype=np.float64)
+        self.channel_spread = float(channel_spread)
+        self._F, self._patches, self._faces = F, patches, faces
+
+    def rows(self, n_patches):
+        if self.matrix.shape[1] != n_patches:
+            raise ValueError(f"the view target's rows read {self.matrix.shape[1]} patches, not {n_patches}")
+        return self.matrix
+
+    def shown(self) -> np.ndarray:
+        """(k, 3) the rows' values as radiance (merged rows': pixel_error says the pixels')."""
+        return self.values / np.pi
+
+    @property
+    def pixels(self) -> int:
+        """How many pixels were painted."""
+        return int(self.spec.painted.sum())
+
+    @classmethod
+    def from_scene(cls, faces, patches, F=None):
+        """The view target of ``faces.view_target`` (a ViewSpec, or None: no target), on the form
+        factors ``F`` (the glossy rows gather through them)."""
+        spec = getattr(faces, "view_target", None)
+        if spec is None:
+            return None
+        if F is None:
+            raise ValueError("a view target needs the form factors")
+        return cls.build(spec, faces, patches, F)
+
+    @classmethod
+    def build(cls, spec, faces, patches, F):
+        P = patches.n_patches
+        hits = cast_pixels(spec.camera, _sampler(F, patches), np.flatnonzero(spec.painted.reshape(-1)))
+        if len(hits.pixel) == 0:
+            raise ValueError(f"no painted pixel of the view target {spec.name!r} sees a surface (they see the World "
+                             f"or the back of faces)")
+        t = np.pi * spec.radiance.reshape(-1, 3)[hits.pixel]  # (n, 3) W/m^2
+        rows, cols, data, values, spread = [], [], [], [], 0.0
+        pixel_row = np.empty(len(hits.pixel), dtype=np.int64)
+        k = 0
+        for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, spec.camera):
+            # the pixels sharing a row (a tile's, a matte patch's): one row of weight sqrt(n) asking
+            # sqrt(n) x their mean
+            w = np.sqrt(np.bincount(tile, minlength=len(W)))[:, None]
+            tm = np.stack([np.bincount(tile, t[group, ch], len(W)) for ch in range(3)], 1) / (w * w)
+            G = W.mean(axis=2)
+            if W.shape[1] > 1:
+                spread = max(spread, float(np.max(np.abs(W - G[:, :, None])) / max(np.max(np.abs(G)), TINY)))
+            Gc, tc = w * G, w * tm
+            r, c = np.nonzero(Gc)
+            rows.append(r + k)
+            cols.append(js[c])
+            data.append(Gc[r, c])
+            values.append(tc)
+            pixel_row[group] = k + tile
+            k += len(Gc)
+        matrix = sp.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(k, P))
+        values = np.concatenate(values)
+        offset = np.sum(t * t, axis=0) - np.sum(values * values, axis=0)
+        return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row)
+
+    def predict(self, B) -> np.ndarray:
+        """(n, 3) the radiance the hit pixels show under radiosity ``B`` (P, 3), W m^-2 sr^-1."""
+        return _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces, self.spec.camera)
+
+    def image(self, B, samples=4) -> tuple:
+        """predicted_image of the whole frame under radiosity ``B`` (``samples`` rays a pixel)."""
+        return predicted_image(self.spec.camera, self._faces, self._patches, self._F, B, samples)
+
+    def pixel_error(self, B) -> dict:
+        """The error over the painted pixels under radiosity ``B``: the pixels seen, the free ones,
+        the mean of each pixel's relative error (|L - L_t| summed over channels / L_t summed; a pixel
+        asking 0 is left out), the RMS error in W m^-2 sr^-1 and relative to the target's RMS."""
+        L = self.predict(B)
+        Lt = self.spec.radiance.reshape(-1, 3)[self.hits.pixel]
+        asked = Lt.sum(axis=1)
+        ok = asked > TINY
+        rel = np.abs(L - Lt).sum(axis=1)[ok] / asked[ok]
+        rms = float(np.sqrt(np.mean((L - Lt) ** 2)))
+        rms_t = float(np.sqrt(np.mean(Lt ** 2)))
+        return {"painted": self.pixels, "seen": int(len(self.hits.pixel)), "world": self.hits.missed,
+                "back": self.hits.back, "mean_relative_error": float(np.mean(rel)) if len(rel) else 0.0,
+                "rms_error": rms, "relative_rms_error": rms / rms_t if rms_t > TINY else 0.0,
+                "channel_spread": self.channel_spread}
+
+
+def _radiance(hits, B, patches, F, faces, camera) -> np.ndarray:
+    out = np.zeros((len(hits.pixel), 3))
+    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE):
+        out[group] = np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
+    return out
+
+
+def predicted_image(camera, faces, patches, F, B, samples=1, seed=0) -> tuple:
+    """((H, W, 3) the radiance the model predicts the camera sees under radiosity ``B`` (the per
+    channel rows: view_rows), (H, W) the share of each pixel's ``samples`` rays (stratified
+    jittered over the pixel) that hit a patch's front; 0 radiance where none does)."""
+    H, Wd = camera.height, camera.width
+    sampler = _sampler(F, patches)
+    B = np.asarray(B, dtype=np.float64)
+    img = np.zeros((H * Wd, 3))
+    cover = np.zeros(H * Wd)
+    rng = np.random.default_rng(seed)
+    m = max(1, int(round(np.sqrt(samples))))
+    pixels = np.arange(H * Wd)
+    for a in range(m):
+        for b in range(m):
+            off = (np.stack([a + rng.random(H * Wd), b + rng.random(H * Wd)], axis=1) / m) if samples > 1 else (0.5, 0.5)
+            hits = cast_pixels(camera, sampler, pixels, off)
+            img[hits.pixel] += _radiance(hits, B, patches, F, faces, camera)
+            cover[hits.pixel] += 1.0
+    n = m * m
+    return (img / n).reshape(H, Wd, 3), (cover / n).reshape(H, Wd)
