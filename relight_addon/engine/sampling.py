@@ -32,6 +32,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 
 import numpy as np
 
+from .coincident import Twins
 from .rays import RAY_OFFSET
 from .scene import PatchSet, SceneError, patch_triangles
 from .units import TINY
@@ -120,9 +121,17 @@ class SceneSampler:
         self.scene = rtcs.EmbreeScene(rtc.EmbreeDevice(), robust=True)
         tv = self.tv if self._occluders is None else self.tv[self._occluders]
         self._mesh = TriangleMesh(self.scene, tv.astype(np.float32))
+        # coincident triangles back to back: a ray hits the one facing it (engine.coincident)
+        self._twins = Twins.of(self.tv, self.tn, self.ta, self.offset, self._own_hit, among=self._occluders)
 
     def first_hit(self, org, d) -> np.ndarray:
-        """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a miss."""
+        """The (sorted) triangle each ray (origins, directions: (n, 3) float32) hits first, -1 for a
+        miss; of coincident triangles back to back, the one facing the ray (engine.coincident)."""
+        prim = self._own_hit(org, d)
+        return prim if self._twins is None else self._twins.facing(org, d, prim)
+
+    def _own_hit(self, org, d):
+        """Embree's first hit, a sorted triangle (-1: a miss), of two coincident ones either."""
         prim = self.scene.run(org, d)
         if self._occluders is None:
             return prim

@@ -75,6 +75,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .backs import back_view, sides_view
+from .coincident import covered_share
 from .rays import RAY_OFFSET
 from .units import MAX_REFLECTANCE
 
@@ -111,6 +112,10 @@ ISLAND_SEES = 0.02
 #: an island's faces are modelled from both sides when its backs' rays see the scene at least
 #: this often (all of them: one plane is lit and seen alike on its whole)
 ISLAND_BOTH = 0.25
+#: a face of an open island whose back lies against a coincident face of an open island facing the
+#: other way on at least this share of its area (engine.coincident.covered_share: a thin wall drawn
+#: as both its sides) is no candidate: the scene sees that side as the other face's front
+BACKED = 0.5
 #: a back sees the scene where its rays reach fronts outside its island's box, grown by this
 #: fraction of the box's largest side (a block standing on a floor looks at the floor inside it)
 ISLAND_BOX_PAD = 0.01
@@ -226,14 +231,22 @@ def _candidates(b):
     with faces turned against their neighbours; None when there are none."""
     objects = _object_boxes(b)
     cand, islands = _Candidates(), {}
-    for ci in range(len(b.e)):
-        if b.geos[ci] is None or not len(b.e[ci]):
-            continue
+    chunks = [ci for ci in range(len(b.e)) if b.geos[ci] is not None and len(b.e[ci])]
+    opened = np.zeros(b.nf, dtype=bool)
+    for ci in chunks:
         geo = b.geos[ci][0]
         if id(geo) not in islands:  # instances share their mesh's arrays
             islands[id(geo)] = open_faces(geo)
             islands[id(geo)] += (mixed_orientation(geo, islands[id(geo)][1]),)
-        _chunk_candidates(b, ci, islands[id(geo)], objects, cand)
+        nf0 = b.base[ci][1]
+        opened[nf0:nf0 + len(b.e[ci])] = islands[id(geo)][0]
+    # faces of open islands back to back (a thin wall's two sides; not a card lying on a solid,
+    # which is turned as before)
+    share = covered_share(np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), b.nf,
+                          among=opened)
+    backed = np.zeros(b.nf, dtype=bool) if share is None else share >= BACKED
+    for ci in chunks:
+        _chunk_candidates(b, ci, islands[id(b.geos[ci][0])], objects, cand, backed)
     if not cand.chosen:
         return None
     cand.areas = np.concatenate(cand.areas)
@@ -243,9 +256,10 @@ def _candidates(b):
     return cand
 
 
-def _chunk_candidates(b, ci, topology, objects, cand) -> None:
+def _chunk_candidates(b, ci, topology, objects, cand, backed) -> None:
     """Add the candidate faces of chunk ``ci`` (``topology``: open_faces' and mixed_orientation's
-    answers for its mesh; ``objects``: _object_boxes) to ``cand``."""
+    answers for its mesh; ``objects``: _object_boxes; ``backed``: per face, its back against a
+    coincident face facing the other way) to ``cand``."""
     centres, obj_ids, obj_lo, obj_hi, obj_painted = objects
     is_open, island, mixed = topology
     back = b.e[ci] if b.e_back[ci] is None else b.e_back[ci]
@@ -262,7 +276,7 @@ def _chunk_candidates(b, ci, topology, objects, cand) -> None:
     lo, hi = np.minimum.reduceat(P, first, axis=0), np.maximum.reduceat(P, first, axis=0)
     others = np.array([c for o, c in centres.items() if o != int(b.f_obj[ci][0])]).reshape(-1, 3)
     holds = np.any(np.all((others[None] > lo[:, None]) & (others[None] < hi[:, None]), axis=2), axis=1)
-    sel = np.flatnonzero(still & (is_open | holds[island] | mixed[island]))
+    sel = np.flatnonzero(still & ~backed[nf0:nf0 + len(still)] & (is_open | holds[island] | mixed[island]))
     if not len(sel):
         return
     cand.chosen.append(nf0 + sel)
