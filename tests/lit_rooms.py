@@ -89,6 +89,20 @@ def lamp_room(path, lambertian=True):
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
 
+def floor_with_blocker(albedo, n):
+    """A 4 m grey floor of n x n faces (Lambertian ``albedo``), a black tile floating 0.5 m over it
+    to cast a shadow, no World: the scene of the lamp kinds' direct light against Cycles."""
+    cr.reset_blender()
+    bpy.context.scene.world = None  # no World light: only the lamp
+    grey = cr._material("grey", (albedo,) * 3, lambertian=True)
+    v, f = cr.grid_quads((-2.0, -2.0, 0.0), (4.0, 0, 0), (0, 4.0, 0), n, n)
+    floor = cr.add_mesh_object("floor", v, f, grey)
+    black = cr._material("black", (0.0,) * 3, lambertian=True)
+    v, f = cr.grid_quads((-0.9, -0.3, 0.5), (0.6, 0, 0), (0, 0.6, 0), 1, 1)  # a tile floating at 0.5 m
+    cr.add_mesh_object("blocker", v, f, black)
+    return floor
+
+
 def paint(ob, polygons, rgb):
     me = ob.data
     layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")

@@ -20,23 +20,12 @@ pytestmark = pytest.mark.cycles  # (a Cycles closed loop: make test-all, not mak
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import (cut_window, lamp_room, light, radiosity_against_cycles, relight, remove_lamps,  # noqa: E402
-                       solve_closed_loop, uniform_world)
+from lit_rooms import (cut_window, floor_with_blocker, lamp_room, light, radiosity_against_cycles,  # noqa: E402
+                       relight, remove_lamps, solve_closed_loop, uniform_world)
 
 SAMPLES = 256
 ALBEDO = 0.5
 
-
-def _floor_with_blocker():
-    cr.reset_blender()
-    bpy.context.scene.world = None  # no World light: only the lamp
-    grey = cr._material("grey", (ALBEDO,) * 3, lambertian=True)
-    v, f = cr.grid_quads((-2.0, -2.0, 0.0), (4.0, 0, 0), (0, 4.0, 0), 8, 8)
-    floor = cr.add_mesh_object("floor", v, f, grey)
-    black = cr._material("black", (0.0,) * 3, lambertian=True)
-    v, f = cr.grid_quads((-0.9, -0.3, 0.5), (0.6, 0, 0), (0, 0.6, 0), 1, 1)  # a tile floating at 0.5 m
-    cr.add_mesh_object("blocker", v, f, black)
-    return floor
 
 
 LAMPS = {
@@ -119,7 +108,7 @@ def test_lamp_direct_irradiance_against_cycles(name):
     if name in LAMPS and any(k in LAMPS[name][3] and k not in bpy.types.Light.bl_rna.properties for k in NEWER):
         pytest.skip(f"this Blender {bpy.app.version_string} has no Exposure, Temperature or Normalize on lights")
     try:
-        floor = _floor_with_blocker()
+        floor = floor_with_blocker(ALBEDO, 8)
         if name in LAMPS:
             kind, loc, rot, props = LAMPS[name]
             light(kind, loc, rot, **props)

@@ -16,7 +16,7 @@ bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is nee
 
 import cycles_reference as cr  # noqa: E402
 import photometric_fixtures as pf  # noqa: E402
-from lit_rooms import radiosity_against_cycles, solve_closed_loop  # noqa: E402
+from lit_rooms import floor_with_blocker, radiosity_against_cycles, solve_closed_loop  # noqa: E402
 
 SAMPLES = 256
 ALBEDO = 0.5
@@ -38,17 +38,6 @@ CASES = {
 }
 
 
-def _floor_with_blocker():
-    cr.reset_blender()
-    bpy.context.scene.world = None  # no World light: only the lamp
-    grey = cr._material("grey", (ALBEDO,) * 3, lambertian=True)
-    v, f = cr.grid_quads((-2.0, -2.0, 0.0), (4.0, 0, 0), (0, 4.0, 0), 10, 10)
-    floor = cr.add_mesh_object("floor", v, f, grey)
-    black = cr._material("black", (0.0,) * 3, lambertian=True)
-    v, f = cr.grid_quads((-0.9, -0.3, 0.5), (0.6, 0, 0), (0, 0.6, 0), 1, 1)  # a tile floating at 0.5 m
-    cr.add_mesh_object("blocker", v, f, black)
-    return floor
-
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_photometric_lamp_direct_irradiance_against_cycles(name):
@@ -63,7 +52,7 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
     fixture, loc, rot, energy, strength, colour, radius, *spot = CASES[name]
     settings = spot[0] if spot else {}
     try:
-        floor = _floor_with_blocker()
+        floor = floor_with_blocker(ALBEDO, 10)
         pf.ies_point_lamp(bpy, "fixture", loc, rot, pf.lm63_text(fixture), energy, strength, colour, radius=radius,
                           **settings)
         exp = export.export_scene()
