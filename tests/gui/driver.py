@@ -261,8 +261,19 @@ def press(found, command, settle=1.2, retries=2):
         rx, ry = r.view2d.view_to_region(vx, vy, clip=False)
         if 20 <= ry <= r.height - 60:  # (not under the sticky panel header drawn atop a scrolled sidebar)
             break
+        top = r.view2d.region_to_view(0, r.height)[1]
         yield from scroll_sidebar(3 if ry < 20 else -3)
+        for _ in range(24):  # a busy main thread (Live's worker) redraws the sidebar late: wait for it
+            if abs(ui_region().view2d.region_to_view(0, r.height)[1] - top) >= 1:
+                break
+            yield 0.25
+        else:
+            if ry > r.height - 60:  # at the sidebar's top already: the hover below checks the button
+                log(f"{command}: the sidebar does not scroll up, region y {ry:.0f} of {r.height}")
+                break
     else:
+        raise AssertionError(f"button {command} could not be scrolled into the sidebar (region y {ry:.0f})")
+    if not 0 <= ry <= r.height:
         raise AssertionError(f"button {command} could not be scrolled into the sidebar (region y {ry:.0f})")
     sx, sy = to_screen(r, rx, ry)
     got = None
