@@ -256,13 +256,14 @@ def press(found, command, settle=1.2, retries=2):
             return (yield from press(found, command, settle, retries - 1))
         raise AssertionError(f"button {command} not found in the sidebar (probe saw {sorted(found)})")
     vx, vy = found[command]
-    for _ in range(12):
+    for _ in range(40):  # (the probe leaves the sidebar at its bottom: the top buttons are ~2,000 px away)
         r = ui_region()
         rx, ry = r.view2d.view_to_region(vx, vy, clip=False)
         if 20 <= ry <= r.height - 60:  # (not under the sticky panel header drawn atop a scrolled sidebar)
             break
         top = r.view2d.region_to_view(0, r.height)[1]
-        yield from scroll_sidebar(3 if ry < 20 else -3)
+        far = abs(ry - r.height / 2) > r.height  # more than a region away: a page at a time
+        yield from scroll_sidebar((3 if ry < 20 else -3) * (4 if far else 1))
         for _ in range(24):  # a busy main thread (Live's worker) redraws the sidebar late: wait for it
             if abs(ui_region().view2d.region_to_view(0, r.height)[1] - top) >= 1:
                 break
