@@ -15,13 +15,19 @@ from __future__ import annotations
 from pathlib import Path
 
 from .distribution import TYPE_A, TYPE_B, TYPE_C, CyclesProfile, Photometry, PhotometryError
-from .eulumdat import parse_eulumdat, read_eulumdat
-from .lm63 import parse_lm63, read_lm63, write_lm63
+from .eulumdat import parse_eulumdat
+from .lm63 import parse_lm63, write_lm63
 
 __all__ = ["CyclesProfile", "Photometry", "PhotometryError", "TYPE_A", "TYPE_B", "TYPE_C", "parse_eulumdat",
-           "parse_lm63", "read_eulumdat", "read_lm63", "read_photometry", "write_lm63"]
+           "parse_lm63", "read_photometry", "write_lm63"]
 
 
 def read_photometry(path) -> Photometry:
-    """The Photometry of an LM-63 (.ies, any other extension) or EULUMDAT (.ldt) file."""
-    return read_eulumdat(path) if Path(path).suffix.lower() == ".ldt" else read_lm63(path)
+    """The Photometry of an LM-63 (.ies, any other extension) or EULUMDAT (.ldt) file (PhotometryError
+    naming the file, and the line where its content is the cause)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise PhotometryError(f"{p.name}: cannot be read ({e.strerror or e})") from None
+    return (parse_eulumdat if p.suffix.lower() == ".ldt" else parse_lm63)(data, p.name)

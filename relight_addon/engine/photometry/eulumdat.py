@@ -24,19 +24,7 @@ import numpy as np
 
 from .distribution import TYPE_C, Photometry, PhotometryError
 
-__all__ = ["read_eulumdat", "parse_eulumdat"]
-
-
-def read_eulumdat(path) -> Photometry:
-    """The Photometry of the EULUMDAT file at ``path`` (PhotometryError naming the file and line)."""
-    from pathlib import Path
-
-    p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise PhotometryError(f"{p.name}: cannot be read ({e.strerror or e})") from None
-    return parse_eulumdat(data, p.name)
+__all__ = ["parse_eulumdat"]
 
 
 class _Lines:

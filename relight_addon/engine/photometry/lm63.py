@@ -19,7 +19,7 @@ import numpy as np
 
 from .distribution import TYPE_A, TYPE_B, TYPE_C, CyclesProfile, Photometry, PhotometryError
 
-__all__ = ["read_lm63", "parse_lm63", "write_lm63"]
+__all__ = ["parse_lm63", "write_lm63"]
 
 #: LM-63's unit types: 1 feet, 2 metres
 FEET = 0.3048
@@ -85,18 +85,6 @@ class _Tokens:
 
     def rest(self) -> int:
         return len(self.items) - self.i
-
-
-def read_lm63(path) -> Photometry:
-    """The Photometry of the LM-63 file at ``path`` (PhotometryError naming the file and line)."""
-    from pathlib import Path
-
-    p = Path(path)
-    try:
-        data = p.read_bytes()
-    except OSError as e:
-        raise PhotometryError(f"{p.name}: cannot be read ({e.strerror or e})") from None
-    return parse_lm63(data, p.name)
 
 
 def _increasing(values, lines, what, name, low, high):
