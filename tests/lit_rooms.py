@@ -103,6 +103,63 @@ def floor_with_blocker(albedo, n):
     return floor
 
 
+def floor_irradiance_against_cycles(name, floor, exp, lamps, albedo, samples, min_lit, dark=False):
+    """``lamps``' direct irradiance on the floor of floor_with_blocker (lamp_irradiance on the exported
+    patches, per floor face) against Cycles' bake of that floor, per channel (a Temperature's colour
+    has its own power in each): the lamps' power on the lit faces within 1 %, the mean per face within
+    2 %, each face within 8 % or 2 % of the peak (a cone's or a shadow's edge crosses it, sampled)
+    plus 4 x the bake's noise; ``dark``: no more than 2 % of the peak where Cycles has under 0.5 % of it
+    (a distribution's zero, a fixture's back)."""
+    from relight_addon.engine.lamps import lamp_irradiance
+    from relight_addon.engine.scene import mesh_patches
+
+    try:
+        patches = mesh_patches(exp.faces, 10.0)
+        H = lamp_irradiance(patches, lamps, seed=0)[:, 0, :]
+        on_floor = patches.object == exp.faces.object_names.index("floor")
+        ours_rgb = np.zeros((len(floor.data.polygons), 3))
+        ours_rgb[exp.faces.face_index[patches.face[on_floor]]] = H[on_floor]
+        baked = cr.cycles_face_radiance(samples=samples, seed=1, objects=[floor], threads=2)["floor"]
+    finally:
+        cr.reset_blender()
+    for c in range(3):
+        ours = ours_rgb[:, c]
+        E = math.pi * baked.radiance[:, c] / albedo
+        noise = math.pi * baked.std_error[:, c] / albedo
+        lit = E > 0.05 * E.max()
+        rel = np.abs(ours[lit] - E[lit]) / E[lit]
+        total = abs(ours[lit].sum() / E[lit].sum() - 1)
+        worst = np.argsort(-rel)[:3]
+        summary = (f"{name} ({'RGB'[c]}): {lit.sum()} lit faces, mean {rel.mean():.4f} max {rel.max():.4f}, total "
+                   f"{total:.4f} (ours {ours[lit].sum():.4g}, Cycles {E[lit].sum():.4g}); Cycles noise "
+                   f"{np.mean(noise[lit] / E[lit]):.4f}; worst faces (ours, Cycles, peak): "
+                   + ", ".join(f"({ours[lit][i]:.3g}, {E[lit][i]:.3g})" for i in worst) + f", {E.max():.3g}")
+        print(summary)
+        assert lit.sum() >= min_lit, summary
+        assert total < 0.01, summary
+        assert rel.mean() < 0.02, summary
+        assert np.all(np.abs(ours[lit] - E[lit]) <= 0.08 * E[lit] + 0.02 * E.max() + 4 * noise[lit]), summary
+        if dark:
+            assert np.all(ours[E < 0.005 * E.max()] <= 0.02 * E.max()), summary
+
+
+def targets_against_cycles(report, baked, names, own_materials=False):
+    """Each painted face of the objects ``names``: the report's prediction (its radiosity / pi, or with
+    the file's own materials its radiance along the normal, which a bake with them shows) against
+    Cycles' bake, channels summed: (signed relative errors per object, one line per object)."""
+    signed, lines = [], []
+    for name in names:
+        rows = report["objects"][name]
+        target = np.array([t is not None for t in rows["target"]])
+        ours = (np.array([r if r is not None else [np.nan] * 3 for r in rows["radiance_normal"]], dtype=np.float64)
+                if own_materials else np.asarray(rows["radiosity"], dtype=np.float64) / math.pi)[target].sum(axis=1)
+        got = baked[name].radiance[target].sum(axis=1)
+        signed.append((ours - got) / got)
+        lines.append(f"{name}: {target.sum()} targets, mean {np.abs(signed[-1]).mean():.4f} signed "
+                     f"{signed[-1].mean():+.4f}, Cycles noise {baked[name].rel_noise[target].mean():.4f}")
+    return signed, lines
+
+
 def paint(ob, polygons, rgb):
     me = ob.data
     layer = me.color_attributes.new("relight_target", "FLOAT_COLOR", "CORNER")
@@ -162,13 +219,7 @@ def solve_closed_loop(blend, tmp_path, targets, rgb, samples=1024, seed=2, own_m
                                         keep_light_paths=own_materials)
     finally:
         cr.reset_blender()
-    floor = report["objects"]["floor"]
-    target = np.array([t is not None for t in floor["target"]])
-    # with the file's own (glossy) materials a bake shows the radiance along the normal
-    ours = (np.array([r if r is not None else [np.nan] * 3 for r in floor["radiance_normal"]], dtype=np.float64)
-            if own_materials else np.asarray(floor["radiosity"], dtype=np.float64) / math.pi)
-    got = baked["floor"].radiance[target].sum(axis=1)
-    signed = (ours[target].sum(axis=1) - got) / got
+    signed = targets_against_cycles(report, baked, ["floor"], own_materials)[0][0]
     e = np.abs(signed)
     fixed = [r for r in report["fixed_light"] if r["kind"] != "emission"]
     share = sum(r["share"] for r in fixed)

@@ -20,8 +20,9 @@ pytestmark = pytest.mark.cycles  # (a Cycles closed loop: make test-all, not mak
 bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is needed to bake with Cycles")
 
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import (cut_window, floor_with_blocker, lamp_room, light, radiosity_against_cycles,  # noqa: E402
-                       relight, remove_lamps, solve_closed_loop, uniform_world)
+from lit_rooms import (cut_window, floor_irradiance_against_cycles, floor_with_blocker, lamp_room, light,  # noqa: E402
+                       radiosity_against_cycles, relight, remove_lamps, solve_closed_loop, targets_against_cycles,
+                       uniform_world)
 
 SAMPLES = 256
 ALBEDO = 0.5
@@ -102,8 +103,6 @@ def test_lamp_direct_irradiance_against_cycles(name):
     """Each lamp kind, the scene's (exported from Blender) and the solve's placed ones (written by
     results.new_lamp, predicted from the engine's Lamp), against Cycles' bake of the floor."""
     from relight_addon.blender import export
-    from relight_addon.engine.lamps import lamp_irradiance
-    from relight_addon.engine.scene import mesh_patches
 
     if name in LAMPS and any(k in LAMPS[name][3] and k not in bpy.types.Light.bl_rna.properties for k in NEWER):
         pytest.skip(f"this Blender {bpy.app.version_string} has no Exposure, Temperature or Normalize on lights")
@@ -120,37 +119,10 @@ def test_lamp_direct_irradiance_against_cycles(name):
         else:
             lamps = [_placed(*_placed_lamps()[name])]
             exp = export.export_scene()
-        patches = mesh_patches(exp.faces, 10.0)
-        H = lamp_irradiance(patches, lamps, seed=0)[:, 0, :]
-        oi = exp.faces.object_names.index("floor")
-        on_floor = patches.object == oi
-        ours_rgb = np.zeros((len(floor.data.polygons), 3))
-        ours_rgb[exp.faces.face_index[patches.face[on_floor]]] = H[on_floor]
-        baked = cr.cycles_face_radiance(samples=SAMPLES, seed=1, objects=[floor], threads=2)["floor"]
-    finally:
+    except BaseException:
         cr.reset_blender()
-    for c in range(3):  # each channel (a Temperature's colour: its own power in each)
-        ours = ours_rgb[:, c]
-        E = math.pi * baked.radiance[:, c] / ALBEDO
-        noise = math.pi * baked.std_error[:, c] / ALBEDO
-        lit = E > 0.05 * E.max()
-        rel = np.abs(ours[lit] - E[lit]) / E[lit]
-        total = abs(ours[lit].sum() / E[lit].sum() - 1)
-        summary = (f"{name} ({'RGB'[c]}): {lit.sum()} lit faces, mean {rel.mean():.4f} max {rel.max():.4f}, total "
-                   f"{total:.4f} (ours {ours[lit].sum():.4g}, Cycles {E[lit].sum():.4g}); Cycles noise "
-                   f"{np.mean(noise[lit] / E[lit]):.4f}")
-        worst = np.argsort(-rel)[:3]
-        summary += "; worst faces (ours, Cycles, peak): " + ", ".join(
-            f"({ours[lit][i]:.3g}, {E[lit][i]:.3g})" for i in worst) + f", {E.max():.3g}"
-        print(summary)
-        assert lit.sum() >= 8, summary
-        assert total < 0.01, summary  # the lamp's power on the floor
-        assert rel.mean() < 0.02, summary
-        # per face: 8 %, or 2 % of the peak on faces the cone's or a shadow's edge crosses (sampled)
-        assert np.all(np.abs(ours[lit] - E[lit]) <= 0.08 * E[lit] + 0.02 * E.max() + 4 * noise[lit]), summary
-        # dark where Cycles is dark (outside a cone, behind the blocker)
-        dark = E < 0.005 * E.max()
-        assert np.all(ours[dark] <= 0.02 * E.max()), summary
+        raise
+    floor_irradiance_against_cycles(name, floor, exp, lamps, ALBEDO, SAMPLES, min_lit=8, dark=True)
 
 
 def test_radiosity_in_a_lamp_lit_room_against_cycles(tmp_path):
@@ -254,15 +226,7 @@ def test_the_gallery_solved_with_lamps_renders_as_predicted(tmp_path):
                                         keep_world=True, threads=2)
     finally:
         cr.reset_blender()
-    signed, lines = [], []
-    for name in names:
-        rows = report["objects"][name]
-        target = np.array([t is not None for t in rows["target"]])
-        ours = np.asarray(rows["radiosity"], dtype=np.float64)[target].sum(axis=1) / math.pi
-        got = baked[name].radiance[target].sum(axis=1)
-        signed.append((ours - got) / got)
-        lines.append(f"{name}: {target.sum()} targets, mean {np.abs(signed[-1]).mean():.4f} signed "
-                     f"{signed[-1].mean():+.4f}, Cycles noise {baked[name].rel_noise[target].mean():.4f}")
+    signed, lines = targets_against_cycles(report, baked, names)
     e = np.abs(np.concatenate(signed))
     summary = (f"{kinds}, relative error {report['final']['relative_error']:.3f}; {len(e)} target faces: mean "
                f"{e.mean():.4f} max {e.max():.4f}\n" + "\n".join(lines))
