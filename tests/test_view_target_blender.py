@@ -224,7 +224,7 @@ def test_the_add_ons_solve_is_the_command_lines(addon, room, tmp_path, run_cli):
 def test_use_in_solve_off_solves_without_it(addon, room, tmp_path):
     """With Use in Solve off (or no camera then) the image stays and the solve does not read it; with
     it on and no camera, the solve is refused in one line naming both ways out."""
-    from relight_addon.blender.ui import view_target_ops
+    from relight_addon.blender import camera_view
 
     _target_image(tmp_path)
     scene = _open(room)
@@ -232,4 +232,42 @@ def test_use_in_solve_off_solves_without_it(addon, room, tmp_path):
     scene.camera = None
     _refused(bpy.ops.relight.solve, "or turn the View Target's Use in Solve off")
     scene.relight_camera_target.use = False
-    assert view_target_ops.scene_view_spec(scene) is None
+    assert camera_view.scene_view_target(scene) is None
+
+
+@pytest.mark.slow  # (a full solve and a stroke of the room: ~40 s at load 12)
+def test_live_solves_with_the_view_target(addon, room, tmp_path):
+    """Live's first answer (a full solve, no prepared model) reads the view target as Solve & Reduce
+    does (camera_view.scene_view_target) and writes the prediction; a stroke on a wall is re-solved
+    with the pixels' rows (the model retargeted keeps them), and, its lights new, the earlier
+    prediction goes with its result (a stroke's answer writes none: Solve & Reduce does)."""
+    from artist_scenes import paint
+    from test_live import _run
+
+    from relight_addon.blender import live, preparation
+    from relight_addon.blender.ui import operators, view_target_ops
+    from relight_addon.engine.targets.view import ViewTarget
+
+    preparation.PREPARED.clear()
+    _target_image(tmp_path)
+    scene = _open(room)
+    scene.relight.rays_per_patch = RAYS
+    wall = bpy.data.objects["wall_w"]
+    paint(wall, [27, 28], (0.1, 0.1, 0.1))
+    assert bpy.ops.relight.load_view_reference(filepath=str(tmp_path / "target.exr")) == {"FINISHED"}
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
+    try:
+        _run(s, lambda: s.updates == 1)
+        state = preparation.PREPARED[scene.name]
+        assert preparation.PREPARED_JOBS[scene.name].exp.faces.view_target is not None
+        assert any(isinstance(t, ViewTarget) for t in state.model.problem.target_rows.targets)
+        assert view_target_ops.prediction_image(scene) is not None
+        answers, stroke = [], state.live
+        state.live = lambda *a, **k: (lambda out: answers.append(out) or out)(stroke(*a, **k))
+        paint(wall, [19, 20, 35, 36], (0.1, 0.1, 0.1))
+        _run(s, lambda: s.updates == 2)
+        assert answers and any(isinstance(t, ViewTarget) for t in answers[0].problem.target_rows.targets)
+        assert view_target_ops.prediction_image(scene) is None
+        assert not [i for i in bpy.data.images if view_target_ops.ERROR_PROP in i.keys()]
+    finally:
+        live.stop(scene.name)

@@ -20,7 +20,8 @@ from ..engine.targets.view import Camera
 from ..pipeline.view_targets import WORKING_SIDE, view_spec, working_size
 
 __all__ = ["read_camera", "read_image", "write_image", "view_settings", "read_view_target", "straight",
-           "camera_working_size", "new_view_image", "image_pixels", "set_pixels", "image_view_target"]
+           "camera_working_size", "new_view_image", "image_pixels", "set_pixels", "image_view_target",
+           "scene_view_target"]
 
 #: the image formats a view target is read from (Blender's file_format)
 FORMATS = {"OPEN_EXR": True, "OPEN_EXR_MULTILAYER": True, "PNG": False}  # -> linear radiance
@@ -168,3 +169,16 @@ def image_view_target(scene, image, side=WORKING_SIDE):
     camera = read_camera(scene)
     rgba, linear = image_pixels(image)
     return view_spec(camera, rgba, linear, view_settings(scene), image.name, side)
+
+
+def scene_view_target(scene):
+    """The ViewSpec of the scene's view-target image (``scene.relight_camera_target``, registered by
+    blender/ui/view_target_ops.py) for Solve & Reduce and Live, or None (no image, Use in Solve off,
+    or the add-on's property not registered: the CLI). SceneError / ValueError in one line."""
+    props = getattr(scene, "relight_camera_target", None)
+    if props is None or props.image is None or not props.use:
+        return None
+    try:
+        return image_view_target(scene, props.image, props.resolution)
+    except SceneError as exc:  # (no perspective camera)
+        raise SceneError(f"{exc}; or turn the View Target's Use in Solve off (Targets panel)") from None

@@ -15,6 +15,7 @@ from .. import ADDON_PACKAGE, layers, live, results
 from ...pipeline import jobs
 from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
+from ..camera_view import scene_view_target
 from ..preparation import SolveJob
 from . import display, view_target_ops, viewport
 from .properties import set_curve_index, show_row_panel, ui_value
@@ -444,7 +445,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         try:
             # the target scale: the scene's relight_target_scale (= the settings')
             job = SolveJob.export(context, job_options(context.scene.relight), session=True,
-                                  view_target=view_target_ops.scene_view_spec(context.scene))
+                                  view_target=scene_view_target(context.scene))
             job.mesh()
         except BaseException:
             _restore_mode(context, self._mode)

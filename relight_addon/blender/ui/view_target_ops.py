@@ -15,8 +15,8 @@ reference picture loaded as targets, the solve reading it, and the predicted cam
   for a mask without alpha), is 0; resized to the working resolution by pipeline.view_targets.view_spec
   (what ``solve --view-target`` reads, with the same refusals). It becomes a new view-target image:
   the earlier one stays in the file.
-- Solve & Reduce reads the image (``scene_view_spec``: camera_view.image_view_target, the CLI's
-  parser); ``solved`` adds the report's ``view_target`` block and notes; ``write_prediction`` makes
+- Solve & Reduce (and Live's first, full solve) reads the image (camera_view.scene_view_target:
+  image_view_target, the CLI's parser); ``solved`` adds the report's ``view_target`` block and notes; ``write_prediction`` makes
   the image "Relight Prediction" (the final configuration's radiance, alpha = the share of each
   pixel's rays that hit a surface), owned by the result (visibility.tag_owned: Clear Results
   removes it, results.clear_results), with the error over the painted pixels (the report's) that
@@ -34,10 +34,10 @@ from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty,
 from ...engine.scene import SceneError
 from ...pipeline.view_targets import (WORKING_SIDE, display_to_linear, predicted_rgba, resample, view_notes,
                                       view_report, view_spec)
-from .. import camera_view
+from .. import camera_view, live
 from ..visibility import owner_of, tag_owned
 
-__all__ = ["scene_view_spec", "solved", "write_prediction", "prediction_image", "draw_view_target",
+__all__ = ["solved", "write_prediction", "prediction_image", "draw_view_target",
            "draw_prediction", "register", "unregister"]
 
 VIEW_TARGET_NAME = "Relight View Target"
@@ -70,18 +70,6 @@ class RELIGHT_ViewTarget(bpy.types.PropertyGroup):
 
 def _props(scene):
     return scene.relight_camera_target
-
-
-def scene_view_spec(scene):
-    """The ViewSpec of the scene's view-target image for Solve & Reduce, or None (no image, or Use
-    in Solve off). SceneError / ValueError (one line) when it cannot be read."""
-    props = _props(scene)
-    if props.image is None or not props.use:
-        return None
-    try:
-        return camera_view.image_view_target(scene, props.image, props.resolution)
-    except SceneError as exc:  # (no perspective camera)
-        raise SceneError(f"{exc}; or turn the View Target's Use in Solve off (Targets panel)") from None
 
 
 def _one_line(exc) -> str:
@@ -366,6 +354,9 @@ def draw_view_target(layout, context):
     col.prop(props, "resolution")
     if props.image is not None or prediction_image(scene) is not None:
         col.operator("relight.show_view_target", icon="IMAGE")
+    if props.image is not None and live.session(scene) is not None:
+        col.label(text="Live: the view target as the last solve read it;", icon="INFO")
+        col.label(text="strokes on the image: Solve & Reduce", icon="BLANK1")
 
 
 def _error_line(block) -> str:
