@@ -271,3 +271,57 @@ def test_live_solves_with_the_view_target(addon, room, tmp_path):
         assert not [i for i in bpy.data.images if view_target_ops.ERROR_PROP in i.keys()]
     finally:
         live.stop(scene.name)
+
+
+class _Layout:
+    """A UILayout stand-in that records what a draw function asks for."""
+
+    def __init__(self, log):
+        self.log = log
+
+    def __getattr__(self, name):
+        def call(*args, **kw):
+            self.log.append((name, args, kw))
+            return _Layout(self.log) if name in ("box", "column", "row", "split") else _Layout(self.log)
+        return call
+
+
+def _drawn(fn, scene):
+    import types
+
+    log = []
+    fn(_Layout(log), types.SimpleNamespace(scene=scene))
+    for name, args, kw in log:  # every property and operator drawn exists
+        if name in ("prop", "template_ID"):
+            assert args[1] in args[0].bl_rna.properties, args[1]
+        if name == "operator":
+            getattr(bpy.ops.relight, args[0].split(".")[1]).get_rna_type()
+    return [kw.get("text", "") for name, args, kw in log if name == "label"]
+
+
+def test_the_prediction_is_the_results_and_the_panels_say_so(addon, room):
+    """Without a solve (a result id and an owned image made here): the Results panel's line is the
+    report block's numbers; Clear Results removes the prediction by its owner mark, and not a copy the
+    artist made of it (another name) nor the view target."""
+    from relight_addon.blender import results
+    from relight_addon.blender.ui import view_target_ops as vt
+    from relight_addon.blender.visibility import tag_owned
+
+    scene = _open(room)
+    assert bpy.ops.relight.new_view_target() == {"FINISHED"}
+    labels = _drawn(vt.draw_view_target, scene)
+    assert "480 x 270, scene-linear radiance" in labels
+    assert _drawn(vt.draw_prediction, scene) == []  # no result: nothing drawn
+    scene[results.RESULT_ID_PROP] = "r1"
+    pred = bpy.data.images.new(vt.PREDICTION_NAME, 48, 27, float_buffer=True)
+    tag_owned(pred, "r1")
+    pred[vt.ERROR_PROP] = json.dumps({"painted": 12000, "seen": 11500, "mean_relative_error": 0.0423,
+                                      "rms_error": 0.0125, "rows": 90})
+    copy = pred.copy()  # the artist's copy: its name is another
+    assert vt.prediction_image(scene) == pred
+    labels = _drawn(vt.draw_prediction, scene)
+    assert "4.2 % mean error over 11,500 of 12,000 painted pixels (RMS 0.0125 W/m\u00b2/sr)" in labels, labels
+    painted = scene.relight_camera_target.image
+    assert bpy.ops.relight.clear_results() == {"FINISHED"}
+    assert vt.PREDICTION_NAME not in bpy.data.images and copy.name in bpy.data.images
+    assert scene.relight_camera_target.image == painted
