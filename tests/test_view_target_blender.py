@@ -7,7 +7,6 @@ command line's ``solve --view-target FILE --view-prediction PRED.exr`` on the sa
 (the add-on's solve must give the same rows, curve, pixel error and predicted image); the scene
 snapshot of tests/test_hostile.py (a refused operator changes nothing)."""
 import json
-import os
 
 import numpy as np
 import pytest
@@ -282,7 +281,7 @@ class _Layout:
     def __getattr__(self, name):
         def call(*args, **kw):
             self.log.append((name, args, kw))
-            return _Layout(self.log) if name in ("box", "column", "row", "split") else _Layout(self.log)
+            return _Layout(self.log)  # (box, column, row; an operator's properties: set, unread)
         return call
 
 

@@ -20,7 +20,11 @@ reference picture loaded as targets, the solve reading it, and the predicted cam
   the image "Relight Prediction" (the final configuration's radiance, alpha = the share of each
   pixel's rays that hit a surface), owned by the result (visibility.tag_owned: Clear Results
   removes it, results.clear_results), with the error over the painted pixels (the report's) that
-  the Results panel shows (``draw_prediction``).
+  the Results panel shows (``draw_prediction``); shown beside the view target when an Image Editor
+  shows it (else Show in Image Editor: a solve does not change the window's layout by itself).
+- Live's first answer (a full solve) reads the view target too; its strokes keep the one that solve
+  read (Live watches meshes, not images) and write no prediction: the earlier one goes with its
+  result, and the next Solve & Reduce writes one again.
 """
 from __future__ import annotations
 
@@ -87,20 +91,29 @@ def _largest(areas):
     return max(areas, key=lambda a: a.width * a.height) if areas else None
 
 
-def show_image(context, image, paint=False, keep=None):
+def _editor_showing(screen, image):
+    return next((a for a in screen.areas if a.type == "IMAGE_EDITOR" and a.spaces.active.image == image), None)
+
+
+def show_image(context, image, paint=False, keep=None, only_beside=False):
     """Show ``image`` in an Image Editor of the window (Paint mode when ``paint``): the one showing it
     already, else one not showing ``keep`` (the image to stay in sight beside it), else a new one
-    split off the largest 3D View (or off the editor showing ``keep``). None headless."""
+    split off the editor showing ``keep`` (side by side), or off the largest 3D View.
+    ``only_beside``: only when an editor shows ``keep`` (after a solve: the layout the artist chose
+    is not changed otherwise). The area, or None (headless, or nothing shown)."""
     window = context.window
     if window is None or bpy.app.background:
         return None
     screen = window.screen
-    editors = [a for a in screen.areas if a.type == "IMAGE_EDITOR"]
-    area = next((a for a in editors if a.spaces.active.image == image), None)
+    beside = _editor_showing(screen, keep) if keep is not None else None
+    if only_beside and beside is None:
+        return None
+    area = _editor_showing(screen, image)
     if area is None:
-        area = next((a for a in editors if keep is None or a.spaces.active.image != keep), None)
+        area = next((a for a in screen.areas if a.type == "IMAGE_EDITOR" and a != beside
+                     and (keep is None or a.spaces.active.image != keep)), None)
     if area is None:
-        host = _largest([a for a in screen.areas if a.type == "VIEW_3D"]) or _largest(editors)
+        host = beside or _largest([a for a in screen.areas if a.type == "VIEW_3D"])
         if host is None:
             return None
         before = set(screen.areas[:])
@@ -271,13 +284,14 @@ class RELIGHT_OT_show_view_target(bpy.types.Operator):
         return {"FINISHED"}
 
 
-def show_images(context) -> list:
-    """The view target (Paint mode) and the prediction beside it, in Image Editors; their names."""
+def show_images(context, after_solve=False) -> list:
+    """The view target (Paint mode) and the prediction beside it, in Image Editors; their names.
+    ``after_solve``: the prediction only, and only beside an editor that shows the view target."""
     painted, pred = _props(context.scene).image, prediction_image(context.scene)
     shown = []
-    if painted is not None and show_image(context, painted, paint=True) is not None:
+    if not after_solve and painted is not None and show_image(context, painted, paint=True) is not None:
         shown.append(painted.name)
-    if pred is not None and show_image(context, pred, keep=painted) is not None:
+    if pred is not None and show_image(context, pred, keep=painted, only_beside=after_solve) is not None:
         shown.append(pred.name)
     return shown
 
@@ -311,7 +325,8 @@ def prediction_image(scene):
 def write_prediction(context, outcome):
     """The final configuration's camera image as image "Relight Prediction" (radiance, premultiplied
     by the share of each pixel's rays that hit a surface), owned by the result shown (Clear Results
-    removes it), packed, holding the report's view_target block; shown beside the view target."""
+    removes it), packed, holding the report's view_target block; shown beside the view target when
+    an Image Editor shows it."""
     from ..results import result_id
 
     rgba = predicted_rgba(outcome)
@@ -328,7 +343,7 @@ def write_prediction(context, outcome):
     img.use_fake_user = True  # (the file keeps it while no editor shows it; Clear removes it)
     tag_owned(img, rid)
     img[ERROR_PROP] = json.dumps(outcome.report.get("view_target") or {})
-    show_images(context)
+    show_images(context, after_solve=True)
     return img
 
 
