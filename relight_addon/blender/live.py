@@ -325,8 +325,13 @@ class LiveSession:
         self.paint = (job.exp.faces.target, job.exp.faces.target_radiosity)
         self.solving = self.paint
         self.status = "preparing (a full solve)"
-        self._run(lambda: job.run(cancel=self.cancel.is_set), job)
+        self._run(lambda: self._predicted(job.run(cancel=self.cancel.is_set)), job)
         self.result["first"] = True
+
+    def _predicted(self, outcome):
+        """A full solve's outcome with its view target's report block and camera image (in the worker)."""
+        camera_view.predict_view(outcome, cancel=self.cancel.is_set)
+        return outcome
 
     def _run(self, fn, job):
         self.result = {"job": job}

@@ -15,7 +15,7 @@ from .. import ADDON_PACKAGE, layers, live, results
 from ...pipeline import jobs
 from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
-from ..camera_view import scene_view_target
+from ..camera_view import predict_view, scene_view_target
 from ..preparation import SolveJob
 from . import display, view_target_ops, viewport
 from .properties import set_curve_index, show_row_panel, ui_value
@@ -505,6 +505,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         def work():
             try:
                 self._result["outcome"] = job.run(progress=self._set_progress, cancel=self._cancel.is_set)
+                predict_view(self._result["outcome"], self._set_progress, self._cancel.is_set)  # (view target)
             except BaseException as exc:  # reported on the main thread
                 self._result["error"] = exc
 

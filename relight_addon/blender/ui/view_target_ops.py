@@ -16,7 +16,9 @@ reference picture loaded as targets, the solve reading it, and the predicted cam
   (what ``solve --view-target`` reads, with the same refusals). It becomes a new view-target image:
   the earlier one stays in the file.
 - Solve & Reduce (and Live's first, full solve) reads the image (camera_view.scene_view_target:
-  image_view_target, the CLI's parser); ``solved`` adds the report's ``view_target`` block and notes; ``write_prediction`` makes
+  image_view_target, the CLI's parser); their worker threads add the report's ``view_target``
+  block, its notes and the predicted image (camera_view.predict_view; ``solved`` when a solve ran
+  on the main thread: scripts, ``blender -b``); ``write_prediction`` makes
   the image "Relight Prediction" (the final configuration's radiance, alpha = the share of each
   pixel's rays that hit a surface), owned by the result (visibility.tag_owned: Clear Results
   removes it, results.clear_results), with the error over the painted pixels (the report's) that
@@ -36,8 +38,7 @@ import numpy as np
 from bpy.props import BoolProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ...engine.scene import SceneError
-from ...pipeline.view_targets import (WORKING_SIDE, display_to_linear, predicted_rgba, resample, view_notes,
-                                      view_report, view_spec)
+from ...pipeline.view_targets import WORKING_SIDE, display_to_linear, resample, view_spec
 from .. import camera_view, live
 from ..visibility import owner_of, tag_owned
 
@@ -299,17 +300,9 @@ def show_images(context, after_solve=False) -> list:
 # --- the solve ----------------------------------------------------------------------------------
 
 def solved(job, outcome) -> bool:
-    """After a solve with a view target (before it is stored): the report's ``view_target`` block
-    (the error over the painted pixels) and its notes among the warnings, as ``solve --view-target``
-    has them. False without a view target."""
-    if job.exp.faces.view_target is None:
-        return False
-    outcome.report["view_target"] = view_report(outcome)
-    for w in view_notes(outcome.problem):
-        for warnings in (outcome.warnings, outcome.report.setdefault("warnings", [])):
-            if w not in warnings:
-                warnings.append(w)
-    return True
+    """After a solve with a view target (before it is stored): camera_view.predict_view, unless the
+    solve's worker did it (Solve & Reduce's, Live's first). False without a view target."""
+    return job.exp.faces.view_target is not None and camera_view.predict_view(outcome)
 
 
 def prediction_image(scene):
@@ -329,7 +322,7 @@ def write_prediction(context, outcome):
     an Image Editor shows it."""
     from ..results import result_id
 
-    rgba = predicted_rgba(outcome)
+    rgba = getattr(outcome, "view_prediction", None)
     rid = result_id(context.scene)
     if rgba is None or rid is None:
         return None
