@@ -50,7 +50,7 @@ from dataclasses import replace
 import bpy
 import numpy as np
 
-from . import export, lamp_state, light_paths, meshes, preparation, results, visibility
+from . import camera_view, export, lamp_state, light_paths, meshes, preparation, results, visibility
 from .lamps import export_lamps
 from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
@@ -316,7 +316,8 @@ class LiveSession:
     def _start_full(self, context):
         """The first solve of the session (no prepared model): export and solve in full."""
         try:
-            job = preparation.SolveJob.export(context, self.options_fn(context.scene.relight), session=True)
+            job = preparation.SolveJob.export(context, self.options_fn(context.scene.relight), session=True,
+                                              view_target=camera_view.scene_view_target(context.scene))
         except Exception as exc:  # noqa: BLE001  (SceneError, ValueError: the user's message)
             self.paused = f"{exc}"
             self.status = "paused"
@@ -324,8 +325,13 @@ class LiveSession:
         self.paint = (job.exp.faces.target, job.exp.faces.target_radiosity)
         self.solving = self.paint
         self.status = "preparing (a full solve)"
-        self._run(lambda: job.run(cancel=self.cancel.is_set), job)
+        self._run(lambda: self._predicted(job.run(cancel=self.cancel.is_set)), job)
         self.result["first"] = True
+
+    def _predicted(self, outcome):
+        """A full solve's outcome with its view target's report block and camera image (in the worker)."""
+        camera_view.predict_view(outcome, cancel=self.cancel.is_set)
+        return outcome
 
     def _run(self, fn, job):
         self.result = {"job": job}

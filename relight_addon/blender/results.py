@@ -849,6 +849,9 @@ def clear_results(scene) -> int:
     """Remove every trace of Relight's results (by identity): what shows a configuration, the
     stored curve and the chart. Area lights made by Make Area Lights stay (they are the artist's)."""
     n = clear_shown(scene)
+    rid = result_id(scene)
+    for img in [i for i in bpy.data.images if _owned(i, rid)]:  # the predicted camera image (view target)
+        bpy.data.images.remove(img)
     for key in (RESULT_PROP, RESULT_ID_PROP):
         if key in scene.keys():
             del scene[key]

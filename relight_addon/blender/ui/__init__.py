@@ -53,12 +53,13 @@ _classes = (RelightPreferences,)
 
 
 def register():
-    from . import display, operators, panels, properties, render_settings
+    from . import display, operators, panels, properties, render_settings, view_target_ops
 
     for cls in _classes:
         bpy.utils.register_class(cls)
     properties.register()
     operators.register()
+    view_target_ops.register()
     render_settings.register()
     prefs = preferences()
     tab = prefs.sidebar_tab if prefs is not None and prefs.sidebar_tab else "Relight"
@@ -68,7 +69,7 @@ def register():
 
 
 def unregister():
-    from . import display, operators, panels, properties, render_settings
+    from . import display, operators, panels, properties, render_settings, view_target_ops
     from .. import live
 
     live.stop()
@@ -78,6 +79,7 @@ def unregister():
     display.unregister()
     panels.unregister()
     render_settings.unregister()
+    view_target_ops.unregister()
     operators.unregister()
     properties.unregister()
     for cls in reversed(_classes):

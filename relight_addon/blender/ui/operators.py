@@ -15,8 +15,9 @@ from .. import ADDON_PACKAGE, layers, live, results
 from ...pipeline import jobs
 from ...pipeline.notes import for_addon, sidebar_lines
 from ...pipeline.report import fixed_light_rows, light_rows, photometric_rows, summary_line
+from ..camera_view import predict_view, scene_view_target
 from ..preparation import SolveJob
-from . import display, viewport
+from . import display, view_target_ops, viewport
 from .properties import set_curve_index, show_row_panel, ui_value
 from ...engine.options import JobOptions
 from ...engine.scene import SceneError
@@ -370,7 +371,10 @@ def show_solve(context, job, outcome, finished=False, trusted=False, show=True, 
     results.packed_result, made by the worker (Live's; after ``finished``)."""
     if not finished:
         job.finish(context.scene, outcome, view_radiance=False)  # warns when Cycles would render darker
+    view = not finished and view_target_ops.solved(job, outcome)  # (Live's answers: no prediction)
     skipped = store_outcome(context, outcome, job.exp.fingerprints, trusted, packed)
+    if view:
+        view_target_ops.write_prediction(context, outcome)
     warnings = list(outcome.warnings) + list(skipped or [])
     settings = context.scene.relight
     settings.last_summary = summary_line(outcome.report, len(outcome.curve))
@@ -440,7 +444,8 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         self._mode = _object_mode(context)
         try:
             # the target scale: the scene's relight_target_scale (= the settings')
-            job = SolveJob.export(context, job_options(context.scene.relight), session=True)
+            job = SolveJob.export(context, job_options(context.scene.relight), session=True,
+                                  view_target=scene_view_target(context.scene))
             job.mesh()
         except BaseException:
             _restore_mode(context, self._mode)
@@ -500,6 +505,7 @@ class RELIGHT_OT_solve(bpy.types.Operator):
         def work():
             try:
                 self._result["outcome"] = job.run(progress=self._set_progress, cancel=self._cancel.is_set)
+                predict_view(self._result["outcome"], self._set_progress, self._cancel.is_set)  # (view target)
             except BaseException as exc:  # reported on the main thread
                 self._result["error"] = exc
 

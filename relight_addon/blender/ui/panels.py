@@ -21,7 +21,7 @@ from ...pipeline.report import SCHEDULE_LINE
 from ...pipeline.notes import sidebar_lines
 from .. import layers, results, visibility
 from ...engine.formfactors import auto_rays_per_patch
-from . import viewport
+from . import view_target_ops, viewport
 
 #: beyond this many faces in Edit Mode, counts are not read from the BMesh on every redraw
 EDIT_COUNT_LIMIT = 200_000
@@ -244,6 +244,7 @@ class RELIGHT_PT_targets(RELIGHT_PT_base, bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("relight.select_faces", text="Select Targets").kind = "TARGET"
         row.operator("relight.clear_targets", text="Clear Targets")
+        view_target_ops.draw_view_target(layout, context)
 
 
 class RELIGHT_PT_candidates(RELIGHT_PT_base, bpy.types.Panel):
@@ -540,6 +541,7 @@ class RELIGHT_PT_results(RELIGHT_PT_base, bpy.types.Panel):
             p = s.curve[s.curve_index]
             neg = f", {p.n_negative} negative" if p.n_negative else ""
             layout.label(text=f"Shown: {p.n_lights} lights, error {p.relative_error:.3f}{neg}", icon="HIDE_OFF")
+        view_target_ops.draw_prediction(layout, context)
         split = layout.split(factor=0.36)
         split.label(text="Lights")
         split = split.split(factor=0.55)
