@@ -246,7 +246,9 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     the rows of its pixels, pixel k's row W[tile[k]]. A glossy patch: view_rows at the mean point and
     direction of the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile). A matte
     patch: the radiosity interpolated at its pixels' points (``interp``: MatteInterpolation; None:
-    the patch's own B_i), their mean in tiles of _matte_side (``exact``: each pixel alone)."""
+    the patch's own B_i), their mean in tiles of _matte_side (``exact``: each pixel alone). With
+    ``interp`` a glossy patch's B_i is interpolated too: at its tiles' mean points, or (``exact``) in
+    one more block of the patch's pixels, each at its own point (the blocks of a patch add up)."""
     material, lobes, alpha = _patch_materials(faces, patches)
     order = np.argsort(hits.patch, kind="stable")
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
@@ -269,7 +271,32 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
                           material, lobes)
+        if interp is not None and not exact:
+            js, W = _interpolated(interp, i, point, js, W)
         yield i, group, js, W, tile
+        if interp is not None and exact:  # (the interpolation at each pixel's own point: one more block)
+            nb, G = interp.gradient(i)
+            if len(nb):
+                w = (hits.point[group] - interp.center[i]) @ G
+                Wx = np.concatenate([-w.sum(axis=1, keepdims=True), w], axis=1)
+                yield i, group, np.r_[i, nb], np.repeat(Wx[:, :, None], 3, axis=2), np.arange(len(group))
+
+
+def _interpolated(interp, i, point, js, W):
+    """view_rows' (js, W) at ``point`` on patch i (js[0] == i, its B_i the diffuse part) with B_i
+    interpolated at the points (MatteInterpolation: B_i + g_i . (x - c_i))."""
+    nb, G = interp.gradient(i)
+    if len(nb) == 0:
+        return js, W
+    w = (point - interp.center[i]) @ G  # (n, k)
+    new = nb[~np.isin(nb, js)]
+    js = np.r_[js, new]
+    W = np.concatenate([W, np.zeros((len(W), len(new), 3))], axis=1)
+    pos = np.searchsorted(js, nb, sorter=np.argsort(js))
+    pos = np.argsort(js)[pos]
+    W[:, pos, :] += w[:, :, None]
+    W[:, 0, :] -= w.sum(axis=1)[:, None]
+    return js, W
 
 
 def matte_interpolation(F, faces, patches) -> MatteInterpolation:
@@ -388,7 +415,7 @@ class ViewTarget(Target):
 def _radiance(hits, B, patches, F, faces, camera, interp) -> np.ndarray:
     out = np.zeros((len(hits.pixel), 3))
     for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE, interp, exact=True):
-        out[group] = np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
+        out[group] += np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
     return out
 
 
