@@ -41,8 +41,10 @@ def _box(name, lo, hi, mat, n=(1, 1, 1)):
     return cr.add_mesh_object(name, verts, faces, mat)
 
 
-def build(path, patch_size=0.15):
-    """The room, saved to ``path``."""
+def build(path, patch_size=0.15, emitters=()):
+    """The room, saved to ``path``. ``emitters``: [(i, j, strength)]: polygon (column i from the west,
+    row j from the north) of the ceiling's 8 x 8 grid emitting white, Emission Strength ``strength``
+    (a known configuration of lights: a reference image's)."""
     cr.reset_blender()
     scene = bpy.context.scene
     scene.world = cr.black_world()
@@ -62,6 +64,11 @@ def build(path, patch_size=0.15):
         ob = cr.add_mesh_object(name, v, f, m)
         if name != "ceiling":
             ob["relight_no_lights"] = True
+        else:
+            for k, (i, j, strength) in enumerate(emitters):
+                ob.data.materials.append(cr._material(f"emitter{k}", (0.7, 0.7, 0.7), (1.0, 1.0, 1.0), strength,
+                                                      lambertian=True))
+                ob.data.polygons[j * n + i].material_index = k + 1
     table = _box("table", (1.2, 1.5, 0.7), (2.8, 2.4, 0.75), table_m, n=(8, 4))
     table["relight_no_lights"] = True
     cam_data = bpy.data.cameras.new("camera")
@@ -90,12 +97,16 @@ def read_exr(path):
     return read_image(str(path))[0]
 
 
-def render(blend, path, samples, seed=0):
+def render(blend, path, samples, seed=0, size=None):
     """Cycles' camera image of ``blend`` as the file has it (its light paths, materials), linear:
-    (h, w, 4), row 0 at the top. No denoising, no adaptive sampling, the Standard view transform."""
+    (h, w, 4), row 0 at the top. No denoising, no adaptive sampling, the Standard view transform.
+    ``size``: (width, height) at 100 % instead of the file's resolution (the same aspect)."""
     try:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
         scene = bpy.context.scene
+        if size is not None:
+            scene.render.resolution_x, scene.render.resolution_y = size
+            scene.render.resolution_percentage = 100
         scene.render.engine = "CYCLES"
         c = scene.cycles
         c.device, c.samples, c.seed = "CPU", int(samples), int(seed)

@@ -144,6 +144,61 @@ def cast_pixels(camera: Camera, sampler, pixels, offset=(0.5, 0.5)) -> PixelHits
                      missed=int(np.sum(~hit)), back=int(np.sum(hit & ~front)))
 
 
+class MatteInterpolation:
+    """A matte patch's radiance at a point from the patches' radiosities: its own B_i plus a
+    gradient across it, the least-squares plane through the radiosities of the patches that share a
+    corner with it on one surface (the same object, plane and material: a room's corner is not
+    blended), B(x) = B_i + g_i . (x - c_i). Linear in B; the mean over the patch stays B_i (its centre
+    is its centroid); Cycles shows the radiosity varying across a patch where B_i is its mean, and the
+    pixels follow it. A patch that may emit (a candidate for lights: not forbidden, or the scene's own
+    emitter) is seen as its own B_i and takes no part in its neighbours' gradients (an emitter's edge
+    is sharp), as is a patch without two neighbours in different directions."""
+
+    def __init__(self, sampler, patches, material):
+        tv, tp = sampler.tv, sampler.tri_patch
+        scale = max(float(np.ptp(tv.reshape(-1, 3), axis=0).max()), TINY)
+        pos = np.round(tv.reshape(-1, 3) / (scale * 1e-6)).astype(np.int64)  # (3T, 3) the corners, quantised
+        p = np.repeat(tp, 3)
+        n_q = np.round(np.asarray(patches.normal, dtype=np.float64)[p] * 1e3).astype(np.int64)  # (one plane)
+        may_emit = ~np.asarray(patches.forbidden, dtype=bool) | np.any(np.asarray(patches.exitance) > 0, axis=1)
+        surface = np.stack([np.asarray(patches.object, dtype=np.int64)[p], np.asarray(material, dtype=np.int64)[p],
+                            np.where(may_emit[p], p, -1)], 1)  # (an emitter: its own corners)
+        _, vertex = np.unique(np.concatenate([pos, n_q, surface], axis=1), axis=0, return_inverse=True)
+        vertex = vertex.reshape(-1)
+        S = sp.csr_matrix((np.ones(len(p)), (p, vertex)), shape=(patches.n_patches, int(vertex.max()) + 1))
+        self.near = (S @ S.T).tocsr()  # (P, P): patches sharing a corner
+        self.may_emit = may_emit
+        self.center = np.asarray(patches.center, dtype=np.float64)
+        self.normal = np.asarray(patches.normal, dtype=np.float64)
+        self._grad = {}
+
+    def gradient(self, i) -> tuple:
+        """(js (k,) the neighbours, G (3, k)): B's gradient on patch i is G (B_js - B_i); k = 0 for
+        a patch seen as its own B_i."""
+        if i not in self._grad:
+            js = self.near.indices[self.near.indptr[i]:self.near.indptr[i + 1]]
+            js = js[js != i] if not self.may_emit[i] else js[:0]
+            G = np.zeros((3, 0))
+            if len(js) >= 2:
+                n = self.normal[i] / max(np.linalg.norm(self.normal[i]), TINY)
+                a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+                t1 = np.cross(n, a)
+                t1 /= np.linalg.norm(t1)
+                T = np.stack([t1, np.cross(n, t1)])  # (2, 3) the plane's axes
+                D = (self.center[js] - self.center[i]) @ T.T  # (k, 2)
+                s = np.linalg.svd(D, compute_uv=False)
+                if s[-1] > 1e-3 * s[0]:
+                    G = T.T @ np.linalg.pinv(D)
+            self._grad[i] = (js if G.shape[1] else js[:0], G)
+        return self._grad[i]
+
+    def rows(self, i, point) -> tuple:
+        """(js, W (n, J)): the radiosity at ``point`` (n, 3) on patch i is W @ B[js]."""
+        js, G = self.gradient(i)
+        w = (np.asarray(point, dtype=np.float64) - self.center[i]) @ G  # (n, k)
+        return np.r_[i, js], np.concatenate([1.0 - w.sum(axis=1, keepdims=True), w], axis=1)
+
+
 def _narrowest(lobes) -> float:
     """A material's narrowest GGX alpha; inf for Lambert's BSDF (diffuse lobes of roughness 0), 1 for
     another BSDF without a GGX lobe (Oren-Nayar)."""
@@ -171,30 +226,82 @@ def _tile(camera, alpha, lobe=None) -> int:
     return max(1, int((TILE_LOBE if lobe is None else lobe) * max(alpha, VIEW_ALPHA_MIN) / pixel))
 
 
-def _pixel_blocks(hits, patches, F, faces, camera, lobe=None):
+def _matte_side(n, exact) -> int:
+    """The side in pixels of the tiles a matte patch's ``n`` pixels share a row on: half the patch's
+    extent in the image for the solve (about 4 rows a patch: its gradient at half its size), 1 for
+    the radiance predicted (``exact``: each pixel its own point)."""
+    return 1 if exact else max(1, int(np.ceil(np.sqrt(n) / 2)))
+
+
+def _tiles(pixels, width, side):
+    """(n_tiles, tile (n,)): the image tiles of ``side`` pixels that ``pixels`` fall in."""
+    n_cols = -(-width // side)
+    r, c = np.divmod(pixels, width)
+    tiles, tile = np.unique((r // side) * n_cols + c // side, return_inverse=True)
+    return len(tiles), tile.reshape(-1)
+
+
+def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact=False):
     """Per patch seen: (patch, pixel positions in ``hits``, columns js, W (n_tiles, J, 3), tile (n,)):
-    the rows of its pixels, pixel k's row W[tile[k]] (view_rows at the mean point and direction of
-    the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile); a Lambertian patch reads
-    itself alone, weight 1)."""
+    the rows of its pixels, pixel k's row W[tile[k]]. A glossy patch: view_rows at the mean point and
+    direction of the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile). A matte
+    patch: the radiosity interpolated at its pixels' points (``interp``: MatteInterpolation; None:
+    the patch's own B_i), their mean in tiles of _matte_side (``exact``: each pixel alone). With
+    ``interp`` a glossy patch's B_i is interpolated too: at its tiles' mean points, or (``exact``) in
+    one more block of the patch's pixels, each at its own point (the blocks of a patch add up)."""
     material, lobes, alpha = _patch_materials(faces, patches)
     order = np.argsort(hits.patch, kind="stable")
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
     for group in np.split(order, cuts) if len(order) else []:
         i = int(hits.patch[group[0]])
         if np.isinf(alpha[i]):
-            yield i, group, np.array([i]), np.ones((1, 1, 3)), np.zeros(len(group), dtype=np.int64)
+            js, R = (np.array([i]), None) if interp is None else interp.rows(i, hits.point[group])
+            if len(js) == 1:  # (its own B_i at every pixel: one row)
+                yield i, group, js, np.ones((1, 1, 3)), np.zeros(len(group), dtype=np.int64)
+                continue
+            n_tiles, tile = _tiles(hits.pixel[group], camera.width, _matte_side(len(group), exact))
+            W = np.stack([np.bincount(tile, R[:, j], n_tiles) for j in range(len(js))], 1)
+            W /= np.bincount(tile, minlength=n_tiles)[:, None]
+            yield i, group, js, np.repeat(W[:, :, None], 3, axis=2), tile
             continue
-        side = _tile(camera, alpha[i], lobe)
-        n_cols = -(-camera.width // side)
-        r, c = np.divmod(hits.pixel[group], camera.width)
-        tiles, tile = np.unique((r // side) * n_cols + c // side, return_inverse=True)
-        count = np.bincount(tile, minlength=len(tiles))[:, None]
-        point = np.stack([np.bincount(tile, hits.point[group, a], len(tiles)) for a in range(3)], 1) / count
-        d = np.stack([np.bincount(tile, hits.direction[group, a], len(tiles)) for a in range(3)], 1)
+        n_tiles, tile = _tiles(hits.pixel[group], camera.width, _tile(camera, alpha[i], lobe))
+        count = np.bincount(tile, minlength=n_tiles)[:, None]
+        point = np.stack([np.bincount(tile, hits.point[group, a], n_tiles) for a in range(3)], 1) / count
+        d = np.stack([np.bincount(tile, hits.direction[group, a], n_tiles) for a in range(3)], 1)
         d /= np.linalg.norm(d, axis=1, keepdims=True)
-        js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(len(tiles), i), point, d,
+        js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
                           material, lobes)
+        if interp is not None and not exact:
+            js, W = _interpolated(interp, i, point, js, W)
         yield i, group, js, W, tile
+        if interp is not None and exact:  # (the interpolation at each pixel's own point: one more block)
+            nb, G = interp.gradient(i)
+            if len(nb):
+                w = (hits.point[group] - interp.center[i]) @ G
+                Wx = np.concatenate([-w.sum(axis=1, keepdims=True), w], axis=1)
+                yield i, group, np.r_[i, nb], np.repeat(Wx[:, :, None], 3, axis=2), np.arange(len(group))
+
+
+def _interpolated(interp, i, point, js, W):
+    """view_rows' (js, W) at ``point`` on patch i (js[0] == i, its B_i the diffuse part) with B_i
+    interpolated at the points (MatteInterpolation: B_i + g_i . (x - c_i))."""
+    nb, G = interp.gradient(i)
+    if len(nb) == 0:
+        return js, W
+    w = (point - interp.center[i]) @ G  # (n, k)
+    new = nb[~np.isin(nb, js)]
+    js = np.r_[js, new]
+    W = np.concatenate([W, np.zeros((len(W), len(new), 3))], axis=1)
+    pos = np.searchsorted(js, nb, sorter=np.argsort(js))
+    pos = np.argsort(js)[pos]
+    W[:, pos, :] += w[:, :, None]
+    W[:, 0, :] -= w.sum(axis=1)[:, None]
+    return js, W
+
+
+def matte_interpolation(F, faces, patches) -> MatteInterpolation:
+    """The MatteInterpolation of a scene's patches (on F's sampler)."""
+    return MatteInterpolation(_sampler(F, patches), patches, _patch_materials(faces, patches)[0])
 
 
 @TARGET_KINDS.register("view", "Camera View", "Pixels of the camera's image painted with the radiance they should show")
@@ -208,8 +315,11 @@ class ViewTarget(Target):
     kind = "view"
     unit = "W/(m^2 sr)"
 
-    def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces, pixel_row=None):
+    def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces, pixel_row=None,
+                 interp=None):
         self.spec, self.hits = spec, hits
+        #: the matte patches' interpolation (MatteInterpolation; None: each reads its own B_i)
+        self.interp = interp
         #: (n,) the row each hit pixel shares (its weight: sqrt of how many pixels share it)
         self.pixel_row = pixel_row
         self.matrix = sp.csr_matrix(matrix)
@@ -254,7 +364,8 @@ class ViewTarget(Target):
         rows, cols, data, values, spread = [], [], [], [], 0.0
         pixel_row = np.empty(len(hits.pixel), dtype=np.int64)
         k = 0
-        for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, spec.camera):
+        interp = matte_interpolation(F, faces, patches)
+        for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, spec.camera, interp=interp):
             # the pixels sharing a row (a tile's, a matte patch's): one row of weight sqrt(n) asking
             # sqrt(n) x their mean
             w = np.sqrt(np.bincount(tile, minlength=len(W)))[:, None]
@@ -273,15 +384,16 @@ class ViewTarget(Target):
         matrix = sp.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(k, P))
         values = np.concatenate(values)
         offset = np.sum(t * t, axis=0) - np.sum(values * values, axis=0)
-        return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row)
+        return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row, interp)
 
     def predict(self, B) -> np.ndarray:
         """(n, 3) the radiance the hit pixels show under radiosity ``B`` (P, 3), W m^-2 sr^-1."""
-        return _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces, self.spec.camera)
+        return _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces, self.spec.camera,
+                         self.interp)
 
     def image(self, B, samples=4) -> tuple:
         """predicted_image of the whole frame under radiosity ``B`` (``samples`` rays a pixel)."""
-        return predicted_image(self.spec.camera, self._faces, self._patches, self._F, B, samples)
+        return predicted_image(self.spec.camera, self._faces, self._patches, self._F, B, samples, interp=self.interp)
 
     def pixel_error(self, B) -> dict:
         """The error over the painted pixels under radiosity ``B``: the pixels seen, the free ones,
@@ -300,19 +412,20 @@ class ViewTarget(Target):
                 "channel_spread": self.channel_spread}
 
 
-def _radiance(hits, B, patches, F, faces, camera) -> np.ndarray:
+def _radiance(hits, B, patches, F, faces, camera, interp) -> np.ndarray:
     out = np.zeros((len(hits.pixel), 3))
-    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE):
-        out[group] = np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
+    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE, interp, exact=True):
+        out[group] += np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
     return out
 
 
-def predicted_image(camera, faces, patches, F, B, samples=1, seed=0) -> tuple:
+def predicted_image(camera, faces, patches, F, B, samples=1, seed=0, interp=None) -> tuple:
     """((H, W, 3) the radiance the model predicts the camera sees under radiosity ``B`` (the per
     channel rows: view_rows), (H, W) the share of each pixel's ``samples`` rays (stratified
     jittered over the pixel) that hit a patch's front; 0 radiance where none does)."""
     H, Wd = camera.height, camera.width
     sampler = _sampler(F, patches)
+    interp = matte_interpolation(F, faces, patches) if interp is None else interp
     B = np.asarray(B, dtype=np.float64)
     img = np.zeros((H * Wd, 3))
     cover = np.zeros(H * Wd)
@@ -323,7 +436,7 @@ def predicted_image(camera, faces, patches, F, B, samples=1, seed=0) -> tuple:
         for b in range(m):
             off = (np.stack([a + rng.random(H * Wd), b + rng.random(H * Wd)], axis=1) / m) if samples > 1 else (0.5, 0.5)
             hits = cast_pixels(camera, sampler, pixels, off)
-            img[hits.pixel] += _radiance(hits, B, patches, F, faces, camera)
+            img[hits.pixel] += _radiance(hits, B, patches, F, faces, camera, interp)
             cover[hits.pixel] += 1.0
     n = m * m
     return (img / n).reshape(H, Wd, 3), (cover / n).reshape(H, Wd)
