@@ -344,7 +344,10 @@ class _Geometry:
         ta = self.ta
         self.center = np.stack([np.bincount(self.tri_patch, weights=self.tc[:, k] * ta, minlength=P)
                                 for k in range(3)], axis=1) / self.area[:, None]
-        dist = np.linalg.norm(tv - self.center[self.tri_patch][:, None, :], axis=2).max(axis=1)
+        rel = tv - self.center[self.tri_patch][:, None, :]
+        rel *= rel  # (np.linalg.norm's squares and sum, in its order, without its temporaries)
+        dist = np.sqrt(rel[..., 0] + rel[..., 1] + rel[..., 2]).max(axis=1)
+        del rel
         self.radius = np.zeros(P)
         np.maximum.at(self.radius, self.tri_patch, dist)
         self.diam = 2 * self.radius
@@ -480,9 +483,21 @@ def _signed_range(g: _Geometry, a, b):
     sel = np.flatnonzero(g.planar[a])
     if len(sel) == 0:
         return mn, mx, tol
+    # a plane paired with patches of more than a quarter of the scene's triangles (every receiver
+    # against a source: lights_direct_correction) is measured once against every triangle, in
+    # order, and reduced per patch: no gather of the pairs' triangles (the same values)
+    per_plane = np.bincount(a[sel], weights=g.tcount[b[sel]], minlength=g.P)
+    whole = per_plane > 0.25 * len(g.tv)
+    if whole.any():
+        on = whole[a[sel]]
+        for plane in np.flatnonzero(whole):
+            lo, hi = _plane_range_per_patch(g, plane)
+            part = sel[on & (a[sel] == plane)]
+            mn[part], mx[part] = lo[b[part]], hi[b[part]]
+        sel = sel[~on]
     # pairs in chunks of about RANGE_CHUNK_TRIANGLES of b's triangles (a dense receiver's
     # thousands, times every source: the 1M-triangle room's 246 sources would take 17 GB at once)
-    for first, end in _chunks(g.tcount[b[sel]], RANGE_CHUNK_TRIANGLES):
+    for first, end in (_chunks(g.tcount[b[sel]], RANGE_CHUNK_TRIANGLES) if len(sel) else []):
         part = sel[first:end]
         ta, tb = a[part], b[part]
         cnt = g.tcount[tb]
@@ -495,6 +510,20 @@ def _signed_range(g: _Geometry, a, b):
         np.maximum.at(hi, pair, h.max(axis=1))
         mn[part], mx[part] = lo, hi
     return mn, mx, tol
+
+
+def _plane_range_per_patch(g: _Geometry, plane: int):
+    """(P,) each patch's (min, max) over its vertices of the signed distance to patch
+    ``plane``'s plane, by chunks of RANGE_CHUNK_TRIANGLES triangles (the sampler's triangles are
+    sorted by patch)."""
+    c, n = g.center[plane], g.normal[plane]
+    tmin = np.empty(len(g.tv))
+    tmax = np.empty(len(g.tv))
+    for t0 in range(0, len(g.tv), RANGE_CHUNK_TRIANGLES):
+        h = np.einsum("kij,j->ki", g.tv[t0:t0 + RANGE_CHUNK_TRIANGLES] - c, n)
+        tmin[t0:t0 + len(h)] = h.min(axis=1)
+        tmax[t0:t0 + len(h)] = h.max(axis=1)
+    return np.minimum.reduceat(tmin, g.tstart), np.maximum.reduceat(tmax, g.tstart)
 
 
 def _clip_triangle(v, n, p0):
