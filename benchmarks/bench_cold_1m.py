@@ -4,13 +4,16 @@ less"), stage by stage, against another checkout in the same run.
 Each (checkout, round) runs in a fresh process: build ``artist_scenes.living_room(DETAIL)`` (default
 5: 1,013,718 triangles), export, then ``jobs.run_solve`` with the add-on's options (adaptive model,
 candidate spots on: the defaults); it measures the job's wall time (export to the end of the
-solve), the report's per-stage times (``timings_s``), the peak RSS during the job (VmHWM after
+solve), the meshing (``mesh_for_job``, before the solve: the report's meshing is 0 when it is given
+the patches), the report's per-stage times (``timings_s``), the rest of the job ("other": in no
+stage), the peak RSS during the job (VmHWM after
 resetting it, minus the RSS before the export), the process's CPU time (user + system, all threads:
 what a loaded machine's wall time hides), the final relative error and the final lamps.
 
     .venv/bin/python benchmarks/bench_cold_1m.py [--base=/work/base] [--rounds=1] [--detail=5] [--profile]
 
-``--profile``: cProfile of this checkout's solve, the top functions by cumulative time.
+``--profile``: cProfile of this checkout's job (export, meshing, solve; the main thread only: the
+chunks the worker threads run are not in it), the top functions by cumulative and own time.
 Writes benchmarks/results/bench_cold_1m.json and prints a table (docs/benchmarks.md, "1M cold solve
 (issue 37)").
 """
@@ -42,15 +45,17 @@ artist_scenes.living_room(detail)
 with open("/proc/self/clear_refs", "w") as fh:
     fh.write("5")  # reset the peak RSS (VmHWM)
 base = rss("VmRSS:")
+if profile:  # the whole job: export, meshing, solve (the main thread's: worker threads are not seen)
+    import cProfile, pstats
+    pr = cProfile.Profile()
+    pr.enable()
 t0, c0 = time.perf_counter(), time.process_time()
 exp = export.export_scene()
 t_export = time.perf_counter() - t0
 options = JobOptions(patch_model="adaptive").validate()
+t1 = time.perf_counter()
 patches = meshing.mesh_for_job(exp.faces, options, exp.settings.get("max_patch_size"))
-if profile:
-    import cProfile, pstats
-    pr = cProfile.Profile()
-    pr.enable()
+t_mesh = time.perf_counter() - t1
 out = jobs.run_solve(exp.faces, options, patches=patches, **export.job_inputs(exp))
 if profile:
     pr.disable()
@@ -61,7 +66,8 @@ peak = rss("VmHWM:") - base
 r = out.report
 lamps = [{k: l.get(k) for k in ("kind", "position", "direction", "spot_size", "spot_blend", "power")}
          for l in r["final"]["lights"] if l.get("kind") in ("spot", "area", "point")]
-print("RESULT " + json.dumps({"seconds": seconds, "cpu_seconds": cpu, "export": t_export, "peak_bytes": peak,
+print("RESULT " + json.dumps({"seconds": seconds, "cpu_seconds": cpu, "export": t_export, "mesh": t_mesh,
+      "peak_bytes": peak,
       "patches": r["scene"]["patches"], "triangles": r["scene"]["triangles"],
       "relative_error": r["final"]["relative_error"], "n_lights": r["final"]["n_lights"],
       "timings": r["timings_s"], "refinement": r["model"].get("lamp_refinement"), "lamps": lamps}))
@@ -80,7 +86,7 @@ def run(root, detail, profile=False):
     return json.loads(line[-1][7:])
 
 
-STAGES = ("meshing", "form_factors", "lamps", "inverse", "reduction", "direct_light", "lamp_refinement", "curve")
+STAGES = ("form_factors", "lamps", "inverse", "reduction", "direct_light", "lamp_refinement", "curve")
 
 
 def main(argv):
@@ -97,9 +103,11 @@ def main(argv):
             r.update(checkout=name, root=root, round=rnd)
             rows.append(r)
             st = "  ".join(f"{k} {r['timings'].get(k, 0):.2f}" for k in STAGES)
+            # the job's time in none of the report's stages (the model's problem set-up, the report)
+            r["other"] = r["seconds"] - r["export"] - r["mesh"] - sum(r["timings"].get(k, 0) for k in STAGES)
             ev = (r["refinement"] or {}).get("evaluations", 0)
             print(f"{name:5s} round {rnd}: total {r['seconds']:.2f} s (CPU {r['cpu_seconds']:.2f} s, load "
-                  f"{os.getloadavg()[0]:.1f}; export {r['export']:.2f})  {st}  "
+                  f"{os.getloadavg()[0]:.1f}; export {r['export']:.2f}, meshing {r['mesh']:.2f})  {st}  other {r['other']:.2f}  "
                   f"peak {r['peak_bytes'] / 2**20:.0f} MB  error {r['relative_error']:.5f}  "
                   f"{r['n_lights']} lights, {len(r['lamps'])} lamps, {ev} refinement evaluations", flush=True)
     os.makedirs(os.path.dirname(OUT), exist_ok=True)

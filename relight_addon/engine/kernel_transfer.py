@@ -77,6 +77,7 @@ F[s, r] = A_r F[r, s] / A_s (one estimate serves both directions).
 """
 from __future__ import annotations
 
+import copy
 import math
 import os
 import threading
@@ -124,6 +125,8 @@ COARSE_GAP = 2.0
 MAX_NODES = 24
 #: the triangles gathered at once by the pairs' plane test (_signed_range): about 0.4 GB of temporaries.
 RANGE_CHUNK_TRIANGLES = 1 << 21
+#: the receiver triangles whose rules are made at once (_Geometry.make_receiver_rules): about 0.1 GB of temporaries.
+RULE_CHUNK_TRIANGLES = 1 << 18
 #: kernel evaluations (receiver point x source triangle) per work chunk.
 CHUNK_EVALS = 1 << 15
 #: at most about this many penumbra rays are generated at once (a batch within a work chunk:
@@ -344,7 +347,10 @@ class _Geometry:
         ta = self.ta
         self.center = np.stack([np.bincount(self.tri_patch, weights=self.tc[:, k] * ta, minlength=P)
                                 for k in range(3)], axis=1) / self.area[:, None]
-        dist = np.linalg.norm(tv - self.center[self.tri_patch][:, None, :], axis=2).max(axis=1)
+        rel = tv - self.center[self.tri_patch][:, None, :]
+        rel *= rel  # (np.linalg.norm's squares and sum, in its order, without its temporaries)
+        dist = np.sqrt(rel[..., 0] + rel[..., 1] + rel[..., 2]).max(axis=1)
+        del rel
         self.radius = np.zeros(P)
         np.maximum.at(self.radius, self.tri_patch, dist)
         self.diam = 2 * self.radius
@@ -407,18 +413,38 @@ class _Geometry:
         """(points (q, 3), normals (q, 3), weights (q,) summing to 1) of receiver r at a level."""
         key = (int(r), int(level))
         got = self._rules.get(key)
-        if got is not None:
-            return got
-        t0, t1 = self.tstart[r], self.tstart[r] + self.tcount[r]
+        if got is None:
+            self.make_receiver_rules([r], level)
+            got = self._rules[key]
+        return got
+
+    def make_receiver_rules(self, receivers, level: int):
+        """``receiver_points`` of the ``receivers`` at a level, those not made yet, made together
+        (their triangles through one _triangle_rules by chunks of RULE_CHUNK_TRIANGLES: the same
+        numbers as one receiver at a time, without a Python call per receiver: the 1M room's
+        2,349)."""
+        rs = np.array([r for r in dict.fromkeys(int(r) for r in receivers) if (r, int(level)) not in self._rules],
+                      dtype=np.int64)
+        if len(rs) == 0:
+            return
         # node spacing: a patch of area A gets about M points (a triangle of area a gets
         # about 2 a / h^2 nodes, so h^2 = 2 A / M), then / 2^level
-        h = math.sqrt(2 * self.area[r] / max(self.M, 1)) / 2 ** max(level, 0)
-        ts = np.arange(t0, t1)[self.ta[t0:t1] > 0]
-        pts, wts, tri = _triangle_rules(self.tv[ts], h, coarse=level < 0)
-        got = (pts, np.asarray(self.tn[ts][tri], dtype=np.float64), wts / self.area[r])
-        with self._lock:
-            self._rules[key] = got
-        return got
+        h = np.sqrt(2 * self.area[rs] / max(self.M, 1)) / 2 ** max(level, 0)
+        for first, end in _chunks(np.maximum(self.tcount[rs], 1), RULE_CHUNK_TRIANGLES):
+            part = rs[first:end]
+            cnt = self.tcount[part]
+            ts = _ragged(self.tstart[part], cnt)
+            owner = np.repeat(np.arange(len(part)), cnt)
+            keep = self.ta[ts] > 0
+            ts, owner = ts[keep], owner[keep]
+            pts, wts, tri = _triangle_rules(self.tv[ts], h[first:end][owner], coarse=level < 0)
+            own = owner[tri]
+            nrm = np.asarray(self.tn[ts][tri], dtype=np.float64)
+            wts = wts / self.area[part][own]
+            cut = np.searchsorted(own, np.arange(len(part) + 1))
+            with self._lock:
+                for i, r in enumerate(part.tolist()):
+                    self._rules[(r, int(level))] = (pts[cut[i]:cut[i + 1]], nrm[cut[i]:cut[i + 1]], wts[cut[i]:cut[i + 1]])
 
 
 def kernel_geometry(patches: PatchSet, points_per_patch: int, sampler: SceneSampler | None = None) -> "_Geometry":
@@ -429,8 +455,20 @@ def kernel_geometry(patches: PatchSet, points_per_patch: int, sampler: SceneSamp
     cache = sampler.__dict__.setdefault("_kernel_geometry", {})
     key = int(points_per_patch)
     if key not in cache:
-        cache[key] = _Geometry(patches, key, sampler=sampler)
+        if cache:  # only the receiver rules depend on the points: the rest is shared (on the 1M room, 1 s a geometry)
+            cache[key] = _with_points(next(iter(cache.values())), key)
+        else:
+            cache[key] = _Geometry(patches, key, sampler=sampler)
     return cache[key]
+
+
+def _with_points(g: _Geometry, points_per_patch: int) -> _Geometry:
+    """A kernel geometry sharing ``g``'s arrays, with its own points per patch and receiver rules."""
+    out = copy.copy(g)
+    out.M = int(points_per_patch)
+    out._rules = {}
+    out._lock = threading.Lock()
+    return out
 
 
 def _clipped_receiver_points(g, r, level, s):
@@ -480,9 +518,21 @@ def _signed_range(g: _Geometry, a, b):
     sel = np.flatnonzero(g.planar[a])
     if len(sel) == 0:
         return mn, mx, tol
+    # a plane paired with patches of more than a quarter of the scene's triangles (every receiver
+    # against a source: lights_direct_correction) is measured once against every triangle, in
+    # order, and reduced per patch: no gather of the pairs' triangles (the same values)
+    per_plane = np.bincount(a[sel], weights=g.tcount[b[sel]], minlength=g.P)
+    whole = per_plane > 0.25 * len(g.tv)
+    if whole.any():
+        on = whole[a[sel]]
+        for plane in np.flatnonzero(whole):
+            lo, hi = _plane_range_per_patch(g, plane)
+            part = sel[on & (a[sel] == plane)]
+            mn[part], mx[part] = lo[b[part]], hi[b[part]]
+        sel = sel[~on]
     # pairs in chunks of about RANGE_CHUNK_TRIANGLES of b's triangles (a dense receiver's
     # thousands, times every source: the 1M-triangle room's 246 sources would take 17 GB at once)
-    for first, end in _chunks(g.tcount[b[sel]], RANGE_CHUNK_TRIANGLES):
+    for first, end in (_chunks(g.tcount[b[sel]], RANGE_CHUNK_TRIANGLES) if len(sel) else []):
         part = sel[first:end]
         ta, tb = a[part], b[part]
         cnt = g.tcount[tb]
@@ -495,6 +545,20 @@ def _signed_range(g: _Geometry, a, b):
         np.maximum.at(hi, pair, h.max(axis=1))
         mn[part], mx[part] = lo, hi
     return mn, mx, tol
+
+
+def _plane_range_per_patch(g: _Geometry, plane: int):
+    """(P,) each patch's (min, max) over its vertices of the signed distance to patch
+    ``plane``'s plane, by chunks of RANGE_CHUNK_TRIANGLES triangles (the sampler's triangles are
+    sorted by patch)."""
+    c, n = g.center[plane], g.normal[plane]
+    tmin = np.empty(len(g.tv))
+    tmax = np.empty(len(g.tv))
+    for t0 in range(0, len(g.tv), RANGE_CHUNK_TRIANGLES):
+        h = np.einsum("kij,j->ki", g.tv[t0:t0 + RANGE_CHUNK_TRIANGLES] - c, n)
+        tmin[t0:t0 + len(h)] = h.min(axis=1)
+        tmax[t0:t0 + len(h)] = h.max(axis=1)
+    return np.minimum.reduceat(tmin, g.tstart), np.maximum.reduceat(tmax, g.tstart)
 
 
 def _clip_triangle(v, n, p0):
@@ -650,6 +714,8 @@ def _receiver_rules(g: _Geometry, pairs: _Pairs, info: dict):
     a pair whose receiver crosses the source's plane has a rule of its own."""
     pr, ps, rule_level = pairs.pr, pairs.ps, pairs.rule_level
     need = np.unique(pr * (MAX_LEVEL + 2) + rule_level + 1)
+    for L in np.unique(need % (MAX_LEVEL + 2)):  # the rules not made yet, a level at a time
+        g.make_receiver_rules(need[need % (MAX_LEVEL + 2) == L] // (MAX_LEVEL + 2), int(L) - 1)
     sets = {}
     xs, ns, ws = [], [], []
     base = 0
