@@ -147,6 +147,13 @@ class FixtureKind(PhotometricKind):
         if not isinstance(lamp.profile, FixtureProfile):
             raise ValueError(f"lamp {lamp.name!r}: a fixture's distribution is a FixtureProfile (fixture_lamp)")
 
+    def strength_upper(self, lamp) -> float:
+        """Its rated flux as white light: a strength s gives 683 luminance(s) lm (``dimming``), so at most
+        rated lumens / 683 W per channel (a dimmer, or a filter, only takes light away): every selection
+        keeps it within 0-100 % of its rated lumens (white: exactly 100 %; a colour view bounds the
+        luminance: engine.light_colour.ColourProblem)."""
+        return float(lamp.profile.fixture.lumens) / LUMENS_PER_WATT
+
     def light_patches(self, lamp, job) -> None:
         """The patches near it (their centre within NEAR_RADII of their bounding radius from the lamp:
         the ceiling an uplight hangs under) get NEAR_POINTS x the points: there its distribution

@@ -43,6 +43,12 @@ class LightKind:
         (m^2) for an exitance, 1 for a strength in W."""
         return area if self.strength_unit == "W/m^2" else 1.0 + 0.0 * area
 
+    def strength_upper(self, lamp) -> float:
+        """The largest strength per channel a light of this kind may take (inf: no bound; ``lamp``
+        its engine.lamps.Lamp, None for a surface light): every selection, fit and programme keeps
+        0 <= strength <= it (engine.best_lights, engine.light_colour)."""
+        return math.inf
+
 
 class Capability(enum.Flag):
     """What a lamp kind has, as its callers ask it (``LampKind.flags``).
