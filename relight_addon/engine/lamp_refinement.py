@@ -131,7 +131,7 @@ class RefinedLamp:
 
 
 class _LampParameters:
-    """A lamp's refined parameters (its kind's ``parameters``: slide_u / slide_v along the surface it
+    """A lamp's refined parameters (its kind's ``refinement_parameters``: slide_u / slide_v along the surface it
     hangs from, ``mount``'s Mount.normal_at, if any; aim_u / aim_v about its axis; the kind's own,
     which its ``refined`` applies) as a vector x scaled to unit steps (x = 0: the lamp as it is)."""
 
@@ -140,8 +140,8 @@ class _LampParameters:
     def __init__(self, lamp, mount, step_length):
         normal = mount.normal_at(lamp.position)
         self.lamp, self.mount, self.normal = lamp, mount, normal
-        self.names = lamp.kind.parameters if normal is not None else \
-            tuple(p for p in lamp.kind.parameters if not p.startswith("slide"))
+        names = lamp.kind.refinement_parameters(lamp)
+        self.names = names if normal is not None else tuple(p for p in names if not p.startswith("slide"))
         self.mount_u = self.mount_v = None
         if normal is not None:  # tangents u and n x u (frame's second axis is -n x u)
             _, self.mount_u, v = frame(normal)

@@ -165,6 +165,11 @@ class LampKind(LightKind):
     #: the parameters refined (besides slide_u, slide_v, aim_u, aim_v: see lamp_refinement)
     parameters = ()
 
+    def refinement_parameters(self, lamp) -> tuple:
+        """The parameters of ``lamp`` its refinement moves (engine.lamp_refinement; default the kind's
+        ``parameters``: a kind whose lamps differ, e.g. a fixture aimable or not, says so per lamp)."""
+        return self.parameters
+
     def aim_half_angle(self, lamp) -> float:
         """The half-angle (rad) whose quarter is one unit of aim."""
         return 0.25
