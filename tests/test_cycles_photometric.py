@@ -1,7 +1,8 @@
 """A scene's measured luminaires (issue 39, items 1-2) against Cycles: a Point lamp whose IES
 Texture node holds a distribution (written by the project's LM-63 writer from a closed form:
 tests/photometric_fixtures.py), read by the Blender layer (blender/ies_nodes.py) as a photometric
-lamp (engine/lights/photometric.py), its direct irradiance on a floor against Cycles' bake of the
+lamp (engine/lights/photometric.py; a Spot lamp's photometric_spot.py, an Area lamp's photometric_area.py),
+its direct irradiance on a floor against Cycles' bake of the
 floor; and `radiosity` in a closed room lit by a downlight and a batwing fixture against Cycles'
 bake of the same file, and `solve` counting them (closed loop).
 """
@@ -35,6 +36,13 @@ CASES = {
     # a Spot lamp: its cone x the profile (engine/lights/photometric_spot.py)
     "spot asymmetric": ("asymmetric", (0.1, 0.1, 1.4), (0.3, 0.1, 0.6), 40.0, 1.0, (1.0, 1.0, 1.0), 0.0,
                         dict(light_type="SPOT", spot_size=1.4, spot_blend=0.4)),
+    # an Area lamp: Cycles reads the profile along the lamp's normal only (engine/lights/photometric_area.py),
+    # so a batwing's area lamp is Lambertian times its value at v = 0 (19 of its 62 at 40 degrees): were
+    # it read per direction, the floor would show the batwing's ring
+    "area batwing": ("batwing", (0.0, 0.1, 1.2), (0.3, 0.0, 0.4), 60.0, 1.0, (1.0, 1.0, 1.0), 0.0,
+                     dict(light_type="AREA", size=0.5)),
+    "area asymmetric": ("asymmetric", (0.1, 0.0, 1.3), (0.0, 0.2, 0.9), 60.0, 1.5, (1.0, 0.8, 0.6), 0.0,
+                        dict(light_type="AREA", shape="RECTANGLE", size=0.4, size_y=0.2)),
 }
 
 
@@ -45,8 +53,7 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
     Emission's colour in its gain), its irradiance on the floor against Cycles' bake, per channel."""
     from relight_addon.blender import export
     from relight_addon.engine.lamps import lamp_irradiance
-    from relight_addon.engine.lights.photometric import PHOTOMETRIC
-    from relight_addon.engine.lights.photometric_spot import PHOTOMETRIC_SPOT
+    from relight_addon.engine.lights.photometric import measured_kind
     from relight_addon.engine.scene import mesh_patches
 
     fixture, loc, rot, energy, strength, colour, radius, *spot = CASES[name]
@@ -57,7 +64,10 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
                           **settings)
         exp = export.export_scene()
         lamps = exp.faces.lamps
-        assert [lamp.kind for lamp in lamps] == [PHOTOMETRIC_SPOT if spot else PHOTOMETRIC]
+        expected = {"POINT": "photometric", "SPOT": "photometric_spot", "AREA": "photometric_area"}
+        light_type = settings.get("light_type", "POINT")
+        assert [lamp.kind.name for lamp in lamps] == [expected[light_type]]
+        assert measured_kind(light_type).name == expected[light_type]
         assert not [w for w in exp.faces.warnings if "fixture" in w and "not modelled" in w], exp.faces.warnings
         patches = mesh_patches(exp.faces, 10.0)
         H = lamp_irradiance(patches, lamps, seed=0)[:, 0, :]
