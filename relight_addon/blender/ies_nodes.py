@@ -6,8 +6,8 @@ against the .blend, or its internal text) whose Fac feeds an Emission's Strength
 into the Light Output; the IES node's Vector unlinked (the direction the light leaves, in the
 lamp's frame, as Cycles takes it by default). Cycles' emission is then colour x Power x the
 lamp's gain x the Emission's Color x the IES node's Strength x the profile's value, so those two
-(unlinked) are a factor of the lamp's gain. On an Area lamp Cycles reads the profile along the
-lamp's normal only (engine/lights/photometric_area.py: a constant factor). Any other tree with an IES
+(unlinked) are a factor of the lamp's gain. On an Area lamp the profile multiplies its Lambertian
+emission along each direction (engine/lights/photometric_area.py). Any other tree with an IES
 node (a Math node between, a linked Strength or Vector) is not reduced: ``photometric`` returns None
 and the lamp is named as today (its light nodes not modelled). A missing or unreadable file is
 refused, named.
