@@ -200,6 +200,8 @@ def test_the_schedule_counts_dims_and_sums():
     assert row["at_full"] == ["c"]
     (note,) = schedule_notes([row])
     assert note.startswith("1 x X of the answer's 2 fixtures at 100 % of their rated lumens") and "Max Lights" in note
+    (note,) = schedule_notes([row], (12, 0.05, 0.4))
+    assert note.endswith("(the curve: relative error 0.4 with 2, 0.05 with 12)")
     assert schedule_lines([row]) == ["2 x X at 70-100 %: 1700 lm, 17.0 W (at full output)",
                                      "in all 2 fixtures: 1700 lm, 17.0 W"]
     lights[2]["luminous_flux_lm"] = 900.0

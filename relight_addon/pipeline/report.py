@@ -174,7 +174,10 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
     final_lights = light_records(model, curve, fi)
     schedule = fixture_schedule(final_lights) if options.param("fixtures") else None
     if schedule:
-        warnings += schedule_notes(schedule)
+        more = [pt for pt in red.curve if pt.n_negative == 0 and pt.n_lights > final.n_lights]
+        best = min(more, key=lambda pt: (pt.relative_error, pt.n_lights), default=None)
+        warnings += schedule_notes(schedule, None if best is None or not best.relative_error < final.relative_error
+                                   else (best.n_lights, best.relative_error, final.relative_error))
     if model.mode == "inverse":  # (each record gets its utilisation; the implausible ones named)
         warnings += implausible_notes(problem, final_lights, np.flatnonzero(np.any(curve.exitance[fi] != 0, axis=1)))
     return {
@@ -252,16 +255,18 @@ def fixture_schedule(lights) -> list:
     return list(out.values())
 
 
-def schedule_notes(schedule) -> list:
+def schedule_notes(schedule, more=None) -> list:
     """The warning of a fixture schedule with fixtures at full output: the targets ask for more light than
-    the answer's fixtures give within their ratings; more of them (Max Lights) give more."""
+    the answer's fixtures give within their ratings; more of them (Max Lights) give more. ``more``: (n, the
+    relative error with n lights, the answer's), the curve's best with more lights, or None."""
     full = [f"{len(row['at_full'])} x {row['fixture']}" for row in schedule if row["at_full"]]
     if not full:
         return []
     n = sum(row["count"] for row in schedule)
+    curve = ("the curve shows the error with each number of them" if more is None else
+             f"the curve: relative error {more[2]:.3g} with {n}, {more[1]:.3g} with {more[0]}")
     return [f"{', '.join(full)} of the answer's {n} fixtures at 100 % of their rated lumens: the targets ask for "
-            f"more light than {n} fixtures give within their ratings; raise Max Lights for more fixtures (the "
-            "curve shows the error with each number of them)"]
+            f"more light than {n} fixtures give within their ratings; raise Max Lights for more fixtures ({curve})"]
 
 
 def schedule_lines(schedule) -> list:
