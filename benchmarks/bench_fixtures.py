@@ -1,7 +1,7 @@
 """Catalogue fixtures as candidates (issue 39, item 4): 10 fixture types at about 50 mounting positions on the
 suite's living room (tests/artist_scenes.living_room(2)), time and error against spots alone.
 
-    flock /tmp/relight-bench.lock .venv/bin/python benchmarks/bench_fixtures.py [--scene PATH]
+    flock /tmp/relight-bench.lock .venv/bin/python benchmarks/bench_fixtures.py [--scene PATH] [--only fixtures ...]
 
 The 10 types: the built-in library's 5 (engine/photometry/library.py) and 5 variants of their closed forms
 (a 40 degree and a 60 degree downlight, an aimable wide one, a narrower batwing, a steeper wall washer),
@@ -9,7 +9,7 @@ written by the same generator into a temporary folder (``--fixtures DIR``). Runs
 the real command line (`solve --seed 1`, cells off so that the lamps alone answer): spots alone at the
 default 96 candidates; spots alone and fixtures alone at about 50 positions (``--max-lamps`` = 50 x the
 lamps a position holds for 2 clusters: each kind's ``per_position``). Prints and writes
-benchmarks/results/bench_fixtures.json: per run the candidates offered, the job's time and its stages,
+benchmarks/results/bench_fixtures.json (bench_fixtures_<runs>.json with --only): per run the candidates offered, the job's time and its stages,
 the final relative error and lights, and for the fixtures the schedule.
 """
 from __future__ import annotations
@@ -74,7 +74,10 @@ def run(scene, report, *extra):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--scene", help="the living room .blend (default: built by tests/artist_scenes.living_room(2))")
+    ap.add_argument("--only", choices=("spots", "spots-positions", "fixtures"), action="append",
+                    help="run only these (repeatable; default all three)")
     args = ap.parse_args()
+    only = set(args.only or ("spots", "spots-positions", "fixtures"))
     tmp = tempfile.mkdtemp(prefix="relight-bench-fixtures-")
     scene = args.scene
     if scene is None:
@@ -91,19 +94,20 @@ def main():
             f.write(lib.builtin_text(spec))
     fixtures_per_position = per_position([(s[6], s[7]) for s in specs])
     spots_per_position = 2 * 6  # spot.py's CONES x candidate_lamps.MAX_CLUSTERS (the living room has more clusters)
-    runs = {
-        "spots, default (96 candidates)": run(scene, os.path.join(tmp, "a.json")),
-        f"spots, {POSITIONS} positions": run(scene, os.path.join(tmp, "b.json"), "--max-lamps",
-                                             str(POSITIONS * spots_per_position)),
-        f"10 fixture types, {POSITIONS} positions": run(scene, os.path.join(tmp, "c.json"), "--no-spot-lamps",
-                                                        "--fixtures", folder, "--max-lamps",
-                                                        str(POSITIONS * fixtures_per_position)),
+    plan = {
+        "spots": ("spots, default (96 candidates)", ("a.json",)),
+        "spots-positions": (f"spots, {POSITIONS} positions", ("b.json", "--max-lamps", str(POSITIONS * spots_per_position))),
+        "fixtures": (f"10 fixture types, {POSITIONS} positions", ("c.json", "--no-spot-lamps", "--fixtures", folder,
+                                                                  "--max-lamps", str(POSITIONS * fixtures_per_position))),
     }
+    runs = {name: run(scene, os.path.join(tmp, report), *extra)
+            for key, (name, (report, *extra)) in plan.items() if key in only}
     load = os.getloadavg()
     result = {"scene": "living_room(2)", "load_at_end": load, "fixtures_per_position": fixtures_per_position,
               "runs": runs}
     os.makedirs(os.path.join(HERE, "results"), exist_ok=True)
-    with open(os.path.join(HERE, "results", "bench_fixtures.json"), "w") as f:
+    stem = "bench_fixtures" if len(only) == 3 else "bench_fixtures_" + "_".join(sorted(only))
+    with open(os.path.join(HERE, "results", f"{stem}.json"), "w") as f:
         json.dump(result, f, indent=1)
     for name, r in runs.items():
         print(f"{name}: offered {r['offered']}; {r['wall_s']:.1f} s wall, job {r['timings_s'].get('total', '?')}; "

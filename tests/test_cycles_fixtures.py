@@ -3,7 +3,8 @@ on the suite's living room and gallery (tests/artist_scenes.py), fixtures the on
 written copy (`--out`) holds each fixture as a Point Light with an IES Texture node whose internal text
 is the fixture's LM-63 and whose Power is the report's; Cycles bakes the copy (its own Lights, World and
 emitters; Lambertian materials, unbiased light paths: tests/cycles_reference.py) and every painted face
-shows what the report predicts, within 3 % on the mean; the report has the fixture schedule.
+shows what the report predicts, within 3 % on the mean; the report has the fixture schedule, every fixture
+dimmed within 0-100 % of its rated flux.
 """
 import json
 import math
@@ -75,6 +76,8 @@ def test_a_solve_with_the_builtin_library_renders_as_predicted(scene, tmp_path):
         assert row["lumens"] == pytest.approx(sum(li["luminous_flux_lm"] for li in mine))
         assert row["watts"] == pytest.approx(sum(li["luminous_flux_lm"] / li["rated_lumens"] * li["rated_watts"]
                                                  for li in mine))
+        # dimmed between 0 and 100 % of the rated flux: the selection's bounds (LightKind.strength_upper)
+        assert all(0.0 < li["dimming"] <= 1.0 + 1e-9 for li in row["lights"]), row
     names = [name for name, rows in report["objects"].items() if any(t is not None for t in rows["target"])]
     try:
         bpy.ops.wm.open_mainfile(filepath=str(out))

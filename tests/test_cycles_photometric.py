@@ -1,7 +1,8 @@
 """A scene's measured luminaires (issue 39, items 1-2) against Cycles: a Point lamp whose IES
 Texture node holds a distribution (written by the project's LM-63 writer from a closed form:
 tests/photometric_fixtures.py), read by the Blender layer (blender/ies_nodes.py) as a photometric
-lamp (engine/lights/photometric.py), its direct irradiance on a floor against Cycles' bake of the
+lamp (engine/lights/photometric.py; a Spot lamp's photometric_spot.py, an Area lamp's photometric_area.py),
+its direct irradiance on a floor against Cycles' bake of the
 floor; and `radiosity` in a closed room lit by a downlight and a batwing fixture against Cycles'
 bake of the same file, and `solve` counting them (closed loop).
 """
@@ -34,6 +35,14 @@ CASES = {
     # a Spot lamp: its cone x the profile (engine/lights/photometric_spot.py)
     "spot asymmetric": ("asymmetric", (0.1, 0.1, 1.4), (0.3, 0.1, 0.6), 40.0, 1.0, (1.0, 1.0, 1.0), 0.0,
                         dict(light_type="SPOT", spot_size=1.4, spot_blend=0.4)),
+    # an Area lamp: its Lambertian emission times the profile along each direction from its points
+    # (engine/lights/photometric_area.py: the IES node's Vector is Geometry > Incoming); a batwing's value at
+    # v = 0 is 19 of its 62 at 40 degrees: read along the lamp's normal only (a constant, as Cycles did with
+    # the Normal default), the floor came out 0.39 x Cycles' (measured), so the test sees the difference
+    "area batwing": ("batwing", (0.0, 0.1, 1.2), (0.3, 0.0, 0.4), 60.0, 1.0, (1.0, 1.0, 1.0), 0.0,
+                     dict(light_type="AREA", size=0.5)),
+    "area asymmetric": ("asymmetric", (0.1, 0.0, 1.3), (0.0, 0.2, 0.9), 60.0, 1.5, (1.0, 0.8, 0.6), 0.0,
+                        dict(light_type="AREA", shape="RECTANGLE", size=0.4, size_y=0.2)),
 }
 
 
@@ -43,8 +52,7 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
     """The IES lamp as the Blender layer reads it (its kind, its profile, the node's Strength and the
     Emission's colour in its gain), its irradiance on the floor against Cycles' bake, per channel."""
     from relight_addon.blender import export
-    from relight_addon.engine.lights.photometric import PHOTOMETRIC
-    from relight_addon.engine.lights.photometric_spot import PHOTOMETRIC_SPOT
+    from relight_addon.engine.lights.photometric import measured_kind
 
     fixture, loc, rot, energy, strength, colour, radius, *spot = CASES[name]
     settings = spot[0] if spot else {}
@@ -54,7 +62,10 @@ def test_photometric_lamp_direct_irradiance_against_cycles(name):
                           **settings)
         exp = export.export_scene()
         lamps = exp.faces.lamps
-        assert [lamp.kind for lamp in lamps] == [PHOTOMETRIC_SPOT if spot else PHOTOMETRIC]
+        expected = {"POINT": "photometric", "SPOT": "photometric_spot", "AREA": "photometric_area"}
+        light_type = settings.get("light_type", "POINT")
+        assert [lamp.kind.name for lamp in lamps] == [expected[light_type]]
+        assert measured_kind(light_type).name == expected[light_type]
         assert not [w for w in exp.faces.warnings if "fixture" in w and "not modelled" in w], exp.faces.warnings
     except BaseException:
         cr.reset_blender()

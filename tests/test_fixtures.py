@@ -193,15 +193,20 @@ def test_the_schedule_counts_dims_and_sums():
                "rated_watts": 10.0, "luminous_flux_lm": 700.0, "location": [0, 0, 1], "direction": [0, 0, -1]},
               {"object": "b", "kind": "spot", "luminous_flux_lm": 50.0},
               {"object": "c", "kind": "fixture", "fixture": "X", "fixture_description": "x", "rated_lumens": 1000.0,
-               "rated_watts": 10.0, "luminous_flux_lm": 2500.0, "location": [1, 0, 1], "direction": [0, 0, -1]}]
+               "rated_watts": 10.0, "luminous_flux_lm": 1000.0, "location": [1, 0, 1], "direction": [0, 0, -1]}]
     (row,) = fixture_schedule(lights)
-    assert row["count"] == 2 and row["lumens"] == pytest.approx(3200.0) and row["watts"] == pytest.approx(32.0)
-    assert [li["dimming"] for li in row["lights"]] == pytest.approx([0.7, 2.5])
-    assert row["over_rating"] == [{"object": "c", "dimming": 2.5, "fixtures_needed": 3}]
+    assert row["count"] == 2 and row["lumens"] == pytest.approx(1700.0) and row["watts"] == pytest.approx(17.0)
+    assert [li["dimming"] for li in row["lights"]] == pytest.approx([0.7, 1.0])
+    assert row["at_full"] == ["c"]
     (note,) = schedule_notes([row])
-    assert "'c' (X) needs 250 % of its rated 1000 lm" in note and "3 of X there at 83 % each" in note
-    assert schedule_lines([row]) == ["2 x X at 70-250 %: 3200 lm, 32.0 W (over rating)",
-                                     "in all 2 fixtures: 3200 lm, 32.0 W"]
+    assert note.startswith("1 x X of the answer's 2 fixtures at 100 % of their rated lumens") and "Max Lights" in note
+    (note,) = schedule_notes([row], (12, 0.05, 0.4))
+    assert note.endswith("(the curve: relative error 0.4 with 2, 0.05 with 12)")
+    assert schedule_lines([row]) == ["2 x X at 70-100 %: 1700 lm, 17.0 W (at full output)",
+                                     "in all 2 fixtures: 1700 lm, 17.0 W"]
+    lights[2]["luminous_flux_lm"] = 900.0
+    (row,) = fixture_schedule(lights)
+    assert row["at_full"] == [] and schedule_notes([row]) == []
 
 
 def test_a_eulumdat_fixture_is_offered_with_its_lm63_for_blenders_node(tmp_path):

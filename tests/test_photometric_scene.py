@@ -61,15 +61,36 @@ def test_an_ies_spot_lamp_is_read_as_a_photometric_spot():
     assert lamp.spot_size == pytest.approx(1.2) and lamp.spot_blend == pytest.approx(0.3)
 
 
-@pytest.mark.parametrize("setup", ["area", "math node"])
+def test_an_area_lamps_ies_node_is_read_as_a_photometric_area_lamp():
+    """An IES node on an Area lamp: engine/lights/photometric_area.py (its emission times the profile; its
+    light against Cycles' in tests/test_cycles_photometric.py), its size read as an area lamp's."""
+    from relight_addon.engine.lights.photometric_area import PHOTOMETRIC_AREA
+
+    try:
+        _floor()
+        pf.ies_point_lamp(bpy, "fixture", (0, 0, 1.0), (0, 0, 0), pf.lm63_text("downlight"), 20.0,
+                          light_type="AREA", shape="RECTANGLE", size=0.4, size_y=0.2)
+        exp = _export()
+    finally:
+        cr.reset_blender()
+    (lamp,) = exp.faces.lamps
+    assert lamp.kind is PHOTOMETRIC_AREA and lamp.profile is not None
+    assert (lamp.size_u, lamp.size_v) == pytest.approx((0.4, 0.2))
+    assert not [w for w in exp.faces.warnings if "not modelled" in w], exp.faces.warnings
+
+
+@pytest.mark.parametrize("setup", ["linked vector", "math node"])
 def test_ies_trees_not_reduced_stay_named(setup):
-    """An IES node on an Area lamp, or a Math node between the IES node and the Emission: read as a
-    plain lamp, named in a warning as before."""
+    """An IES node whose Vector is linked (here the Geometry's Normal), or a Math node between the IES node
+    and the Emission: read as a plain lamp, named in a warning as before."""
     try:
         _floor()
         ob = pf.ies_point_lamp(bpy, "fixture", (0, 0, 1.0), (0, 0, 0), pf.lm63_text("downlight"), 20.0)
-        if setup == "area":
-            ob.data.type = "AREA"
+        if setup == "linked vector":
+            nt = ob.data.node_tree
+            ies = next(n for n in nt.nodes if n.type == "TEX_IES")
+            geo = nt.nodes.new("ShaderNodeNewGeometry")
+            nt.links.new(geo.outputs["Normal"], ies.inputs["Vector"])
         else:
             nt = ob.data.node_tree
             ies = next(n for n in nt.nodes if n.type == "TEX_IES")

@@ -1,14 +1,16 @@
 """A Light's IES Texture node read as Cycles renders it (bpy): the measured distribution of a
 scene's luminaire (engine/photometry/, engine/lights/photometric.py).
 
-Read: a Point or Spot lamp whose node tree is an IES Texture node (its file from disk, relative paths
+Read: a Point, Spot or Area lamp whose node tree is an IES Texture node (its file from disk, relative paths
 against the .blend, or its internal text) whose Fac feeds an Emission's Strength, the Emission
 into the Light Output; the IES node's Vector unlinked (the direction the light leaves, in the
 lamp's frame, as Cycles takes it by default). Cycles' emission is then colour x Power x the
 lamp's gain x the Emission's Color x the IES node's Strength x the profile's value, so those two
-(unlinked) are a factor of the lamp's gain. Any other tree with an IES node (an Area lamp's,
-a Math node between, a linked Strength) is not reduced: ``photometric`` returns None and the lamp
-is named as today (its light nodes not modelled). A missing or unreadable file is refused, named.
+(unlinked) are a factor of the lamp's gain. On an Area lamp the profile multiplies its Lambertian
+emission along each direction (engine/lights/photometric_area.py). Any other tree with an IES
+node (a Math node between, a linked Strength or Vector) is not reduced: ``photometric`` returns None
+and the lamp is named as today (its light nodes not modelled). A missing or unreadable file is
+refused, named.
 """
 from __future__ import annotations
 
@@ -23,7 +25,8 @@ from ..engine.scene import SceneError
 
 __all__ = ["IESLight", "photometric", "has_ies", "write_ies"]
 
-#: (an IES node on a Point lamp: engine/lights/photometric.py; on a Spot lamp: photometric_spot.py)
+#: (an IES node on a Point lamp: engine/lights/photometric.py; on a Spot lamp: photometric_spot.py; on an
+#: Area lamp: photometric_area.py)
 
 #: the node types of a tree read as a photometric lamp
 IES, EMISSION, OUTPUT = "TEX_IES", "EMISSION", "OUTPUT_LIGHT"

@@ -191,6 +191,38 @@ def _nnls(A, y):
     return np.maximum(x, 0.0)
 
 
+def _bounded(A, y, upper=None):
+    """The best ``x`` with 0 <= x <= ``upper`` (k,) of ``A x ~ y`` (bounded least squares: scipy's
+    BVLS); NNLS (``_nnls``) when ``upper`` is None or has no finite entry."""
+    if upper is None or not np.isfinite(upper).any():
+        return _nnls(A, y)
+    ub = np.asarray(upper, dtype=np.float64)
+    x = sopt.lsq_linear(A, y, bounds=(np.zeros(len(ub)), ub), method="bvls").x
+    if not np.all(np.isfinite(x)):
+        raise ValueError("the bounded least squares produced non-finite values")
+    return np.clip(x, 0.0, ub)
+
+
+def checked_upper(upper, n):
+    """``upper`` (n,) as float64, None when it is None or has no finite entry (no light bounded);
+    ValueError on a bound that is NaN or not positive."""
+    if upper is None:
+        return None
+    u = np.asarray(upper, dtype=np.float64).reshape(-1)
+    if u.shape != (n,):
+        raise ValueError(f"upper must have {n} entries (one per light), got {u.shape}")
+    if np.isnan(u).any() or np.any(u <= 0):
+        raise ValueError("a light's upper bound on its strength must be positive (inf: none)")
+    return u if np.isfinite(u).any() else None
+
+
+def _clipped_gain(g, d, u):
+    """The decrease of a squared error along a column of squared norm ``d`` with correlation ``g``
+    (t . residual) at its best multiple within [0, ``u``]: 2 beta g - beta^2 d, beta = clip(g / d)."""
+    beta = np.clip(np.where(d > 0, g / np.where(d > 0, d, 1.0), 0.0), 0.0, u)
+    return 2.0 * beta * g - beta * beta * d
+
+
 #: the working-set NNLS (``_nnls_from``) adds at most this many violating lights per round
 WORKING_SET_STEP = 16
 
@@ -303,10 +335,15 @@ def _swap_used(q, d, N, ia, MN, tolN, val, beta, kkt_ok):
 class _Model:
     """Gram matrices, NNLS fits of light sets (cached), and the screening bounds."""
 
-    def __init__(self, T, b, area):
+    def __init__(self, T, b, area, upper=None):
         self.T = _as_transfer(T)
         m, n = self.T[0].shape
         self.m, self.n = m, n
+        #: (n,) each light's largest strength per channel, or None: none bounded (a catalogue fixture's
+        #: rated flux, LightKind.strength_upper). With bounds every fit is bounded least squares; the
+        #: screening's lower bounds (of the unbounded NNLS: a relaxation) stay valid, none is taken as
+        #: exact, and its achievable values take each step within the bound.
+        self.upper = checked_upper(upper, n)
         self.b = _as_targets(b, m)
         self.area = np.ones(n) if area is None else np.asarray(area, dtype=np.float64).reshape(-1)
         if self.area.shape != (n,):
@@ -350,7 +387,7 @@ class _Model:
             self.n_fits += 1
             for c in self.chans:
                 A = self.T[c][:, idx]
-                e[:, c] = _nnls(A, self.b[:, c])
+                e[:, c] = _bounded(A, self.b[:, c], None if self.upper is None else self.upper[idx])
                 r = np.einsum("ij,j->i", A, e[:, c]) - self.b[:, c]
                 err2[c] = float(np.dot(r, r))
         on = e.max(axis=1) > 0
@@ -467,8 +504,21 @@ class _Model:
             exact_val += val
             gain1 += np.where(d > 0, cp * cp / np.where(d > 0, d, 1.0), 0.0)
         LB = np.maximum(LB, 0.0)
+        if self.upper is not None:  # bounded: the current fit plus j's best multiple within its bound
+            return LB, np.maximum(err2.sum() - self._bounded_gain(S, e), 0.0), gain1
         UB = np.where(exact, np.maximum(exact_val, 0.0), np.maximum(err2.sum() - gain1, 0.0))
         return LB, UB, gain1
+
+    def _bounded_gain(self, S, e):
+        """(n,) the decrease of the squared error of the fit ``e`` (k, 3) on S when light j is added at
+        its best strength within [0, upper_j] per channel, the others kept (achievable)."""
+        out = np.zeros(self.n)
+        for c in self.chans:
+            key = id(self.T[c])
+            G, d = self.G[key], self.d[key]
+            g = self.h[:, c] - (G[S].T @ e[:, c] if len(S) else 0.0)  # t_j . (b - T_S e)
+            out += _clipped_gain(g, d, self.upper)
+        return out
 
     def swap_bounds(self, S, e, err2, limit=np.inf, max_pairs=2048):
         """Swaps S[i] -> j whose lower bound on the squared error is <= limit.
@@ -502,8 +552,10 @@ class _Model:
             I, J = I[keep], J[keep]
         if len(I) == 0:
             return I, J, np.zeros(0), np.zeros(0)
-        exact, exact_val = self._swap_exact(chan, I, J, k)
         LB = LB0[I, J]
+        if self.upper is not None:  # bounded: no swap's value is certified exact
+            return I, J, LB, np.maximum(UB1[I, J], 0.0)
+        exact, exact_val = self._swap_exact(chan, I, J, k)
         UB = np.where(exact, np.maximum(exact_val, 0.0), np.maximum(UB1[I, J], 0.0))
         return I, J, LB, UB
 
@@ -542,6 +594,8 @@ class _Model:
         gS = self.h[:, c] - np.einsum("ij,i->j", G[S], ec)  # t_j . rho
         rho_i2 = err2c + 2.0 * ec * gS[S] + ec * ec * d[S]
         gij = gS[None, :] + G[S] * ec[:, None]
+        if self.upper is not None:
+            return rho_i2[:, None] - _clipped_gain(gij, d[None, :], self.upper[None, :])
         return rho_i2[:, None] - np.where((d > 0)[None, :], np.maximum(gij, 0.0) ** 2
                                           / np.where(d > 0, d, 1.0)[None, :], 0.0)
 
@@ -673,17 +727,22 @@ def _swap_search(model, fit, max_rounds, max_exact):
     return fit, rounds
 
 
-def fit_lights(T, b, lights, light_watts=None):
-    """NNLS per channel on a given set of lights: (lights on, exitance (k, 3), error, power)."""
-    model = _Model(T, b, light_watts)
+def fit_lights(T, b, lights, light_watts=None, upper=None):
+    """NNLS per channel on a given set of lights (bounded least squares where ``upper`` (n,) bounds
+    them): (lights on, exitance (k, 3), error, power)."""
+    model = _Model(T, b, light_watts, upper)
     f = model.fit(lights)
     return f[0], f[1], math.sqrt(f[2].sum()), f[3]
 
 
 def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0, max_swap_rounds=None,
                  max_exact=24, restarts=0, initial=None, exhaustive_limit=20_000, swap_all=True, cancel=None,
-                 progress=None, stats=None, _model=None):
+                 progress=None, stats=None, _model=None, upper=None):
     """The best configuration found with at most k lights, for k = 1 .. k_max.
+
+    ``upper`` (n,): each light's largest strength per channel (inf: none; a catalogue fixture's
+    rated flux): every fit is then bounded least squares (0 <= e <= upper), so a configuration
+    that needs more light than its fixtures give takes more of them.
 
     T: list of 3 (m, n) transfer matrices (``problem.transfer``) or one (m, n) for all
     channels; b (m, 3) targets W/m^2 (``problem.b_target``); light_watts (n,) W per unit strength (the area for surface lights; for the
@@ -716,7 +775,7 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
     """
     if score not in SCORES + ("both",):
         raise ValueError(f"unknown score {score!r}; choose one of {', '.join(SCORES + ('both',))}")
-    model = _model or _Model(T, b, light_watts)
+    model = _model or _Model(T, b, light_watts, upper)
     k_max = _checked_k_max(k_max, model.n)
     search = _KSearch(model, score, max(1, int(max_exact)), max_swap_rounds, swap_all, restarts,
                       np.random.default_rng(seed), initial)
@@ -881,14 +940,15 @@ def _monotone(curve):
             b_.lights, b_.exitance, b_.n_lights, b_.source = a.lights.copy(), a.exitance.copy(), a.n_lights, "fewer"
 
 
-def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, nnls_start=None, **kw):
+def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, nnls_start=None, upper=None,
+                            **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
     exact, and the swap search starts from there above (best_k_curve enumerates nothing again:
     the certificate's enumeration reaches at least as far). ``initial`` (best_k_curve's: a list
     indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others;
     ``nnls_start``: lower_bounds'. Returns (curve, bounds)."""
-    model = _Model(T, b, light_watts)  # one for both (its Gram matrices, its fits)
+    model = _Model(T, b, light_watts, upper)  # one for both (its Gram matrices, its fits)
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit, nnls_start=nnls_start, _model=model)
     given = kw.pop("initial", None) or {}
     starts = dict(given) if isinstance(given, dict) else {k + 1: st for k, st in enumerate(given)}
@@ -1018,7 +1078,7 @@ def _exhaustive(model, k_top, chunk=50000):
     return best_err2, best_sets
 
 
-def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=None):
+def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=None, upper=None):
     """Certificate: a lower bound on the best error with at most k non-negative lights, k = 1..k_max.
 
     The all-lights NNLS error bounds every k. For every k with at most ``exhaustive_limit``
@@ -1032,9 +1092,14 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
     ``nnls_start``: an earlier, nearby problem's all-lights NNLS exitance (n, 3) (``nnls_exitance``
     of a Live stroke's bounds): its active lights start a working-set NNLS (``_nnls_from``),
     the same optimum, sooner. Returns a :class:`LowerBounds`.
+
+    With bounds (``upper`` (n,), best_k_curve's), every configuration of k lights within them is a
+    configuration of all the lights within them, so the all-lights *bounded* least squares bounds
+    every k; the enumeration's optima are of the unbounded NNLS of each subset (a relaxation: a
+    lower bound, no longer taken as exact), and each k takes the larger of the two.
     """
     t0 = time.perf_counter()
-    model = _model or _Model(T, b, None)  # (the lights' power plays no part in a bound)
+    model = _model or _Model(T, b, None, upper)  # (the lights' power plays no part in a bound)
     k_max = int(k_max)
     if k_max < 1:
         raise ValueError(f"k_max must be at least 1, got {k_max}")
@@ -1052,7 +1117,7 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
             f = model.fit(sets[s - 1])  # accurate value on T for the optimal set
             val = min(math.sqrt(max(errs[s - 1], 0.0)), math.sqrt(f[2].sum()))
             bound[s - 1] = max(val * (1 - BOUND_MARGIN) - BOUND_ROUNDING * model.norm, nnls_err, 0.0)
-            exact[s - 1] = True
+            exact[s - 1] = model.upper is None
             opt_sets[s - 1] = f[0].copy()
     if model.n <= k_max:  # all lights allowed: NNLS is the optimum
         exact[model.n - 1:] = True
@@ -1072,7 +1137,9 @@ def _all_lights_nnls(model, nnls_start=None) -> tuple:
     if len(cols):
         for c in model.chans:
             A = model.T[c][:, cols]
-            if nnls_start is not None and np.shape(nnls_start) == (model.n, 3):
+            if model.upper is not None:
+                x = _bounded(A, model.b[:, c], model.upper[cols])
+            elif nnls_start is not None and np.shape(nnls_start) == (model.n, 3):
                 on = np.flatnonzero(np.asarray(nnls_start)[cols, c] > 0)
                 d = model.d[id(model.T[c])][cols]
                 x = _nnls_from(A, model.b[:, c], on, model._kkt_tol(d, c))
@@ -1182,17 +1249,24 @@ def _deviation(model, e, scale, rows=None):
     return float(rel.max()) if rel.size else 0.0
 
 
+def _lp_bounds(model) -> list:
+    """Each light's bounds (0, its upper bound or None) in the programmes."""
+    if model.upper is None:
+        return [(0, None)] * model.n
+    return [(0.0, float(u) if np.isfinite(u) else None) for u in model.upper]
+
+
 def _lp_options():
     return {"presolve": True, "primal_feasibility_tolerance": 1e-9, "dual_feasibility_tolerance": 1e-9}
 
 
-def min_max_deviation(T, b, zero_band=None, skip_unreachable=True):
+def min_max_deviation(T, b, zero_band=None, skip_unreachable=True, upper=None):
     """The smallest tolerance x such that non-negative lights keep |T e - b| <= x * scale on every
     target channel (scale = b, or ``zero_band`` W/m^2 where b = 0; default the mean of the positive
     target values), and such an exitance (n, 3). One LP per channel (the channels decouple).
     ``skip_unreachable``: leave out the target channels no light reaches (their deviation is 1
-    whatever the lights)."""
-    model = _Model(T, b, None)
+    whatever the lights). ``upper`` (n,): each light's largest strength per channel (inf: none)."""
+    model = _Model(T, b, None, upper)
     zb = _default_zero_band(model.b) if zero_band is None else float(zero_band)
     scale = _band_scale(model.b, zb)
     rows = ~_unreachable(model) if skip_unreachable else np.ones(model.b.shape, dtype=bool)
@@ -1211,7 +1285,7 @@ def min_max_deviation(T, b, zero_band=None, skip_unreachable=True):
         ub = np.concatenate([model.b[keep, c], -model.b[keep, c]])
         cost = np.zeros(n + 1)
         cost[-1] = 1.0
-        res = sopt.linprog(cost, A_ub=A, b_ub=ub, bounds=[(0, None)] * (n + 1), method="highs",
+        res = sopt.linprog(cost, A_ub=A, b_ub=ub, bounds=_lp_bounds(model) + [(0, None)], method="highs",
                            options=_lp_options())
         if res.status != 0:
             # unbounded deviation: a target with scale 0 that every light reaching it must keep dark
@@ -1239,7 +1313,7 @@ def _uniformity_rows(t, regions, u):
 UNIFORMITY_STEP = 1e-3
 
 
-def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, uniformity=None):
+def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, uniformity=None, upper=None):
     """Least total power keeping every target within +-tolerance of its painted value (an LP).
 
     minimise  sum_j A_j sum_c e_jc   (W)
@@ -1260,10 +1334,11 @@ def least_power_within_tolerance(T, b, light_watts, tolerance, zero_band=None, u
     each channel's (a sufficient condition for the illuminance's: a luminance is a positive
     combination of the channels), as constraints of the same programme. When it cannot be met
     within the band, the largest reachable u (bisection, to UNIFORMITY_STEP) is used and said
-    (``reachable_uniformity``). Returns a ToleranceResult.
+    (``reachable_uniformity``). ``upper`` (n,): each light's largest strength per channel (inf: none),
+    bounds of the programme's variables. Returns a ToleranceResult.
     """
     t0 = time.perf_counter()
-    model = _Model(T, b, light_watts)
+    model = _Model(T, b, light_watts, upper)
     tol = float(tolerance)
     if not (np.isfinite(tol) and tol >= 0):
         raise ValueError(f"tolerance must be a non-negative number, got {tolerance}")
@@ -1325,7 +1400,7 @@ class _BandProgramme:
             if u and regions and regions[c]:
                 Au, bu = _uniformity_rows(model.T[c], regions[c], u)
                 A, ub = np.vstack([A, Au]), np.concatenate([ub, bu])
-            res = sopt.linprog(model.area, A_ub=A, b_ub=ub, bounds=(0, None), method="highs",
+            res = sopt.linprog(model.area, A_ub=A, b_ub=ub, bounds=_lp_bounds(model), method="highs",
                                options=_lp_options())
             if res.status == 2:
                 return None, "infeasible"
@@ -1344,7 +1419,7 @@ def _within_band(prog, tol, zb) -> tuple:
     reach = None
     x_used = tol
     if e is None and status == "infeasible":
-        reach, _ = min_max_deviation(model.T, model.b, zb)
+        reach, _ = min_max_deviation(model.T, model.b, zb, upper=model.upper)
         x = max(reach * (1 + 1e-7), reach + 1e-9, tol)
         e, st2 = prog.solve(x, 0.0)
         if e is None:  # a hair more room for the LP's tolerances

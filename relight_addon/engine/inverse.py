@@ -448,6 +448,8 @@ class InverseProblem:
         self.lights = lights
         #: (n_lights,) power (W) of one unit of strength in one channel (area for surface lights)
         self.light_watts = lights.watts
+        #: (n_lights,) each light's largest strength per channel (inf: none; a catalogue fixture's rated flux)
+        self.light_upper = lights.upper
 
     @property
     def source_basis(self):

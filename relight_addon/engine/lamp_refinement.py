@@ -131,7 +131,7 @@ class RefinedLamp:
 
 
 class _LampParameters:
-    """A lamp's refined parameters (its kind's ``parameters``: slide_u / slide_v along the surface it
+    """A lamp's refined parameters (its kind's ``refinement_parameters``: slide_u / slide_v along the surface it
     hangs from, ``mount``'s Mount.normal_at, if any; aim_u / aim_v about its axis; the kind's own,
     which its ``refined`` applies) as a vector x scaled to unit steps (x = 0: the lamp as it is)."""
 
@@ -140,8 +140,8 @@ class _LampParameters:
     def __init__(self, lamp, mount, step_length):
         normal = mount.normal_at(lamp.position)
         self.lamp, self.mount, self.normal = lamp, mount, normal
-        self.names = lamp.kind.parameters if normal is not None else \
-            tuple(p for p in lamp.kind.parameters if not p.startswith("slide"))
+        names = lamp.kind.refinement_parameters(lamp)
+        self.names = names if normal is not None else tuple(p for p in names if not p.startswith("slide"))
         self.mount_u = self.mount_v = None
         if normal is not None:  # tangents u and n x u (frame's second axis is -n x u)
             _, self.mount_u, v = frame(normal)
@@ -172,17 +172,19 @@ class _LampParameters:
 
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
-                         seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None, exitance=None) -> tuple:
+                         seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None, exitance=None,
+                         upper=None) -> tuple:
     """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
     channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
     (see the module docstring). ``step_length``: the slide of one unit (m). Returns ([RefinedLamp] of the lamps whose
     refinement lowered the error, the columns with theirs replaced, the relative error before and
     after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET). ``exitance``
-    (k, 3): the configuration's strengths, whose colours a constrained light colour keeps."""
+    (k, 3): the configuration's strengths, whose colours a constrained light colour keeps; ``upper`` (k,):
+    the lights' largest strength per channel (their kinds' strength_upper; None: none), kept in every fit."""
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
     budget = BUDGET if budget is None else int(budget)
-    search = _Search(problem, transport, mount, seed, exitance)
+    search = _Search(problem, transport, mount, seed, exitance, upper)
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
     start = search.error(cols)
     best, evaluations, refined = start, 0, {}
@@ -212,13 +214,14 @@ class _Search:
     the problem's light colour: NNLS per channel when free), a lamp's irradiance on the patches it
     reaches (one seed: the same receiver points at every evaluation), and its column of T."""
 
-    def __init__(self, problem, transport, mount, seed, exitance):
+    def __init__(self, problem, transport, mount, seed, exitance, upper=None):
         self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
+        self.upper = upper
         self.norm = problem.target_norm if problem.target_norm > 0 else 1.0
         self.radius = patch_radius(mount.patches, mount.sampler)
 
     def error(self, cs):
-        return fit_columns(self.problem, cs, self.exitance, refit=False)[1] / self.norm
+        return fit_columns(self.problem, cs, self.exitance, refit=False, upper=self.upper)[1] / self.norm
 
     def irradiance(self, lamp, points=SEARCH_POINTS):
         patches = self.mount.patches

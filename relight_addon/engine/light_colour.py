@@ -35,7 +35,7 @@ from dataclasses import replace
 
 import numpy as np
 import scipy.optimize as sopt
-from .units import TINY
+from .units import TINY, luminance_weighted
 
 __all__ = ["blackbody_rec709", "temperature_grid", "ColourProblem", "colour_problem", "fit_colours", "fit_lights",
            "fit_columns", "lower_bounds_of", "temperature_of", "TEMPERATURE_STEPS"]
@@ -116,26 +116,38 @@ def stacked(columns, colours) -> np.ndarray:
     return np.vstack([columns[c] * colours[:, c][None, :] for c in range(3)])
 
 
-def _nnls(A, y):
-    from .best_lights import _nnls as nnls  # (best_lights' NNLS, with its fallback)
+def _nnls(A, y, upper=None):
+    from .best_lights import _bounded  # (best_lights' NNLS, with its fallback; bounded least squares)
 
-    return nnls(A, y)
+    return _bounded(A, y, upper)
 
 
-def fit_colours(columns, b, colours, temperatures=None, t_range=None):
+def power_upper(upper, colours):
+    """(k,) the largest power p of lights of colours ``colours`` (k, 3) (strength p chi) whose strength
+    per channel is bounded by ``upper`` (k,) (inf: none): upper / luminance(chi), the rated flux
+    bounding the light's luminance; None when ``upper`` is None."""
+    if upper is None:
+        return None
+    lum = luminance_weighted(colours)
+    u = np.asarray(upper, dtype=np.float64)
+    return np.where(lum > 0, u / np.where(lum > 0, lum, 1.0), u / np.maximum(np.max(colours, axis=1), TINY))
+
+
+def fit_colours(columns, b, colours, temperatures=None, t_range=None, upper=None):
     """The best exitance (k, 3) >= 0 of lights whose colours are fixed (``colours`` (k, 3)) or,
     with ``temperatures`` (k,) K and ``t_range``, blackbody lights whose temperatures are refitted
     one light at a time while the error drops (FIT_ROUNDS rounds at most): the light's best
     temperature of the range's grid with the others' light fixed (every temperature at once: the
     best non-negative multiple of its column), then every power again by NNLS, kept when the error
-    drops. Their transfer ``columns`` (3 arrays (m, k)), the targets ``b`` (m, 3). Returns
+    drops. Their transfer ``columns`` (3 arrays (m, k)), the targets ``b`` (m, 3); ``upper`` (k,) their
+    largest strength per channel (inf: none; ``power_upper`` of each colour tried). Returns
     (exitance, error, temperatures or None)."""
     y = np.asarray(b, dtype=np.float64).T.reshape(-1)
     colours = np.array(colours, dtype=np.float64, copy=True).reshape(-1, 3)
 
     def solve(chi):
         A = stacked(columns, chi)
-        p = _nnls(A, y) if A.shape[1] else np.zeros(0)
+        p = _nnls(A, y, power_upper(upper, chi)) if A.shape[1] else np.zeros(0)
         return p, float(np.linalg.norm(A @ p - y)), A
 
     p, err, A = solve(colours)
@@ -177,6 +189,9 @@ class ColourProblem:
         self.b_target = np.zeros((len(y), 3))
         self.b_target[:, 0] = y
         self.light_watts = np.asarray(problem.light_watts, dtype=np.float64) * self.colours.sum(axis=1)
+        #: (n,) each light's largest power p (its strength p chi): its strength bound over the luminance
+        #: of its colour (a fixture's rated lumens bound the luminance it gives, of any colour)
+        self.light_upper = power_upper(getattr(problem, "light_upper", None), self.colours)
         self.target_norm = problem.target_norm
 
     def __getattr__(self, name):
@@ -234,14 +249,17 @@ def fit_lights(problem, ids, e=None):
     return fit_columns(problem, [t[:, ids] for t in problem.transfer], e, ids)
 
 
-def fit_columns(problem, columns, e=None, ids=None, refit=True):
+def fit_columns(problem, columns, e=None, ids=None, refit=True, upper=None):
     """fit_lights for lights of transfer ``columns`` (3 arrays (m, k)) (a refined lamp's, not yet
     a light of the problem); ``e`` or else ``ids`` give the colours a refit starts from;
-    ``refit`` False: those colours kept (their powers fitted only)."""
+    ``refit`` False: those colours kept (their powers fitted only). ``upper`` (k,): the lights'
+    largest strength per channel (default: the problem's ``light_upper`` of ``ids``; none without)."""
     b = problem.b_target
     mode = problem.colour
+    if upper is None and ids is not None and getattr(problem, "light_upper", None) is not None:
+        upper = np.asarray(problem.light_upper, dtype=np.float64)[np.asarray(ids, dtype=np.int64)]
     if mode is None or mode.free:
-        return fit_per_channel(columns, b)
+        return fit_per_channel(columns, b, upper)
     k = columns[0].shape[1]
     if e is not None and np.all(np.asarray(e).sum(axis=1) > 0):
         colours = np.asarray(e, dtype=np.float64)
@@ -249,13 +267,13 @@ def fit_columns(problem, columns, e=None, ids=None, refit=True):
         colours = mode.colours(problem)[np.asarray(ids, dtype=np.int64)]
     else:
         colours = np.ones((k, 3))
-    return mode.fit(columns, b, colours, refit)
+    return mode.fit(columns, b, colours, refit, upper)
 
 
-def fit_per_channel(columns, b):
+def fit_per_channel(columns, b, upper=None):
     """(exitance (k, 3), error W/m^2): NNLS per channel of lights of transfer ``columns`` (3 arrays
-    (m, k)) on the targets ``b`` (m, 3): free colours' fit."""
-    x = np.stack([_nnls(columns[c], b[:, c]) for c in range(3)], axis=1)
+    (m, k)) on the targets ``b`` (m, 3): free colours' fit; ``upper`` (k,) bounds each channel."""
+    x = np.stack([_nnls(columns[c], b[:, c], upper) for c in range(3)], axis=1)
     return x, channel_error(columns, x, b)
 
 

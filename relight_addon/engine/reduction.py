@@ -272,7 +272,7 @@ def in_colour(problem, view, colour, curve, refits=False) -> list:
         lights = np.asarray(pt.lights, dtype=np.int64)
         e = view.exitance_of(lights, pt.exitance)
         if refits and pt.n_negative == 0 and len(lights):
-            e2, _ = colour.fit([T[c][:, lights] for c in range(3)], b, e)
+            e2, _ = colour.fit([T[c][:, lights] for c in range(3)], b, e, upper=_upper_of(problem, lights))
             on = e2.max(axis=1) > 0
             lights, e = lights[on], e2[on]
         err = channel_error([t[:, lights] for t in T], e, b)
@@ -283,6 +283,12 @@ def in_colour(problem, view, colour, curve, refits=False) -> list:
             new = replace(prev, lights=prev.lights.copy(), exitance=prev.exitance.copy())
         out.append(new)
     return out
+
+
+def _upper_of(problem, lights):
+    """(k,) the largest strength per channel of the problem's lights ``lights`` (None: none bounded)."""
+    upper = getattr(problem, "light_upper", None)
+    return None if upper is None else np.asarray(upper, dtype=np.float64)[np.asarray(lights, dtype=np.int64)]
 
 
 def _neg(e):

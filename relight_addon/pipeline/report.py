@@ -174,7 +174,10 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
     final_lights = light_records(model, curve, fi)
     schedule = fixture_schedule(final_lights) if options.param("fixtures") else None
     if schedule:
-        warnings += schedule_notes(schedule)
+        more = [pt for pt in red.curve if pt.n_negative == 0 and pt.n_lights > final.n_lights]
+        best = min(more, key=lambda pt: (pt.relative_error, pt.n_lights), default=None)
+        warnings += schedule_notes(schedule, None if best is None or not best.relative_error < final.relative_error
+                                   else (best.n_lights, best.relative_error, final.relative_error))
     if model.mode == "inverse":  # (each record gets its utilisation; the implausible ones named)
         warnings += implausible_notes(problem, final_lights, np.flatnonzero(np.any(curve.exitance[fi] != 0, axis=1)))
     return {
@@ -219,16 +222,20 @@ def solve_report(model, options, inv, red, curve, warnings: list, timings: dict,
     }
 
 
+#: a fixture dimmed to at least this share of its rated lumens is at full output (the selection's bound,
+#: LightKind.strength_upper, up to the bounded least squares' rounding)
+FULL_OUTPUT = 1.0 - 1e-6
+
+
 def fixture_schedule(lights) -> list:
     """The fixture schedule of a configuration's lights (``light_records``: the records of catalogue
     fixtures, engine/lights/fixture.py, those with a ``fixture``), per fixture type in order of its
     first light: fixture (its catalogue name), description, count, rated_lumens and rated_watts (one
     fixture's), lumens and watts in all (lm at the dimming solved; W its rated input watts x the
     dimming: dimming taken as linear in the input power), and per light its object, location,
-    direction and dimming (1 = 100 % of its rated lumens). A light dimmed above 1 needs more than its
-    rating: ``over_rating`` lists those, each with ``fixtures_needed`` (as many of its type there,
-    each at dimming / that, give its light); the written lamp gives the light solved (its Power above
-    the rating's), and schedule_notes names it."""
+    direction and dimming (1 = 100 % of its rated lumens: every selection keeps it within 0-1,
+    FixtureKind.strength_upper). ``at_full`` lists the objects at full output (FULL_OUTPUT), which
+    schedule_notes names: the targets ask for more light than those fixtures give."""
     out = {}
     for rec in lights:
         if rec.get("fixture") is None:
@@ -236,24 +243,30 @@ def fixture_schedule(lights) -> list:
         row = out.setdefault(rec["fixture"], {"fixture": rec["fixture"], "description": rec.get("fixture_description"),
                                               "count": 0, "rated_lumens": float(rec["rated_lumens"]),
                                               "rated_watts": float(rec["rated_watts"]), "lumens": 0.0, "watts": 0.0,
-                                              "lights": [], "over_rating": []})
+                                              "lights": [], "at_full": []})
         dim = float(rec["luminous_flux_lm"]) / row["rated_lumens"]
         row["count"] += 1
         row["lumens"] += float(rec["luminous_flux_lm"])
         row["watts"] += dim * row["rated_watts"]
         row["lights"].append({"object": rec["object"], "location": rec["location"], "direction": rec["direction"],
                               "dimming": dim, "lumens": float(rec["luminous_flux_lm"])})
-        if dim > 1.0:
-            row["over_rating"].append({"object": rec["object"], "dimming": dim, "fixtures_needed": int(math.ceil(dim))})
+        if dim >= FULL_OUTPUT:
+            row["at_full"].append(rec["object"])
     return list(out.values())
 
 
-def schedule_notes(schedule) -> list:
-    """The warnings of a fixture schedule: each fixture whose light needs more than its rated lumens."""
-    return [f"fixture {o['object']!r} ({row['fixture']}) needs {100 * o['dimming']:.0f} % of its rated "
-            f"{row['rated_lumens']:.0f} lm: written so (its Power above its rating's); {o['fixtures_needed']} of "
-            f"{row['fixture']} there at {100 * o['dimming'] / o['fixtures_needed']:.0f} % each give it, or a "
-            "brighter fixture of its distribution" for row in schedule for o in row["over_rating"]]
+def schedule_notes(schedule, more=None) -> list:
+    """The warning of a fixture schedule with fixtures at full output: the targets ask for more light than
+    the answer's fixtures give within their ratings; more of them (Max Lights) give more. ``more``: (n, the
+    relative error with n lights, the answer's), the curve's best with more lights, or None."""
+    full = [f"{len(row['at_full'])} x {row['fixture']}" for row in schedule if row["at_full"]]
+    if not full:
+        return []
+    n = sum(row["count"] for row in schedule)
+    curve = ("the curve shows the error with each number of them" if more is None else
+             f"the curve: relative error {more[2]:.3g} with {n}, {more[1]:.3g} with {more[0]}")
+    return [f"{', '.join(full)} of the answer's {n} fixtures at 100 % of their rated lumens: the targets ask for "
+            f"more light than {n} fixtures give within their ratings; raise Max Lights for more fixtures ({curve})"]
 
 
 def schedule_lines(schedule) -> list:
@@ -263,7 +276,7 @@ def schedule_lines(schedule) -> list:
     for row in schedule:
         dims = [li["dimming"] for li in row["lights"]]
         lines.append(f"{row['count']} x {row['fixture']} at {100 * min(dims):.0f}-{100 * max(dims):.0f} %: "
-                     f"{row['lumens']:.0f} lm, {row['watts']:.1f} W" + (" (over rating)" if row["over_rating"] else ""))
+                     f"{row['lumens']:.0f} lm, {row['watts']:.1f} W" + (" (at full output)" if row["at_full"] else ""))
     if schedule:
         lines.append(f"in all {sum(r['count'] for r in schedule)} fixtures: {sum(r['lumens'] for r in schedule):.0f} lm, "
                      f"{sum(r['watts'] for r in schedule):.1f} W")

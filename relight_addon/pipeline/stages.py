@@ -203,7 +203,8 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check):
     placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights) if _placed(lights, j)}
     refined, cols, before, after, n_eval = refine_configuration(
         problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
-        seed=seed, budget=REFINE_BUDGET - done.evaluations, exitance=pt.exitance, cancel=check(len(placed)))
+        seed=seed, budget=REFINE_BUDGET - done.evaluations, exitance=pt.exitance, cancel=check(len(placed)),
+        upper=problem.light_upper[pt.lights])
     done.evaluations += n_eval
     done.rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
                       "lamps_refined": len(refined), "evaluations": n_eval})
@@ -219,7 +220,7 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check):
         done.irradiance.append(r.irradiance)
         for c in range(3):
             done.columns[c].append(cols[c][:, r.index])
-    e, error = fit_columns(problem, cols, pt.exitance)  # (of the light colour)
+    e, error = fit_columns(problem, cols, pt.exitance, upper=problem.light_upper[pt.lights])  # (of the light colour)
     order = np.argsort(ids, kind="stable")
     on = e[order].max(axis=1) > 0
     return replace(pt, n_lights=int(on.sum()), lights=ids[order][on], exitance=e[order][on],

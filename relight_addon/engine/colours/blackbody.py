@@ -33,11 +33,11 @@ class Blackbody:
             self._solo = (key, blackbody_rec709(solo_temperatures(problem, self.grid)))
         return self._solo[1]
 
-    def fit(self, columns, b, colours, refit=True):
+    def fit(self, columns, b, colours, refit=True, upper=None):
         """(exitance (k, 3), error): the best powers and temperatures of these lights, from the
         temperatures of ``colours`` (k, 3) (``refit`` False: those temperatures, powers only)."""
         temps = temperature_of(colours, *self.range)
-        e, err, _ = fit_colours(columns, b, blackbody_rec709(temps), temps if refit else None, self.range)
+        e, err, _ = fit_colours(columns, b, blackbody_rec709(temps), temps if refit else None, self.range, upper)
         return e, err
 
     def certificate(self, problem, view, bounds, k_max):

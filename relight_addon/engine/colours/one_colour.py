@@ -25,15 +25,15 @@ class OneColour:
     def colours(self, problem) -> np.ndarray:
         return solo_colours(problem)
 
-    def fit(self, columns, b, colours, refit=True):
+    def fit(self, columns, b, colours, refit=True, upper=None):
         """(exitance (k, 3), error): NNLS per channel on these lights (``refit`` False: their
         colours ``colours`` kept, the powers fitted)."""
         from ..light_colour import fit_colours
 
         if not refit:
-            e, err, _ = fit_colours(columns, b, colours)
+            e, err, _ = fit_colours(columns, b, colours, upper=upper)
             return e, err
-        return fit_per_channel(columns, b)
+        return fit_per_channel(columns, b, upper)
 
     def certificate(self, problem, view, bounds, k_max):
         """The free problem's certificate: the configurations allowed are free colours'."""

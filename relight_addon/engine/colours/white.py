@@ -17,9 +17,9 @@ class White:
     def colours(self, problem) -> np.ndarray:
         return np.ones((problem.n_lights, 3))
 
-    def fit(self, columns, b, colours, refit=True):
-        """(exitance (k, 3), error): the best powers of these lights, white."""
-        e, err, _ = fit_colours(columns, b, np.ones((columns[0].shape[1], 3)))
+    def fit(self, columns, b, colours, refit=True, upper=None):
+        """(exitance (k, 3), error): the best powers of these lights, white (``upper``: fit_colours')."""
+        e, err, _ = fit_colours(columns, b, np.ones((columns[0].shape[1], 3)), upper=upper)
         return e, err
 
     def certificate(self, problem, view, bounds, k_max):

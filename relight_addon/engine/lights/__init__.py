@@ -25,8 +25,9 @@ its writer in the Blender layer (docs/architecture.md, "Adding a light kind").
   measured distribution, engine/photometry/); ``photometric_spot.py``: a Spot lamp with one (its
   cone x the distribution). ``fixture.py``: a catalogue fixture of a fixture library
   (engine/photometry/library.py) placed by the solve, written with an IES Texture node.
+  ``photometric_area.py``: an Area lamp with one (its Lambertian emission times the distribution).
 """
-from . import cell, group, polygon, lamp, sun, spot, area, point, photometric, photometric_spot, fixture  # noqa: F401  (registration order = the stored kind codes)
+from . import cell, group, polygon, lamp, sun, spot, area, point, photometric, photometric_spot, fixture, photometric_area  # noqa: F401  (registration order = the stored kind codes)
 from .kind import Capability, LampKind, LightKind, lamp_kind_of_type, lamp_kinds
 from .lightset import LightSet, append_lamps, candidate_mask, kind_code, lights_from_groups
 

@@ -18,8 +18,11 @@ mounting positions of engine/candidate_lamps.py: a symmetric fixture that is not
 mounting surface's normal (a downlight from a ceiling, a batwing); an aimable one (a track or gimbal
 fixture) points at each of the first FIXTURE_CLUSTERS target clusters the position sees; an asymmetric one
 hangs along the normal with its C0 plane (the lamp's -Y, where Cycles' IES node puts C0) turned towards
-each of those clusters (a wall washer's throw towards the painted wall). Refined (engine/lamp_refinement.py)
-in its aim and its position on the mounting surface, the turn about its axis kept. Written (writer
+each of those clusters (a wall washer's throw towards the painted wall). Refined (engine/lamp_refinement.py,
+``refinement_parameters``) in its position on the mounting surface, in its aim only if aimable (a downlight
+or a batwing keeps hanging along its mounting normal), and in its turn about its axis if asymmetric.
+Dimmed within 0-100 % (``strength_upper``: every selection and fit keeps its strength at most the rated
+flux's). Written (writer
 "placed") as a Point Light whose node tree is an IES Texture node holding the fixture's LM-63 as an
 internal text (``blender_ies``), so the .blend carries it.
 """
@@ -49,6 +52,8 @@ NEAR_POINTS = 64
 #: a fixture's irradiance work in a spot's (engine.cost): each sample interpolates its profile
 #: (measured: 0.31 s a fixture against 0.13 s a spot, docs/benchmarks.md, "Catalogue fixtures as candidates")
 FIXTURE_WORK = 2.4
+#: the turn about its axis (rad) of one unit of an asymmetric fixture's refinement (``turn``)
+TURN_STEP = math.radians(15.0)
 #: the radiant flux (W) the scaled distribution integrates to: an isotropic Point lamp's 4 pi x 1 / (4 pi)
 FULL_TURN = 4.0 * math.pi
 
@@ -140,12 +145,20 @@ class FixtureKind(PhotometricKind):
     flags = Capability.AIMED | Capability.PLACEABLE
     option = "fixtures"
     measured = False  # (a scene's Point lamp with an IES node is photometric.py's)
-    parameters = ("aim_u", "aim_v", "slide_u", "slide_v")
+    #: (every fixture's; a lamp's own are ``refinement_parameters``)
+    parameters = ("aim_u", "aim_v", "slide_u", "slide_v", "turn")
 
     def check(self, lamp) -> None:
         super().check(lamp)
         if not isinstance(lamp.profile, FixtureProfile):
             raise ValueError(f"lamp {lamp.name!r}: a fixture's distribution is a FixtureProfile (fixture_lamp)")
+
+    def strength_upper(self, lamp) -> float:
+        """Its rated flux as white light: a strength s gives 683 luminance(s) lm (``dimming``), so at most
+        rated lumens / 683 W per channel (a dimmer, or a filter, only takes light away): every selection
+        keeps it within 0-100 % of its rated lumens (white: exactly 100 %; a colour view bounds the
+        luminance: engine.light_colour.ColourProblem)."""
+        return float(lamp.profile.fixture.lumens) / LUMENS_PER_WATT
 
     def light_patches(self, lamp, job) -> None:
         """The patches near it (their centre within NEAR_RADII of their bounding radius from the lamp:
@@ -163,9 +176,20 @@ class FixtureKind(PhotometricKind):
         """This kind bound to the job's fixture library (its ``option``: a folder, or "builtin")."""
         return _Offer(self, load_library(options.fixtures or BUILTIN))
 
+    def refinement_parameters(self, lamp) -> tuple:
+        """What a lighting designer may change of a hung fixture: an aimable one (track, gimbal) its aim;
+        one that is not (a downlight, a batwing) keeps hanging along its mounting normal; every one slides
+        on its mounting surface; an asymmetric one turns about its axis (``turn``: its C0 plane)."""
+        f = lamp.profile.fixture
+        return (("aim_u", "aim_v") if f.aimable else ()) + ("slide_u", "slide_v") + (() if f.symmetric else ("turn",))
+
     def refined(self, lamp, values, steps):
-        """Turned as refinement aims it, its C0 plane kept where it was (the old -Y made perpendicular)."""
+        """Turned as refinement aims it, its C0 plane kept where it was (the old -Y made perpendicular),
+        then turned about its axis by ``turn`` x TURN_STEP."""
         u, v = _turned(lamp.direction, -steps.lamp.axis_v)
+        t = TURN_STEP * float(values.get("turn", 0.0))
+        if t:
+            u, v = math.cos(t) * u + math.sin(t) * v, -math.sin(t) * u + math.cos(t) * v
         return replace(lamp, axis_u=u, axis_v=v)
 
     def record(self, lamp) -> dict:

@@ -43,6 +43,12 @@ class LightKind:
         (m^2) for an exitance, 1 for a strength in W."""
         return area if self.strength_unit == "W/m^2" else 1.0 + 0.0 * area
 
+    def strength_upper(self, lamp) -> float:
+        """The largest strength per channel a light of this kind may take (inf: no bound; ``lamp``
+        its engine.lamps.Lamp, None for a surface light): every selection, fit and programme keeps
+        0 <= strength <= it (engine.best_lights, engine.light_colour)."""
+        return math.inf
+
 
 class Capability(enum.Flag):
     """What a lamp kind has, as its callers ask it (``LampKind.flags``).
@@ -158,6 +164,11 @@ class LampKind(LightKind):
     # -- refinement (engine/lamp_refinement.py) --------------------------------------------
     #: the parameters refined (besides slide_u, slide_v, aim_u, aim_v: see lamp_refinement)
     parameters = ()
+
+    def refinement_parameters(self, lamp) -> tuple:
+        """The parameters of ``lamp`` its refinement moves (engine.lamp_refinement; default the kind's
+        ``parameters``: a kind whose lamps differ, e.g. a fixture aimable or not, says so per lamp)."""
+        return self.parameters
 
     def aim_half_angle(self, lamp) -> float:
         """The half-angle (rad) whose quarter is one unit of aim."""

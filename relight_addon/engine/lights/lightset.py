@@ -106,6 +106,15 @@ class LightSet:
             out[sel] = self.kind_of(int(np.flatnonzero(sel)[0])).watts(self.area[sel])
         return out
 
+    @property
+    def upper(self) -> np.ndarray:
+        """(n_lights,) each light's largest strength per channel (LightKind.strength_upper; inf: none)."""
+        out = np.full(self.n_lights, np.inf)
+        for j in range(self.n_lights if self.lamps is not None else 0):
+            if self.lamps[j] is not None:
+                out[j] = self.kind_of(j).strength_upper(self.lamps[j])
+        return out
+
     def power(self, strength) -> np.ndarray:
         """(n_lights,) power (W) of the lights at ``strength`` (n_lights, 3), summed over the channels."""
         return np.asarray(strength, dtype=np.float64).reshape(-1, 3).sum(axis=1) * self.watts

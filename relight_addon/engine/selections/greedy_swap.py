@@ -58,10 +58,10 @@ def greedy_swap(s):
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
                                             cancel=lambda: stop["cancel"], progress=progress,
                                             nnls_start=stroke.nnls_start if stroke is not None else None,
-                                            **quick)
+                                            upper=p.light_upper, **quick)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
-        cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface],
+        cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface], upper=p.light_upper[surface],
                              cancel=lambda: stop["cancel"], progress=lambda d, t: progress(d, t, 1))
         curve = never_worse(curve, cells, surface, tol=EQUAL_ERROR_RTOL * max(float(np.linalg.norm(p.b_target)),
                                                                               TINY))

@@ -19,7 +19,8 @@ def refit(problem, ids, tolerance, uniformity=None):
     ids = np.asarray(ids, dtype=np.int64)
     goal, notes = uniformity_goal(problem, uniformity)
     res = least_power_within_tolerance([t[:, ids] for t in problem.transfer], problem.b_target,
-                                       np.asarray(problem.light_watts)[ids], tolerance, uniformity=goal)
+                                       np.asarray(problem.light_watts)[ids], tolerance, uniformity=goal,
+                                       upper=np.asarray(problem.light_upper)[ids])
     return res.exitance, "; ".join(notes + ([res.message] if res.message else []))
 
 
@@ -56,7 +57,8 @@ def least_power(s, tolerance, uniformity):
     p = s.problem
     s.step(0, 1)
     goal, notes = uniformity_goal(p, uniformity)
-    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tolerance, uniformity=goal)
+    res = least_power_within_tolerance(p.transfer, p.b_target, p.light_watts, tolerance, uniformity=goal,
+                                       upper=p.light_upper)
     on = np.flatnonzero(res.exitance.max(axis=1) > 0)
     s.record(on, res.exitance[on])
     s.step(1, 1)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.optimize as sopt
 
+from ..best_lights import _bounded
 from ..registry import SELECTIONS
 from ..units import TINY
 
@@ -18,6 +19,7 @@ def nnls_greedy(s):
     problem, record, step_hook, max_steps = s.problem, s.record, s.step, s.max_steps
     T, b = problem.transfer, problem.b_target
     k = problem.n_lights
+    upper = getattr(problem, "light_upper", None)
     colnorm = np.sqrt(sum((t * t).sum(0) for t in T))
     colnorm = np.where(colnorm > 0, colnorm, np.inf)
     sel = []
@@ -32,7 +34,11 @@ def nnls_greedy(s):
             break  # no candidate can lower the residual any more
         sel.append(j)
         S = np.asarray(sel)
-        e = np.stack([sopt.nnls(T[c][:, S], b[:, c], maxiter=50 * len(S) + 50)[0] for c in range(3)], axis=1)
+        ub = None if upper is None else upper[S]
+        if ub is not None and np.isfinite(ub).any():  # (lights of a bounded strength: bounded least squares)
+            e = np.stack([_bounded(T[c][:, S], b[:, c], ub) for c in range(3)], axis=1)
+        else:
+            e = np.stack([sopt.nnls(T[c][:, S], b[:, c], maxiter=50 * len(S) + 50)[0] for c in range(3)], axis=1)
         r = b - np.stack([T[c][:, S] @ e[:, c] for c in range(3)], axis=1)
         on = e.max(axis=1) > 0
         record(S[on], e[on], j)
