@@ -18,7 +18,7 @@ bpy = pytest.importorskip("bpy", reason="bpy (Blender as a Python module) is nee
 
 import artist_scenes  # noqa: E402
 import cycles_reference as cr  # noqa: E402
-from lit_rooms import relight  # noqa: E402
+from lit_rooms import relight, targets_against_cycles  # noqa: E402
 
 from relight_addon.engine.photometry import CyclesProfile, parse_lm63  # noqa: E402
 from relight_addon.engine.units import LUMENS_PER_WATT, luminance_weighted  # noqa: E402
@@ -88,16 +88,7 @@ def test_a_solve_with_the_builtin_library_renders_as_predicted(scene, tmp_path):
                                         keep_materials=own, keep_light_paths=own, threads=2)
     finally:
         cr.reset_blender()
-    signed, lines = [], []
-    for name in names:
-        rows = report["objects"][name]
-        target = np.array([t is not None for t in rows["target"]])
-        ours = (np.array([r if r is not None else [np.nan] * 3 for r in rows["radiance_normal"]], dtype=np.float64)
-                if own else np.asarray(rows["radiosity"], dtype=np.float64) / math.pi)[target].sum(axis=1)
-        got = baked[name].radiance[target].sum(axis=1)
-        signed.append((ours - got) / got)
-        lines.append(f"{name}: {target.sum()} targets, mean {np.abs(signed[-1]).mean():.4f} signed "
-                     f"{signed[-1].mean():+.4f}, Cycles noise {baked[name].rel_noise[target].mean():.4f}")
+    signed, lines = targets_against_cycles(report, baked, names, own_materials=own)
     e = np.abs(np.concatenate(signed))
     summary = (f"{scene}: {[(r['fixture'], r['count'], [round(x['dimming'], 2) for x in r['lights']]) for r in schedule]}"
                f", relative error {report['final']['relative_error']:.3f}; {len(e)} target faces: mean {e.mean():.4f} "
