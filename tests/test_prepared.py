@@ -83,18 +83,27 @@ def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeyp
     assert state.unmappable(exp2.faces) is None  # the stroke's faces are not clustered
 
     # from the kept state no hemisphere ray is cast again (the adaptive model's refinement passes
-    # included), and the kernel draws the targets' rows again, all of them at once as the cold
-    # solve does (the new target patches' rows drawn alone are other samples)
+    # included), and the kernel draws the new target patches' rows only (each pair samples on a
+    # stream of its own: the entries the cold solve's one draw gives; the painted patches are no
+    # sources any more, so no kept row has a new source)
     rows = _counting(monkeypatch)
     warm = state.solve(exp2.faces)
     monkeypatch.undo()
     assert state.reason is None and state.warm == 1
-    assert rows == [int(warm.patches.target.sum())] and rows[0] >= n_before + len(near)
+    n_rows = int(warm.patches.target.sum())
+    assert rows == [n_rows - n_before] and rows[0] >= len(near)
     assert warm.report["timings_s"]["form_factors"] == pytest.approx(state.seconds["kernel rows"])
     account = warm.report["prepared"]  # what the warm solve did not recompute, in its report
     assert account["from_prepared_state"] and account["kept"]["form factors (hemisphere rays)"]
-    assert account["kept"]["kernel rows"] == 0 and account["computed"]["kernel rows"] == rows[0]
+    assert account["kept"]["kernel rows"] == n_before and account["computed"]["kernel rows"] == rows[0]
+    assert account["kept"]["kernel pairs"] > 0 and account["computed"]["kernel pairs"] > 0
     assert account["computed"]["rays cast"] == 0
+    # the warm solve's kernel entries are the cold solve's, to the bit (the same mesh: the polygon
+    # model's; the adaptive model's when the stroke's faces are meshed alone, as here)
+    rec = np.flatnonzero(warm.patches.target)
+    src = warm.model.lights.patches  # (the candidate patches: the kernel's sources)
+    cold_K = kernel_transfer.kernel_form_factors(warm.patches, rec, src, seed=options.seed)
+    assert np.array_equal(np.stack([state.kernel_rows[int(r)][src] for r in rec]), cold_K)
     assert first.report["prepared"]["computed"]["rays cast"] > 0 and not first.report["prepared"]["kept"]["kernel rows"]
     # a lux fill (the same target patches at another radiosity): no kernel row drawn again, and no
     # candidate lamp's irradiance computed again (the same plan: the lamps of the stroke's solve)
@@ -252,8 +261,9 @@ def test_every_kind_of_stroke_is_answered_live_as_well_as_a_cold_solve():
 def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kept(monkeypatch):
     """The warm solve's candidate lamps (prepared.KeptLamps.offer): with nothing kept, the lights
     offer_lamps makes, the same numbers; offered again for the same plan, no lamp computed and the
-    same lights; in another plan a lamp kept is its earlier number, a new one offer_lamps' number
-    at its place in the new plan (issue 37: a warm solve computes only the lamps it has not)."""
+    same lights; in another plan every lamp, kept or computed, is offer_lamps' number for it bit for
+    bit (each lamp on its own seed, keyed by its geometry, not its place: issue 37), and only the
+    lamps not kept are computed."""
     from relight_addon.engine import candidate_lamps
     from relight_addon.engine.lights import candidate_mask
     from relight_addon.engine.sampling import SceneSampler
@@ -271,25 +281,26 @@ def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kep
     assert list(map(prepared.digest, warm.lamps)) == list(map(prepared.digest, cold.lamps))
     assert (warm.irradiance != cold.irradiance).nnz == 0  # bit for bit
     calls = []
-    real = prepared.lamp_irradiance
-    monkeypatch.setattr(prepared, "lamp_irradiance", lambda *a, **k: calls.append(len(a[1])) or real(*a, **k))
+    real = prepared.lamps_irradiance
+    monkeypatch.setattr(prepared, "lamps_irradiance", lambda *a, **k: calls.append(len(a[1])) or real(*a, **k))
     again, _ = kept.offer(None, patches, mask, options, sampler, options.seed)
-    assert calls == [] and kept.reused == n_cold and kept.computed == 0
+    assert calls == [0] and kept.reused == n_cold and kept.computed == 0
     assert (again.irradiance != cold.irradiance).nnz == 0
-    # another plan (half the paint erased: other clusters, other aims): only its new lamps computed
+    # another plan (half the paint erased: other clusters, other aims; painted patches are candidates
+    # again): only its new lamps computed, and every lamp offer_lamps' number for it
     t = exp.faces.target.copy()
     t[np.flatnonzero(t)[: max(1, int(t.sum()) // 2)]] = False
     other = replace(patches, target=t[patches.face])
-    fresh, n_fresh = candidate_lamps.offer_lamps(None, other, mask, options, sampler, options.seed)
-    moved, n_moved = kept.offer(None, other, mask, options, sampler, options.seed)
-    before = set(map(prepared.digest, cold.lamps))
-    new = [j for j, lamp in enumerate(moved.lamps) if prepared.digest(lamp) not in before]
+    mask2 = candidate_mask(other, "inverse")
+    fresh, n_fresh = candidate_lamps.offer_lamps(None, other, mask2, options, sampler, options.seed)
+    calls.clear()
+    moved, n_moved = kept.offer(None, other, mask2, options, sampler, options.seed)
+    before = set(map(candidate_lamps.lamp_key, cold.lamps))
+    new = [lamp for lamp in moved.lamps if candidate_lamps.lamp_key(lamp) not in before]
     assert n_moved == n_fresh and kept.computed + kept.reused == n_fresh and 0 < len(new) <= kept.computed
-    assert kept.reused == n_fresh - kept.computed > 0
-    H_new, H_fresh = moved.irradiance.tocsc(), fresh.irradiance.tocsc()
-    at = {prepared.digest(lamp): j for j, lamp in enumerate(fresh.lamps)}
-    for j in new:  # as offer_lamps computes it at its place in the new plan
-        assert np.array_equal(H_new[:, j].toarray(), H_fresh[:, at[prepared.digest(moved.lamps[j])]].toarray())
+    assert kept.reused > 0 and calls == [kept.computed]
+    assert list(map(prepared.digest, moved.lamps)) == list(map(prepared.digest, fresh.lamps))
+    assert (moved.irradiance != fresh.irradiance).nnz == 0  # bit for bit, kept lamps included
 
 
 def _full(problem, point):
