@@ -19,20 +19,26 @@ paint changed:
   the new targets (refinement passes 0 from the prepared state);
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
   the refinement passes' ones);
-- the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
-  patch) of the last solve's targets: a solve of the same target patches (a lux fill, a colour)
-  reuses them; a stroke that adds or removes target patches draws them all again, in one draw as
-  the cold solve does, so that the warm solve on the same mesh is the cold solve (rows drawn for
-  the new patches alone are other samples of the kernel: 14 % apart in error on the adaptive
-  staircase on the first draw's seed, 7 % on a seed of their own);
-- the candidate lamps' direct irradiance (``KeptLamps``), keyed by the lamp: a solve plans its
-  lamps for its targets (the spots aimed at the painted regions) and computes those not kept, as
-  offer_lamps computes them at their place in the plan.
+- the kernel's entries (engine.kernel_transfer: the transport from a candidate light's patch to a
+  target patch), per (target, source) pair: a stroke draws only the pairs it has not (the new
+  target patches' rows, the kept rows' new sources: an erased patch is a candidate again). Every
+  pair samples on a stream of its own, keyed by the seed and the two patches' geometry, so these
+  are the entries the cold solve's one draw of every pair gives, bit for bit (before, rows drawn
+  apart were other samples: 14 % apart in error on the adaptive staircase, so every row was drawn
+  again);
+- the candidate lamps' direct irradiance (``KeptLamps``), keyed by the lamp's kind and geometry
+  (candidate_lamps.lamp_key), each lamp drawn on its own seed (lamp_seed): a solve plans its lamps
+  for its targets (the spots aimed at the painted regions, the mounting positions among the
+  unpainted candidates) and computes those not kept; a kept lamp is the number offer_lamps
+  computes for it in a cold solve, bit for bit.
+
+On the polygon model (its mesh is the cold solve's) the warm solve is therefore the cold solve of
+the same paint (tests/test_prepared.py: every kind of stroke, the error to 1e-6).
 
 Every solve says in its report (``prepared``, ``account``) what it kept and what it computed.
 The rest (the lamps' plan, the inverse problem and its factorisation, the selection, the
 certificate, the direct light, the lamp refinement and the curve) is the cold solve's own code
-(pipeline.jobs.run_solve), given the kept patches, form factors, kernel rows and lamps' irradiance. A change
+(pipeline.jobs.run_solve), given the kept patches, form factors, kernel entries and lamps' irradiance. A change
 the fingerprint sees (an object moved, a material, a forbidden face, an option) is not followed:
 ``stale_reason`` names it, and the caller prepares again.
 
@@ -352,8 +358,9 @@ class PreparedScene:
 
     def account(self) -> dict:
         """What the last solve took from the prepared state and what it made anew (its report's
-        ``prepared``): the rays and kernel rows kept or cast, the candidate lamps' irradiance kept or
-        computed; the rest is computed anew on every solve."""
+        ``prepared``): the rays kept or cast, the kernel's target rows and (target, source) pairs kept
+        or drawn, the candidate lamps' irradiance kept or computed; the rest is computed anew on
+        every solve."""
         return {"from_prepared_state": self.reason is None, "reason": self.reason,
                 "kept": {"form factors (hemisphere rays)": self.reason is None and not self.drawn.get("rays cast"),
                          "kernel rows": self.drawn.get("kernel rows kept", 0),
