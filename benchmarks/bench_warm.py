@@ -114,11 +114,11 @@ def main():
         json.dump({"command": "benchmarks/bench_warm.py", "load_before": load, "load_after": os.getloadavg(),
                    "rows": rows}, fh, indent=1)
     print("| case | stroke | warm s | cold s | warm / cold | error warm / cold (ratio) | painted-face error "
-          "warm / cold (ratio) | kernel rows kept / drawn | lamps kept / computed |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "warm / cold (ratio) | kernel rows kept / drawn | kernel pairs kept / drawn | lamps kept / computed |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         if "warm_s" not in r:
-            print(f"| {r['case']} | {r['stroke']} | | {r['cold_s']:.2f} | | {r['cold_report']:.4f} | | | |")
+            print(f"| {r['case']} | {r['stroke']} | | {r['cold_s']:.2f} | | {r['cold_report']:.4f} | | | | |")
             continue
         p = r["prepared"]
         print(f"| {r['case']} | {r['stroke']}{'' if p['from_prepared_state'] else ' (from scratch)'} "
@@ -126,7 +126,20 @@ def main():
               f"| {r['warm_report']:.4f} / {r['cold_report']:.4f} ({r['error_ratio']:.3f}) "
               f"| {r['warm_face']:.4f} / {r['cold_face']:.4f} ({r['face_ratio']:.3f}) "
               f"| {p['kept']['kernel rows']} / {p['computed']['kernel rows']} "
+              f"| {p['kept']['kernel pairs']} / {p['computed']['kernel pairs']} "
               f"| {p['kept'][LAMPS]} / {p['computed'][LAMPS]} |")
+    stage_table(rows)
+
+
+def stage_table(rows):
+    """Seconds per stage of each warm solve against its cold solve (the reports' timings_s)."""
+    keys = ("form_factors", "lamps", "inverse", "reduction", "direct_light", "lamp_refinement", "total")
+    print("| case | stroke | " + " | ".join(f"{k} warm / cold" for k in keys) + " |")
+    print("|---|---|" + "---|" * len(keys))
+    for r in rows:
+        if "warm_stages" in r:
+            print(f"| {r['case']} | {r['stroke']} | " + " | ".join(
+                f"{r['warm_stages'].get(k, 0):.2f} / {r['cold_stages'].get(k, 0):.2f}" for k in keys) + " |")
 
 
 if __name__ == "__main__":

@@ -398,7 +398,7 @@ def test_one_sampler_per_solve(monkeypatch):
 
 # ------------------------------------------------------- a furnished room: noise per target
 
-def room_scene():
+def room_scene(extra=()):
     """2 x 2 x 2 m room (6 big faces, meshed into 0.25 m cells) and a 0.8 x 0.8 m table top
     (a 10 cm slab at 0.6-0.7 m, no legs). Targets: the 16 floor cells under and around the
     table (4 in its umbra, the others in penumbra); sources: the 64 ceiling cells."""
@@ -411,10 +411,11 @@ def room_scene():
               q([[x0, x1, z0], [x0, x1, z1], [x1, x1, z1], [x1, x1, z0]]),
               q([[x0, x0, z0], [x0, x0, z1], [x0, x1, z1], [x0, x1, z0]]),
               q([[x1, x0, z0], [x1, x1, z0], [x1, x1, z1], [x1, x0, z1]])]
-    ps = mesh_patches(polygon_faceset([p.astype(float) for p in polys]), max_patch_size=0.25)
+    ps = mesh_patches(polygon_faceset([np.asarray(p, dtype=float) for p in list(extra) + polys]), max_patch_size=0.25)
     c = ps.center
-    targets = np.flatnonzero((ps.face == 0) & (np.abs(c[:, 0] - 1) < 0.5) & (np.abs(c[:, 1] - 1) < 0.5))
-    sources = np.flatnonzero(ps.face == 1)
+    k = len(extra)  # (the room's floor and ceiling come after the extra polygons)
+    targets = np.flatnonzero((ps.face == k) & (np.abs(c[:, 0] - 1) < 0.5) & (np.abs(c[:, 1] - 1) < 0.5))
+    sources = np.flatnonzero(ps.face == k + 1)
     return ps, targets, sources
 
 
@@ -474,6 +475,30 @@ def test_reproducible_for_a_seed_whatever_the_threads():
     c = kernel_form_factors(ps, t, s, seed=6, threads=2)
     assert np.array_equal(a, b)
     assert not np.array_equal(a, c)
+
+
+def test_a_pair_draws_its_own_samples_whatever_else_is_drawn():
+    # issue 37: every (receiver, source) pair samples on a stream keyed by the seed and the two
+    # patches' geometry, so a row drawn alone, or a source added, gives the entries of a draw of
+    # every pair (a stroke's warm solve draws only its new pairs, and equals the cold solve)
+    ps, targets, sources = room_scene()
+    t, s = targets, sources[::2]
+    st = {}
+    full = kernel_form_factors(ps, t, s, seed=3, stats=st)
+    assert st["penumbra_pairs"] > 20  # (the table's shadow: phase 2's jittered points are drawn too)
+    alone = np.stack([kernel_form_factors(ps, [r], s, seed=3)[0] for r in t[[0, 5, 11]]])
+    assert np.array_equal(alone, full[[0, 5, 11]])
+    cols = kernel_form_factors(ps, t[::-1], s[[7, 2, 30]], seed=3)  # other order, a few sources
+    assert np.array_equal(cols, full[::-1][:, [7, 2, 30]])
+    # the same patches in another PatchSet (a square on the outside of a wall, in its plane,
+    # meshed first: every patch index moves, the scene's extent does not, and no floor-to-ceiling
+    # ray meets it): the same entries, keyed by their geometry
+    other = room_scene(extra=[square((0, 0.2, 0.2), (0, 0, 0.2), (0, 0.2, 0))])[0]
+    shift = other.n_patches - ps.n_patches
+    assert shift > 0 and np.allclose(other.center[shift:], ps.center)
+    moved = kernel_form_factors(other, t + shift, s + shift, seed=3)
+    assert np.array_equal(moved, full)
+    assert not np.array_equal(kernel_form_factors(ps, t, s, seed=4), full)  # (the seed: another draw)
 
 
 def test_a_spread_lights_ray_cast_gather_needs_no_kernel():

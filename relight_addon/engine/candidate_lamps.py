@@ -44,6 +44,7 @@ lights no patch is left out. Deterministic for a seed.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,7 +56,7 @@ from .patch_models.adaptive import normal_bucket
 from .units import TINY
 
 __all__ = ["DROP_FRACTION", "offered_kinds", "default_drop", "lamp_bound", "plan_lamps",
-           "offer_lamps", "target_clusters", "mount_positions", "Cluster", "Mounting"]
+           "offer_lamps", "lamps_irradiance", "lamp_key", "lamp_seed", "target_clusters", "mount_positions", "Cluster", "Mounting"]
 
 #: the default drop in front of the candidate surfaces, x the scene's bounding-box diagonal
 DROP_FRACTION = 0.02
@@ -327,6 +328,42 @@ def lamp_reach(patches, lamps, radius) -> list:
     return [lamp.kind.reach(lamp, patches, radius) for lamp in lamps]
 
 
+def lamp_key(lamp) -> bytes:
+    """A candidate lamp's identity: its kind and geometry (position, aim, axes, power, radius, cone,
+    blend, size, shape, spread, angle, shadows), not its name (its place in the plan): the same lamp
+    planned at another place of another plan has the same key."""
+    h = hashlib.sha1(lamp.kind.name.encode())
+    for a in (lamp.position, lamp.direction, lamp.axis_u, lamp.axis_v, lamp.power):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    h.update(repr((float(lamp.radius), float(lamp.spot_size), float(lamp.spot_blend), float(lamp.size_u),
+                   float(lamp.size_v), bool(lamp.ellipse), float(lamp.spread), float(lamp.angle),
+                   bool(lamp.cast_shadow), lamp.profile is None)).encode())
+    return h.digest()
+
+
+def lamp_seed(lamp, seed) -> int:
+    """The seed of a candidate lamp's irradiance: the job's ``seed`` and the lamp's ``lamp_key``, so
+    its numbers do not depend on the other lamps planned or its place among them."""
+    return ((int(seed) & 0xFFFFFFFFFFFFFFFF) << 64) | int.from_bytes(lamp_key(lamp)[:8], "little")
+
+
+def lamps_irradiance(patches, lamps, sampler, seed=0, progress=None) -> np.ndarray:
+    """(P, len(lamps)) each candidate lamp's direct irradiance per W (engine.lamps.lamp_irradiance,
+    LAMP_POINTS receiver points per patch) on the patches its light can reach (``lamp_reach``),
+    each lamp on its own seed (``lamp_seed``): a lamp computed alone has the numbers it has among
+    others (pipeline.prepared keeps them between solves)."""
+    H = np.zeros((patches.n_patches, len(lamps)))
+    if not lamps:
+        return H
+    reach = lamp_reach(patches, lamps, patch_radius(patches, sampler))
+    for i, lamp in enumerate(lamps):
+        H[:, i] = lamp_irradiance(patches, [lamp], sampler=sampler, seed=lamp_seed(lamp, seed),
+                                  points_per_patch=LAMP_POINTS, only=[reach[i]])[:, 0, 0]
+        if progress is not None:
+            progress((i + 1) / len(lamps))
+    return H
+
+
 def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
     """``lights`` (the surface lights; None: none, over the candidate patches ``candidates``)
     followed by the candidate lamps (``plan_lamps``) that light at least one patch, each a light
@@ -335,16 +372,7 @@ def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=
     lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
     if not lamps:
         return lights, 0
-    radius = patch_radius(patches, sampler)
-    H = np.zeros((patches.n_patches, len(lamps)))
-    reach = lamp_reach(patches, lamps, radius)
-    step = 16
-    for i in range(0, len(lamps), step):
-        H[:, i:i + step] = lamp_irradiance(patches, lamps[i:i + step], sampler=sampler,
-                                           seed=int(seed) + 1_000_003 * (i // step + 1),
-                                           points_per_patch=LAMP_POINTS, only=reach[i:i + step])[:, :, 0]
-        if progress is not None:
-            progress(min(i + step, len(lamps)) / len(lamps))
+    H = lamps_irradiance(patches, lamps, sampler, seed, progress)
     lit = np.flatnonzero(H.max(axis=0) > 0)
     area = np.array([lamps[i].kind.area(lamps[i]) for i in lit])
     return append_lamps(lights, np.flatnonzero(candidates), patches.n_patches, [lamps[i] for i in lit],

@@ -67,8 +67,11 @@ An occluder that none of a pair's phase-1 rays meets (one covering a few per cen
 pair's ray bundle or less) is missed: that pair is then taken as unoccluded.
 Accuracy against time on the staircase and a furnished room: benchmarks/bench_kernel_transfer.py.
 
-Determinism: the pairs are processed in fixed chunks, each with its own random stream
-``np.random.default_rng([seed, chunk])``; the result is the same for any thread count.
+Determinism: every pair draws its samples from a stream of its own, keyed by the seed and the
+two patches' geometry (``_pair_keys``, ``_KeyedStream``: counter-based uniforms, a splitmix64 hash
+of the key and the sample's place), so a pair's value does not depend on the other pairs asked for,
+their order, the chunks or the thread count: a row drawn alone, or a source added, gives the
+entries a draw of every pair gives (pipeline.prepared draws only a stroke's new pairs).
 Worker threads evaluate the kernel (numpy) and trace the shadow rays (embree releases the
 GIL) chunk by chunk.
 
@@ -749,7 +752,8 @@ class _PairTransfer:
 
     def __init__(self, g: _Geometry, pairs: _Pairs, info: dict, shadow_rays: int, penumbra_points: int,
                  penumbra_rays: int, seed):
-        self.g, self.pairs, self.seed = g, pairs, seed
+        self.g, self.pairs = g, pairs
+        self.keys = _pair_keys(g, pairs.pr, pairs.ps, seed)
         self.X, self.N, self.W, self.pstart, self.pcount = _receiver_rules(g, pairs, info)
         evals = self.pcount * g.tcount[pairs.ps]
         info["evaluations"] = int(evals.sum())
@@ -775,14 +779,13 @@ class _PairTransfer:
         if self.stop.is_set():
             return ci
         a, b = self.chunks[ci]
-        rng = np.random.default_rng([int(self.seed), ci])
-        pp_pair, fpt, vis, unoccluded, n_rays = self._quadrature(a, b, rng)
+        pp_pair, fpt, vis, unoccluded, n_rays = self._quadrature(a, b)
         if self.S > 0 and self.Q > 0:
-            n_rays += self._penumbra(a, b, rng, pp_pair, fpt, vis, unoccluded)
+            n_rays += self._penumbra(a, b, pp_pair, fpt, vis, unoccluded)
         self.rays[ci] = n_rays
         return ci
 
-    def _quadrature(self, a, b, rng):
+    def _quadrature(self, a, b):
         """Phase 1: the quadrature rule of every pair's receiver (at the pair's level), with
         shadow rays; values[a:b] and the unoccluded estimate kept for phase 2."""
         g, S = self.g, self.S
@@ -799,13 +802,16 @@ class _PairTransfer:
                 if len(sel) == 0:
                     continue
                 k = max(1, S >> (2 * int(L)))
+                # each receiver point's rays on its pair's stream, at the point's place in its rule
+                local = (pp_pt[sel] - self.pstart[a:b][pp_pair[sel]]).astype(np.uint64)
+                rng = _KeyedStream(_mix(self.keys[a:b][pp_pair[sel]] ^ (local * _ODD1 + _TAG_PHASE1)))
                 vis[sel], nr = _visibility(g, self.X[pp_pt[sel]], self.N[pp_pt[sel]], cps[pp_pair[sel]], k, rng)
                 n_rays += nr
         self.values[a:b] = np.bincount(pp_pair, weights=self.W[pp_pt] * fpt * vis, minlength=b - a)
         unoccluded = np.bincount(pp_pair, weights=self.W[pp_pt] * fpt, minlength=b - a)
         return pp_pair, fpt, vis, unoccluded, n_rays
 
-    def _penumbra(self, a, b, rng, pp_pair, fpt, vis, unoccluded) -> int:
+    def _penumbra(self, a, b, pp_pair, fpt, vis, unoccluded) -> int:
         """Phase 2: pairs partly in shadow (some visibility ray blocked, some not) again, with
         jittered receiver points (the Gauss rule is no good across a shadow edge); the rays cast."""
         Q, K2, cps = self.Q, self.K2, self.pairs.ps[a:b]
@@ -820,8 +826,11 @@ class _PairTransfer:
         n_rays = 0
         for q0 in range(0, len(part), per):
             sub = part[q0:q0 + per]
-            x, n = _sample_patches(self.g, self.pairs.pr[a + sub], Q, rng)
+            key = self.keys[a + sub]
+            x, n = _sample_patches(self.g, self.pairs.pr[a + sub], Q, _KeyedStream(_mix(key ^ _TAG_JITTER)))
             x, n = x.reshape(-1, 3), n.reshape(-1, 3)
+            point = np.tile(np.arange(Q, dtype=np.uint64), len(sub))  # (the jittered point's place)
+            rng = _KeyedStream(_mix(np.repeat(key, Q) ^ (point * _ODD1 + _TAG_PENUMBRA)))
             wv, ws, nr = _visibility(self.g, x, n, np.repeat(cps[sub], Q), K2, rng, sums=True)
             n_rays += nr
             # ratio estimate: the (accurate) unoccluded F of phase 1 times the visible
@@ -830,6 +839,67 @@ class _PairTransfer:
             fs = ws.reshape(len(sub), Q).sum(axis=1)
             self.values[a + sub] = unoccluded[sub] * fv / np.where(fs > 0, fs, 1.0)
         return n_rays
+
+
+_ODD1 = np.uint64(0x9E3779B97F4A7C15)  # (splitmix64's increment)
+_ODD2 = np.uint64(0xD1B54A32D192ED03)
+_TAG_PHASE1, _TAG_JITTER, _TAG_PENUMBRA = np.uint64(1), np.uint64(2), np.uint64(3)
+with np.errstate(over="ignore"):
+    _STEP = np.arange(1, 10, dtype=np.uint64) * _ODD2  # (a vertex coordinate's place in its triangle)
+
+
+def _mix(x):
+    """splitmix64's finaliser of uint64 ``x`` (elementwise, wrapping): a bijective hash."""
+    x = np.asarray(x, dtype=np.uint64)
+    with np.errstate(over="ignore"):  # (the multiplications wrap, as the hash means them to)
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+    return x ^ (x >> np.uint64(31))
+
+
+def _patch_keys(g: _Geometry) -> np.ndarray:
+    """(P,) uint64: a hash of each patch's triangles (their vertices' float64 bits, XORed over the
+    patch's triangles: their order does not matter), the same for the same patch in another mesh
+    or PatchSet; kept on the geometry."""
+    keys = getattr(g, "_patch_keys", None)
+    if keys is None:
+        bits = np.ascontiguousarray(g.tv, dtype=np.float64).reshape(len(g.tv), 9).view(np.uint64)
+        h = np.zeros(len(bits), dtype=np.uint64)
+        for k in range(9):
+            h = _mix(h ^ bits[:, k] ^ _STEP[k])
+        keys = np.zeros(g.P, dtype=np.uint64)
+        np.bitwise_xor.at(keys, g.tri_patch, h)
+        g._patch_keys = keys = _mix(keys ^ g.tcount.astype(np.uint64))
+    return keys
+
+
+def _pair_keys(g: _Geometry, pr, ps, seed) -> np.ndarray:
+    """(pairs,) uint64: each (receiver, source) pair's stream key, from the seed and the two patches'
+    geometry (``_patch_keys``): a pair's samples are its own, whatever else is drawn with it."""
+    keys = _patch_keys(g)
+    s0 = _mix(np.uint64(int(seed) & 0xFFFFFFFFFFFFFFFF) ^ _ODD2)
+    return _mix(_mix(keys[pr] ^ s0) ^ (keys[ps] * _ODD1))
+
+
+class _KeyedStream:
+    """Counter-based uniforms in place of a numpy Generator for ``_sample_patches``: row i of
+    ``random((m, ...))`` is a hash of ``keys[i]`` and the value's place in the row, so a row's
+    samples depend on its key alone (not on the rows drawn with it)."""
+
+    def __init__(self, keys):
+        self.keys = np.asarray(keys, dtype=np.uint64)
+
+    def random(self, shape, dtype=np.float64):
+        m, per = shape[0], int(np.prod(shape[1:], dtype=np.int64))
+        if m != len(self.keys):
+            raise ValueError(f"{m} rows asked of {len(self.keys)} keys")
+        with np.errstate(over="ignore"):
+            x = _mix(self.keys[:, None] + (np.arange(1, per + 1, dtype=np.uint64) * _ODD1)[None, :])
+        if np.dtype(dtype) == np.float32:  # 24 bits: every value exact in float32, in [0, 1)
+            u = (x >> np.uint64(40)).astype(np.float32) * np.float32(1.0 / (1 << 24))
+        else:
+            u = (x >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+        return u.reshape(shape)
 
 
 def _source_kernel(g: _Geometry, x, n, s, far):

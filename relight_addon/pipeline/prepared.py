@@ -19,20 +19,30 @@ paint changed:
   the new targets (refinement passes 0 from the prepared state);
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
   the refinement passes' ones);
-- the kernel's rows (engine.kernel_transfer: the transport from the candidate lights to a target
-  patch) of the last solve's targets: a solve of the same target patches (a lux fill, a colour)
-  reuses them; a stroke that adds or removes target patches draws them all again, in one draw as
-  the cold solve does, so that the warm solve on the same mesh is the cold solve (rows drawn for
-  the new patches alone are other samples of the kernel: 14 % apart in error on the adaptive
-  staircase on the first draw's seed, 7 % on a seed of their own);
-- the candidate lamps' direct irradiance (``KeptLamps``), keyed by the lamp: a solve plans its
-  lamps for its targets (the spots aimed at the painted regions) and computes those not kept, as
-  offer_lamps computes them at their place in the plan.
+- the kernel's entries (engine.kernel_transfer: the transport from a candidate light's patch to a
+  target patch), per (target, source) pair: a stroke draws only the pairs it has not (the new
+  target patches' rows, the kept rows' new sources: an erased patch is a candidate again). Every
+  pair samples on a stream of its own, keyed by the seed and the two patches' geometry, so these
+  are the entries the cold solve's one draw of every pair gives, bit for bit (before, rows drawn
+  apart were other samples: 14 % apart in error on the adaptive staircase, so every row was drawn
+  again);
+- the candidate lamps' direct irradiance (``KeptLamps``), keyed by the lamp's kind and geometry
+  (candidate_lamps.lamp_key), each lamp drawn on its own seed (lamp_seed): a solve plans its lamps
+  for its targets (the spots aimed at the painted regions, the mounting positions among the
+  unpainted candidates) and computes those not kept; a kept lamp is the number offer_lamps
+  computes for it in a cold solve, bit for bit.
+
+What still parts the warm solve from the cold one on the polygon model (its mesh is the cold
+solve's): the kept patches' decisive region (engine.extent) is the first paint's, and the rays'
+offset and the lamps' drop follow it, so the cold solve casts slightly other hemisphere rays and
+hangs its lamps slightly elsewhere (the staircase's extend: the ray-cast F 0.0024 apart at most,
+the error 0.8 %; tests/test_prepared.py: every kind of stroke within 1 %). On the adaptive model
+the kept mesh is not the one the cold solve makes for the new paint either.
 
 Every solve says in its report (``prepared``, ``account``) what it kept and what it computed.
 The rest (the lamps' plan, the inverse problem and its factorisation, the selection, the
 certificate, the direct light, the lamp refinement and the curve) is the cold solve's own code
-(pipeline.jobs.run_solve), given the kept patches, form factors, kernel rows and lamps' irradiance. A change
+(pipeline.jobs.run_solve), given the kept patches, form factors, kernel entries and lamps' irradiance. A change
 the fingerprint sees (an object moved, a material, a forbidden face, an option) is not followed:
 ``stale_reason`` names it, and the caller prepares again.
 
@@ -64,11 +74,10 @@ import numpy as np
 
 from ..engine.blas_threads import one_blas_thread
 from ..engine.bounces import ColumnProducts
-from ..engine.candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius, plan_lamps
+from ..engine.candidate_lamps import lamp_key, lamps_irradiance, plan_lamps
 from ..engine.geometry import triangle_areas
 from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
 from ..engine.kernel_transfer import kernel_form_factors
-from ..engine.lamps import lamp_irradiance
 from ..engine.lights import append_lamps
 from ..engine.options import JobOptions
 from ..engine.registry import ESTIMATORS, PATCH_MODELS
@@ -133,25 +142,23 @@ def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) 
     }
 
 
-#: lamps offer_lamps computes in one call of lamp_irradiance (its seed is per batch; KeptLamps keeps it)
-LAMP_BATCH = 16
-#: KeptLamps keeps the irradiance of at most this many x max_lamps lamps (the latest plans')
+#: KeptLamps keeps the irradiance of at most this many x max_lamps lamps (the latest plans'); also
+#: the kernel rows of this many x the targets of a solve
 KEPT_PLANS = 4
 
 
 class KeptLamps:
     """The candidate lamps' direct irradiance per W on one mesh, kept between solves, keyed by the
-    lamp (its kind, position, aim, cone, size: ``digest`` of the engine.lamps.Lamp): a solve's
-    ``offer`` (engine.candidate_lamps.offer_lamps' signature, build_inverse_model's ``offer``)
-    plans the lamps for its targets as offer_lamps does and computes only the lamps not kept.
-    A lamp computed here is computed as offer_lamps computes it at its place in the plan (its
-    batch's seed, its index in the batch: the same numbers); a kept one is the number of the
-    solve that first planned it, at its place then (the same lamp, another sample of its
-    LAMP_POINTS points). Their irradiance does not depend on the paint: only the plan does (the
-    spots aimed at the painted regions)."""
+    lamp's kind and geometry (engine.candidate_lamps.lamp_key: not its name, its place in the
+    plan): a solve's ``offer`` (engine.candidate_lamps.offer_lamps' signature, build_inverse_model's
+    ``offer``) plans the lamps for its targets as offer_lamps does and computes only the lamps not
+    kept. Each lamp's numbers are drawn on its own seed (lamp_seed: the job's seed and its key), so
+    a kept lamp's irradiance is the one offer_lamps computes for it in a cold solve, bit for bit.
+    Their irradiance does not depend on the paint: only the plan does (the spots aimed at the
+    painted regions, the mounting positions among the unpainted candidates)."""
 
     def __init__(self):
-        self.columns = {}  # digest(lamp) -> (patch indices, irradiance per W there): its column of H
+        self.columns = {}  # lamp_key(lamp) -> (patch indices, irradiance per W there): its column of H
         self.reused = self.computed = 0  # of the last offer
 
     def offer(self, lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
@@ -159,21 +166,11 @@ class KeptLamps:
         self.reused = self.computed = 0
         if not lamps:
             return lights, 0
-        keys = [digest(lamp) for lamp in lamps]
+        keys = [lamp_key(lamp) for lamp in lamps]
         H = np.zeros((patches.n_patches, len(lamps)))
         todo = np.array([k not in self.columns for k in keys])
-        radius = patch_radius(patches) if todo.any() else None
-        for i in range(0, len(lamps), LAMP_BATCH):  # offer_lamps' batches and seeds; a kept lamp lights nothing
-            batch = lamps[i:i + LAMP_BATCH]
-            new = np.flatnonzero(todo[i:i + LAMP_BATCH])
-            if len(new):
-                reach = [r if todo[i + j] else np.zeros(0, dtype=np.int64)
-                         for j, r in enumerate(lamp_reach(patches, batch, radius))]
-                H[:, i + new] = lamp_irradiance(patches, batch, sampler=sampler,
-                                                seed=int(seed) + 1_000_003 * (i // LAMP_BATCH + 1),
-                                                points_per_patch=LAMP_POINTS, only=reach)[:, new, 0]
-            if progress is not None:
-                progress(min(i + LAMP_BATCH, len(lamps)) / len(lamps))
+        new = np.flatnonzero(todo)
+        H[:, new] = lamps_irradiance(patches, [lamps[i] for i in new], sampler, seed, progress)
         for j, k in enumerate(keys):
             if todo[j]:
                 at = np.flatnonzero(H[:, j])
@@ -216,9 +213,7 @@ class PreparedScene:
     paint: tuple = None  # (target, target_radiosity) of the faces at the last solve
     form_factors: object = None  # formfactors.FormFactors of ``_cast_for``, ray-cast only (no kernel pairs)
     _cast_for: object = None  # the PatchSet the form factors were cast for
-    kernel_sources: np.ndarray = None  # the candidate patches the kernel rows are for
-    kernel_targets: np.ndarray = None  # the target patches of the kernel rows' draw
-    kernel_rows: dict = field(default_factory=dict)  # target patch -> (n_sources,) kernel form factors
+    kernel_rows: dict = field(default_factory=dict)  # target patch -> (P,) kernel form factors (NaN: not drawn)
     seconds: dict = field(default_factory=dict)  # "rays": s of the last cast, "kernel rows": of the last solve
     solves: int = 0  # solves made
     warm: int = 0  # ... of which from the kept state
@@ -303,14 +298,14 @@ class PreparedScene:
         with kernel pairs, the kernel's rows of the targets (the new ones computed, the others
         kept), applied as compute_form_factors applies them."""
         cast = 0.0
-        self.drawn = {"rays cast": 0, "kernel rows drawn": 0, "kernel rows kept": 0}
+        self.drawn = {"rays cast": 0}
         if patches is not self._cast_for:  # a new mesh (a first solve, a refinement pass): cast its rays
             rays = (int(options.rays_per_patch) if options.rays_per_patch is not None
                     else auto_rays_per_patch(patches.n_patches, kernel=pairs is not None))
             t0 = time.perf_counter()
             self.form_factors = compute_form_factors(patches, rays_per_patch=rays, seed=options.seed,
                                                      threads=options.threads, progress=progress, cancel=cancel)
-            self._cast_for, self.kernel_sources, self.kernel_targets, self.kernel_rows = patches, None, None, {}
+            self._cast_for, self.kernel_rows = patches, {}
             self.lamps = KeptLamps()  # (another mesh: another irradiance)
             self.seconds["rays"] = cast = time.perf_counter() - t0
             self.drawn["rays cast"] = int(rays) * patches.n_patches
@@ -319,25 +314,47 @@ class PreparedScene:
             return replace(F, matrix=F.matrix.copy(), seconds=cast)
         t0 = time.perf_counter()
         rec, src = (np.asarray(p, dtype=np.int64) for p in pairs)
-        if self.kernel_sources is None or not np.array_equal(src, self.kernel_sources) \
-                or not np.array_equal(rec, self.kernel_targets):
-            # every target's row in one draw, as the cold solve draws them (rows drawn apart, for a
-            # stroke's new targets alone, are other samples: on the adaptive staircase that moved
-            # the warm solve's error 14 % from the cold one's, 0.138 against 0.121, drawn on the
-            # first draw's seed, and 7 % again, 0.161 against 0.150, on a seed of their own; issue 37)
-            K = kernel_form_factors(patches, rec, src, seed=options.seed, threads=options.threads, cancel=cancel,
-                                    sampler=F.sampler) if len(rec) else np.zeros((0, len(src)))
-            self.kernel_sources, self.kernel_targets = src, rec
-            self.kernel_rows = {int(r): K[i] for i, r in enumerate(rec)}
-            self.drawn["kernel rows drawn"] = len(rec)
-        else:
-            self.drawn["kernel rows kept"] = len(rec)
-        K = np.stack([self.kernel_rows[int(r)] for r in rec]) if len(rec) else np.zeros((0, len(src)))
+        self._draw_pairs(patches, rec, src, options, F.sampler, cancel)
+        K = np.stack([self.kernel_rows[int(r)][src] for r in rec]) if len(rec) else np.zeros((0, len(src)))
         # the pairs replace F's entries before the sending scale of partly buried patches, as
         # compute_form_factors applies them
         M = pairs_then_sending_scale(F.matrix, patches.area, F.send, rec, src, K, unscale=True)
         self.seconds["kernel rows"] = time.perf_counter() - t0
         return replace(F, matrix=M, kernel_pairs=int(K.size), seconds=cast + self.seconds["kernel rows"])
+
+    def _draw_pairs(self, patches, rec, src, options, sampler, cancel):
+        """Fill ``kernel_rows`` for every (target ``rec``, source ``src``) pair not drawn yet: the new
+        targets' rows over every source, the kept rows' new sources (an erased patch is a candidate
+        again). Each pair samples on a stream of its own (kernel_transfer: keyed by the seed and the
+        two patches), so these are the entries the cold solve's one draw of every pair gives."""
+        P = patches.n_patches
+        have = np.array([int(r) in self.kernel_rows for r in rec], dtype=bool)
+        new, old = rec[~have], rec[have]
+        draw = dict(seed=options.seed, threads=options.threads, cancel=cancel, sampler=sampler)
+        pairs = 0
+        if len(new) and len(src):
+            K = kernel_form_factors(patches, new, src, **draw)
+            for i, r in enumerate(new):
+                row = np.full(P, np.nan)
+                row[src] = K[i]
+                self.kernel_rows[int(r)] = row
+            pairs += K.size
+        elif len(new):
+            for r in new:
+                self.kernel_rows[int(r)] = np.full(P, np.nan)
+        if len(old) and len(src):
+            missing = np.isnan(np.stack([self.kernel_rows[int(r)][src] for r in old])).any(axis=0)
+            if missing.any():
+                K = kernel_form_factors(patches, old, src[missing], **draw)
+                for i, r in enumerate(old):
+                    self.kernel_rows[int(r)][src[missing]] = K[i]
+                pairs += K.size
+        self.drawn.update({"kernel rows drawn": len(new), "kernel rows kept": len(old), "kernel pairs drawn": pairs,
+                           "kernel pairs kept": len(rec) * len(src) - pairs})
+        for r in rec.tolist():  # (re-inserted: the rows of the latest KEPT_PLANS solves' targets are kept)
+            self.kernel_rows[r] = self.kernel_rows.pop(r)
+        for r in list(self.kernel_rows)[:max(0, len(self.kernel_rows) - KEPT_PLANS * max(len(rec), 1))]:
+            del self.kernel_rows[r]
 
     def offer(self, *args, **kw):
         """build_inverse_model's ``offer``: the candidate lamps, their irradiance kept (KeptLamps)."""
@@ -345,14 +362,17 @@ class PreparedScene:
 
     def account(self) -> dict:
         """What the last solve took from the prepared state and what it made anew (its report's
-        ``prepared``): the rays and kernel rows kept or cast, the candidate lamps' irradiance kept or
-        computed; the rest is computed anew on every solve."""
+        ``prepared``): the rays kept or cast, the kernel's target rows and (target, source) pairs kept
+        or drawn, the candidate lamps' irradiance kept or computed; the rest is computed anew on
+        every solve."""
         return {"from_prepared_state": self.reason is None, "reason": self.reason,
                 "kept": {"form factors (hemisphere rays)": self.reason is None and not self.drawn.get("rays cast"),
                          "kernel rows": self.drawn.get("kernel rows kept", 0),
+                         "kernel pairs": self.drawn.get("kernel pairs kept", 0),
                          "candidate lamps' irradiance": self.lamps.reused},
                 "computed": {"rays cast": self.drawn.get("rays cast", 0),
                              "kernel rows": self.drawn.get("kernel rows drawn", 0),
+                             "kernel pairs": self.drawn.get("kernel pairs drawn", 0),
                              "candidate lamps' irradiance": self.lamps.computed},
                 "computed anew": ["the candidate lamps' plan (aimed at the targets)", "the inverse problem and its "
                                   "factorisation", "the reduction", "the direct light", "the lamp refinement"]}
