@@ -38,7 +38,7 @@ import scipy.optimize as sopt
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..geometry import group_sum, triangle_cross, unit
+from ..geometry import group_sum, unit
 from ..lights import LightSet, kind_code
 from ..registry import PATCH_MODELS, Param
 from ..extent import face_sizes, triangle_measures
