@@ -128,7 +128,7 @@ def triangle_measures(faces) -> TriangleMeasures:
 
 
 def forget_measures(faces):
-    """Drop the FaceSet's cached ``triangle_measures`` (their memory: about 48 bytes a triangle)."""
+    """Drop the FaceSet's cached ``triangle_measures`` (their memory: 40 bytes a triangle, 64 a face)."""
     faces.__dict__.pop("_triangle_measures", None)
 
 
