@@ -2,7 +2,8 @@
 less"), stage by stage, against another checkout in the same run.
 
 Each (checkout, round) runs in a fresh process: build ``artist_scenes.living_room(DETAIL)`` (default
-5: 1,013,718 triangles), export, then ``jobs.run_solve`` with the add-on's options (adaptive model,
+5: 1,013,718 triangles; this checkout's tests/artist_scenes for every checkout: the same scene, its
+sphere's faces in a fixed order), export, then ``jobs.run_solve`` with the add-on's options (adaptive model,
 candidate spots on: the defaults); it measures the job's wall time (export to the end of the
 solve), the meshing (``mesh_for_job``, before the solve: the report's meshing is 0 when it is given
 the patches), the report's per-stage times (``timings_s``), the rest of the job ("other": in no
@@ -27,7 +28,7 @@ OUT = os.path.join(ROOT, "benchmarks", "results", "bench_cold_1m.json")
 
 CHILD = r'''
 import json, os, sys, time
-sys.path.insert(0, ROOT); sys.path.insert(0, os.path.join(ROOT, "tests"))
+sys.path.insert(0, ROOT); sys.path.insert(0, SCENES)
 import bpy
 import artist_scenes
 from relight_addon.blender import export
@@ -75,7 +76,7 @@ print("RESULT " + json.dumps({"seconds": seconds, "cpu_seconds": cpu, "export": 
 
 
 def run(root, detail, profile=False):
-    code = f"ROOT = {root!r}\n" + CHILD
+    code = f"ROOT = {root!r}\nSCENES = {os.path.join(ROOT, 'tests')!r}\n" + CHILD
     p = subprocess.run([os.path.join(ROOT, ".venv", "bin", "python"), "-c", code, str(detail), "1" if profile else "0"],
                        capture_output=True, text=True, cwd=root, timeout=3600)
     line = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]

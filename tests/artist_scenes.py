@@ -45,6 +45,30 @@ def _mesh_object(name, build):
     return ob
 
 
+def _uv_sphere(name, radius, location):
+    """A UV sphere of 64 segments and 32 rings (primitive_uv_sphere_add's vertices), its faces in
+    a fixed order: Blender 5.0's operator (and bmesh.ops.create_uvsphere) gives its polygons in a
+    different order in each process, which moved the adaptive model's clusters and the answer
+    between runs. Each polygon starts at its lowest vertex (its orientation kept), the polygons sorted."""
+    bm = bmesh.new()
+    bmesh.ops.create_uvsphere(bm, u_segments=64, v_segments=32, radius=radius)
+    bm.verts.index_update()
+    verts = [tuple(v.co) for v in bm.verts]
+    polys = []
+    for f in bm.faces:
+        idx = [v.index for v in f.verts]
+        k = idx.index(min(idx))
+        polys.append(tuple(idx[k:] + idx[:k]))
+    bm.free()
+    me = bpy.data.meshes.new(name)
+    me.from_pydata(verts, [], sorted(polys))
+    me.update()
+    ob = bpy.data.objects.new(name, me)
+    ob.location = location
+    bpy.context.scene.collection.objects.link(ob)
+    return ob
+
+
 def paint(ob, faces, rgb):
     """Paint target colour (radiance) ``rgb`` on polygons ``faces`` of ``ob`` (relight_target, alpha 1)."""
     me = ob.data
@@ -124,8 +148,7 @@ def living_room(detail=2, target=(0.35, 0.33, 0.3)):
     sub.levels = sub.render_levels = detail
     suz.data.materials.append(principled("Clay", (0.7, 0.6, 0.5)))
     obs["Suzanne"] = suz
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=64, ring_count=32, radius=0.3, location=(-1.6, 1.2, 0.3))
-    obs["Sphere"] = bpy.context.active_object
+    obs["Sphere"] = _uv_sphere("Sphere", 0.3, (-1.6, 1.2, 0.3))
     obs["Sphere"].data.materials.append(principled("Ceramic", (0.9, 0.9, 0.9)))
     bpy.ops.mesh.primitive_torus_add(location=(1.8, 1.3, 0.15), major_radius=0.35, minor_radius=0.12)
     obs["Torus"] = bpy.context.active_object

@@ -53,7 +53,7 @@ from .exported_materials import material_warnings, not_modelled
 from .lamps import export_lamps, hidden_warning
 from .layers import (TARGET_ATTRIBUTE, base_attributes, illuminance_targets, no_lights, scene_settings,
                      work_plane)
-from .meshes import Builder, evaluated_mesh, mesh_fingerprint, mesh_geometry, no_area
+from .meshes import Builder, evaluated_mesh, geometry_fingerprint, mesh_fingerprint, mesh_geometry, no_area
 from .visibility import (Evaluable, exported_objects, hidden_in_viewport, mesh_instances, owner_of,
                          render_visible_objects, rendered)
 from .world import world_light
@@ -143,9 +143,12 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     notes = {"target": [], "candidates": [], "emitters": []}
     warnings = _scene_warnings(context, objs, renderable, notes)
     b = Builder()
-    with Evaluable(context, objs):  # (disabled in the viewports: evaluated as a render would)
-        counts, unmapped = _add_objects(b, context, objs, settings["target_scale"], notes, warnings)
+    with Evaluable(context, objs) as shown:  # (disabled in the viewports: evaluated as a render would)
+        counts, unmapped, fingerprints = _add_objects(b, context, objs, settings["target_scale"], notes, warnings)
         n_inst = _add_instances(b, context, renderable)
+    for ob in objs:  # those shown only for the export: fingerprinted as the viewport evaluates them
+        if ob in shown.changed or any(c in shown.changed for c in ob.users_collection):
+            fingerprints[ob.name] = mesh_fingerprint(ob)
     names = b.names
     if not names:
         raise SceneError("the scene has no visible mesh objects"
@@ -167,7 +170,6 @@ def export_scene(context=None, target_scale=None) -> ExportedScene:
     except ValueError as exc:
         raise SceneError(str(exc)) from None
     faces.warnings.extend(w for w in world_notes if w not in faces.warnings)
-    fingerprints = {ob.name: mesh_fingerprint(ob) for ob in objs}
     return ExportedScene(faces, objs, counts, settings, time.perf_counter() - t0, fingerprints,
                          np.concatenate(b.f_mat), b.lobes, notes=notes, backs=backs)
 
@@ -201,8 +203,8 @@ def _scene_warnings(context, objs, renderable, notes) -> list:
 def _add_objects(b, context, objs, target_scale, notes, warnings) -> tuple:
     """Add the evaluated mesh of every object of ``objs`` to ``b`` with its base mesh's paint:
     (polygon counts of the base meshes by name, the number of faces a modifier made that map to
-    no base-mesh polygon)."""
-    counts, unmapped = {}, 0
+    no base-mesh polygon, each object's mesh fingerprint: meshes.geometry_fingerprint)."""
+    counts, unmapped, fingerprints = {}, 0, {}
     for oi, ob in enumerate(objs):
         counts[ob.name] = len(ob.data.polygons)
         b.names.append(ob.name)
@@ -211,6 +213,7 @@ def _add_objects(b, context, objs, target_scale, notes, warnings) -> tuple:
         try:
             geo = mesh_geometry(ob_eval, me, ob.name)
             M = np.array(ob_eval.matrix_world, dtype=np.float64)
+            fingerprints[ob.name] = geometry_fingerprint(ob, geo, M)
         finally:
             ob_eval.to_mesh_clear()
         if len(geo["lt"]) and no_area(geo, M):
@@ -225,7 +228,7 @@ def _add_objects(b, context, objs, target_scale, notes, warnings) -> tuple:
         safe = np.where(ok, idx, 0)
         b.add(geo, M, ob.name, oi, idx, target[safe] & ok, np.where(ok[:, None], target_b[safe], 0.0),
               np.where(ok, forbidden[safe], no_lights(ob)), np.where(ok, lux[safe], 0.0))
-    return counts, unmapped
+    return counts, unmapped, fingerprints
 
 
 def _add_instances(b, context, renderable) -> int:

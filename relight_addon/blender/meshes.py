@@ -56,7 +56,6 @@ def mesh_fingerprint(ob) -> dict:
     the evaluated mesh's world-space vertex positions (two weighted sums per axis and the
     bounding box, compared within a tolerance: a shape key or a modifier that moves vertices
     changes them)."""
-    import hashlib
 
     def loops(me):
         nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
@@ -66,13 +65,32 @@ def mesh_fingerprint(ob) -> dict:
     ob_eval = ob.evaluated_get(bpy.context.evaluated_depsgraph_get())
     me = ob_eval.to_mesh()
     try:
-        parts = loops(ob.data) + loops(me)
         nv = len(me.vertices)
-        co = foreach_array(me.vertices, "co", nv, np.float64, 3).reshape(nv, 3)
+        return _fingerprint(ob, loops(me), foreach_array(me.vertices, "co", nv, np.float64, 3).reshape(nv, 3),
+                            np.array(ob_eval.matrix_world, dtype=np.float64))
     finally:
         ob_eval.to_mesh_clear()
-    topo = hashlib.blake2b(np.concatenate(parts).astype(np.int64).tobytes(), digest_size=16)
-    M = np.array(ob_eval.matrix_world, dtype=np.float64)
+
+
+def geometry_fingerprint(ob, geo, M) -> dict:
+    """``mesh_fingerprint(ob)`` from the export's own reading of its evaluated mesh (``geo``, from
+    ``mesh_geometry``, at world matrix ``M``): the same arrays, the mesh not evaluated again."""
+    V = geo["V"]
+    counts = [len(V), len(geo["loop_vert"]), len(geo["loop_total"])]
+    return _fingerprint(ob, [counts, geo["loop_total"], geo["loop_vert"]], V.reshape(-1, 3), M)
+
+
+def _fingerprint(ob, evaluated_loops, co, M) -> dict:
+    import hashlib
+
+    def loops(me):
+        nv, nl, npoly = len(me.vertices), len(me.loops), len(me.polygons)
+        return [[nv, nl, npoly], foreach_array(me.polygons, "loop_total", npoly, np.int64),
+                foreach_array(me.loops, "vertex_index", nl, np.int64)]
+
+    nv = len(co)
+    topo = hashlib.blake2b(np.concatenate(loops(ob.data) + list(evaluated_loops)).astype(np.int64).tobytes(),
+                           digest_size=16)
     W = co @ M[:3, :3].T + M[:3, 3]
     sig = (_vertex_weights(nv).T @ W).ravel() if nv else np.zeros(6)
     box = np.concatenate([W.min(axis=0), W.max(axis=0)]) if nv else np.zeros(6)

@@ -127,7 +127,7 @@ class SidesView:
 
 
 def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, rays_per_face: int = 16,
-               seed: int = 0, box=None) -> SidesView:
+               seed: int = 0, box=None, scene=None) -> SidesView:
     """Cast ``rays_per_face`` cosine-weighted rays from each side of every face of ``chosen``
     ((F,) bool or face indices) against all the triangles (a FaceSet's arrays, as back_view):
     whether the scene lies in front of a face, behind it, or both. What a back sees counts where
@@ -136,7 +136,8 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     this lies against it (a floor on a ground plane), those rays do not count. ``box`` ((n, 2, 3):
     per chosen face the corners of a box, its island's): a back counts only the fronts it reaches
     outside it (the inside of a block standing on a floor, closed by the floor, is not the scene's),
-    and ``front_in``, ``back_in`` count what each side reaches inside it."""
+    and ``front_in``, ``back_in`` count what each side reaches inside it. ``scene``: an Embree
+    scene of exactly these triangles (engine.rays.embree_scene), built here when not given."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -147,7 +148,8 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
         z = np.zeros(0)
         return SidesView(idx, z, z, z, z, z)
     triangles = np.asarray(triangles, dtype=np.int64)
-    scene = embree_scene(vertices, triangles)
+    if scene is None:
+        scene = embree_scene(vertices, triangles)
     rng = np.random.default_rng(seed)
     out = []
     for side in (1, -1):

@@ -193,11 +193,13 @@ COVER_POINTS = np.array([(1 / 3, 1 / 3), (1 / 6, 1 / 6), (2 / 3, 1 / 6), (1 / 6,
                          (0.1, 0.45), (0.45, 0.1), (0.45, 0.45)])
 
 
-def covered_share(vertices, triangles, triangle_face, n_faces: int, among=None):
+def covered_share(vertices, triangles, triangle_face, n_faces: int, among=None, scene=None):
     """(n_faces,) the share of each face's area (a FaceSet's or FaceChunks' world-space
     ``vertices``, ``triangles``, ``triangle_face``) whose back lies against a coincident face that
     faces the other way (at COVER_POINTS of each triangle, weighted by area), among the faces
-    ``among`` ((n_faces,) bool; default all), or None when no such pair exists."""
+    ``among`` ((n_faces,) bool; default all), or None when no such pair exists. ``scene``: a
+    function returning an Embree scene of exactly these triangles (called only when some
+    triangle has a partner: the probes' rays); one is built here otherwise."""
     V = np.asarray(vertices, dtype=np.float64)
     tv = V[np.asarray(triangles, dtype=np.int64)]
     cross = triangle_cross(tv)
@@ -205,9 +207,18 @@ def covered_share(vertices, triangles, triangle_face, n_faces: int, among=None):
     tn = cross / np.where(ta > 0, 2 * ta, 1.0)[:, None]
     lo, hi = V.min(axis=0), V.max(axis=0)
     offset = RAY_OFFSET * float(np.linalg.norm(hi - lo)) + 4 * np.finfo(np.float32).eps * float(np.abs(V).max())
-    scene = embree_scene(V, triangles)
+    if scene is None:
+        def scene():
+            return embree_scene(V, triangles)
+    built = []
+
+    def trace(org, d):  # the scene's first hits, the scene built on the first rays
+        if not built:
+            built.append(scene())
+        return built[0].run(org, d)
+
     face = np.asarray(triangle_face, dtype=np.int64)
-    twins = Twins.of(tv, tn, ta, offset, scene.run, among=None if among is None else np.flatnonzero(
+    twins = Twins.of(tv, tn, ta, offset, trace, among=None if among is None else np.flatnonzero(
         np.asarray(among, dtype=bool)[face]))
     if twins is None:
         return None

@@ -54,7 +54,7 @@ from .inverse import DIRECT_SOLVE_LIMIT
 from .options import REFINE_RAY_FRACTION, STORE_ALL_UP_TO, STORE_LOG_POINTS
 from .patch_models.adaptive import CLUSTER_BELOW
 from .registry import SOLVERS
-from .extent import decisive_region, face_sizes, is_beyond, quad_cells
+from .extent import decisive_region, face_sizes, is_beyond, quad_cells, triangle_measures
 from .scene import default_max_patch_size as scene_patch_size
 
 __all__ = ["estimate_cost", "estimate_patches_cost", "format_bytes", "available_memory", "check_memory",
@@ -315,14 +315,12 @@ def estimate_patch_count(faces, options, default_max_patch_size=None,
         s[cand] = float(options.light_size or size)
     s = face_sizes(faces, s)
     V = faces.vertices
+    m = triangle_measures(faces)  # the meshing's own (shared, not measured again)
+    edge, face_edge = m.edge, m.face_edge
     with np.errstate(over="ignore", invalid="ignore"):
-        T = V[faces.triangles]
-        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
         tf = faces.triangle_face
         k = np.maximum(np.ceil(np.minimum(edge / s[tf], _MAX_COUNT)), 1.0)
         per_tri = np.bincount(tf, weights=np.minimum(k * k, _MAX_COUNT), minlength=F)
-        face_edge = np.zeros(F)
-        np.maximum.at(face_edge, tf, edge)
         count = np.where(face_edge <= s, 1.0, per_tri)
         if certain and options.patch_model == "adaptive":
             count[face_edge <= CLUSTER_BELOW * s] = 0.0

@@ -27,7 +27,7 @@ import numpy as np
 
 from .units import TINY
 
-__all__ = ["Region", "decisive_region", "far_factor", "face_sizes", "quad_cells", "is_beyond", "DIVISIONS"]
+__all__ = ["Region", "decisive_region", "TriangleMeasures", "triangle_measures", "forget_measures", "far_factor", "face_sizes", "quad_cells", "is_beyond", "DIVISIONS"]
 
 #: the automatic patch size is the region's diagonal / DIVISIONS
 DIVISIONS = 20.0
@@ -73,11 +73,67 @@ def _seeds(faces, area):
     return "faces", np.flatnonzero(area > 0)
 
 
-def _face_areas(faces):
-    from .geometry import triangle_areas
+@dataclass(frozen=True)
+class TriangleMeasures:
+    """A FaceSet's triangles measured once (``triangle_measures``): per triangle its cross product
+    (b - a) x (c - a) (T, 3), area (T,) m^2 and longest edge (T,) m; per face its area (F,) m^2,
+    longest triangle edge (F,) m (0 for a face without triangles) and box (F, 3), (F, 3) m."""
 
-    return np.bincount(faces.triangle_face, weights=triangle_areas(faces.vertices[faces.triangles]),
-                       minlength=faces.n_faces)
+    cross: np.ndarray
+    area: np.ndarray
+    edge: np.ndarray
+    face_area: np.ndarray
+    face_edge: np.ndarray
+    face_lo: np.ndarray
+    face_hi: np.ndarray
+
+
+def _per_face(op, values, tf, n, fill):
+    """Per face, ``op`` (np.minimum / np.maximum) of ``fill`` and its triangles' ``values``: by
+    segments when the triangles are in face order (an export's are), else ``op.at``; the same
+    numbers either way (a min / max is exact)."""
+    out = np.full((n,) + values.shape[1:], fill)
+    if len(tf) and np.all(tf[1:] >= tf[:-1]) and tf[0] >= 0:
+        starts = np.flatnonzero(np.concatenate([[True], tf[1:] != tf[:-1]]))
+        out[tf[starts]] = op(fill, op.reduceat(values, starts, axis=0))
+    else:
+        op.at(out, tf, values)
+    return out
+
+
+def triangle_measures(faces) -> TriangleMeasures:
+    """The triangles of ``faces`` measured (TriangleMeasures): shared by the region, the memory
+    check before meshing (engine.cost.estimate_patch_count) and the patch models' meshing; computed
+    once per FaceSet and geometry (cached on the FaceSet, as the region; ``forget_measures`` drops it)."""
+    from .geometry import triangle_cross
+
+    V, tri, tf = faces.vertices, faces.triangles, faces.triangle_face
+    with np.errstate(over="ignore", invalid="ignore"):
+        key = (id(V), id(tri), id(tf), V.shape, tri.shape, float(V.sum()))
+    cached = faces.__dict__.get("_triangle_measures")
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    T = V[tri]
+    with np.errstate(over="ignore", invalid="ignore"):
+        cr = triangle_cross(T)
+        area = 0.5 * np.linalg.norm(cr, axis=1)
+        edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
+        F = faces.n_faces
+        m = TriangleMeasures(cr, area, edge, np.bincount(tf, weights=area, minlength=F),
+                             _per_face(np.maximum, edge, tf, F, 0.0),
+                             _per_face(np.minimum, T.min(axis=1), tf, F, np.inf),
+                             _per_face(np.maximum, T.max(axis=1), tf, F, -np.inf))
+    faces.__dict__["_triangle_measures"] = (key, m)
+    return m
+
+
+def forget_measures(faces):
+    """Drop the FaceSet's cached ``triangle_measures`` (their memory: 40 bytes a triangle, 64 a face)."""
+    faces.__dict__.pop("_triangle_measures", None)
+
+
+def _face_areas(faces):
+    return triangle_measures(faces).face_area
 
 
 def decisive_region(faces, rays: int = REGION_RAYS, seed: int = 0) -> Region:
@@ -141,12 +197,8 @@ def far_factor(region: Region, lo, hi) -> np.ndarray:
 
 def face_boxes(faces):
     """(F, 3), (F, 3): each face's bounding box (m), from its triangles."""
-    T = faces.vertices[faces.triangles]
-    lo = np.full((faces.n_faces, 3), np.inf)
-    hi = np.full((faces.n_faces, 3), -np.inf)
-    np.minimum.at(lo, faces.triangle_face, T.min(axis=1))
-    np.maximum.at(hi, faces.triangle_face, T.max(axis=1))
-    return lo, hi
+    m = triangle_measures(faces)
+    return m.face_lo, m.face_hi
 
 
 def face_sizes(faces, size) -> np.ndarray:

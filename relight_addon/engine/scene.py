@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .extent import decisive_region, face_sizes, is_beyond, quad_cells
+from .extent import decisive_region, face_sizes, is_beyond, quad_cells, triangle_measures
 from .geometry import group_mean, group_sum, triangle_areas, triangle_cross, unit
 
 __all__ = [
@@ -247,12 +247,10 @@ def check_size(size, what="max patch size"):
 def face_triangles(faces: FaceSet):
     """World-space triangles (T, 3, 3), the non-degenerate ones (T,) bool, and per face its
     longest triangle edge (F,) m."""
+    m = triangle_measures(faces)
     T = faces.vertices[faces.triangles]
-    ok = triangle_areas(T) > (1e-10 * scene_scale(faces)) ** 2
-    edge = np.linalg.norm(T - np.roll(T, 1, axis=1), axis=2).max(axis=1)
-    face_edge = np.zeros(faces.n_faces)
-    np.maximum.at(face_edge, faces.triangle_face, edge)
-    return T, ok, face_edge
+    ok = m.area > (1e-10 * scene_scale(faces)) ** 2
+    return T, ok, m.face_edge
 
 
 def split_faces(faces: FaceSet, T, fids, size):

@@ -76,6 +76,7 @@ import numpy as np
 
 from .backs import back_view, sides_view
 from .coincident import covered_share
+from .rays import embree_scene
 from .rays import RAY_OFFSET
 from .units import MAX_REFLECTANCE
 
@@ -177,17 +178,18 @@ def faces_seen_from_behind(b) -> list:
     """Turn the faces of the chunks ``b`` (engine.face_chunks.FaceChunks) that the scene sees from
     behind, and give the backs that it sees from both sides faces of their own (see the module
     docstring). Returns the warnings that name what was turned or doubled, per object."""
-    cand = _candidates(b)
+    geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
+    scene = _SharedScene(geometry)  # the coincident faces' rays and the sides' rays: one Embree scene
+    cand = _candidates(b, geometry, scene)
     if cand is None:
         return []
-    geometry = (np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), np.concatenate(b.f_obj))
     # 1. each island from ISLAND_FACES of its faces (by area): the inside-out ones, and those
     # whose backs see the scene at all (their faces are cast one by one)
     _sample_islands(cand)
     inv = cand.inv
     inner = np.zeros(cand.n_isl, dtype=bool)  # the islands judged by their own inside (the rooms)
     inner[inv] = cand.enclosing
-    mean = _island_means(cand, geometry)
+    mean = _island_means(cand, geometry, scene)
     inside_out = (np.where(inner, mean[3], mean[0]) <= SIDE_BLIND) & ((mean[2] >= ENCLOSES) | inner)
     turned, doubled, painted_away = {}, {}, {}
     k = 0
@@ -198,13 +200,14 @@ def faces_seen_from_behind(b) -> list:
     opened_all = np.concatenate([op for *_, op in cand.where])
     if inside_out.any():
         geometry = (np.concatenate(b.verts), np.concatenate(b.tris), geometry[2], geometry[3])
+        scene = _SharedScene(geometry)  # faces turned: their triangles' corners in another order
         if (opened_all & ~inside_out[inv]).any():
-            mean = _island_means(cand, geometry)
+            mean = _island_means(cand, geometry, scene)
     # (and the faces of a room partly turned by hand, some facing in, some out: what each sees in its box)
     partly = ~inside_out[inv] & cand.enclosing & (mean[4][inv] >= ISLAND_SEES)
     fine = np.flatnonzero(~inside_out[inv] & opened_all & (mean[1][inv] >= ISLAND_SEES) | partly)
     if len(fine):
-        _judge_faces(b, cand, geometry, mean, fine, partly, (turned, doubled, painted_away))
+        _judge_faces(b, cand, geometry, scene, mean, fine, partly, (turned, doubled, painted_away))
     return _turned_warnings(turned, doubled, cand.muddled, painted_away)
 
 
@@ -225,7 +228,20 @@ def _object_boxes(b) -> tuple:
     return centres, obj_ids, obj_lo, obj_hi, obj_painted
 
 
-def _candidates(b):
+class _SharedScene:
+    """An Embree scene (engine.rays.embree_scene) of a geometry's triangles, built when first
+    asked for and then shared (``scene()``): the export's checks cast their rays into one scene."""
+
+    def __init__(self, geometry):
+        self.geometry, self.built = geometry, None
+
+    def __call__(self):
+        if self.built is None:
+            self.built = embree_scene(self.geometry[0], self.geometry[1])
+        return self.built
+
+
+def _candidates(b, geometry, scene):
     """The faces that may be seen from behind: the still faces (emitting none, front or back) of
     the open islands, of the closed islands whose box holds another object's centre and of those
     with faces turned against their neighbours; None when there are none."""
@@ -242,8 +258,7 @@ def _candidates(b):
         opened[nf0:nf0 + len(b.e[ci])] = islands[id(geo)][0]
     # faces of open islands back to back (a thin wall's two sides; not a card lying on a solid,
     # which is turned as before)
-    share = covered_share(np.concatenate(b.verts), np.concatenate(b.tris), np.concatenate(b.tri_face), b.nf,
-                          among=opened)
+    share = covered_share(*geometry[:3], b.nf, among=opened, scene=scene)
     backed = np.zeros(b.nf, dtype=bool) if share is None else share >= BACKED
     for ci in chunks:
         _chunk_candidates(b, ci, islands[id(b.geos[ci][0])], objects, cand, backed)
@@ -322,11 +337,12 @@ def _sample_islands(cand) -> None:
     cand.inv, cand.n_isl, cand.sample = inv, len(keys), np.sort(np.concatenate(sample))
 
 
-def _island_means(cand, geometry) -> list:
+def _island_means(cand, geometry, scene) -> list:
     """Per island, the mean over its sampled faces of sides_view's front, back, back_other,
     front_in and back_in."""
     sample, inv, n_isl = cand.sample, cand.inv, cand.n_isl
-    coarse = sides_view(*geometry, cand.chosen[sample], cand.gaps[sample], SIDE_RAYS, box=cand.boxes[sample])
+    coarse = sides_view(*geometry, cand.chosen[sample], cand.gaps[sample], SIDE_RAYS, box=cand.boxes[sample],
+                        scene=scene())
     return [np.bincount(inv[sample], weights=x, minlength=n_isl) / np.bincount(inv[sample], minlength=n_isl)
             for x in (coarse.front, coarse.back, coarse.back_other, coarse.front_in, coarse.back_in)]
 
@@ -341,13 +357,13 @@ def _apply(b, mask, count, ci, sel, act) -> None:
         count[name] = count.get(name, 0) + int(mask.sum())
 
 
-def _judge_faces(b, cand, geometry, mean, fine, partly, counts) -> None:
+def _judge_faces(b, cand, geometry, scene, mean, fine, partly, counts) -> None:
     """Cast rays from the faces ``fine`` (positions among the candidates) one by one and turn,
     double or name them (``counts``: turned, doubled, painted away, per object)."""
     turned, doubled, painted_away = counts
     inv, faces_all = cand.inv, cand.chosen
     rays = int(np.clip(SIDE_RAY_BUDGET // (2 * len(fine)), 4, SIDE_RAYS))
-    view = sides_view(*geometry, faces_all[fine], cand.gaps[fine], rays, seed=1, box=cand.boxes[fine])
+    view = sides_view(*geometry, faces_all[fine], cand.gaps[fine], rays, seed=1, box=cand.boxes[fine], scene=scene())
     V = geometry[0]
     offset = BACK_OFFSET * max(float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))), 1e-9)
     front_all, back_all, cast_all = np.zeros(len(faces_all)), np.zeros(len(faces_all)), np.zeros(len(faces_all), bool)

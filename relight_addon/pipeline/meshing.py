@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from ..engine.candidate_lamps import lamp_bound
 from ..engine.cost import check_memory, estimate_cost, estimate_patch_count, estimate_patches_cost
+from ..engine.extent import forget_measures
 from ..engine.formfactors import auto_rays_per_patch
 from ..engine.lights import candidate_mask
 from ..engine.options import JobOptions
@@ -24,9 +25,13 @@ def patch_model(options: JobOptions, default_max_patch_size=None):
 
 def mesh_for_job(faces: FaceSet, options: JobOptions, default_max_patch_size=None, mode="inverse") -> PatchSet:
     """The faces meshed by the job's patch model, after checking (from the faces alone) that the
-    patches would fit in this machine's memory."""
-    check_before_meshing(faces, options, default_max_patch_size, mode)
-    return patch_model(options, default_max_patch_size).mesh(faces)
+    patches would fit in this machine's memory. The check and the mesh share one measure of the
+    faces' triangles (engine.extent.triangle_measures), dropped once the patches are made."""
+    try:
+        check_before_meshing(faces, options, default_max_patch_size, mode)
+        return patch_model(options, default_max_patch_size).mesh(faces)
+    finally:
+        forget_measures(faces)
 
 
 def uses_kernel_pairs(options: JobOptions, mode: str = "inverse") -> bool:

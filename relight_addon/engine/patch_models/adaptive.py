@@ -38,10 +38,10 @@ import scipy.optimize as sopt
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from ..geometry import group_sum, triangle_cross, unit
+from ..geometry import group_sum, unit
 from ..lights import LightSet, kind_code
 from ..registry import PATCH_MODELS, Param
-from ..extent import face_sizes
+from ..extent import face_sizes, triangle_measures
 from ..scene import SceneError, build_patches, check_size, default_max_patch_size, face_triangles, split_faces
 from ..units import TINY
 
@@ -146,9 +146,8 @@ class AdaptiveModel:
         small = (face_edge <= below) & ~emit
         whole = (face_edge <= size) & ~small  # about its size: a patch of its own
         # per face: area-weighted normal and centroid
-        cr = triangle_cross(T)
-        ta = 0.5 * np.linalg.norm(cr, axis=1)
-        fa = group_sum(tf, ta, faces.n_faces)
+        m = triangle_measures(faces)  # (the memory check's and the region's, not measured again)
+        cr, ta, fa = m.cross, m.area, m.face_area
         normal = unit(group_sum(tf, cr, faces.n_faces))
         centroid = group_sum(tf, T.mean(axis=1), faces.n_faces, ta) / np.where(fa > 0, fa, 1.0)[:, None]
         lo = faces.vertices.min(axis=0)
