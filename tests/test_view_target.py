@@ -297,3 +297,69 @@ def test_matte_radiance_is_interpolated_across_patches(matte):
     assert big.sum() >= 10
     assert np.median(np.abs(mean[big] / n[big] / (B[big, 0] / np.pi) - 1)) < 0.02
     assert np.all(t.values >= 0) and t.matrix.shape[0] < 0.3 * len(t.hits.pixel)
+
+
+def _cell_rectangles(patches, sampler, cells):
+    """(len(cells), 4) the axis-aligned x, y extents of ceiling patches ``cells`` (x0, x1, y0, y1),
+    checked to be the patches themselves (their area)."""
+    out = []
+    for k in cells:
+        v = sampler.tv[sampler.tri_patch == k].reshape(-1, 3)
+        x0, y0 = v[:, :2].min(axis=0)
+        x1, y1 = v[:, :2].max(axis=0)
+        assert abs((x1 - x0) * (y1 - y0) - patches.area[k]) < 1e-9 * max(patches.area[k], 1.0)
+        out.append((x0, x1, y0, y1))
+    return np.array(out)
+
+
+def test_the_solved_lights_direct_light_on_the_pixels_patches_is_the_kernels():
+    """A view target alone (the far wall's pixels, no painted face): the direct light of the solved
+    ceiling lights on the wall patches the pixels see, F's gather plus the kernel's correction
+    (pipeline.stages.direct_stage), against its closed form (Howell B-2 by superposition, per
+    ceiling cell, averaged over 10 x 10 points of each patch; the box is empty: nothing occludes).
+    The direct stage once skipped the view rows' first patches (taken for the kernel's receivers,
+    which are the painted patches), leaving them the rays' gather of small cells: +-10 % from patch
+    to patch on the wall, where Cycles is smooth (issue 40's sawtooth)."""
+    from relight_addon.engine.options import JobOptions
+    from relight_addon.pipeline.jobs import run_solve
+
+    faces = polygon_faceset(cf.box_polygons(SIZE), reflectance=0.6)
+    faces.material_lobes = [[MATTE["lambert"]]]
+    faces.face_material = np.zeros(6, dtype=np.int64)
+    faces.forbidden[:] = True
+    faces.forbidden[1] = False  # (lights on the ceiling only)
+    cam = camera(96, 54, origin=(2.0, 0.3, 1.4), target=(2.0, 3.0, 1.0), fov=1.2)
+    rad = np.full((cam.height, cam.width, 3), 0.05)
+    rad[:, : cam.width // 2] = 0.03  # (the west half darker: the lights are not one uniform ceiling)
+    faces.view_target = ViewSpec(cam, rad, np.ones((cam.height, cam.width), dtype=bool))
+    out = run_solve(faces, JobOptions(max_patch_size=0.5, seed=2).validate())
+    patches, prob = out.patches, out.problem
+    strength = out.stored.exitance[out.final_index]
+    e = prob.patch_exitance(strength)[:, 0]
+    assert out.model.direct is not None and out.model.direct["lights"] > 0
+    M = prob.F.matrix if hasattr(prob.F, "matrix") else prob.F
+    H = np.asarray(M @ e).ravel()
+    if prob.direct_correction is not None:
+        H = H + np.asarray(prob.direct_correction @ strength[:, 0]).ravel()
+    sampler = SceneSampler(patches)
+    view = next(t for t in prob.target_rows.targets if t.kind == "view")
+    wall = np.unique(view.hits.patch)
+    wall = wall[patches.center[wall, 1] > SIZE[1] - 1e-6]  # (the far wall's, facing -y)
+    cells = np.flatnonzero(e > 0)
+    rect = _cell_rectangles(patches, sampler, cells)
+    g = (np.arange(10) + 0.5) / 10
+    exact = np.zeros(len(wall))
+    for n, i in enumerate(wall):
+        v = sampler.tv[sampler.tri_patch == i].reshape(-1, 3)
+        xs = v[:, 0].min() + g * np.ptp(v[:, 0])
+        zs = v[:, 2].min() + g * np.ptp(v[:, 2])
+        for (x0, x1, y0, y1), ek in zip(rect, e[cells]):
+            f = [cf.point_to_perpendicular_rectangle(x0 - px, x1 - px, SIZE[1] - y1, SIZE[1] - y0, SIZE[2] - pz)
+                 for px in xs for pz in zs]
+            exact[n] += ek * np.mean(f)
+    lit = exact > 0.05 * exact.max()
+    rel = H[wall][lit] / exact[lit] - 1
+    print(f"{lit.sum()} wall patches, {len(cells)} emitting cells: direct light against the closed form mean "
+          f"{np.mean(np.abs(rel)):.4f}, max {np.max(np.abs(rel)):.4f}, signed {np.mean(rel):+.4f}")
+    assert lit.sum() >= 20
+    assert np.mean(np.abs(rel)) < 0.02 and np.max(np.abs(rel)) < 0.06

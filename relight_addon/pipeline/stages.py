@@ -140,7 +140,10 @@ def direct_stage(model: Model, red: ReductionResult, options: JobOptions, cancel
                                                               "seconds": 0.0}), red
     t0 = time.perf_counter()
     ff = model.form_factors
-    skip = problem.targets if uses_kernel_pairs(options) else None
+    # (the receivers whose F entries with the lights are kernel estimates already: the painted
+    # patches, build_inverse_model's kernel pairs; not the rows' first patches, which for a view
+    # target are the pixels' patches, left with the rays' noise)
+    skip = np.flatnonzero(patches.target) if uses_kernel_pairs(options) else None
     dH = lights_direct_correction(patches, problem.F, todo, model.lights.members, getattr(ff, "send", None), skip,
                                   seed=options.seed, sampler=getattr(ff, "sampler", None), cancel=cancel)
     problem = _own_transfer(problem)
