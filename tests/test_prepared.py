@@ -55,14 +55,20 @@ def _counting(monkeypatch):
     return rows
 
 
+def _prepared_staircase(options):
+    """The shipped staircase opened and exported, ``options`` validated, and its PreparedScene (nothing
+    solved yet): (the export, the options, the scene's default patch size, the state)."""
+    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
+    exp = export.export_scene()
+    options = options.validate()
+    size = exp.settings.get("max_patch_size")
+    return exp, options, size, prepared.PreparedScene.prepare(exp.faces, options, size)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("model", ["polygon", "adaptive"])
 def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeypatch, model):
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**{**OPTIONS, "patch_model": model}).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(**{**OPTIONS, "patch_model": model}))
     assert state.stale_reason(exp.faces, options, size) is None
     first = state.solve(exp.faces)  # nothing kept yet: from scratch, through the state
     assert state.reason == "nothing is kept yet" and state.patches is first.patches
@@ -143,11 +149,7 @@ def test_a_stroke_is_re_solved_live_from_the_prepared_model(monkeypatch):
     worse than a cold solve's, and changes nothing kept."""
     from relight_addon.engine import inverse
 
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**OPTIONS).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
     assert state.live(exp.faces) is None and state.reason == "nothing is solved yet"
     first = state.solve(exp.faces)
     problem = first.model.problem  # with the kernel's direct light and the refined lamps added
@@ -242,11 +244,7 @@ def test_every_kind_of_stroke_is_answered_live_as_well_as_a_cold_solve():
     """Live's answer to each kind of stroke (extend, a new spot, erase, a lux fill), from the
     prepared state (its quick answer, then its second, PreparedScene.refine_live: the lamps refined
     for the stroke's targets, kept when better), within 5 % of a cold solve of the same paint."""
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**OPTIONS).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
     state.solve(exp.faces)
     state.prepare_live(exp.faces)
     kept = (state.model, state.patches)
@@ -275,11 +273,7 @@ def test_the_button_after_each_kind_of_stroke_gives_the_cold_solve_reusing_the_s
     hemisphere rays' offset and the lamps' drop are slightly other than the cold solve's), having
     cast no hemisphere ray, drawn only the kernel pairs it did not have and computed only the
     lamps it did not have; its report says what it kept."""
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**OPTIONS).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
     state.solve(exp.faces)
     lamps_kept = 0
     for kind, faces in _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool)):
@@ -357,11 +351,7 @@ def _full(problem, point):
 
 
 def test_what_the_prepared_state_cannot_follow_is_named():
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(**OPTIONS).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
     faces = exp.faces
     moved = replace(faces, vertices=faces.vertices + np.array([0.0, 0.0, 0.01]))
     assert state.stale_reason(moved, options, size) == "the geometry changed since it was prepared"
@@ -414,11 +404,7 @@ def test_paint_on_clustered_faces_maps_onto_the_kept_clusters():
     be mapped (a patch reads its first face's) and is named."""
     from relight_addon.engine.geometry import triangle_areas
 
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(seed=3).validate()  # the default patch model: adaptive
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(seed=3))  # the default patch model: adaptive
     state.solve(exp.faces)
     faces, ids = _clustered_stroke(exp.faces, state.patches)
     assert state.unmappable(faces) is None
@@ -456,11 +442,7 @@ def test_paint_on_clustered_faces_is_solved_from_the_prepared_state_as_well_as_c
     paint mapped onto the kept clusters, no ray cast) against a cold solve of the same paint (its
     mesh meshes them at the patch size): the painted-face error within 5 % (issue 37's acceptance;
     here 0.0784 against 0.0761, 1.03 x; 24 faces painted: 1.11 x, docs/benchmarks.md)."""
-    blend_files.open_blend(os.path.join(SAMPLES, "staircase_targets.blend"))
-    exp = export.export_scene()
-    options = JobOptions(seed=3).validate()
-    size = exp.settings.get("max_patch_size")
-    state = prepared.PreparedScene.prepare(exp.faces, options, size)
+    exp, options, size, state = _prepared_staircase(JobOptions(seed=3))
     state.solve(exp.faces)
     faces, _ = _clustered_stroke(exp.faces, state.patches)
     warm = state.solve(faces)

@@ -143,13 +143,8 @@ def _keep_earlier(props):
     return f"; the earlier view target {old.name!r} stays in the file"
 
 
-class RELIGHT_OT_new_view_target(bpy.types.Operator):
-    """Make an image of the camera's view to paint the light it should see: colour = radiance (scene
-    linear, the render's units), painted pixels are targets, unpainted (alpha 0) pixels are free.
-    Opens it in an Image Editor in Paint mode"""
-    bl_idname = "relight.new_view_target"
-    bl_label = "New View Target"
-    bl_options = {"REGISTER", "UNDO"}
+class _CameraView:
+    """An operator on the scene camera's view: greyed out, with the reason, without a scene camera."""
 
     @classmethod
     def poll(cls, context):
@@ -157,6 +152,15 @@ class RELIGHT_OT_new_view_target(bpy.types.Operator):
             cls.poll_message_set("Set a scene camera (Scene > Camera): a view target is its image")
             return False
         return True
+
+
+class RELIGHT_OT_new_view_target(_CameraView, bpy.types.Operator):
+    """Make an image of the camera's view to paint the light it should see: colour = radiance (scene
+    linear, the render's units), painted pixels are targets, unpainted (alpha 0) pixels are free.
+    Opens it in an Image Editor in Paint mode"""
+    bl_idname = "relight.new_view_target"
+    bl_label = "New View Target"
+    bl_options = {"REGISTER", "UNDO"}
 
     def execute(self, context):
         scene = context.scene
@@ -219,7 +223,7 @@ def reference_pixels(scene, path, exposure=0.0, mask=None, side=WORKING_SIDE) ->
     return spec, out
 
 
-class RELIGHT_OT_load_view_reference(bpy.types.Operator):
+class RELIGHT_OT_load_view_reference(_CameraView, bpy.types.Operator):
     """Load a picture (OpenEXR, linear radiance, or PNG through the scene's view transform) as the light
     the camera should see at every pixel, scaled by an exposure; an optional mask frees pixels
     (alpha or value 0). It becomes a new view-target image (an earlier one stays in the file)"""
@@ -234,13 +238,6 @@ class RELIGHT_OT_load_view_reference(bpy.types.Operator):
     mask: StringProperty(name="Mask", subtype="FILE_PATH", default="", options={"SKIP_SAVE"},
                          description="Optional image of the picture's aspect: its alpha (or its value, without "
                                      "alpha) 0 frees a pixel, 1 makes it a target")
-
-    @classmethod
-    def poll(cls, context):
-        if context.scene.camera is None:
-            cls.poll_message_set("Set a scene camera (Scene > Camera): a view target is its image")
-            return False
-        return True
 
     def invoke(self, context, event):
         context.window_manager.fileselect_add(self)
