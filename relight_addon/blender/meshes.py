@@ -173,6 +173,8 @@ def no_area(geo, M) -> bool:
     # a triangle's world area is at least s_min s_mid (the matrix's two smallest singular values)
     # times its own: far above the 1e-12 below, every triangle need not be measured (on the 1M
     # room, 2.4 s of the export)
+    if not np.isfinite(A).all():  # (named by the chunks' own check: face_chunks' "NaN or infinite transform")
+        return False
     s = np.linalg.svd(A, compute_uv=False)
     if s[1] * s[2] > 1e-9:
         return False
