@@ -26,10 +26,12 @@ def snapshot():
     snap = {"materials": sorted(m.name for m in bpy.data.materials),
             "lights": sorted(o.name for o in bpy.data.objects if o.type == "LIGHT"),
             "collections": sorted(c.name for c in bpy.data.collections),
-            # the add-on's own settings groups ("relight", the View's "relight_view") appear in the
-            # ID properties of Blender 4.2 and 4.5 on first access; they hold the panel's settings,
-            # not scene content (relight_view's view transform to give back: checked empty below)
-            "scene_keys": sorted(k for k in bpy.context.scene.keys() if k not in ("relight", "relight_view"))}
+            # the add-on's own settings groups ("relight", the View's "relight_view", the camera
+            # view target's "relight_camera_target") appear in the ID properties of Blender 4.2 and
+            # 4.5 on first access; they hold the panel's settings, not scene content (relight_view's
+            # view transform to give back: checked empty below)
+            "scene_keys": sorted(k for k in bpy.context.scene.keys()
+                                 if k not in ("relight", "relight_view", "relight_camera_target"))}
     for ob in bpy.context.scene.objects:
         if ob.type != "MESH":
             continue

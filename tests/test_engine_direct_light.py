@@ -117,3 +117,31 @@ def test_the_curve_never_rises_after_its_configurations_are_refitted():
     assert second.error <= refitted[0].error + 1e-12
     assert second.n_lights == len(second.lights) and np.all(second.exitance.max(axis=1) > 0)
     assert second.error == pytest.approx(fit_lights(problem, second.lights)[1], abs=1e-12)
+
+
+def test_the_curve_never_rises_above_a_configuration_improved_by_its_carried_lamps():
+    """engine.curve_refits.carry_refined: when the configuration before (the final one, its lamps
+    refined by their own programme) ends below every fit of this one's lights, this one becomes
+    that configuration (the staircase's k = 18 rose above k = 17 on a compat run before)."""
+    from types import SimpleNamespace as NS
+
+    from relight_addon.engine.curve_refits import carry_refined
+    from relight_addon.engine.light_colour import fit_lights
+    from relight_addon.engine.reduction import CurvePoint
+
+    rng = np.random.default_rng(1)
+    t = rng.uniform(0.1, 1.0, (8, 3))
+    problem = NS(transfer=[t, t, t], b_target=np.repeat(rng.uniform(0.5, 1.0, (8, 1)), 3, axis=1),
+                 target_norm=1.0, colour=None)
+
+    def point(ids, error):
+        ids = np.asarray(ids, dtype=np.int64)
+        return CurvePoint(len(ids), error, error, 0, ids, np.ones((len(ids), 3)), -1)
+
+    fits = [fit_lights(problem, ids) for ids in ([2, 0], [2, 1])]
+    assert all(e.min() > 0 for e, _ in fits)  # (every try keeps its lights on)
+    low = 0.5 * min(err for _, err in fits)  # the final configuration: below every fit of the next
+    curve = [point([2], low), point([0, 1], 10.0)]
+    out = carry_refined(problem, curve, 0, {}, every=False)
+    assert out[1].error <= out[0].error and out[1].lights.tolist() == [2] and out[1].n_lights == 1
+    assert curve[1].lights.tolist() == [0, 1]  # (the curve given stays as it was)

@@ -53,6 +53,7 @@ from .geometry import unit
 from .lamps import lamp_irradiance
 from .lights import append_lamps, lamp_kinds
 from .patch_models.adaptive import normal_bucket
+from .scene import key_lengths, key_scale
 from .units import TINY
 
 __all__ = ["DROP_FRACTION", "offered_kinds", "default_drop", "lamp_bound", "plan_lamps",
@@ -226,28 +227,37 @@ def mount_positions(patches, candidates, count, drop, sampler) -> tuple:
     if not len(C):
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
     v = patches.tri_vertices.reshape(-1, 3)
-    scale = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    X = np.column_stack([patches.center[C], 0.5 * scale * n])
+    scale = max(float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))), TINY)
+    # in units of the scene's diagonal, ties (a symmetric room) broken alike at every scale
+    X = np.column_stack([patches.center[C] / scale, 0.5 * n])
     w = patches.area[C]
     k = min(int(count), len(C))
     # farthest-point start (from the candidate nearest the candidates' centroid), then Lloyd
-    first = int(np.argmin(np.linalg.norm(X - (X * w[:, None]).sum(axis=0) / w.sum(), axis=1)))
+    first = _first_least(np.linalg.norm(X - (X * w[:, None]).sum(axis=0) / w.sum(), axis=1))
     centers = [X[first]]
     d = np.linalg.norm(X - centers[0], axis=1)
     for _ in range(1, k):
-        j = int(np.argmax(d))
+        j = _first_least(-d)
         centers.append(X[j])
         d = np.minimum(d, np.linalg.norm(X - X[j], axis=1))
     centers = np.array(centers)
     for _ in range(KMEANS_ITERATIONS):
-        label = np.argmin(((X[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2), axis=1)
+        label = _first_least(((X[:, None, :] - centers[None, :, :]) ** 2).sum(axis=2))
         for j in range(k):
             m = label == j
             if m.any():
                 centers[j] = (X[m] * w[m, None]).sum(axis=0) / w[m].sum()
-    pick = np.unique([int(np.argmin(np.linalg.norm(X - c, axis=1))) for c in centers])
+    pick = np.unique([_first_least(np.linalg.norm(X - c, axis=1)) for c in centers])
     P = C[pick]
     return patches.center[P] + drop * patches.normal[P], patches.normal[P].copy(), P
+
+
+def _first_least(v, tie=1e-9):
+    """np.argmin along the last axis, a value within ``tie`` of the least taken as tied (the first
+    of them wins): rounding does not decide between places a symmetric scene makes equal."""
+    v = np.asarray(v)
+    pick = np.argmax(v <= v.min(axis=-1, keepdims=True) + tie, axis=-1)
+    return int(pick) if pick.ndim == 0 else pick
 
 
 def _visible_share(sampler, position, cluster, patches):
@@ -335,16 +345,29 @@ def lamp_key(lamp) -> bytes:
     h = hashlib.sha1(lamp.kind.name.encode())
     for a in (lamp.position, lamp.direction, lamp.axis_u, lamp.axis_v, lamp.power):
         h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
-    h.update(repr((float(lamp.radius), float(lamp.spot_size), float(lamp.spot_blend), float(lamp.size_u),
-                   float(lamp.size_v), bool(lamp.ellipse), float(lamp.spread), float(lamp.angle),
-                   bool(lamp.cast_shadow), lamp.profile is None)).encode())
+    h.update(repr(_lamp_scalars(lamp)).encode())
     return h.digest()
 
 
-def lamp_seed(lamp, seed) -> int:
-    """The seed of a candidate lamp's irradiance: the job's ``seed`` and the lamp's ``lamp_key``, so
-    its numbers do not depend on the other lamps planned or its place among them."""
-    return ((int(seed) & 0xFFFFFFFFFFFFFFFF) << 64) | int.from_bytes(lamp_key(lamp)[:8], "little")
+def _lamp_scalars(lamp):
+    return (float(lamp.radius), float(lamp.spot_size), float(lamp.spot_blend), float(lamp.size_u),
+            float(lamp.size_v), bool(lamp.ellipse), float(lamp.spread), float(lamp.angle),
+            bool(lamp.cast_shadow), lamp.profile is None)
+
+
+def lamp_seed(lamp, seed, scale) -> int:
+    """The seed of a candidate lamp's irradiance: the job's ``seed`` and a hash of the lamp's kind
+    and geometry in scale-free steps (scene.key_lengths of ``scale``, scene.key_scale: lengths
+    over it, directions and angles as they are), so its numbers depend neither on the other lamps
+    planned, nor on its place among them, nor on the scene's unit."""
+    h = hashlib.sha1(lamp.kind.name.encode())
+    lengths = np.concatenate([np.ravel(lamp.position), [lamp.radius, lamp.size_u, lamp.size_v]])
+    h.update(key_lengths(lengths, scale).tobytes())
+    free = np.concatenate([np.ravel(lamp.direction), np.ravel(lamp.axis_u), np.ravel(lamp.axis_v),
+                           np.ravel(lamp.power), [lamp.spot_size, lamp.spot_blend, lamp.spread, lamp.angle]])
+    h.update(key_lengths(free, 1.0).tobytes())
+    h.update(repr(_lamp_scalars(lamp)[5:]).encode())
+    return ((int(seed) & 0xFFFFFFFFFFFFFFFF) << 64) | int.from_bytes(h.digest()[:8], "little")
 
 
 def lamps_irradiance(patches, lamps, sampler, seed=0, progress=None) -> np.ndarray:
@@ -356,8 +379,9 @@ def lamps_irradiance(patches, lamps, sampler, seed=0, progress=None) -> np.ndarr
     if not lamps:
         return H
     reach = lamp_reach(patches, lamps, patch_radius(patches, sampler))
+    scale = key_scale(patches.tri_vertices)
     for i, lamp in enumerate(lamps):
-        H[:, i] = lamp_irradiance(patches, [lamp], sampler=sampler, seed=lamp_seed(lamp, seed),
+        H[:, i] = lamp_irradiance(patches, [lamp], sampler=sampler, seed=lamp_seed(lamp, seed, scale),
                                   points_per_patch=LAMP_POINTS, only=[reach[i]])[:, 0, 0]
         if progress is not None:
             progress((i + 1) / len(lamps))

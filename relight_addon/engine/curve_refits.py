@@ -104,9 +104,10 @@ def carry_refined(problem, curve, final_index, carried: dict, every=False) -> li
             continue
         best = _carried_fit(problem, pt, prev, carried)
         if best is not None:
-            out[i] = replace(pt, lights=best[1], exitance=best[2], error=best[0], relative_error=best[0] / norm)
-        elif pt.error > prev.error and prev.n_negative == 0 and prev.n_lights < pt.n_lights:
-            # no such fit keeps all its lights on: the configuration before it (fewer lights do)
+            out[i] = pt = replace(pt, lights=best[1], exitance=best[2], error=best[0], relative_error=best[0] / norm)
+        if pt.error > prev.error and prev.n_negative == 0 and prev.n_lights < pt.n_lights:
+            # no fit of its lights all on comes below the configuration before it (whose carried
+            # lamps improved it more): that one (fewer lights do)
             out[i] = replace(pt, n_lights=prev.n_lights, lights=prev.lights.copy(), exitance=prev.exitance.copy(),
                              error=prev.error, relative_error=prev.relative_error)
     return out

@@ -68,7 +68,7 @@ pair's ray bundle or less) is missed: that pair is then taken as unoccluded.
 Accuracy against time on the staircase and a furnished room: benchmarks/bench_kernel_transfer.py.
 
 Determinism: every pair draws its samples from a stream of its own, keyed by the seed and the
-two patches' geometry (``_pair_keys``, ``_KeyedStream``: counter-based uniforms, a splitmix64 hash
+two patches' geometry in scale-free steps (``_pair_keys``, ``_KeyedStream``: counter-based uniforms, a splitmix64 hash
 of the key and the sample's place), so a pair's value does not depend on the other pairs asked for,
 their order, the chunks or the thread count: a row drawn alone, or a source added, gives the
 entries a draw of every pair gives (pipeline.prepared draws only a stroke's new pairs).
@@ -91,7 +91,7 @@ import scipy.sparse as sp
 import scipy.special
 
 from .sampling import SceneSampler, run_chunks
-from .scene import PatchSet, SceneError
+from .scene import PatchSet, SceneError, key_lengths, key_scale
 from .units import TINY
 
 __all__ = [
@@ -858,12 +858,12 @@ def _mix(x):
 
 
 def _patch_keys(g: _Geometry) -> np.ndarray:
-    """(P,) uint64: a hash of each patch's triangles (their vertices' float64 bits, XORed over the
-    patch's triangles: their order does not matter), the same for the same patch in another mesh
-    or PatchSet; kept on the geometry."""
+    """(P,) uint64: a hash of each patch's triangles (their vertices in scale-free steps,
+    scene.key_lengths, XORed over the patch's triangles: their order does not matter), the same
+    for the same patch in another mesh or PatchSet, and in the scene scaled; kept on the geometry."""
     keys = getattr(g, "_patch_keys", None)
     if keys is None:
-        bits = np.ascontiguousarray(g.tv, dtype=np.float64).reshape(len(g.tv), 9).view(np.uint64)
+        bits = key_lengths(g.tv, key_scale(g.tv)).reshape(len(g.tv), 9).view(np.uint64)
         h = np.zeros(len(bits), dtype=np.uint64)
         for k in range(9):
             h = _mix(h ^ bits[:, k] ^ _STEP[k])

@@ -92,7 +92,8 @@ class SceneSampler:
         2 * offset (the shift, <= 2 * offset, is of the order of the normal offset)."""
         tv, ta = self.tv, self.ta
         lo, hi = tv.reshape(-1, 3).min(axis=0), tv.reshape(-1, 3).max(axis=0)
-        diag = float(np.linalg.norm(hi - lo)) if patches.region is None else patches.region.diagonal
+        diag = patches.ray_scale if patches.ray_scale is not None else \
+            float(np.linalg.norm(hi - lo)) if patches.region is None else patches.region.diagonal
         self.offset = RAY_OFFSET * diag + 4 * np.finfo(np.float32).eps * float(np.abs(tv).max())
         el3 = np.stack([np.linalg.norm(tv[:, 2] - tv[:, 1], axis=1), np.linalg.norm(tv[:, 0] - tv[:, 2], axis=1),
                         np.linalg.norm(tv[:, 1] - tv[:, 0], axis=1)], axis=1)  # side opposite each vertex

@@ -163,6 +163,10 @@ class PatchSet:
     level: np.ndarray = None  # (P,) int, the adaptive model's refinement level of each patch
     #: the region that decides the answer (engine.extent.Region): the scale of every automatic length
     region: object = None
+    #: the length the rays' offset is taken from (engine.sampling; None: the region's diagonal): a
+    #: prepared solve repaints kept patches with the new paint's region and keeps this, so the rays
+    #: and kernel rows it draws agree with those it kept (pipeline.prepared)
+    ray_scale: float | None = None
 
     @property
     def n_patches(self) -> int:
@@ -235,6 +239,26 @@ def scene_scale(faces: FaceSet) -> float:
     if faces.n_faces == 0 or len(faces.triangles) == 0:
         raise SceneError("the scene has no faces")
     return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+
+
+#: the resolution of the scale-free keys that seed random streams (``key_lengths``): 2^-24 of the
+#: scene's largest coordinate
+KEY_STEPS = float(1 << 24)
+
+
+def key_scale(tri_vertices) -> float:
+    """The length unit of the keys that seed the random streams (engine.kernel_transfer's pairs,
+    engine.candidate_lamps' lamps): the largest |coordinate| of the scene's triangles, the same
+    for every paint and, x s, for the scene scaled by s."""
+    s = float(np.abs(tri_vertices).max()) if len(tri_vertices) else 0.0
+    return s if s > 0 and np.isfinite(s) else 1.0
+
+
+def key_lengths(x, scale) -> np.ndarray:
+    """int64: ``x`` (lengths) in steps of ``scale`` / KEY_STEPS, so the same scene in centimetres
+    or kilometres draws the same samples (tests/test_scale.py); a rounding of the scaling moves a
+    value across a step's edge with a probability of about 1e-8."""
+    return np.rint(np.asarray(x, dtype=np.float64) * (KEY_STEPS / scale)).astype(np.int64)
 
 
 def check_size(size, what="max patch size"):

@@ -33,10 +33,10 @@ paint changed:
   computes for it in a cold solve, bit for bit.
 
 What still parts the warm solve from the cold one on the polygon model (its mesh is the cold
-solve's): the kept patches' decisive region (engine.extent) is the first paint's, and the rays'
-offset and the lamps' drop follow it, so the cold solve casts slightly other hemisphere rays and
-hangs its lamps slightly elsewhere (the staircase's extend: the ray-cast F 0.0024 apart at most,
-the error 0.8 %; tests/test_prepared.py: every kind of stroke within 1 %). On the adaptive model
+solve's): the kept hemisphere rays were cast with the first paint's decisive region's offset
+(engine.extent; a warm solve's lamps hang at the new paint's drop, as the cold solve's), so the cold
+solve casts slightly other rays (the staircase's extend: the ray-cast F 0.0024 apart at most;
+tests/test_prepared.py: every kind of stroke within 1 %). On the adaptive model
 the kept mesh is not the one the cold solve makes for the new paint either.
 
 Every solve says in its report (``prepared``, ``account``) what it kept and what it computed.
@@ -75,6 +75,7 @@ import numpy as np
 from ..engine.blas_threads import one_blas_thread
 from ..engine.bounces import ColumnProducts
 from ..engine.candidate_lamps import lamp_key, lamps_irradiance, plan_lamps
+from ..engine.extent import decisive_region
 from ..engine.geometry import triangle_areas
 from ..engine.formfactors import auto_rays_per_patch, compute_form_factors, pairs_then_sending_scale
 from ..engine.kernel_transfer import kernel_form_factors
@@ -379,8 +380,13 @@ class PreparedScene:
 
     def _warm(self, faces: FaceSet) -> tuple:
         """(the kept patches with ``faces``' paint, the options a solve on them runs with): the same
-        mesh, so its rays and kernel rows serve (``_cast_for``), and no refinement pass re-meshes it."""
-        patches = self.painted(faces)
+        mesh, so its rays and kernel rows serve (``_cast_for``), and no refinement pass re-meshes it;
+        the decisive region the new paint's (engine.extent: the lamps' drop follows it, as in a cold
+        solve of the same paint; the rays' offset the kept rays' own, ``PatchSet.ray_scale``)."""
+        kept = self.painted(faces)
+        ray_scale = kept.ray_scale if kept.ray_scale is not None else \
+            kept.region.diagonal if kept.region is not None else None
+        patches = replace(kept, region=decisive_region(faces), ray_scale=ray_scale)
         self._cast_for = patches
         options = self.options
         if options.param("refine_passes", 0):
