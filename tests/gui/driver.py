@@ -641,6 +641,71 @@ def live_watch(scene):
     check("ESC turns Live off after the undo", live.session(sc) is None, live.status_text(s))
 
 
+def view_target(scene):
+    """Issue 40 in the window: New View Target opens an image of the camera's view in an Image Editor
+    in Paint mode; a brush stroke there paints targets (alpha); Solve & Reduce shows the predicted
+    camera image beside it, with its error; Clear Results removes the prediction, not the painting."""
+    m = mods()
+    operators = m["blender.ui.operators"]
+    vt = sys.modules[f"{PKG}.blender.ui.view_target_ops"]
+    set_active(scene.objects["floor_0"])
+    found = yield from probe_sidebar()
+    yield from press(found, "bpy.ops.relight.new_view_target()", settle=2.0)
+    img = scene.relight_camera_target.image
+    areas = [a for a in window().screen.areas if a.type == "IMAGE_EDITOR" and img is not None
+             and a.spaces.active.image == img]
+    said = [ln for ln in (yield from reports()) if "New view target" in ln]
+    yield 1.0  # (the brush Relight adds is made active from a timer)
+    brush = bpy.context.scene.tool_settings.image_paint.brush
+    check("New View Target: an image of the camera's view, free everywhere, in an Image Editor in Paint mode, "
+          "with a brush (Debian's Blender has none of its own: Relight adds one, and says so)",
+          img is not None and areas and areas[0].spaces.active.ui_mode == "PAINT" and brush is not None
+          and (brush.name != vt.PAINT_BRUSH_NAME or any("brush" in ln for ln in said))
+          and max(np.asarray(img.pixels[:], dtype=np.float32)[3::4]) == 0.0,
+          None if img is None else f"{img.name} {tuple(img.size)}, editors {[a.spaces.active.ui_mode for a in areas]}, "
+          f"brush {None if brush is None else brush.name}; {said[-1:]}")
+    if img is None or not areas:
+        return
+    shot("18_view_target_new")
+    # a brush stroke across the middle of the image (the Image Editor's window region)
+    reg = region("WINDOW", areas[0])
+    cx, cy = to_screen(reg, reg.width // 2, reg.height // 2)
+    move(cx - 80, cy)
+    yield 0.5
+    xdo("mousedown", "1")
+    for dx in range(-80, 81, 10):
+        move(cx + dx, cy)
+        yield 0.05
+    xdo("mouseup", "1")
+    yield 1.5
+    alpha = np.asarray(img.pixels[:], dtype=np.float32)[3::4]
+    painted = int((alpha > 0.5).sum())
+    check("a brush stroke in the Image Editor paints view targets (alpha)", painted > 100,
+          f"{painted} of {alpha.size} pixels painted")
+    if painted <= 100:  # (so that the solve below still has targets to read)
+        px = np.asarray(img.pixels[:], dtype=np.float32).reshape(img.size[1], img.size[0], 4)
+        px[img.size[1] // 3: img.size[1] // 2, img.size[0] // 3: img.size[0] // 2] = (0.5, 0.5, 0.5, 1.0)
+        img.pixels.foreach_set(px.ravel())
+        log("the stroke painted nothing: pixels set from Python for the solve")
+    shot("19_view_target_painted")
+    yield from press(found, "bpy.ops.relight.solve()", settle=2.0)
+    yield from wait_for(lambda: operators.solve_state(scene) is None, 400)
+    yield 2.0
+    pred = vt.prediction_image(scene)
+    block = json.loads(pred.get(vt.ERROR_PROP) or "{}") if pred is not None else {}
+    beside = [a for a in window().screen.areas if a.type == "IMAGE_EDITOR" and a.spaces.active.image == pred]
+    check("Solve & Reduce with the view target: the predicted camera image beside the painted one, its error",
+          pred is not None and beside and block.get("painted", 0) > 0
+          and block.get("mean_relative_error") is not None and np.isfinite(block["mean_relative_error"]),
+          f"prediction {None if pred is None else tuple(pred.size)}, shown in {len(beside)} editor(s), {block}")
+    shot("20_view_prediction")
+    found = yield from probe_sidebar()  # (the 3D View is narrower since the prediction's editor split it)
+    yield from press(found, "bpy.ops.relight.clear_results()", settle=2.0)
+    check("Clear Results removes the prediction, the painted view target stays",
+          vt.prediction_image(scene) is None and not [i for i in bpy.data.images if i.name.startswith("Relight Prediction")]
+          and scene.relight_camera_target.image == img, [i.name for i in bpy.data.images])
+
+
 def scenario():
     yield 3.0
     prefs = bpy.context.preferences
@@ -1060,6 +1125,10 @@ def scenario():
 
     # 12. Live's watch (issue 35): a candidate hidden from renders, an object deleted, Ctrl+Z
     yield from live_watch(scene)
+
+    # 13. the camera-view target (issue 40): painted in the Image Editor, the prediction beside it
+    # (the scene found again: live_watch's Ctrl+Z replaced the data-blocks)
+    yield from view_target(bpy.context.scene)
 
 
 def finish(code=None):

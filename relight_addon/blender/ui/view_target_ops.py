@@ -47,6 +47,9 @@ __all__ = ["solved", "write_prediction", "prediction_image", "draw_view_target",
 
 VIEW_TARGET_NAME = "Relight View Target"
 PREDICTION_NAME = "Relight Prediction"
+#: the brush made for painting a view target when the Blender running has none (Debian's 4.3 package
+#: ships without the Essentials brushes: no paint mode has a brush there, a stroke paints nothing)
+PAINT_BRUSH_NAME = "Relight View Paint"
 #: the prediction image's custom property: the report's view_target block (JSON)
 ERROR_PROP = "relight_view_error"
 
@@ -132,6 +135,40 @@ def show_image(context, image, paint=False, keep=None, only_beside=False):
     return area
 
 
+def ensure_paint_brush(context, area) -> str:
+    """The Image Editor's Paint mode with a brush: when the Blender running has none (its Essentials
+    brushes missing), a plain one (PAINT_BRUSH_NAME, the file's own: an asset of the file on Blender
+    4.3 and later, where a paint mode's brush is an asset, activated a moment later from a timer: in
+    the operator that has just split the editor off, activating it crashes Blender 4.3). A sentence
+    for the report when it did, else ''."""
+    paint = context.scene.tool_settings.image_paint
+    if paint.brush is not None:
+        return ""
+    brush = bpy.data.brushes.get(PAINT_BRUSH_NAME) or bpy.data.brushes.new(PAINT_BRUSH_NAME, mode="TEXTURE_PAINT")
+    if not hasattr(bpy.ops.brush, "asset_activate"):  # (before 4.3: a paint mode's brush is set directly)
+        paint.brush = brush
+    else:
+        if brush.asset_data is None:
+            brush.asset_mark()
+        image = area.spaces.active.image
+        bpy.app.timers.register(lambda: _activate_brush(brush.name, image), first_interval=0.2)
+    return (f"; this Blender has no paint brush (its Essentials brushes are missing): the brush {brush.name!r} "
+            "was added to the file")
+
+
+def _activate_brush(name, image):
+    """(A timer's, once) the brush asset ``name`` of the file made the Image Editor's paint brush,
+    in the editor showing ``image``."""
+    window = bpy.context.window_manager.windows[0] if bpy.context.window_manager.windows else None
+    area = _editor_showing(window.screen, image) if window is not None else None
+    if area is None or bpy.data.brushes.get(name) is None:
+        return None
+    region = next((r for r in area.regions if r.type == "WINDOW"), None)
+    with bpy.context.temp_override(window=window, screen=window.screen, area=area, region=region):
+        bpy.ops.brush.asset_activate(asset_library_type="LOCAL", relative_asset_identifier=f"Brush/{name}")
+    return None
+
+
 # --- operators ----------------------------------------------------------------------------------
 
 def _keep_earlier(props):
@@ -154,6 +191,12 @@ class _CameraView:
         return True
 
 
+def _paint_in(context, image) -> str:
+    """Show ``image`` in Paint mode with a brush (``ensure_paint_brush``'s sentence, or '')."""
+    area = show_image(context, image, paint=True)
+    return ensure_paint_brush(context, area) if area is not None else ""
+
+
 class RELIGHT_OT_new_view_target(_CameraView, bpy.types.Operator):
     """Make an image of the camera's view to paint the light it should see: colour = radiance (scene
     linear, the render's units), painted pixels are targets, unpainted (alpha 0) pixels are free.
@@ -171,16 +214,16 @@ class RELIGHT_OT_new_view_target(_CameraView, bpy.types.Operator):
             return _refuse(self, exc)
         old = props.image
         if old is not None and tuple(old.size) == (w, h):  # the camera's: painted on, not replaced
-            show_image(context, old, paint=True)
+            brush = _paint_in(context, old)
             self.report({"INFO"}, f"Painting the view target {old.name!r} ({w} x {h}); colour = radiance the camera "
-                                  "should see (scene linear), Erase Alpha frees pixels")
+                                  f"should see (scene linear), Erase Alpha frees pixels{brush}")
             return {"FINISHED"}
         note = _keep_earlier(props)
         if old is not None:
             note = f" (the camera's aspect or the resolution changed: {old.size[0]} x {old.size[1]}){note}"
         img = camera_view.new_view_image(VIEW_TARGET_NAME, w, h)
         props.image = img
-        show_image(context, img, paint=True)
+        note += _paint_in(context, img)
         self.report({"INFO"}, f"New view target {img.name!r}, {w} x {h}, every pixel free: paint the radiance the "
                               f"camera should see (scene linear, the render's units){note}")
         return {"FINISHED"}
@@ -259,7 +302,7 @@ class RELIGHT_OT_load_view_reference(_CameraView, bpy.types.Operator):
         img = camera_view.new_view_image(f"{VIEW_TARGET_NAME} ({os.path.basename(path)})", w, h)
         camera_view.set_pixels(img, rgba)
         props.image = img
-        show_image(context, img, paint=True)
+        note += _paint_in(context, img)
         painted = int(spec.painted.sum())
         self.report({"INFO"}, f"Reference {os.path.basename(path)} x 2^{self.exposure:g}: view target {img.name!r}, "
                               f"{w} x {h}, {painted} of {w * h} pixels targets{note}")
@@ -277,21 +320,26 @@ class RELIGHT_OT_show_view_target(bpy.types.Operator):
                                                or prediction_image(context.scene) is not None)
 
     def execute(self, context):
-        shown = show_images(context)
-        self.report({"INFO"}, f"Shown: {', '.join(shown) if shown else 'nothing (no Image Editor can open here)'}")
+        shown, brush = show_images(context)
+        self.report({"INFO"}, f"Shown: {', '.join(shown) if shown else 'nothing (no Image Editor can open here)'}"
+                              f"{brush}")
         return {"FINISHED"}
 
 
-def show_images(context, after_solve=False) -> list:
-    """The view target (Paint mode) and the prediction beside it, in Image Editors; their names.
-    ``after_solve``: the prediction only, and only beside an editor that shows the view target."""
+def show_images(context, after_solve=False) -> tuple:
+    """The view target (Paint mode, with a brush) and the prediction beside it, in Image Editors:
+    (their names, ``ensure_paint_brush``'s sentence or ''). ``after_solve``: the prediction only,
+    and only beside an editor that shows the view target."""
     painted, pred = _props(context.scene).image, prediction_image(context.scene)
-    shown = []
-    if not after_solve and painted is not None and show_image(context, painted, paint=True) is not None:
-        shown.append(painted.name)
+    shown, brush = [], ""
+    if not after_solve and painted is not None:
+        area = show_image(context, painted, paint=True)
+        if area is not None:
+            shown.append(painted.name)
+            brush = ensure_paint_brush(context, area)
     if pred is not None and show_image(context, pred, keep=painted, only_beside=after_solve) is not None:
         shown.append(pred.name)
-    return shown
+    return shown, brush
 
 
 # --- the solve ----------------------------------------------------------------------------------
