@@ -11,9 +11,22 @@ BSDF towards the camera: a light cell's highlight on a glossy table moves with t
 painted highlight pulls a cell to where its reflection lands. The rows are the same in every
 channel (the target interface's): a glossy patch's coefficients are the mean of its channels'
 (exact for a neutral specular layer over any diffuse colour when the layers' weights agree; the
-largest relative spread is ``channel_spread``). Left out: the reflection of lamps' direct light
-through a glossy BSDF (a lamp's light on a patch is seen Lambertian), the sources' own glossy
-reflection, pixels that see the World or a face's back (free, counted in ``free``).
+largest relative spread is ``channel_spread``).
+
+Lamps' highlights: B holds a lamp's direct light E as rho E, seen Lambertian; a glossy pixel shows
+f(l, v) E, so each lamp adds (pi f(l, v) - rho) E to its glossy rows beyond B (engine.view_lamps:
+the lamp's kind's irradiance at the point with a shadow ray, l towards the lamp; 0 exactly on a
+matte patch, which has no such row). ``lamp_terms`` gives it per unit strength on the rows (at the
+glossy tiles' mean points and directions, as their rows are evaluated): the inverse problem adds it
+to the lamps' columns of T (InverseProblem.transfer, retarget; a refined lamp's column by
+engine.lamp_refinement.Transport, for the lamp as it moved), so a painted highlight pulls a lamp to
+where its reflection lands. The scene's own lamps' (``fixed_light``, the lamps of the faces the
+target was built on) are subtracted from the targets with the rest of the fixed light; ``predict``,
+``image`` and ``pixel_error`` add both at each pixel's own point. Left out: the highlights of the
+World and of light cells' direct light beyond F's gather (a cell's reflection is the rows' own,
+through F), the sources' own glossy reflection, pixels that see the World or a face's back (free,
+counted in ``free``); the scene's lamps moved after the target was built (a prepared scene's
+move_scene_light) keep their old highlights in the targets until the target is built again.
 
 Rows are in W/m^2 (pi L: the radiosity's units, so they mix with painted and lux targets). A
 patch seen by many pixels would give as many rows; pixels that share a row are one row of weight
