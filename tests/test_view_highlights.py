@@ -14,6 +14,7 @@ from scipy.optimize import nnls
 from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import QUALITY, compute_form_factors
 from relight_addon.engine.inverse import InverseProblem
+from relight_addon.engine.lamp_refinement import Transport
 from relight_addon.engine.lamps import Lamp, lamp_irradiance
 from relight_addon.engine.lights import append_lamps
 from relight_addon.engine.lights.point import POINT
@@ -121,7 +122,9 @@ def _lamp_radiosity(patches, F, h):
 
 def test_the_transfers_lamp_column_is_the_forward_rows():
     """A candidate lamp's column of T on the view rows is R A^-1 rho H + its highlight on the rows
-    (linear: the same per unit strength); the highlight alone is what the rows of B miss."""
+    (linear: the same per unit strength), and so is the lamp refinement's column of it
+    (lamp_refinement.Transport: of a moved lamp, with the moved lamp's highlight); the highlight
+    alone is what the rows of B miss: up to a third of the floor's rows."""
     lamps = [point_lamp((2.2, 2.1, 2.2), 1.0, "a"), point_lamp((1.0, 1.0, 2.2), 1.0, "b")]
     faces, patches, F = room()
     _target(faces, patches, F)
@@ -134,6 +137,17 @@ def test_the_transfers_lamp_column_is_the_forward_rows():
         for c in range(3):
             np.testing.assert_allclose(T[c][:, k], t.matrix @ B[:, c] + X[:, k, c], rtol=1e-8,
                                        atol=1e-10 * np.abs(T[c][:, k]).max())
+    # the lamp refinement's column of a lamp (moved: its highlight computed for it as it is) is the same
+    transport = Transport(prob)
+    for k in range(2):
+        col = transport.column(H[:, k], lamps[k])
+        np.testing.assert_allclose(col, np.stack([T[c][:, k] for c in range(3)], 1), rtol=1e-8,
+                                   atol=1e-10 * np.abs(col).max())
+    moved = point_lamp((2.6, 2.0, 2.2), 1.0, "a moved")
+    h = lamp_irradiance(patches, [moved], sampler=F.sampler, seed=0)[:, 0, 0]
+    B = _lamp_radiosity(patches, F, h)
+    np.testing.assert_allclose(transport.column(h, moved), t.matrix @ B + t.lamp_terms([moved])[:, 0], rtol=1e-8,
+                               atol=1e-10 * np.abs(t.matrix @ B).max())
     g = t.glossy_rows[0]  # (lamp a: up to a third more on the floor than B shows)
     ratio = X[g, 0, 0] / (t.matrix @ B)[g, 0]
     print(f"lamp a's highlight / the rows of B on the floor: max {ratio.max():.3f}, min {ratio.min():.3f}")
