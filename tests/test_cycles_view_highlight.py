@@ -11,7 +11,11 @@ renders the written file from the camera.
 - the highlight: its peak (the brightest pixel of the table, both images smoothed over 3 x 3) at the
   working resolution (480 x 270; Cycles renders the table's region alone, cropped) within 3 pixels
   of the predicted one.
-"""
+
+Measured (h40-highlight, load 5 on 2 shared cores, 5.6 min: the solve, two renders at 64 x 36 and the
+crop): 4.38 % mean per painted pixel (median 2.79 %, 95th percentile 14.6 %) over 1,920 pixels,
+Cycles' noise 2.27 %; the peak at (148, 240) in Cycles and (148, 239) predicted, 49 x the table
+region's median in both (without the highlight term it was not predicted at all)."""
 import json
 
 import numpy as np

@@ -41,13 +41,13 @@ def _box(name, lo, hi, mat, n=(1, 1, 1)):
     return cr.add_mesh_object(name, verts, faces, mat)
 
 
-def build(path, patch_size=0.15, emitters=(), lamps=()):
+def build(path, patch_size=0.15, emitters=(), lamps=(), lights_on=("ceiling",)):
     """The room, saved to ``path``. ``emitters``: [(i, j, strength)]: polygon (column i from the west,
     row j from the north) of the ceiling's 8 x 8 grid emitting white, Emission Strength ``strength``
     (a known configuration of lights: a reference image's). ``lamps``: [dict(type="SPOT" / "POINT" /
     "AREA", location, aim (the point it looks at), energy (W), radius (m, a point or spot), size
     (deg, a spot's cone; m, an area lamp's side), blend)]: the scene's own lamps (fixed light), not
-    seen by the camera (only their light)."""
+    seen by the camera (only their light). ``lights_on``: the surfaces that may hold lights."""
     cr.reset_blender()
     scene = bpy.context.scene
     scene.world = cr.black_world()
@@ -65,7 +65,7 @@ def build(path, patch_size=0.15, emitters=(), lamps=()):
     for name, o, du, dv, m in quads:
         v, f = cr.grid_quads(o, du, dv, n, n)
         ob = cr.add_mesh_object(name, v, f, m)
-        if name != "ceiling":
+        if name not in lights_on:
             ob["relight_no_lights"] = True
         else:
             for k, (i, j, strength) in enumerate(emitters):
