@@ -45,7 +45,7 @@ class TargetRows:
     target: np.ndarray
     patch: np.ndarray
     selects: bool
-    #: (m,) row r of the system is row order[r] of the targets' rows stacked in turn
+    #: (m,) row r of the system is row order[r] of the targets' rows stacked in turn (None: the same order)
     order: np.ndarray = None
 
     @classmethod
@@ -96,7 +96,7 @@ class TargetRows:
         counts = np.bincount(self.target, minlength=len(self.targets))
         full = np.concatenate([np.zeros((k,) + shape) if b is None else np.asarray(b, dtype=np.float64)
                                for b, k in zip(blocks, counts)])
-        return full[self.order]
+        return full if self.order is None else full[self.order]
 
     def lamp_terms(self, lamps, irradiance=None) -> np.ndarray | None:
         """(m, len(lamps), 3): what the lamps (engine.lamps.Lamp) add to the rows beyond B per unit
