@@ -41,10 +41,13 @@ def _box(name, lo, hi, mat, n=(1, 1, 1)):
     return cr.add_mesh_object(name, verts, faces, mat)
 
 
-def build(path, patch_size=0.15, emitters=()):
+def build(path, patch_size=0.15, emitters=(), lamps=(), lights_on=("ceiling",)):
     """The room, saved to ``path``. ``emitters``: [(i, j, strength)]: polygon (column i from the west,
     row j from the north) of the ceiling's 8 x 8 grid emitting white, Emission Strength ``strength``
-    (a known configuration of lights: a reference image's)."""
+    (a known configuration of lights: a reference image's). ``lamps``: [dict(type="SPOT" / "POINT" /
+    "AREA", location, aim (the point it looks at), energy (W), radius (m, a point or spot), size
+    (deg, a spot's cone; m, an area lamp's side), blend)]: the scene's own lamps (fixed light), not
+    seen by the camera (only their light). ``lights_on``: the surfaces that may hold lights."""
     cr.reset_blender()
     scene = bpy.context.scene
     scene.world = cr.black_world()
@@ -62,13 +65,15 @@ def build(path, patch_size=0.15, emitters=()):
     for name, o, du, dv, m in quads:
         v, f = cr.grid_quads(o, du, dv, n, n)
         ob = cr.add_mesh_object(name, v, f, m)
-        if name != "ceiling":
+        if name not in lights_on:
             ob["relight_no_lights"] = True
         else:
             for k, (i, j, strength) in enumerate(emitters):
                 ob.data.materials.append(cr._material(f"emitter{k}", (0.7, 0.7, 0.7), (1.0, 1.0, 1.0), strength,
                                                       lambertian=True))
                 ob.data.polygons[j * n + i].material_index = k + 1
+    for k, spec in enumerate(lamps):
+        _lamp(scene, f"lamp{k}", **spec)
     table = _box("table", (1.2, 1.5, 0.7), (2.8, 2.4, 0.75), table_m, n=(8, 4))
     table["relight_no_lights"] = True
     cam_data = bpy.data.cameras.new("camera")
@@ -86,6 +91,24 @@ def build(path, patch_size=0.15, emitters=()):
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
 
 
+def _lamp(scene, name, type, location, aim, energy, radius=0.02, size=45.0, blend=0.15):
+    light = bpy.data.lights.new(name, type)
+    light.energy = energy
+    if type in ("POINT", "SPOT"):
+        light.shadow_soft_size = radius
+    if type == "SPOT":
+        light.spot_size, light.spot_blend = math.radians(size), blend
+    if type == "AREA":
+        light.size = size
+    ob = bpy.data.objects.new(name, light)
+    scene.collection.objects.link(ob)
+    ob.location = location
+    d = np.subtract(aim, location)  # (the lamp shines along its -Z)
+    ob.rotation_euler = (math.atan2(math.hypot(d[0], d[1]), -d[2]), 0.0, math.atan2(d[1], d[0]) - math.pi / 2)
+    ob.visible_camera = False
+    return ob
+
+
 def write_exr(path, rgba):
     """(h, w, 4) floats, row 0 at the top -> an OpenEXR (bpy)."""
     from relight_addon.blender.camera_view import write_image
@@ -97,10 +120,11 @@ def read_exr(path):
     return read_image(str(path))[0]
 
 
-def render(blend, path, samples, seed=0, size=None):
+def render(blend, path, samples, seed=0, size=None, border=None):
     """Cycles' camera image of ``blend`` as the file has it (its light paths, materials), linear:
     (h, w, 4), row 0 at the top. No denoising, no adaptive sampling, the Standard view transform.
-    ``size``: (width, height) at 100 % instead of the file's resolution (the same aspect)."""
+    ``size``: (width, height) at 100 % instead of the file's resolution (the same aspect).
+    ``border``: (x0, x1, y0, y1) pixels (row 0 at the top) of the image rendered alone, cropped."""
     try:
         bpy.ops.wm.open_mainfile(filepath=str(blend))
         scene = bpy.context.scene
@@ -115,6 +139,13 @@ def render(blend, path, samples, seed=0, size=None):
         scene.render.image_settings.color_depth = "32"
         scene.render.filepath = str(path)
         scene.render.film_transparent = True
+        if border is not None:
+            w, h = scene.render.resolution_x, scene.render.resolution_y
+            x0, x1, y0, y1 = border
+            r = scene.render
+            r.use_border, r.use_crop_to_border = True, True
+            r.border_min_x, r.border_max_x = x0 / w, x1 / w
+            r.border_min_y, r.border_max_y = 1 - y1 / h, 1 - y0 / h
         bpy.ops.render.render(write_still=True)
     finally:
         cr.reset_blender()

@@ -387,7 +387,13 @@ class InverseProblem:
         h_bg = None if background_irradiance is None else _array(background_irradiance, (n, 3), "background irradiance")
         x_bg = None if background_excess is None else _array(background_excess, (n, 3), "background excess")
         self.background_radiosity = self._fixed_light(e_bg, h_bg, x_bg)
-        self.b_target = self.b_target - self.target_rows.of(self.background_radiosity)
+        self.b_target = self.b_target - self.target_rows.of(self.background_radiosity) - self._fixed_beyond(self.target_rows)
+
+    def _fixed_beyond(self, rows):
+        """(m, 3) or 0: what the scene's own lamps add to target rows ``rows`` beyond the radiosity
+        (TargetRows.fixed_light: a camera-view target's highlights of them)."""
+        X = rows.fixed_light()
+        return 0.0 if X is None else X
 
     def _fixed_light(self, background=None, irradiance=None, excess=None) -> np.ndarray:
         """(P, 3) W/m^2: the radiosity of the fixed light (the scene's own emitters' exitance
@@ -535,6 +541,7 @@ class InverseProblem:
             T = [None] * 3
             done = {}
             D = self.first_bounce
+            seen = self.lamp_view_terms(R)
             for c in range(3):
                 key = (id(facs[c]), None if D is None else self._same_first_bounce(c))
                 if key in done:
@@ -559,6 +566,8 @@ class InverseProblem:
                 H = self.lights.irradiance
                 if H is not None:  # lights of irradiance kinds: rows P of A^-1 diag(rho) H
                     T[c] = T[c] + self._irradiance_transfer(facs[c], c, H)
+                if seen is not None:  # what the lamps add to the rows beyond B (a view target's highlights)
+                    T[c][:, seen[0]] += seen[1][:, :, c]
                 if not np.all(np.isfinite(T[c])):
                     raise InverseError("the radiosity system could not be solved (non-finite transfer matrix)")
                 done[key] = T[c]
@@ -567,6 +576,19 @@ class InverseProblem:
             self.transfer_seconds = time.perf_counter() - t0
             self._check_reachable()
         return self._transfer
+
+    def lamp_view_terms(self, rows):
+        """(the lights that are lamps (n,), X (m, n, 3)): what each adds per unit strength to target
+        rows ``rows`` (a TargetRows) beyond the radiosity (TargetRows.lamp_terms: a camera-view
+        target's glossy pixels reflect a lamp's direct light through their BSDF), or None when no
+        row's kind adds anything (channels that share T share the first's: one reflectance)."""
+        lamps = self.lights.lamps
+        idx = [] if lamps is None else [j for j, lamp in enumerate(lamps) if lamp is not None]
+        if not idx:
+            return None
+        H = self.lights.irradiance
+        X = rows.lamp_terms([lamps[j] for j in idx], None if H is None else sp.csc_matrix(H)[:, idx])
+        return None if X is None else (np.asarray(idx, dtype=np.int64), X)
 
     def _leave_out_implausible(self):
         """Candidate lights that send less than MIN_UTILISATION of their light to the targets, while
@@ -649,9 +671,13 @@ class InverseProblem:
         T_all = self.all_rows_transfer()
         new = copy.copy(self)
         new._set_targets(rows)
-        new.b_target = rows.values - rows.of(self.background_radiosity)
+        new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows)
         shared = {}
         new._transfer = [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
+        seen = self.lamp_view_terms(rows)
+        if seen is not None:
+            for c in sorted({id(t): c for c, t in reversed(list(enumerate(new._transfer)))}.values()):
+                new._transfer[c][:, seen[0]] += seen[1][:, :, c]
         new.transfer_seconds = 0.0
         new.warnings = list(self.condition_warnings)
         new._check_reachable()

@@ -66,6 +66,7 @@ class Transport:
         facs = problem.factors()
         self.rho = problem.reflectance
         self.albedo_excess = albedo_excess
+        self.rows = problem.target_rows
         self.Y = []
         done = {}
         for c in range(3):
@@ -75,13 +76,17 @@ class Transport:
 
     def column(self, h, lamp=None) -> np.ndarray:
         """(m, 3): the targets' radiosity per unit strength of ``lamp`` whose direct irradiance is
-        ``h`` (P,): rows P of A^-1 ((rho + x) h), x its first reflection's excess albedo."""
+        ``h`` (P,): rows P of A^-1 ((rho + x) h), x its first reflection's excess albedo; plus what
+        the lamp adds to the rows beyond B (TargetRows.lamp_terms: its highlight on a camera-view
+        target's glossy pixels, computed for the lamp as it is now)."""
         nz = np.flatnonzero(h)
         albedo = self.rho[nz]
         x = None if self.albedo_excess is None or lamp is None else self.albedo_excess(lamp)
         if x is not None:
             albedo = albedo + x[nz]
-        return np.stack([(albedo[:, c] * h[nz]) @ self.Y[c][nz] for c in range(3)], axis=1)
+        col = np.stack([(albedo[:, c] * h[nz]) @ self.Y[c][nz] for c in range(3)], axis=1)
+        X = None if lamp is None else self.rows.lamp_terms([lamp], h.reshape(-1, 1))
+        return col if X is None else col + X[:, 0, :]  # (a view target's highlight of the moved lamp)
 
 
 @dataclass

@@ -189,7 +189,8 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
 
     l_xj the direction from the viewed point x (not the patch's centre: a highlight moves across a
     patch with the point) to source j's centre. A Lambertian patch (f = rho/pi) reads B_i alone.
-    A lamp's direct light (in B_i, not in F B) is seen Lambertian. Every patch of ``patch`` is one
+    A lamp's direct light (in B_i, not in F B) is seen Lambertian here; its glossy reflection is
+    added beyond these rows (engine.view_lamps, a view target's ``lamp_terms``). Every patch of ``patch`` is one
     patch (group the points by patch first); ``views`` point from the viewer to the surface."""
     M = getattr(F, "matrix", F)
     i = int(np.unique(np.asarray(patch, dtype=np.int64))[0]) if len(patch) else 0

@@ -136,13 +136,27 @@ def view_notes(problem) -> list:
     return notes
 
 
+def _lamps_of(outcome) -> list:
+    """[(engine.lamps.Lamp, strength (3,))]: the final configuration's lights that are lamps (their
+    highlights on a view target's glossy pixels: the radiosity holds their light Lambertian)."""
+    lamps = outcome.problem.lights.lamps
+    s = np.asarray(outcome.stored.exitance[outcome.final_index], dtype=np.float64)
+    if lamps is None:
+        return []
+    if len(s) != len(lamps):
+        raise ValueError(f"the final configuration has {len(s)} strengths for {len(lamps)} lights")
+    return [(lamp, s[j]) for j, lamp in enumerate(lamps) if lamp is not None and np.any(s[j] != 0)]
+
+
 def predicted_rgba(outcome, samples=4) -> np.ndarray | None:
-    """(H, W, 4): the radiance the final configuration shows the camera (ViewTarget.image) with
+    """(H, W, 4): the radiance the final configuration shows the camera (ViewTarget.image: its lamps'
+    and the scene's lamps' highlights included) with
     alpha the share of each pixel's rays that hit a surface; None without a view target."""
     t = _view_target(outcome.problem)
     if t is None:
         return None
-    img, cover = t.image(np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64), samples)
+    img, cover = t.image(np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64), samples,
+                         _lamps_of(outcome))
     return np.concatenate([img, cover[..., None]], axis=2)
 
 
@@ -155,5 +169,5 @@ def view_report(outcome) -> dict | None:
     B = np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64)
     block = {"image": t.spec.name, "resolution": [t.spec.camera.width, t.spec.camera.height],
              "rows": int(t.matrix.shape[0])}
-    block.update(t.pixel_error(B))
+    block.update(t.pixel_error(B, _lamps_of(outcome)))
     return block

@@ -45,6 +45,8 @@ class TargetRows:
     target: np.ndarray
     patch: np.ndarray
     selects: bool
+    #: (m,) row r of the system is row order[r] of the targets' rows stacked in turn (None: the same order)
+    order: np.ndarray = None
 
     @classmethod
     def stack(cls, targets, n_patches) -> "TargetRows":
@@ -68,7 +70,8 @@ class TargetRows:
         M = M[order]
         selects = bool(np.all(np.diff(M.indptr) == 1) and np.all(M.data == 1.0)
                        and len(np.unique(first)) == len(first))  # (one patch per row, each patch once)
-        return cls(targets, M, values[order], region[order].astype(np.int64), which[order], first[order], selects)
+        return cls(targets, M, values[order], region[order].astype(np.int64), which[order], first[order], selects,
+                   order)
 
     @property
     def m(self) -> int:
@@ -83,6 +86,28 @@ class TargetRows:
         if self.selects:
             return X[self.patch]
         return np.asarray(self.matrix @ X)
+
+    def _stacked(self, blocks) -> np.ndarray | None:
+        """The targets' ``blocks`` (one per target: None, or an array of its rows first) in the
+        system's rows; None when every block is."""
+        shape = next((np.shape(b)[1:] for b in blocks if b is not None), None)
+        if shape is None:
+            return None
+        counts = np.bincount(self.target, minlength=len(self.targets))
+        full = np.concatenate([np.zeros((k,) + shape) if b is None else np.asarray(b, dtype=np.float64)
+                               for b, k in zip(blocks, counts)])
+        return full if self.order is None else full[self.order]
+
+    def lamp_terms(self, lamps, irradiance=None) -> np.ndarray | None:
+        """(m, len(lamps), 3): what the lamps (engine.lamps.Lamp) add to the rows beyond B per unit
+        strength (each kind's ``lamp_terms``), None when no kind adds anything."""
+        if not len(lamps):
+            return None
+        return self._stacked([t.lamp_terms(lamps, irradiance) for t in self.targets])
+
+    def fixed_light(self) -> np.ndarray | None:
+        """(m, 3): what the scene's own lamps add to the rows beyond B (each kind's ``fixed_light``)."""
+        return self._stacked([t.fixed_light() for t in self.targets])
 
     def columns(self) -> np.ndarray:
         """(P, m) dense: the rows' transpose, right-hand sides of A^T Y = R^T."""

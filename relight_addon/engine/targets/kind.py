@@ -33,6 +33,19 @@ class Target:
     def shown(self) -> np.ndarray:
         return np.asarray(self.values, dtype=np.float64)
 
+    def lamp_terms(self, lamps, irradiance=None):
+        """None when this kind's rows see the lamps' light through B alone; else (k, len(lamps), 3)
+        W/m^2 per unit strength: what each lamp (engine.lamps.Lamp) adds to the rows beyond B
+        (a glossy surface's reflection of its direct light, engine/targets/view.py).
+        ``irradiance`` (P, len(lamps)) optional: the lamps' direct irradiance on the patches (a
+        lamp that lights none of the rows' patches adds nothing)."""
+        return None
+
+    def fixed_light(self):
+        """None, or (k, 3) W/m^2: what the scene's own lamps add to the rows beyond B (lamp_terms
+        of the fixed light)."""
+        return None
+
     @classmethod
     def from_scene(cls, faces, patches, F=None):
         """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None."""
