@@ -185,3 +185,35 @@ def test_a_painted_highlight_picks_the_lamp_whose_reflection_it_is():
     err_b = np.linalg.norm(np.stack([Tb[c] @ sb[:, c] for c in range(3)], 1) - b) / np.linalg.norm(b)
     print(f"without: strengths {sb[:, 0].round(3).tolist()}, relative error {err_b:.4f}")
     assert err < 0.05 and err_b > 2 * err
+
+
+def test_a_painted_highlight_gives_a_mounting_position_where_its_mirror_ray_lands():
+    """view.highlight_mounts: a bright pixel painted on the glossy floor of the box room (the rest
+    dim) gives one mount, the point where the camera's ray mirrored by the floor (z = 0) meets the
+    room (closed form: the first of the box's planes along the reflected ray), on that wall's
+    patch; a matte floor gives none; TargetAims of the view target carries it, and the patches
+    the painted pixels see get their mean pi x radiance (channels summed)."""
+    from relight_addon.engine.sampling import SceneSampler
+    from relight_addon.engine.targets import target_aims
+
+    for glossy in (True, False):
+        faces, patches, F = room(glossy=glossy)
+        cam = camera()
+        radiance = np.full((cam.height, cam.width, 3), 0.05)
+        radiance[40, 48] = 2.0  # (a pixel on the floor: the camera looks down at it)
+        faces.view_target = ViewSpec(cam, radiance, np.ones((cam.height, cam.width), bool), "t")
+        aims = target_aims(faces, patches, SceneSampler(patches))
+        if not glossy:
+            assert len(aims.mounts) == 0
+            continue
+        assert len(aims.mounts) == 1
+        d = cam.directions([40 * cam.width + 48])[0]
+        p = cam.origin + (-cam.origin[2] / d[2]) * d  # the floor's point
+        r = d * np.array([1.0, 1.0, -1.0])
+        t = min(((lim - p[k]) / r[k] for k, lim in ((0, SIZE[0]), (0, 0.0), (1, SIZE[1]), (1, 0.0), (2, SIZE[2]))
+                 if (lim - p[k]) / r[k] > 1e-9 if abs(r[k]) > 1e-12), default=np.inf)
+        np.testing.assert_allclose(aims.mounts[0], p + t * r, atol=1e-4)
+        on = patches.tri_vertices[patches.tri_patch == aims.mount_patches[0]].reshape(-1, 3)
+        assert np.all(on.min(axis=0) - 1e-6 <= aims.mounts[0]) and np.all(aims.mounts[0] <= on.max(axis=0) + 1e-6)
+        seen = aims.radiosity[aims.radiosity > 0]  # (pi x 3 x 0.05 on a patch of dim pixels only)
+        assert len(seen) > 10 and np.median(seen) == pytest.approx(np.pi * 0.15)

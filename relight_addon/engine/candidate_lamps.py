@@ -187,13 +187,19 @@ def _splits(patches, idx, size, depth):
     return out
 
 
-def target_clusters(patches, max_clusters=MAX_CLUSTERS) -> list:
-    """The target regions aimed at (see the module docstring), most power first."""
-    want = patches.target_radiosity.sum(axis=1)
-    tg = np.flatnonzero(patches.target & (want > 0))
+def target_clusters(patches, max_clusters=MAX_CLUSTERS, aims=None) -> list:
+    """The target regions aimed at (see the module docstring), most power first: the painted
+    patches at their painted radiosity, and where none is painted the radiosity ``aims`` (P,)
+    asks (engine.targets.target_aims' radiosity: a camera-view target's patches; grey)."""
+    wanted = np.where(patches.target[:, None], patches.target_radiosity, 0.0)
+    if aims is not None:
+        more = (wanted.sum(axis=1) <= 0) & (np.asarray(aims) > 0)
+        wanted[more] = np.asarray(aims)[more, None] / 3.0
+    want = wanted.sum(axis=1)
+    tg = np.flatnonzero(want > 0)
     if not len(tg):
         return []
-    key = np.column_stack([patches.object[tg], normal_bucket(patches.normal[tg]), patches.target_radiosity[tg]])
+    key = np.column_stack([patches.object[tg], normal_bucket(patches.normal[tg]), wanted[tg]])
     _, group = np.unique(key, axis=0, return_inverse=True)
     group = group.reshape(-1)
     size = float(patches.max_patch_size)
@@ -285,20 +291,26 @@ def enclosing_cone(directions, iterations=64) -> tuple:
     return a, float(np.arccos(np.clip((directions @ a).min(), -1.0, 1.0)))
 
 
-def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None) -> tuple:
+def plan_lamps(patches, candidates, options, sampler, drop=None, notes=None, aims=None) -> tuple:
     """The candidate lamps (no irradiance yet): ([engine.lamps.Lamp], [kind name]) as the module
     docstring says, for the job's options (``offered_kinds``, ``max_lamps``, ``lamp_drop``): at each
     mounting position, every offered kind's ``offer_at``, then for each cluster the position sees
     (in front of its mounting surface) every offered kind's ``offer_for``. ``notes``: a list that
-    gets a warning when no lamp can hang (every drop blocked)."""
+    gets a warning when no lamp can hang (every drop blocked); ``aims`` (engine.targets.TargetAims):
+    the radiosity the other target kinds ask (target_clusters) and their mounts, the first
+    positions (a painted highlight's: its mirror ray's landing point on a candidate surface)."""
     kinds = _offered(options)
     if not kinds:
         return [], []
-    clusters = target_clusters(patches)
+    clusters = target_clusters(patches, aims=None if aims is None else aims.radiosity)
     M = positions_for(options.max_lamps, kinds, max(len(clusters), 1), int(np.count_nonzero(candidates)))
     drop = float(options.lamp_drop if options.lamp_drop is not None else default_drop(patches)) if drop is None \
         else float(drop)
     pos, nrm, _ = mount_positions(patches, candidates, M, drop, sampler)
+    if aims is not None and len(aims.mounts):  # (first: the plan is cut at max_lamps)
+        on = candidates[aims.mount_patches]
+        n = patches.normal[aims.mount_patches[on]]
+        pos, nrm = np.concatenate([aims.mounts[on] + drop * n, pos]), np.concatenate([n, nrm])
     if M and not len(pos) and notes is not None:
         notes.append(f"no candidate lamp can hang {drop:.3g} m in front of the surfaces that may hold lights "
                      "(something closer is in front of every one): the lamps are not offered; use a smaller --lamp-drop")
@@ -388,12 +400,12 @@ def lamps_irradiance(patches, lamps, sampler, seed=0, progress=None) -> np.ndarr
     return H
 
 
-def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
+def offer_lamps(lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None, aims=None):
     """``lights`` (the surface lights; None: none, over the candidate patches ``candidates``)
     followed by the candidate lamps (``plan_lamps``) that light at least one patch, each a light
     of its kind whose source is its direct irradiance per W (engine.lamps). Returns
-    (LightSet, number of lamps planned); ``notes`` gets plan_lamps' warning."""
-    lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
+    (LightSet, number of lamps planned); ``notes`` gets plan_lamps' warning; ``aims``: its."""
+    lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes, aims=aims)
     if not lamps:
         return lights, 0
     H = lamps_irradiance(patches, lamps, sampler, seed, progress)

@@ -25,6 +25,7 @@ from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.registry import ESTIMATORS, LIGHT_COLOURS, SELECTIONS
 from ..engine.sampling import Cancelled, SceneSampler
 from ..engine.scene import FaceSet, PatchSet
+from ..engine.targets import target_aims
 from ..engine.targets import scene_targets
 from ..engine.scene_light import direct_lights, has_scene_light, scene_light, scene_light_excess
 from . import notes as texts
@@ -135,14 +136,15 @@ def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> Inv
                           background_excess=scene_light_excess(faces, patches, lamp_H))
 
 
-def _offer(lights, patches, mask, options, F, warnings, seconds, progress, cancel, offer=None):
-    """The candidate lamps offered beside the surface lights (engine.candidate_lamps; ``offer``:
+def _offer(faces, lights, patches, mask, options, F, warnings, seconds, progress, cancel, offer=None):
+    """The candidate lamps offered beside the surface lights (engine.candidate_lamps, aimed at the
+    painted patches and at what the other target kinds ask: engine.targets.target_aims; ``offer``:
     offer_lamps' replacement, a prepared scene's that keeps the lamps' irradiance)."""
     t1 = time.perf_counter()
     sampler = getattr(F, "sampler", None) or SceneSampler(patches)
     lamp_notes = []
     lights, _ = (offer or offer_lamps)(lights, patches, mask, options, sampler, options.seed, progress,
-                                       notes=lamp_notes)
+                                       notes=lamp_notes, aims=target_aims(faces, patches, sampler))
     warnings.extend(n for n in lamp_notes if n not in warnings)
     seconds["lamps"] += time.perf_counter() - t1
     _check_cancel(cancel)
@@ -166,7 +168,7 @@ def _inverse_pass(faces, patches, options, pm, scales, estimate, p, passes, warn
                       progress_slice(progress, "form factors", lo, hi), cancel, warnings)
     seconds["form_factors"] += F.seconds
     if offered_kinds(options):  # the candidate lamps, beside the cells
-        lights = _offer(lights, patches, mask, options, F, warnings, seconds,
+        lights = _offer(faces, lights, patches, mask, options, F, warnings, seconds,
                         progress_slice(progress, "lamps", hi, hi + 0.05 / (passes + 1)), cancel, offer)
     if lights.n_lights == 0:
         raise _no_light_error(options)

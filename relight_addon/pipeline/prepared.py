@@ -162,8 +162,8 @@ class KeptLamps:
         self.columns = {}  # lamp_key(lamp) -> (patch indices, irradiance per W there): its column of H
         self.reused = self.computed = 0  # of the last offer
 
-    def offer(self, lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None):
-        lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes)
+    def offer(self, lights, patches, candidates, options, sampler, seed=0, progress=None, notes=None, aims=None):
+        lamps, kinds = plan_lamps(patches, candidates, options, sampler, notes=notes, aims=aims)
         self.reused = self.computed = 0
         if not lamps:
             return lights, 0

@@ -23,12 +23,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..registry import TARGET_KINDS
-from .kind import Target, selection_rows
+from .kind import Target, TargetAims, selection_rows
 from .radiance import PaintedRadiance  # (the kinds register themselves, in this order)
 from .illuminance import Illuminance
 from .view import ViewTarget
 
-__all__ = ["Target", "TargetRows", "scene_targets", "selection_rows", "PaintedRadiance", "Illuminance", "ViewTarget"]
+__all__ = ["Target", "TargetRows", "scene_targets", "target_aims", "TargetAims", "selection_rows", "PaintedRadiance", "Illuminance", "ViewTarget"]
 
 
 @dataclass
@@ -123,3 +123,12 @@ def scene_targets(faces, patches, F=None) -> list:
     registered kind's (``from_scene``), in registration order."""
     found = (kind.impl.from_scene(faces, patches, F) for kind in TARGET_KINDS)
     return [t for t in found if t is not None]
+
+
+def target_aims(faces, patches, sampler) -> TargetAims:
+    """Every registered kind's ``Target.aims`` together (radiosities summed, mounts joined)."""
+    found = [a for a in (kind.impl.aims(faces, patches, sampler) for kind in TARGET_KINDS) if a is not None]
+    radiosity = [a.radiosity for a in found if a.radiosity is not None]
+    return TargetAims(np.sum(radiosity, axis=0) if radiosity else None,
+                      np.concatenate([a.mounts for a in found] + [np.zeros((0, 3))]),
+                      np.concatenate([a.mount_patches for a in found] + [np.zeros(0, dtype=np.int64)]))

@@ -2,10 +2,12 @@
 every kind, and ``selection_rows``, the rows of a kind that selects patches."""
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import scipy.sparse as sp
 
-__all__ = ["Target", "selection_rows"]
+__all__ = ["Target", "TargetAims", "selection_rows"]
 
 
 def selection_rows(patches, n_patches) -> sp.csr_matrix:
@@ -13,6 +15,19 @@ def selection_rows(patches, n_patches) -> sp.csr_matrix:
     patches = np.asarray(patches, dtype=np.int64).reshape(-1)
     k = len(patches)
     return sp.csr_matrix((np.ones(k), patches, np.arange(k + 1)), shape=(k, n_patches))
+
+
+@dataclass
+class TargetAims:
+    """What the candidate lamps aim at beyond the painted patches (engine.candidate_lamps):
+    ``radiosity`` (P,) W/m^2 or None, the radiosity asked on patches no paint covers (a camera-view
+    target's: the patches its painted pixels see; target_clusters); ``mounts`` (m, 3) points on
+    surfaces where a lamp must hang to give what is asked (a painted highlight: where the camera's
+    ray reflected by the glossy surface meets a surface), ``mount_patches`` (m,) their patches."""
+
+    radiosity: np.ndarray | None = None
+    mounts: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    mount_patches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 class Target:
@@ -32,6 +47,12 @@ class Target:
 
     def shown(self) -> np.ndarray:
         return np.asarray(self.values, dtype=np.float64)
+
+    @classmethod
+    def aims(cls, faces, patches, sampler):
+        """What the candidate lamps should aim at for this kind's targets of ``faces`` beyond the
+        painted patches (``patches.target``): a TargetAims (engine/targets/__init__.py), or None."""
+        return None
 
     def lamp_terms(self, lamps, irradiance=None):
         """None when this kind's rows see the lamps' light through B alone; else (k, len(lamps), 3)

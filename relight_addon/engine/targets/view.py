@@ -50,7 +50,7 @@ from ..principled import VIEW_ALPHA_MIN, BRDFTable
 from ..units import TINY
 from ..view_lamps import LAMP_VIEW_SAMPLES, lamp_view_light
 from ..view_radiance import view_rows
-from .kind import Target
+from .kind import Target, TargetAims
 
 __all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "predicted_image", "TILE_LOBE", "PREDICT_LOBE"]
 
@@ -65,6 +65,12 @@ TILE_LOBE = 0.5
 #: evaluation, no solve): finer, the pixels' error and the predicted image within 0.2 % of each
 #: pixel's own row on average
 PREDICT_LOBE = 0.15
+#: a painted highlight (``highlight_mounts``): a painted pixel on a glossy patch at least this many
+#: times the median of the painted glossy pixels; at most MAX_HIGHLIGHTS of them, HIGHLIGHT_SPACING
+#: pixels apart, each a mounting position for the candidate lamps where its mirror ray lands
+HIGHLIGHT_CONTRAST = 3.0
+MAX_HIGHLIGHTS = 4
+HIGHLIGHT_SPACING = 8
 #: lamp samples a pixel (each of its rays) for a lamp with an extent in the radiance predicted and shown
 #: (``predict``, ``image``: per pixel; the rows take engine.view_lamps.LAMP_VIEW_SAMPLES): 112,000 glossy
 #: pixels of a 480 x 270 image x 16 samples took 5 s a 0.5 m area lamp, x 4 1.3 s (load 5 on 2 cores)
@@ -143,6 +149,40 @@ def _sampler(F, patches):
         from ..sampling import SceneSampler
         sampler = SceneSampler(patches)
     return sampler
+
+
+def highlight_mounts(spec, hits, want, alpha, sampler):
+    """((m, 3) points, (m,) patches): where a lamp hangs to put a painted highlight where it is
+    painted -- for each highlight (a painted pixel on a glossy patch at least HIGHLIGHT_CONTRAST x
+    the median of the painted glossy pixels, the brightest first, at most MAX_HIGHLIGHTS of them
+    HIGHLIGHT_SPACING pixels apart), the first surface the camera's ray meets after its mirror
+    reflection about the patch's normal (the lobe's peak direction)."""
+    glossy = np.flatnonzero(np.isfinite(alpha[hits.patch]))
+    if not len(glossy):
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    bright = glossy[want[glossy] >= HIGHLIGHT_CONTRAST * np.median(want[glossy])]
+    rows, cols = np.divmod(hits.pixel, spec.camera.width)
+    chosen = []
+    for k in bright[np.argsort(-want[bright], kind="stable")]:
+        if all(np.hypot(rows[k] - rows[c], cols[k] - cols[c]) >= HIGHLIGHT_SPACING for c in chosen):
+            chosen.append(k)
+        if len(chosen) == MAX_HIGHLIGHTS:
+            break
+    if not chosen:
+        return np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    chosen = np.asarray(chosen)
+    n = sampler.tn[sampler.tstart[hits.patch[chosen]]]  # (the patch's first triangle's normal: a plane)
+    d = hits.direction[chosen]
+    r = d - 2 * np.einsum("ij,ij->i", d, n)[:, None] * n
+    org = hits.point[chosen] + n * sampler.offset
+    prim = np.asarray(sampler.first_hit(org.astype(np.float32), r.astype(np.float32)))
+    ok = prim >= 0
+    tri = np.maximum(prim, 0)
+    tn = sampler.tn[tri]
+    cos = np.einsum("ij,ij->i", tn, r)
+    t = np.einsum("ij,ij->i", sampler.tv[tri, 0] - org, tn) / np.where(np.abs(cos) > TINY, cos, -1.0)
+    ok &= (cos < 0) & (t > 0)
+    return (org + t[:, None] * r)[ok], sampler.tri_patch[tri[ok]]
 
 
 def cast_pixels(camera: Camera, sampler, pixels, offset=(0.5, 0.5)) -> PixelHits:
@@ -402,6 +442,21 @@ class ViewTarget(Target):
     def pixels(self) -> int:
         """How many pixels were painted."""
         return int(self.spec.painted.sum())
+
+    @classmethod
+    def aims(cls, faces, patches, sampler):
+        """A TargetAims (None without a view target): per patch its painted pixels see, their mean
+        pi x radiance (channels summed: where the candidate lamps aim, target_clusters), and the
+        painted highlights' mounts (``highlight_mounts``)."""
+        spec = getattr(faces, "view_target", None)
+        if spec is None:
+            return None
+        hits = cast_pixels(spec.camera, sampler, np.flatnonzero(spec.painted.reshape(-1)))
+        want = np.pi * spec.radiance.reshape(-1, 3)[hits.pixel].sum(axis=1)
+        n = np.bincount(hits.patch, minlength=patches.n_patches)
+        radiosity = np.bincount(hits.patch, weights=want, minlength=patches.n_patches) / np.maximum(n, 1)
+        points, where = highlight_mounts(spec, hits, want, _patch_materials(faces, patches)[2], sampler)
+        return TargetAims(radiosity, points, where)
 
     @classmethod
     def from_scene(cls, faces, patches, F=None):
