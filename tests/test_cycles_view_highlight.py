@@ -26,7 +26,6 @@ pytestmark = [pytest.mark.cycles, pytest.mark.slow]
 bpy = pytest.importorskip("bpy", reason="Cycles renders through bpy")
 
 import view_rooms as vr  # noqa: E402
-from relight_addon.pipeline.view_targets import resample  # noqa: E402
 
 SAMPLES = 4096  # per render at 64 x 36; two renders (seeds 0 and 1) are averaged
 RENDER = (64, 36)
@@ -73,15 +72,9 @@ def _smooth(img):
 
 
 def test_cycles_renders_the_predicted_image_with_the_lamps_highlight(solved):
-    report, pred, (a, b), _ = solved
+    report, pred, renders, _ = solved
     w, h = RENDER
-    cyc = (a[..., :3] + b[..., :3]) / 2
-    painted = resample(_target()[..., 3:], h, w)[..., 0] >= 1 - 1e-9
-    lum_p = resample(pred[..., :3], h, w).sum(axis=2)
-    lum_c = cyc.sum(axis=2)
-    ok = painted & (lum_c > 0)
-    rel = np.abs(lum_p - lum_c)[ok] / lum_c[ok]
-    noise = (np.abs(a[..., :3] - b[..., :3]).sum(axis=2) / 2)[ok] / lum_c[ok]
+    rel, noise, ok, painted = vr.against_cycles(pred, renders, _target()[..., 3:], RENDER)
     block = report["view_target"]
     print(f"view target: {block}; {report['final']['n_lights']} lights; Cycles {2 * SAMPLES} samples: pixel noise "
           f"{noise.mean():.4f} (mean, relative) at {w} x {h}; predicted vs Cycles over {ok.sum()} painted pixels: mean "

@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 from scipy.optimize import nnls
 
-from relight_addon.engine import closed_forms as cf
 from relight_addon.engine.formfactors import QUALITY, compute_form_factors
 from relight_addon.engine.inverse import InverseProblem
 from relight_addon.engine.lamp_refinement import Transport
 from relight_addon.engine.lamps import Lamp, lamp_irradiance
 from relight_addon.engine.lights import append_lamps
 from relight_addon.engine.lights.point import POINT
-from relight_addon.engine.principled import BRDFTable, PrincipledParams, principled_albedo
-from relight_addon.engine.scene import mesh_patches, polygon_faceset
+from relight_addon.engine.principled import BRDFTable, PrincipledParams
+from relight_addon.engine.scene import mesh_patches
 from relight_addon.engine.targets import scene_targets
 from relight_addon.engine.targets.view import Camera, ViewSpec, ViewTarget
+from test_view_target import box_faces
 
 SIZE = (4.0, 3.0, 2.5)
 #: the glossy floor: Roughness 0.3, Specular IOR Level 0.5 (the brief's plane)
@@ -41,12 +41,7 @@ def camera(width=96, height=54, target=(2.0, 2.0, 0.0), fov=1.0):
 
 def room(glossy=True, size=0.4, lamps=()):
     """The box room (floor glossy or matte: material 1 / 0, the rest matte 0.6 grey), its scene lamps ``lamps``."""
-    faces = polygon_faceset(cf.box_polygons(SIZE), reflectance=0.6)
-    faces.material_lobes = [[(1.0, "diffuse", (np.full(3, 0.6), 0.0))], [(1.0, "principled", GLOSSY)]]
-    faces.face_material = np.zeros(6, dtype=np.int64)
-    if glossy:
-        faces.face_material[0] = 1
-        faces.reflectance[0] = principled_albedo(GLOSSY).albedo
+    faces = box_faces(glossy, GLOSSY, SIZE)
     faces.lamps = list(lamps)
     patches = mesh_patches(faces, max_patch_size=size)
     F = compute_form_factors(patches, QUALITY["default"], seed=1)

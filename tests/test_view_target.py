@@ -41,14 +41,21 @@ def camera(width=64, height=36, origin=(2.0, 0.3, 1.6), target=(2.0, 2.2, 0.2), 
     return Camera(origin, look_at(origin, target), width, height, half)
 
 
-def room(glossy=True, size=0.3):
-    """The box's faces: floor (glossy or matte, material 1 / 0), the rest matte 0.6 grey."""
-    faces = polygon_faceset(cf.box_polygons(SIZE), reflectance=0.6)
-    faces.material_lobes = [[(1.0, "diffuse", (np.full(3, 0.6), 0.0))], [(1.0, "principled", GLOSSY)]]
+def box_faces(glossy=True, params=GLOSSY, size=SIZE):
+    """The box's faces: floor (glossy Principled ``params`` or matte, material 1 / 0), the rest matte
+    0.6 grey."""
+    faces = polygon_faceset(cf.box_polygons(size), reflectance=0.6)
+    faces.material_lobes = [[(1.0, "diffuse", (np.full(3, 0.6), 0.0))], [(1.0, "principled", params)]]
     faces.face_material = np.zeros(6, dtype=np.int64)
     if glossy:
         faces.face_material[0] = 1
-        faces.reflectance[0] = principled_albedo(GLOSSY).albedo
+        faces.reflectance[0] = principled_albedo(params).albedo
+    return faces
+
+
+def room(glossy=True, size=0.3):
+    """The box's faces (``box_faces``) and patches."""
+    faces = box_faces(glossy)
     patches = mesh_patches(faces, max_patch_size=size)
     F = compute_form_factors(patches, QUALITY["default"], seed=1)
     return faces, patches, F

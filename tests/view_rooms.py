@@ -161,3 +161,21 @@ def relight_cli(*args):
     proc = subprocess.run([sys.executable, "-m", "relight_addon", *map(str, args)], cwd=root, capture_output=True,
                           text=True, env={**os.environ, "PYTHONPATH": root})
     return proc.returncode, proc.stderr
+
+
+def against_cycles(pred, renders, painted_alpha, size):
+    """The predicted image ``pred`` (H, W, 4) box-filtered to ``size`` (w, h) against the mean of two
+    Cycles ``renders`` at that size, over the pixels wholly painted (``painted_alpha`` (H, W, 1) at the
+    working resolution) that Cycles sees lit: (the relative luminance differences, the renders'
+    relative noise (half their difference), the pixels compared (h, w) bool, the painted ones)."""
+    from relight_addon.pipeline.view_targets import resample
+
+    w, h = size
+    a, b = renders
+    painted = resample(painted_alpha, h, w)[..., 0] >= 1 - 1e-9
+    lum_p = resample(pred[..., :3], h, w).sum(axis=2)
+    lum_c = ((a[..., :3] + b[..., :3]) / 2).sum(axis=2)
+    ok = painted & (lum_c > 0)
+    rel = np.abs(lum_p - lum_c)[ok] / lum_c[ok]
+    noise = (np.abs(a[..., :3] - b[..., :3]).sum(axis=2) / 2)[ok] / lum_c[ok]
+    return rel, noise, ok, painted
