@@ -43,11 +43,7 @@ CROP_SAMPLES = 512
 
 
 def _target():
-    H, W = vr.HEIGHT, vr.WIDTH
-    rgba = np.zeros((H, W, 4))
-    rgba[..., :3] = BASE
-    rgba[40:, :, 3] = 1.0  # (the top rows free)
-    return rgba
+    return vr.lower_image_target(BASE)
 
 
 @pytest.fixture(scope="module")

@@ -31,9 +31,7 @@ CROP_SAMPLES = 512
 
 def _target():
     H, W = vr.HEIGHT, vr.WIDTH
-    rgba = np.zeros((H, W, 4))
-    rgba[..., :3] = 0.05
-    rgba[40:, :, 3] = 1.0
+    rgba = vr.lower_image_target(0.05)
     yy, xx = np.mgrid[0:H, 0:W]
     rgba[(yy - PAINTED[0]) ** 2 + (xx - PAINTED[1]) ** 2 <= RADIUS ** 2, :3] = 2.0
     return rgba

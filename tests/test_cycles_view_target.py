@@ -36,9 +36,7 @@ BASE = 0.05
 
 def _target():
     H, W = vr.HEIGHT, vr.WIDTH
-    rgba = np.zeros((H, W, 4))
-    rgba[..., :3] = BASE
-    rgba[40:, :, 3] = 1.0  # (the top rows free)
+    rgba = vr.lower_image_target(BASE)
     r0, c0, rad, value = HIGHLIGHT
     rr, cc = np.mgrid[:H, :W]
     blob = (rr - r0) ** 2 + (cc - c0) ** 2 <= rad * rad

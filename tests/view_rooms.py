@@ -179,3 +179,12 @@ def against_cycles(pred, renders, painted_alpha, size):
     rel = np.abs(lum_p - lum_c)[ok] / lum_c[ok]
     noise = (np.abs(a[..., :3] - b[..., :3]).sum(axis=2) / 2)[ok] / lum_c[ok]
     return rel, noise, ok, painted
+
+
+def lower_image_target(radiance, free_rows=40):
+    """(HEIGHT, WIDTH, 4) a view target painted ``radiance`` (W m^-2 sr^-1, grey) below its top
+    ``free_rows`` rows (free: alpha 0)."""
+    rgba = np.zeros((HEIGHT, WIDTH, 4))
+    rgba[..., :3] = radiance
+    rgba[free_rows:, :, 3] = 1.0
+    return rgba
