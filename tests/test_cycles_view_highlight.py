@@ -16,7 +16,6 @@ Measured (h40-highlight, load 5 on 2 shared cores, 5.6 min: the solve, two rende
 crop): 4.38 % mean per painted pixel (median 2.79 %, 95th percentile 14.6 %) over 1,920 pixels,
 Cycles' noise 2.27 %; the peak at (148, 240) in Cycles and (148, 239) predicted, 49 x the table
 region's median in both (without the highlight term it was not predicted at all)."""
-import json
 
 import numpy as np
 import pytest
@@ -50,12 +49,7 @@ def _target():
 def solved(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("view_highlight")
     vr.build(tmp / "room.blend", patch_size=0.2, lamps=[SPOT])
-    vr.write_exr(tmp / "target.exr", _target())
-    code, err = vr.relight_cli("solve", tmp / "room.blend", "--report", tmp / "r.json", "--out", tmp / "out.blend",
-                               "--view-target", tmp / "target.exr", "--view-prediction", tmp / "pred.exr", "--quiet")
-    assert code == 0, err[-2000:]
-    report = json.loads((tmp / "r.json").read_text())
-    pred = vr.read_exr(tmp / "pred.exr")
+    report, pred = vr.solve_view(tmp, _target())
     renders = [vr.render(tmp / "out.blend", tmp / f"cycles{s}.exr", SAMPLES, seed=s, size=RENDER) for s in (0, 1)]
     crop = vr.render(tmp / "out.blend", tmp / "crop.exr", CROP_SAMPLES, seed=2, border=CROP)
     return report, pred, renders, crop
@@ -69,12 +63,8 @@ def _smooth(img):
 
 def test_cycles_renders_the_predicted_image_with_the_lamps_highlight(solved):
     report, pred, renders, _ = solved
-    w, h = RENDER
     rel, noise, ok, painted = vr.against_cycles(pred, renders, _target()[..., 3:], RENDER)
-    block = report["view_target"]
-    print(f"view target: {block}; {report['final']['n_lights']} lights; Cycles {2 * SAMPLES} samples: pixel noise "
-          f"{noise.mean():.4f} (mean, relative) at {w} x {h}; predicted vs Cycles over {ok.sum()} painted pixels: mean "
-          f"{rel.mean():.4f}, median {np.median(rel):.4f}, 95th percentile {np.quantile(rel, 0.95):.4f}")
+    print(vr.cycles_summary(report, rel, noise, ok, SAMPLES, RENDER))
     assert ok.sum() > 0.95 * painted.sum()
     assert rel.mean() <= MEAN_TOL
 

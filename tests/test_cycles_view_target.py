@@ -13,7 +13,6 @@ per painted pixel (median 3.35 %, 95th percentile 15.3 %) over 1,920 pixels, Cyc
 seen wall's B scattered +-10 % from patch to patch). The margin is thin (the renders' seeds and the
 solve are fixed; the solve gave the same report in three runs); what is left is mostly Cycles' noise
 and the floor in the table's shadow (docs/validation.md)."""
-import json
 
 import numpy as np
 import pytest
@@ -48,24 +47,16 @@ def _target():
 def solved(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("view_target")
     vr.build(tmp / "room.blend", patch_size=0.2)
-    vr.write_exr(tmp / "target.exr", _target())
-    code, err = vr.relight_cli("solve", tmp / "room.blend", "--report", tmp / "r.json", "--out", tmp / "out.blend",
-                               "--view-target", tmp / "target.exr", "--view-prediction", tmp / "pred.exr", "--quiet")
-    assert code == 0, err[-2000:]
-    report = json.loads((tmp / "r.json").read_text())
-    pred = vr.read_exr(tmp / "pred.exr")
+    report, pred = vr.solve_view(tmp, _target())
     renders = [vr.render(tmp / "out.blend", tmp / f"cycles{s}.exr", SAMPLES, seed=s, size=RENDER) for s in (0, 1)]
     return report, pred, renders
 
 
 def test_cycles_renders_the_predicted_image(solved):
     report, pred, renders = solved
-    w, h = RENDER
     rel, noise, ok, painted = vr.against_cycles(pred, renders, _target()[..., 3:], RENDER)
     block = report["view_target"]
-    print(f"view target: {block}; {report['final']['n_lights']} lights; Cycles {2 * SAMPLES} samples: pixel noise "
-          f"{noise.mean():.4f} (mean, relative) at {w} x {h}; predicted vs Cycles over {ok.sum()} painted pixels: mean "
-          f"{rel.mean():.4f}, median {np.median(rel):.4f}, 95th percentile {np.quantile(rel, 0.95):.4f}")
+    print(vr.cycles_summary(report, rel, noise, ok, SAMPLES, RENDER))
     assert block["seen"] == block["painted"] and block["rows"] < block["painted"] / 5
     assert ok.sum() > 0.95 * painted.sum()
     assert rel.mean() <= MEAN_TOL

@@ -181,6 +181,14 @@ def against_cycles(pred, renders, painted_alpha, size):
     return rel, noise, ok, painted
 
 
+def cycles_summary(report, rel, noise, ok, samples, size) -> str:
+    """One line: the report's view target block and lights, Cycles' noise, the differences."""
+    return (f"view target: {report['view_target']}; {report['final']['n_lights']} lights; Cycles {2 * samples} "
+            f"samples: pixel noise {noise.mean():.4f} (mean, relative) at {size[0]} x {size[1]}; predicted vs Cycles "
+            f"over {ok.sum()} painted pixels: mean {rel.mean():.4f}, median {np.median(rel):.4f}, 95th percentile "
+            f"{np.quantile(rel, 0.95):.4f}")
+
+
 def lower_image_target(radiance, free_rows=40):
     """(HEIGHT, WIDTH, 4) a view target painted ``radiance`` (W m^-2 sr^-1, grey) below its top
     ``free_rows`` rows (free: alpha 0)."""
@@ -188,3 +196,15 @@ def lower_image_target(radiance, free_rows=40):
     rgba[..., :3] = radiance
     rgba[free_rows:, :, 3] = 1.0
     return rgba
+
+
+def solve_view(tmp, rgba):
+    """`solve --view-target` of tmp/room.blend with the view target ``rgba`` (written to
+    tmp/target.exr), the result to tmp/out.blend: (the report, the predicted image)."""
+    import json
+
+    write_exr(tmp / "target.exr", rgba)
+    code, err = relight_cli("solve", tmp / "room.blend", "--report", tmp / "r.json", "--out", tmp / "out.blend",
+                            "--view-target", tmp / "target.exr", "--view-prediction", tmp / "pred.exr", "--quiet")
+    assert code == 0, err[-2000:]
+    return json.loads((tmp / "r.json").read_text()), read_exr(tmp / "pred.exr")
