@@ -198,13 +198,14 @@ def lower_image_target(radiance, free_rows=40):
     return rgba
 
 
-def solve_view(tmp, rgba):
+def solve_view(tmp, rgba, *options):
     """`solve --view-target` of tmp/room.blend with the view target ``rgba`` (written to
-    tmp/target.exr), the result to tmp/out.blend: (the report, the predicted image)."""
+    tmp/target.exr) and ``options``, the result to tmp/out.blend: (the report, the predicted image)."""
     import json
 
     write_exr(tmp / "target.exr", rgba)
     code, err = relight_cli("solve", tmp / "room.blend", "--report", tmp / "r.json", "--out", tmp / "out.blend",
-                            "--view-target", tmp / "target.exr", "--view-prediction", tmp / "pred.exr", "--quiet")
+                            "--view-target", tmp / "target.exr", "--view-prediction", tmp / "pred.exr", "--quiet",
+                            *options)
     assert code == 0, err[-2000:]
     return json.loads((tmp / "r.json").read_text()), read_exr(tmp / "pred.exr")
