@@ -123,9 +123,9 @@ def test_a_stroke_is_re_solved_from_the_prepared_state_like_a_cold_solve(monkeyp
 
     # the warm solve against a cold solve of the painted file. On the polygon model, whose mesh is
     # the cold solve's: within 1 % (kernel pairs and lamps drawn per pair and per lamp: what is kept
-    # is what the cold solve computes; but the kept patches' decisive region, engine.extent, is the
-    # first paint's: the rays' offset and the lamps' drop follow it). On the adaptive model the kept
-    # mesh is not the one a cold solve makes for the new paint: the warm solve is the cold solve
+    # is what the cold solve computes; but the kept rays were cast with the first paint's decisive
+    # region's offset: engine.extent, PatchSet.ray_scale; the lamps hang at the new paint's drop). On
+    # the adaptive model the kept mesh is not the one a cold solve makes for the new paint: the warm solve is the cold solve
     # *of the kept mesh* (to 1e-6: nothing it kept is another sample), and how far that mesh is
     # from the re-meshed cold solve is the adaptive model's own open question (issue 37; seed 3:
     # 0.1849 against 0.1476, 1.25 x, for this stroke and its lux fill; docs/benchmarks.md)
@@ -269,8 +269,8 @@ def test_the_button_after_each_kind_of_stroke_gives_the_cold_solve_reusing_the_s
     cold solve's: after each kind of stroke (extend, a new spot, erase, a lux fill; each on the
     paint the one before left) an answer as good as the cold solve's within 1 % (the same number of lights; the
     kernel's pairs and the lamps' irradiance are drawn per pair and per lamp, so what is kept is
-    what the cold solve computes; the kept patches' decisive region is the first paint's, so the
-    hemisphere rays' offset and the lamps' drop are slightly other than the cold solve's), having
+    what the cold solve computes; the kept rays' offset is the first paint's decisive region's,
+    slightly other than the cold solve's; the lamps hang at the new paint's drop, as its), having
     cast no hemisphere ray, drawn only the kernel pairs it did not have and computed only the
     lamps it did not have; its report says what it kept."""
     exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
