@@ -175,14 +175,22 @@ def highlight_mounts(spec, hits, want, alpha, sampler):
     d = hits.direction[chosen]
     r = d - 2 * np.einsum("ij,ij->i", d, n)[:, None] * n
     org = hits.point[chosen] + n * sampler.offset
-    prim = np.asarray(sampler.first_hit(org.astype(np.float32), r.astype(np.float32)))
-    ok = prim >= 0
+    hit, front, tri, point = _first_surface(sampler, org, r)
+    ok = front & (np.einsum("ij,ij->i", point - org, r) > 0)
+    return point[ok], sampler.tri_patch[tri[ok]]
+
+
+def _first_surface(sampler, org, d):
+    """The first triangle each ray (origins ``org``, unit directions ``d``) meets: (hit (n,) bool, front
+    (n,) bool: it meets the triangle's front, tri (n,) its sorted triangle (0 where none), point (n, 3)
+    on its plane)."""
+    prim = np.asarray(sampler.first_hit(org.astype(np.float32), d.astype(np.float32)))
+    hit = prim >= 0
     tri = np.maximum(prim, 0)
-    tn = sampler.tn[tri]
-    cos = np.einsum("ij,ij->i", tn, r)
-    t = np.einsum("ij,ij->i", sampler.tv[tri, 0] - org, tn) / np.where(np.abs(cos) > TINY, cos, -1.0)
-    ok &= (cos < 0) & (t > 0)
-    return (org + t[:, None] * r)[ok], sampler.tri_patch[tri[ok]]
+    n = sampler.tn[tri]
+    cos = np.einsum("ij,ij->i", n, d)
+    t = np.einsum("ij,ij->i", sampler.tv[tri, 0] - org, n) / np.where(np.abs(cos) > TINY, cos, -1.0)
+    return hit, hit & (cos < 0), tri, org + t[:, None] * d
 
 
 def cast_pixels(camera: Camera, sampler, pixels, offset=(0.5, 0.5)) -> PixelHits:
@@ -190,14 +198,7 @@ def cast_pixels(camera: Camera, sampler, pixels, offset=(0.5, 0.5)) -> PixelHits
     pixels = np.asarray(pixels, dtype=np.int64)
     d = camera.directions(pixels, offset)
     org = np.repeat(camera.origin[None, :], len(pixels), axis=0)
-    prim = np.asarray(sampler.first_hit(org.astype(np.float32), d.astype(np.float32)))
-    hit = prim >= 0
-    tri = np.maximum(prim, 0)
-    n = sampler.tn[tri]
-    cos = np.einsum("ij,ij->i", n, d)
-    front = hit & (cos < 0)
-    t = np.einsum("ij,ij->i", sampler.tv[tri, 0] - org, n) / np.where(np.abs(cos) > TINY, cos, -1.0)
-    point = org + t[:, None] * d
+    hit, front, tri, point = _first_surface(sampler, org, d)
     return PixelHits(pixels[front], sampler.tri_patch[tri[front]], point[front], d[front],
                      missed=int(np.sum(~hit)), back=int(np.sum(hit & ~front)))
 
