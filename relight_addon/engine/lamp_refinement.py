@@ -45,6 +45,9 @@ __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp"]
 #: receiver points per patch of a lamp's irradiance while searching (the lamp kept takes
 #: candidate_lamps.LAMP_POINTS)
 SEARCH_POINTS = 4
+#: samples of a lamp with an extent per glossy viewed point of its highlight while searching (a
+#: camera-view target's lamp_terms; the lamp kept takes the kind's own, view_lamps.LAMP_VIEW_SAMPLES)
+SEARCH_SAMPLES = 4
 #: Nelder-Mead evaluations per lamp and round, and rounds over the configuration's lamps
 MAX_EVALUATIONS = 60
 ROUNDS = 2
@@ -74,18 +77,18 @@ class Transport:
                 done[id(facs[c])] = facs[c].solve(problem.target_rows.columns(), trans=True)  # (P, m): Y^T = R A^-1
             self.Y.append(done[id(facs[c])])
 
-    def column(self, h, lamp=None) -> np.ndarray:
+    def column(self, h, lamp=None, samples=None) -> np.ndarray:
         """(m, 3): the targets' radiosity per unit strength of ``lamp`` whose direct irradiance is
         ``h`` (P,): rows P of A^-1 ((rho + x) h), x its first reflection's excess albedo; plus what
         the lamp adds to the rows beyond B (TargetRows.lamp_terms: its highlight on a camera-view
-        target's glossy pixels, computed for the lamp as it is now)."""
+        target's glossy pixels, computed for the lamp as it is now, with ``samples``)."""
         nz = np.flatnonzero(h)
         albedo = self.rho[nz]
         x = None if self.albedo_excess is None or lamp is None else self.albedo_excess(lamp)
         if x is not None:
             albedo = albedo + x[nz]
         col = np.stack([(albedo[:, c] * h[nz]) @ self.Y[c][nz] for c in range(3)], axis=1)
-        X = None if lamp is None else self.rows.lamp_terms([lamp], h.reshape(-1, 1))
+        X = None if lamp is None else self.rows.lamp_terms([lamp], h.reshape(-1, 1), samples)
         return col if X is None else col + X[:, 0, :]  # (a view target's highlight of the moved lamp)
 
 
@@ -233,8 +236,8 @@ class _Search:
         return lamp_irradiance(patches, [lamp], sampler=self.mount.sampler, seed=self.seed, points_per_patch=points,
                                only=lamp_reach(patches, [lamp], self.radius))[:, 0, 0]
 
-    def with_column(self, cs, j, h, lamp):
-        col = self.transport.column(h, lamp)
+    def with_column(self, cs, j, h, lamp, samples=None):
+        col = self.transport.column(h, lamp, samples)
         out = [c.copy() for c in cs]
         for c in range(3):
             out[c][:, j] = col[:, c]
@@ -250,7 +253,8 @@ class _Search:
             if key not in seen:
                 cand = params.lamp_at(x)
                 h = None if cand is None else self.irradiance(cand)
-                val = self.error(self.with_column(cols, j, h, cand)) if h is not None and np.any(h > 0) else math.inf
+                val = (self.error(self.with_column(cols, j, h, cand, SEARCH_SAMPLES))
+                       if h is not None and np.any(h > 0) else math.inf)
                 seen[key] = (val, cand)
             return seen[key][0]
 

@@ -23,9 +23,9 @@ import numpy as np
 
 from .lamps import _far
 from .principled import BRDFTable
-from .view_radiance import _above, _frame
+from .view_radiance import _above, frames
 
-__all__ = ["LAMP_VIEW_SAMPLES", "lamp_view_light"]
+__all__ = ["LAMP_VIEW_SAMPLES", "lamp_view_light", "brdf_tables"]
 
 #: lamp samples per viewed point for a lamp with an extent (stratified on a 4 x 4 grid)
 LAMP_VIEW_SAMPLES = 16
@@ -61,14 +61,21 @@ def _lit(lamp, y, n, u, sampler, far):
     return e, np.asarray(w, dtype=np.float64)
 
 
+def brdf_tables(material_lobes, material) -> dict:
+    """{m: engine.principled.BRDFTable of material_lobes[m]} for each material m of ``material``."""
+    return {int(m): BRDFTable(material_lobes[int(m)]) for m in np.unique(material)}
+
+
 def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, material_lobes, sampler,
-                    samples=LAMP_VIEW_SAMPLES, seed=0) -> np.ndarray:
+                    samples=LAMP_VIEW_SAMPLES, seed=0, tables=None) -> np.ndarray:
     """(n, len(lamps), 3) pi L_extra = (pi f(l, v) - rho) E (W/m^2 per unit strength of each lamp,
     module docstring) at ``point`` (n, 3) on patches ``patch`` (n,), seen along ``view`` (n, 3)
     unit directions from the viewer to the points. ``normal``, ``reflectance`` (P, 3) and
     ``material`` (P,) are the patches' (``material_lobes``: each material's BSDFs,
     engine.principled.BRDFTable); ``sampler``: the scene's engine.sampling.SceneSampler (shadow
-    rays). Deterministic for a seed. The caller passes glossy points only (a Lambertian one is 0)."""
+    rays). Deterministic for a seed. The caller passes glossy points only (a Lambertian one is 0).
+    ``tables``: {material: its BRDFTable} of the points' materials, built by a caller that calls
+    again (default: built here)."""
     point = np.asarray(point, dtype=np.float64).reshape(-1, 3)
     patch = np.asarray(patch, dtype=np.int64).reshape(-1)
     view = np.asarray(view, dtype=np.float64).reshape(-1, 3)
@@ -81,10 +88,10 @@ def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, ma
     mat = np.asarray(material, dtype=np.int64)[patch]
     nrm = normal[patch] / np.linalg.norm(normal[patch], axis=1, keepdims=True)
     # each point's local frame (its patch's) and its view towards the viewer, as view_rows takes them
-    frames = {int(p): _frame(normal[p]) for p in np.unique(patch)}
-    R = np.stack([frames[int(p)] for p in patch])  # (n, 3, 3)
+    R = frames(normal[patch])  # (n, 3, 3)
     v_loc = _above(np.einsum("nab,nb->na", R, -view))
-    tables = {int(m): BRDFTable(material_lobes[int(m)]) for m in np.unique(mat)}
+    if tables is None:
+        tables = brdf_tables(material_lobes, mat)
     far = _far(sampler)
     for k, lamp in enumerate(lamps):
         ns = 1 if lamp.kind.samples_per_point(lamp) == 1 else int(samples)

@@ -46,12 +46,15 @@ HORIZON = 0.02
 MAX_PAIRS = 40_000_000
 
 
-def _frame(n):
-    n = n / np.linalg.norm(n)
-    a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+def frames(normal) -> np.ndarray:
+    """(n, 3, 3): the local frame of each of the normals ``normal`` (n, 3) (or one (3,)), rows local x,
+    y, z (z the unit normal; x across the world x axis, or the y axis for a normal near x)."""
+    n = np.asarray(normal, dtype=np.float64).reshape(-1, 3)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    a = np.where((np.abs(n[:, 0]) < 0.9)[:, None], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     t1 = np.cross(n, a)
-    t1 /= np.linalg.norm(t1)
-    return np.stack([t1, np.cross(n, t1), n])  # rows: local x, y, z
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return np.stack([t1, np.cross(n, t1), n], axis=1)
 
 
 def view_radiance(F, B, reflectance, center, normal, patches, material, material_lobes, view=None,
@@ -89,19 +92,19 @@ def view_radiance(F, B, reflectance, center, normal, patches, material, material
     if emission_share is not None and exitance is not None:
         e = e * np.asarray(emission_share, dtype=np.float64).reshape(-1, 1)
     tables = {int(m): BRDFTable(material_lobes[m]) for m in np.unique(material)}
-    frames = np.stack([_frame(n) for n in normal])  # (P, 3, 3): rows local x, y, z
+    frame_of = frames(normal)  # (P, 3, 3): rows local x, y, z
     E = np.flatnonzero(np.any(e > 1e-9 * max(float(e.max()), TINY), axis=1))
     rows = M[patches]
     rows = rows.tocsr() if sp.issparse(rows) else np.asarray(rows)
     nnz = rows.nnz if sp.issparse(rows) else int(np.count_nonzero(rows))
     sources = None
     if source_glossy and len(E) > 0 and nnz * len(E) <= max_pairs:
-        sources = _GlossySources(M, E, e, e_own, rho, FB, B, center, frames, material, tables, direct_correction,
+        sources = _GlossySources(M, E, e, e_own, rho, FB, B, center, frame_of, material, tables, direct_correction,
                                  lamp_light)
     out = np.empty((len(patches), 3))
     for k, i in enumerate(patches):
         js, fij = _row(rows, k)
-        R = frames[i]
+        R = frame_of[i]
         v = np.array([0.0, 0.0, 1.0]) if view is None else R @ np.asarray(view[k], dtype=np.float64)
         d = center[js] - center[i]
         d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), TINY)
@@ -202,7 +205,7 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
     keep = js != i
     js, fij = js[keep], fij[keep]
     n = len(points)
-    R = _frame(np.asarray(normal[i], dtype=np.float64))
+    R = frames(normal[i])[0]
     v_loc = _above(-np.asarray(views, dtype=np.float64) @ R.T)  # towards the viewer, local
     d = center[js][None, :, :] - np.asarray(points, dtype=np.float64)[:, None, :]  # (n, J, 3)
     d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), TINY)

@@ -98,12 +98,12 @@ class TargetRows:
                                for b, k in zip(blocks, counts)])
         return full if self.order is None else full[self.order]
 
-    def lamp_terms(self, lamps, irradiance=None) -> np.ndarray | None:
+    def lamp_terms(self, lamps, irradiance=None, samples=None) -> np.ndarray | None:
         """(m, len(lamps), 3): what the lamps (engine.lamps.Lamp) add to the rows beyond B per unit
-        strength (each kind's ``lamp_terms``), None when no kind adds anything."""
+        strength (each kind's ``lamp_terms``; ``samples``: theirs), None when no kind adds anything."""
         if not len(lamps):
             return None
-        return self._stacked([t.lamp_terms(lamps, irradiance) for t in self.targets])
+        return self._stacked([t.lamp_terms(lamps, irradiance, samples) for t in self.targets])
 
     def fixed_light(self) -> np.ndarray | None:
         """(m, 3): what the scene's own lamps add to the rows beyond B (each kind's ``fixed_light``)."""

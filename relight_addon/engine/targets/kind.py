@@ -54,12 +54,13 @@ class Target:
         painted patches (``patches.target``): a TargetAims (engine/targets/__init__.py), or None."""
         return None
 
-    def lamp_terms(self, lamps, irradiance=None):
+    def lamp_terms(self, lamps, irradiance=None, samples=None):
         """None when this kind's rows see the lamps' light through B alone; else (k, len(lamps), 3)
         W/m^2 per unit strength: what each lamp (engine.lamps.Lamp) adds to the rows beyond B
         (a glossy surface's reflection of its direct light, engine/targets/view.py).
         ``irradiance`` (P, len(lamps)) optional: the lamps' direct irradiance on the patches (a
-        lamp that lights none of the rows' patches adds nothing)."""
+        lamp that lights none of the rows' patches adds nothing). ``samples``: the samples of a
+        lamp with an extent per point (None: the kind's own; fewer for a search's estimate)."""
         return None
 
     def fixed_light(self):

@@ -48,7 +48,7 @@ import scipy.sparse as sp
 from ..registry import TARGET_KINDS
 from ..principled import VIEW_ALPHA_MIN, BRDFTable
 from ..units import TINY
-from ..view_lamps import LAMP_VIEW_SAMPLES, lamp_view_light
+from ..view_lamps import LAMP_VIEW_SAMPLES, brdf_tables, lamp_view_light
 from ..view_radiance import view_rows
 from .kind import Target, TargetAims
 
@@ -390,6 +390,7 @@ class ViewTarget(Target):
         #: the scene's own lamps (engine.lamps.Lamp, fixed light): their highlights are ``fixed_light``
         self.fixed_lamps = list(fixed_lamps)
         self._fixed = None
+        self._materials = None  # (material (P,), lobes, {material: BRDFTable}) for the lamps' highlights
         #: the matte patches' interpolation (MatteInterpolation; None: each reads its own B_i)
         self.interp = interp
         #: (n,) the row each hit pixel shares (its weight: sqrt of how many pixels share it)
@@ -405,7 +406,7 @@ class ViewTarget(Target):
             raise ValueError(f"the view target's rows read {self.matrix.shape[1]} patches, not {n_patches}")
         return self.matrix
 
-    def lamp_terms(self, lamps, irradiance=None, samples=LAMP_VIEW_SAMPLES):
+    def lamp_terms(self, lamps, irradiance=None, samples=None):
         """(k, len(lamps), 3) W/m^2 per unit strength: each lamp's highlight on the rows (engine.view_lamps:
         (pi f(l, v) - rho) E at the glossy rows' points, the matte rows' 0 exactly), None without a
         glossy row. ``irradiance`` (P, len(lamps)): a lamp that lights no glossy patch seen is skipped
@@ -419,7 +420,7 @@ class ViewTarget(Target):
             H = sp.csc_matrix(irradiance)[np.unique(patch)]
             todo = np.flatnonzero(np.asarray(abs(H).sum(axis=0)).reshape(-1) > 0)
         if len(todo):
-            X = self._lamp_light([lamps[j] for j in todo], patch, point, d, samples)
+            X = self._lamp_light([lamps[j] for j in todo], patch, point, d, samples or LAMP_VIEW_SAMPLES)
             out[np.ix_(row, todo)] = X * w[:, None, None]
         return out
 
@@ -431,9 +432,14 @@ class ViewTarget(Target):
         return self._fixed
 
     def _lamp_light(self, lamps, patch, point, d, samples=LAMP_VIEW_SAMPLES):
-        material, lobes, _ = _patch_materials(self._faces, self._patches)
+        if self._materials is None:  # (kept: the lamp refinement asks again at every evaluation)
+            material, lobes, _ = _patch_materials(self._faces, self._patches)
+            self._materials = material, lobes, {}
+        material, lobes, tables = self._materials
+        for m, table in brdf_tables(lobes, [m for m in np.unique(material[patch]) if int(m) not in tables]).items():
+            tables[m] = table
         return lamp_view_light(lamps, point, patch, d, self._patches.normal, self._patches.reflectance, material, lobes,
-                               _sampler(self._F, self._patches), samples)
+                               _sampler(self._F, self._patches), samples, tables=tables)
 
     def shown(self) -> np.ndarray:
         """(k, 3) the rows' values as radiance (merged rows': pixel_error says the pixels')."""
