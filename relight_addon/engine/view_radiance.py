@@ -179,7 +179,71 @@ def _above(loc):
     return loc / np.linalg.norm(loc, axis=-1, keepdims=True)
 
 
-def view_rows(F, reflectance, center, normal, patch, points, views, material, material_lobes):
+#: a source patch whose centre lies within LOBE_REACH x the material's narrowest GGX alpha (plus the
+#: patch's own angular radius) of a viewed point's mirror direction is read over its area (SourcePoints)
+LOBE_REACH = 3.0
+#: such a source is read at g x g points, g = ceil(its angular diameter / (alpha / 2)), 2 <= g <= MAX_SIDE
+MAX_SIDE = 8
+
+
+class _Midpoints:
+    """An rng for kernel_transfer._sample_patches that puts each point at the middle of its stratum."""
+
+    @staticmethod
+    def random(shape, dtype=np.float64):
+        return np.full(shape, 0.5, dtype=dtype)
+
+
+class SourcePoints:
+    """The g x g points of a patch at the middles of its strata (kernel_transfer._sample_patches: a
+    grid cell's affine grid, any other patch's triangles by area), and the patches' areas: what
+    view_rows reads a source near a glossy lobe at."""
+
+    def __init__(self, patches, sampler):
+        self.patches, self.sampler = patches, sampler
+        self.area = np.asarray(sampler.area, dtype=np.float64)
+
+    def __call__(self, s, g) -> tuple:
+        """(points (len(s), g*g, 3), normals (len(s), g*g, 3)) of the patches ``s``."""
+        from .kernel_transfer import _sample_patches, kernel_geometry
+
+        y, ny = _sample_patches(kernel_geometry(self.patches, g * g, self.sampler), np.asarray(s, dtype=np.int64),
+                                g * g, _Midpoints())
+        return np.asarray(y, dtype=np.float64), np.asarray(ny, dtype=np.float64)
+
+
+def _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources):
+    """``f`` (n, J, 3), the BSDF at the sources' centres, with each (point, source) pair near the
+    lobe (LOBE_REACH) replaced by its mean over the source's points, weighted by their share of the
+    form factor (cos at the point x cos at the source / r^2): the lobe integrated over the patch
+    instead of read at its centre (a lobe about as wide as the patches' spacing is otherwise
+    aliased: on a Roughness 0.25 table under 0.2 m patches the centres' sum of pi f F_ij ranged
+    over 0.63-1.59 x the lobe's directional albedo from point to point)."""
+    radius = np.sqrt(sources.area[js] / np.pi)[None, :] / np.maximum(dist, TINY)  # (n, J) angular radius
+    mirror = v_loc * np.array([-1.0, -1.0, 1.0])
+    ang = np.arccos(np.clip(np.einsum("njc,nc->nj", l_loc, mirror), -1.0, 1.0))
+    near = ang < LOBE_REACH * alpha + radius
+    side = np.clip(np.ceil(2.0 * radius / alpha), 2, MAX_SIDE).astype(np.int64)
+    out = f.copy()
+    for g in np.unique(side[near]):
+        pn, jn = np.nonzero(near & (side == g))
+        src, inv = np.unique(js[jn], return_inverse=True)
+        y, ny = sources(src, int(g))  # (S, K, 3)
+        d = y[inv.reshape(-1)] - x[pn][:, None, :]  # (m, K, 3) from the point to each source point
+        r2 = np.maximum(np.einsum("mkc,mkc->mk", d, d), TINY)
+        d /= np.sqrt(r2)[..., None]
+        loc = d @ R.T
+        w = np.maximum(loc[..., 2], 0.0) * np.maximum(-np.einsum("mkc,mkc->mk", d, ny[inv.reshape(-1)]), 0.0) / r2
+        w_sum = w.sum(axis=1, keepdims=True)
+        keep = w_sum[:, 0] > 0
+        K = d.shape[1]
+        fk = table(np.repeat(v_loc[pn], K, axis=0), _above(loc).reshape(-1, 3)).reshape(len(pn), K, 3)
+        mean = np.einsum("mk,mkc->mc", w / np.where(w_sum > 0, w_sum, 1.0), fk)
+        out[pn[keep], jn[keep]] = mean[keep]
+    return out
+
+
+def view_rows(F, reflectance, center, normal, patch, points, views, material, material_lobes, sources=None):
     """The radiance seen along ``views`` (n, 3) unit world directions from the viewer at ``points``
     (n, 3) on patches ``patch`` (n,), as rows on the radiosity: (js, W), W (n, len(js), 3) the
     coefficients such that pi L_c = sum_j W[:, j, c] B[js[j], c] (pi times the radiance: W/m^2, the
@@ -207,11 +271,16 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
     n = len(points)
     R = frames(normal[i])[0]
     v_loc = _above(-np.asarray(views, dtype=np.float64) @ R.T)  # towards the viewer, local
-    d = center[js][None, :, :] - np.asarray(points, dtype=np.float64)[:, None, :]  # (n, J, 3)
-    d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), TINY)
+    x = np.asarray(points, dtype=np.float64)
+    d = center[js][None, :, :] - x[:, None, :]  # (n, J, 3)
+    dist = np.linalg.norm(d, axis=2)
+    d /= np.maximum(dist, TINY)[..., None]
     l_loc = _above(d @ R.T)
     table = BRDFTable(material_lobes[int(material[i])])
     f = table(np.repeat(v_loc, len(js), axis=0), l_loc.reshape(-1, 3)).reshape(n, len(js), 3)
+    alpha = min([float(t.alpha) for kind, _, t in table.terms if kind == "ggx"] or [np.inf])
+    if sources is not None and np.isfinite(alpha) and len(js):
+        f = _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources)
     rho = np.asarray(reflectance[i], dtype=np.float64)
     W = np.empty((n, len(js) + 1, 3))
     W[:, 0, :] = 1.0

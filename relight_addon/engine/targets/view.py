@@ -49,7 +49,7 @@ from ..registry import TARGET_KINDS
 from ..principled import VIEW_ALPHA_MIN, BRDFTable
 from ..units import TINY
 from ..view_lamps import LAMP_VIEW_SAMPLES, brdf_tables, lamp_view_light
-from ..view_radiance import view_rows
+from ..view_radiance import SourcePoints, view_rows
 from .kind import Target, TargetAims
 
 __all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "predicted_image", "TILE_LOBE", "PREDICT_LOBE"]
@@ -309,6 +309,7 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     ``interp`` a glossy patch's B_i is interpolated too: at its tiles' mean points, or (``exact``) in
     one more block of the patch's pixels, each at its own point (the blocks of a patch add up)."""
     material, lobes, alpha = _patch_materials(faces, patches)
+    sources = SourcePoints(patches, _sampler(F, patches)) if np.isfinite(alpha[hits.patch]).any() else None
     order = np.argsort(hits.patch, kind="stable")
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
     for group in np.split(order, cuts) if len(order) else []:
@@ -326,7 +327,7 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
         n_tiles, tile = _tiles(hits.pixel[group], camera.width, _tile(camera, alpha[i], lobe))
         point, d = _tile_means(hits, group, tile, n_tiles)
         js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
-                          material, lobes)
+                          material, lobes, sources=sources)
         if interp is not None and not exact:
             js, W = _interpolated(interp, i, point, js, W)
         yield i, group, js, W, tile
