@@ -17,10 +17,18 @@ crop): 4.38 % mean per painted pixel (median 2.79 %, 95th percentile 14.6 %) ove
 Cycles' noise 2.27 %; the peak at (148, 240) in Cycles and (148, 239) predicted, 49 x the table
 region's median in both (without the highlight term it was not predicted at all).
 
-The answer's lights are the ceiling's cells (``--no-spot-lamps``): since the candidate lamps aim at
-a view target (engine.targets.view's aims), the default solve adds candidate spots, and that answer's
-render is 5.46 % from the prediction (the cause not analysed; tests/test_cycles_view_target.py saw
-5.00 % in the same case)."""
+Measured after the glossy rows stopped counting their first reflection's albedo at incidence twice
+(TargetKind.bsdf_rows), load 1-3: 4.57 % (median 3.09 %, 95th percentile 14.1 %), noise 2.18 % at
+2 x 16,384 samples; the peak 0 pixels apart. That change moved the answer to three small corner cells
+(a cell and two polygons before, 4.19 % with noise 2.27 % at 2 x 4,096), which render noisier: 6.09 %
+with noise 4.21 % at 2 x 4,096, hence the samples.
+
+The answer's lights are the ceiling's cells (``--no-spot-lamps``). The default solve adds candidate
+spots (engine.targets.view's aims), and its render is 5.22 % from the prediction at load 1 (5.46 %
+before the table's glossy rows stopped counting their own first reflection's albedo at incidence
+twice, TargetKind.bsdf_rows, which took tests/test_cycles_view_target.py's spot answer from 5.00 % to
+3.15 %): above 5 % here, not analysed further (the scene's fixed spot and the answer's spot both
+light the glossy table)."""
 
 import numpy as np
 import pytest
@@ -31,7 +39,7 @@ bpy = pytest.importorskip("bpy", reason="Cycles renders through bpy")
 
 import view_rooms as vr  # noqa: E402
 
-SAMPLES = 4096  # per render at 64 x 36; two renders (seeds 0 and 1) are averaged
+SAMPLES = 16384  # per render at 64 x 36; two renders (seeds 0 and 1) are averaged (the answer's three small corner cells render with 4.2 % noise at 2 x 4096)
 RENDER = (64, 36)
 MEAN_TOL = 0.05
 PEAK_TOL = 3.0  # pixels at the working resolution

@@ -7,26 +7,18 @@ predicted image over the painted pixels: mean relative error per pixel <= 5 %. C
 measured from two renders of different seeds (the mean of their per-pixel half difference,
 relative) and printed with the error.
 
-Measured (h40-accuracy, load 9 on 2 shared cores, 4.9 min: the solve and two renders): 4.90 % mean
-per painted pixel (median 3.35 %, 95th percentile 15.3 %) over 1,920 pixels, Cycles' noise 2.71 %;
-7.8 % before the direct stage corrected the pixels' own patches (pipeline.stages.direct_stage: the
-seen wall's B scattered +-10 % from patch to patch). The margin is thin (the renders' seeds and the
-solve are fixed; the solve gave the same report in three runs); what is left is mostly Cycles' noise
-and the floor in the table's shadow (docs/validation.md).
-
-With each source near a glossy lobe read over its area (view_radiance._lobe_means; before, at its
-centre: the table's lobe, about as wide as the patches seen in it, was aliased), measured at load 1:
-**4.59 %** (median 3.27 %, 95th percentile 13.5 %, noise 2.71 %).
-
-The lights are the ceiling's cells (``--no-spot-lamps``): since the candidate lamps aim at a view
-target (engine.targets.view's aims), the default solve of this room answers with a 99 W spot at the
-south wall's top, and its render is 4.92 % from the prediction (median 3.42 %, noise 2.51 %; 5.00 %
-before the lobe's change): at equal samples the cells' and the spot's answers differ by less than
-the renders' noise (5.81 % and 5.72 % at 2 x 2048 samples, noise 3.8 % and 3.5 %). What is left in
-both is the table top, 4-6 % darker in the prediction (signed, rows 14-22 of 36) though the table's
-BSDF under uniform light matches Cycles within 1 % from a view cosine of 0.95 to 0.3 (a furnace
-render, not in the suite), and the floor in the table's shadow. A lamp's highlight is checked by tests/test_cycles_view_highlight.py (a fixed spot: 4.4 %)
-and tests/test_cycles_view_painted_highlight.py (the answer's spot where the highlight is painted)."""
+Measured at load 1 (2 x 4096 samples), the default solve (its answer: a ceiling group, a ceiling polygon and a 99 W
+spot at the south wall's top, aimed at the table): **3.15 %** mean per painted pixel (median 2.44 %, 95th
+percentile 8.0 %), Cycles' noise 2.26 %; the ceiling's cells alone (``--no-spot-lamps``) 4.02 % (noise
+2.69 %). The history of this number: 7.8 % before the direct stage corrected the pixels' own patches
+(pipeline.stages.direct_stage: the seen wall's B scattered +-10 % from patch to patch); 4.90 % (cells)
+and 5.00 % (the spot's answer) before the two changes of issue 40's later work: a source near a glossy
+lobe read over its area, not at its centre (view_radiance._lobe_means: 4.59 % / 4.92 %), and the
+glossy rows no longer counting their own first reflection's albedo at incidence twice (B holds it,
+engine.incidence; the BSDF gives it: TargetKind.bsdf_rows), which had made the table top 4-6 %
+darker than Cycles. What is left is mostly Cycles' noise and the floor in the table's shadow
+(docs/validation.md). A lamp's highlight is checked by tests/test_cycles_view_highlight.py and
+tests/test_cycles_view_painted_highlight.py (the answer's spot where the highlight is painted)."""
 
 import numpy as np
 import pytest
@@ -61,7 +53,7 @@ def _target():
 def solved(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("view_target")
     vr.build(tmp / "room.blend", patch_size=0.2)
-    report, pred = vr.solve_view(tmp, _target(), "--no-spot-lamps")
+    report, pred = vr.solve_view(tmp, _target())
     renders = [vr.render(tmp / "out.blend", tmp / f"cycles{s}.exr", SAMPLES, seed=s, size=RENDER) for s in (0, 1)]
     return report, pred, renders
 

@@ -74,15 +74,23 @@ def _closed_form(lamp, point, view, rho):
 
 
 def test_a_point_lamps_highlight_is_the_inverse_square_law_through_the_bsdf():
-    """At every pixel on the glossy floor the forward highlight (the scene lamp's) is (f - rho/pi) E to
-    1e-6; a highlight there (up to several x the Lambertian radiance), nothing on the matte walls."""
+    """At every pixel on the glossy floor the forward highlight (the scene lamp's) is (f - (rho + x)/pi) E
+    to 1e-6, x the albedo of the lamp's first reflection beyond rho that B holds (engine.incidence, at
+    the patch's incidence: B shows (rho + x) E / pi, the BSDF f E); a highlight there (up to several x
+    the Lambertian radiance), nothing on the matte walls."""
+    from relight_addon.engine.first_reflection import incidence_of
+    from relight_addon.engine.incidence import lamp_albedo_excess
+
     lamp = point_lamp((2.2, 2.1, 2.2))
     faces, patches, F = room(lamps=[lamp])
     t = _target(faces, patches, F)
     hl = t._highlights(t.hits, [])
     floor = patches.face[t.hits.patch] == 0
     assert floor.sum() > 1000 and (~floor).sum() > 300
-    ref = _closed_form(lamp, t.hits.point[floor], t.hits.direction[floor], patches.reflectance[t.hits.patch[floor]])
+    on = t.hits.patch[floor]
+    x = lamp_albedo_excess(lamp, patches.center, patches.normal, *incidence_of(faces, patches), patches=on)
+    assert np.abs(x).max() > 1e-3  # (the glossy floor's albedo depends on the incidence)
+    ref = _closed_form(lamp, t.hits.point[floor], t.hits.direction[floor], patches.reflectance[on] + x)
     np.testing.assert_allclose(hl[floor], ref, rtol=1e-6, atol=1e-9 * np.abs(ref).max())
     assert np.all(hl[~floor] == 0.0)
     fE = _closed_form(lamp, t.hits.point[floor], t.hits.direction[floor], np.zeros(3))  # f E alone

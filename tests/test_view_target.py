@@ -200,6 +200,43 @@ def _problem(faces, patches, F, targets):
     return InverseProblem(F, patches.area, patches.reflectance, targets, mask, patches.center, patches.normal)
 
 
+def test_a_glossy_row_sees_its_first_reflection_once(glossy_room):
+    """With the first reflection's albedo at incidence in B (InverseProblem's first_bounce D,
+    engine.incidence), the view target's glossy rows read their own patch's first reflection
+    through the BSDF alone: T's columns are R A^-1 (I + D) - S D (S: bsdf_rows), and the forward
+    prediction (predict with ``own`` = first_reflection) agrees with T for a cell's light to 1e-9;
+    what S D takes off is a real share of those rows (the floor's albedo varies with incidence)."""
+    from relight_addon.engine.first_reflection import first_bounce
+
+    faces, patches, F = glossy_room
+    cam = camera()
+    painted = np.ones((cam.height, cam.width), bool)
+    t = ViewTarget.build(ViewSpec(cam, np.full((cam.height, cam.width, 3), 0.1), painted), faces, patches, F)
+    mask = candidate_mask(patches, "inverse") & (patches.normal[:, 2] < -0.9)
+    D = first_bounce(faces, patches, F, mask)
+    assert D is not None
+    problem = InverseProblem(F, patches.area, patches.reflectance, [t], mask, patches.center, patches.normal,
+                             first_bounce=D)
+    S = t.bsdf_rows(patches.n_patches)
+    k = 7  # one ceiling cell
+    e = np.zeros((patches.n_patches, 3))
+    e[problem.candidates[k]] = 20.0
+    B = problem.forward_radiosity(e)
+    own = problem.first_reflection(e)
+    rows = t.matrix @ B - S @ own  # the rows as predict reads them (the glossy ones less their own D e)
+    got = np.stack([problem.transfer[c][:, k] for c in range(3)], axis=1) * 20.0
+    order = problem.target_rows.order
+    np.testing.assert_allclose(got, rows[order], rtol=1e-9, atol=1e-12 * np.abs(rows).max())
+    glossy = np.asarray(abs(S).sum(axis=1)).reshape(-1) > 0
+    share = np.abs(S @ own)[glossy].sum() / np.abs(t.matrix @ B)[glossy].sum()
+    assert share > 1e-3
+    # a stroke's re-solve (retarget: T from every patch's rows) takes the same correction
+    again = problem.retarget([t])
+    for c in range(3):
+        np.testing.assert_allclose(again.transfer[c], problem.transfer[c], rtol=1e-9,
+                                   atol=1e-12 * np.abs(problem.transfer[c]).max())
+
+
 def test_pixels_and_painted_faces_solve_together(glossy_room):
     """A known configuration of two ceiling cells: its predicted camera image painted on 60 % of
     the pixels, and two wall patches painted with their radiosity: the solve (nnls) meets both,

@@ -387,7 +387,16 @@ class InverseProblem:
         h_bg = None if background_irradiance is None else _array(background_irradiance, (n, 3), "background irradiance")
         x_bg = None if background_excess is None else _array(background_excess, (n, 3), "background excess")
         self.background_radiosity = self._fixed_light(e_bg, h_bg, x_bg)
+        #: (P, 3) the scene's own emitters' exitance (None: none)
+        self.background_exitance = e_bg
         self.b_target = self.b_target - self.target_rows.of(self.background_radiosity) - self._fixed_beyond(self.target_rows)
+        self.b_target = self.b_target + self._seen_by_bsdf(self.target_rows, e_bg)
+
+    def _seen_by_bsdf(self, rows, e_bg):
+        """(m, 3) or 0: S D e_bg, what target rows ``rows`` that see their patch's first reflection
+        through its BSDF (TargetRows.bsdf_rows: S) do not read of the fixed emitters' ``e_bg`` in B."""
+        S = None if (self.first_bounce is None or e_bg is None) else rows.bsdf_rows()
+        return 0.0 if S is None else np.asarray(S @ self.first_reflection(e_bg))
 
     def _fixed_beyond(self, rows):
         """(m, 3) or 0: what the scene's own lamps add to target rows ``rows`` beyond the radiosity
@@ -541,6 +550,7 @@ class InverseProblem:
             T = [None] * 3
             done = {}
             D = self.first_bounce
+            S = None if D is None else R.bsdf_rows()  # rows that see their patch's first reflection by its BSDF
             seen = self.lamp_view_terms(R)
             for c in range(3):
                 key = (id(facs[c]), None if D is None else self._same_first_bounce(c))
@@ -551,6 +561,8 @@ class InverseProblem:
                     Y = facs[c].solve(R.columns(), trans=True)  # Y^T = R A^-1, the rows' rows of A^-1
                     if D is not None:  # rows P of A^-1 (I + D): Y + D^T Y
                         Y = Y + np.asarray(D[c].T @ Y)
+                        if S is not None:  # less S D: those rows' BSDF gives the first reflection itself
+                            Y = Y - (D[c].T @ S.T).toarray()
                     T[c] = np.ascontiguousarray(Y[C].T)
                 else:
                     rhs = np.zeros((n, len(C)))
@@ -559,6 +571,8 @@ class InverseProblem:
                         rhs += D[c][:, C].toarray()
                     X = facs[c].solve(rhs)  # columns C of A^-1 (I + D)
                     T[c] = np.ascontiguousarray(R.of(X))
+                    if S is not None:
+                        T[c] = T[c] - (S @ D[c][:, C]).toarray()
                 if self.emission_share is not None:  # what a candidate patch's exitance sends (``source``)
                     T[c] = T[c] * self.emission_share[C][None, :]
                 if self.grouped:  # one column per light: the sum of its patches' columns
@@ -660,6 +674,9 @@ class InverseProblem:
             raise InverseError("the scene's own light gives non-finite radiosity")
         R = self.target_rows
         new.b_target = self.b_target + R.of(self.background_radiosity) - R.of(new.background_radiosity)
+        new.background_exitance = shaped[0]
+        new.b_target = new.b_target - self._seen_by_bsdf(R, self.background_exitance) + \
+            self._seen_by_bsdf(R, new.background_exitance)
         return new
 
     def retarget(self, targets) -> "InverseProblem":
@@ -671,9 +688,19 @@ class InverseProblem:
         T_all = self.all_rows_transfer()
         new = copy.copy(self)
         new._set_targets(rows)
-        new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows)
+        new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows) + \
+            self._seen_by_bsdf(rows, self.background_exitance)
         shared = {}
         new._transfer = [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
+        S = None if self.first_bounce is None else rows.bsdf_rows()
+        if S is not None:  # (less S D: rows that see their patch's first reflection by its BSDF, as transfer's)
+            basis = sp.csc_matrix(self.source_basis)
+            left = getattr(self, "implausible", None)
+            for c in sorted({id(t): c for c, t in reversed(list(enumerate(new._transfer)))}.values()):
+                corr = (S @ (self.first_bounce[c][:, self.candidates] @ basis)).toarray()
+                if left is not None and left.any():
+                    corr[:, left] = 0.0
+                new._transfer[c] -= corr
         seen = self.lamp_view_terms(rows)
         if seen is not None:
             for c in sorted({id(t): c for c, t in reversed(list(enumerate(new._transfer)))}.values()):
@@ -767,6 +794,17 @@ class InverseProblem:
         """The first channel whose D equals channel c's (grey materials: one transfer for all)."""
         D = self.first_bounce
         return next(k for k in range(c + 1) if k == c or (D[k] != D[c]).nnz == 0)
+
+    def first_reflection(self, e_full) -> np.ndarray:
+        """(P, 3) D s: what the first reflection's albedo at incidence adds beyond rho to the light
+        of the exitance ``e_full`` (P, 3) that leaves into the scene (``source`` less s); 0 without
+        ``first_bounce``."""
+        e = np.asarray(e_full, dtype=np.float64).reshape(self.n_patches, 3)
+        if self.emission_share is not None:
+            e = e * self.emission_share[:, None]
+        if self.first_bounce is None:
+            return np.zeros_like(e)
+        return np.stack([np.asarray(self.first_bounce[c] @ e[:, c]).reshape(-1) for c in range(3)], axis=1)
 
     def source(self, e_full):
         """s + D s, s the exitance ``e_full`` (P, 3), or (P, K, 3) for K configurations, that leaves

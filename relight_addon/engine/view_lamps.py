@@ -67,7 +67,7 @@ def brdf_tables(material_lobes, material) -> dict:
 
 
 def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, material_lobes, sampler,
-                    samples=LAMP_VIEW_SAMPLES, seed=0, tables=None) -> np.ndarray:
+                    samples=LAMP_VIEW_SAMPLES, seed=0, tables=None, excess=None) -> np.ndarray:
     """(n, len(lamps), 3) pi L_extra = (pi f(l, v) - rho) E (W/m^2 per unit strength of each lamp,
     module docstring) at ``point`` (n, 3) on patches ``patch`` (n,), seen along ``view`` (n, 3)
     unit directions from the viewer to the points. ``normal``, ``reflectance`` (P, 3) and
@@ -75,7 +75,9 @@ def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, ma
     engine.principled.BRDFTable); ``sampler``: the scene's engine.sampling.SceneSampler (shadow
     rays). Deterministic for a seed. The caller passes glossy points only (a Lambertian one is 0).
     ``tables``: {material: its BRDFTable} of the points' materials, built by a caller that calls
-    again (default: built here)."""
+    again (default: built here). ``excess(lamp)``: (n, 3) the albedo of the lamp's first reflection
+    beyond rho at the points' patches that B holds (engine.incidence.lamp_albedo_excess: the
+    problem's lamp_excess), taken off too: (pi f - rho - x) E, the BSDF giving the reflection itself."""
     point = np.asarray(point, dtype=np.float64).reshape(-1, 3)
     patch = np.asarray(patch, dtype=np.int64).reshape(-1)
     view = np.asarray(view, dtype=np.float64).reshape(-1, 3)
@@ -97,6 +99,7 @@ def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, ma
         ns = 1 if lamp.kind.samples_per_point(lamp) == 1 else int(samples)
         rng = np.random.default_rng([int(seed), k])
         acc = np.zeros((n_pts, 3))
+        albedo = rho if excess is None else rho + excess(lamp)
         for u in _uniforms(rng, n_pts, ns):
             e, w = _lit(lamp, point, nrm, u, sampler, far)
             on = np.flatnonzero(e > 0)
@@ -108,6 +111,6 @@ def lamp_view_light(lamps, point, patch, view, normal, reflectance, material, ma
                 sel = mat[on] == m
                 if sel.any():
                     f[sel] = table(v_loc[on][sel], l_loc[sel])
-            acc[on] += (np.pi * f - rho[on]) * e[on, None]
+            acc[on] += (np.pi * f - albedo[on]) * e[on, None]
         out[:, k, :] = acc / ns * np.asarray(lamp.power, dtype=np.float64)[None, :]
     return out

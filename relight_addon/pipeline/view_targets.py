@@ -148,6 +148,19 @@ def _lamps_of(outcome) -> list:
     return [(lamp, s[j]) for j, lamp in enumerate(lamps) if lamp is not None and np.any(s[j] != 0)]
 
 
+def _own_first_reflection(outcome) -> np.ndarray:
+    """(P, 3): what the final configuration's radiosity holds of its emitters' (and the scene's
+    own emitters') first reflection beyond rho (InverseProblem.first_reflection), which a view
+    target's glossy pixels see through their BSDF instead."""
+    p = outcome.problem
+    s = np.asarray(outcome.stored.exitance[outcome.final_index], dtype=np.float64)
+    e = np.zeros((p.n_patches, 3))
+    e[p.candidates] = p.light_basis @ s
+    if p.background_exitance is not None:
+        e = e + p.background_exitance
+    return p.first_reflection(e)
+
+
 def predicted_rgba(outcome, samples=4) -> np.ndarray | None:
     """(H, W, 4): the radiance the final configuration shows the camera (ViewTarget.image: its lamps'
     and the scene's lamps' highlights included) with
@@ -156,7 +169,7 @@ def predicted_rgba(outcome, samples=4) -> np.ndarray | None:
     if t is None:
         return None
     img, cover = t.image(np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64), samples,
-                         _lamps_of(outcome))
+                         _lamps_of(outcome), _own_first_reflection(outcome))
     return np.concatenate([img, cover[..., None]], axis=2)
 
 
@@ -169,5 +182,5 @@ def view_report(outcome) -> dict | None:
     B = np.asarray(outcome.stored.radiosity[outcome.final_index], dtype=np.float64)
     block = {"image": t.spec.name, "resolution": [t.spec.camera.width, t.spec.camera.height],
              "rows": int(t.matrix.shape[0])}
-    block.update(t.pixel_error(B, _lamps_of(outcome)))
+    block.update(t.pixel_error(B, _lamps_of(outcome), _own_first_reflection(outcome)))
     return block

@@ -105,6 +105,18 @@ class TargetRows:
             return None
         return self._stacked([t.lamp_terms(lamps, irradiance, samples) for t in self.targets])
 
+    def bsdf_rows(self):
+        """(m, P) sparse, or None: the rows' shares that see their patch's first reflection through
+        its BSDF (each kind's ``bsdf_rows``), in the system's order."""
+        P = self.matrix.shape[1]
+        blocks = [t.bsdf_rows(P) for t in self.targets]
+        if all(b is None for b in blocks):
+            return None
+        counts = np.bincount(self.target, minlength=len(self.targets))
+        M = sp.vstack([sp.csr_matrix((k, P)) if b is None else sp.csr_matrix(b, dtype=np.float64)
+                       for b, k in zip(blocks, counts)], format="csr")
+        return M if self.order is None else M[self.order]
+
     def fixed_light(self) -> np.ndarray | None:
         """(m, 3): what the scene's own lamps add to the rows beyond B (each kind's ``fixed_light``)."""
         return self._stacked([t.fixed_light() for t in self.targets])

@@ -68,6 +68,14 @@ class Target:
         of the fixed light)."""
         return None
 
+    def bsdf_rows(self, n_patches):
+        """None, or (k, n_patches) sparse: the share of each row that reads a patch's radiosity
+        where the row sees the patch's first reflection through the patch's own BSDF (a camera-view
+        target's glossy rows: their patch, at the row's weight). B holds that reflection with the
+        albedo of its incidence (engine.incidence: InverseProblem's first_bounce and lamp_excess);
+        such a row must not count the albedo's excess over rho twice."""
+        return None
+
     @classmethod
     def from_scene(cls, faces, patches, F=None):
         """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None."""

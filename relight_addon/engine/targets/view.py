@@ -45,6 +45,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..first_reflection import incidence_of
+from ..incidence import lamp_albedo_excess
 from ..registry import TARGET_KINDS
 from ..principled import VIEW_ALPHA_MIN, BRDFTable
 from ..units import TINY
@@ -391,7 +393,7 @@ class ViewTarget(Target):
         #: the scene's own lamps (engine.lamps.Lamp, fixed light): their highlights are ``fixed_light``
         self.fixed_lamps = list(fixed_lamps)
         self._fixed = None
-        self._materials = None  # (material (P,), lobes, {material: BRDFTable}) for the lamps' highlights
+        self._materials = None  # (material (P,), lobes, {material: BRDFTable}, incidence) for the lamps' highlights
         #: the matte patches' interpolation (MatteInterpolation; None: each reads its own B_i)
         self.interp = interp
         #: (n,) the row each hit pixel shares (its weight: sqrt of how many pixels share it)
@@ -425,6 +427,13 @@ class ViewTarget(Target):
             out[np.ix_(row, todo)] = X * w[:, None, None]
         return out
 
+    def bsdf_rows(self, n_patches):
+        """(k, n_patches): each glossy row reads its own patch through the BSDF (view_rows), at its weight."""
+        row, patch, _, _, w = self.glossy_rows
+        if not len(row):
+            return None
+        return sp.csr_matrix((np.asarray(w, dtype=np.float64), (row, patch)), shape=(self.matrix.shape[0], n_patches))
+
     def fixed_light(self):
         """(k, 3) W/m^2: the scene's own lamps' highlights on the rows (lamp_terms at their power), None without."""
         if self._fixed is None and self.fixed_lamps:
@@ -433,14 +442,16 @@ class ViewTarget(Target):
         return self._fixed
 
     def _lamp_light(self, lamps, patch, point, d, samples=LAMP_VIEW_SAMPLES):
+        P = self._patches
         if self._materials is None:  # (kept: the lamp refinement asks again at every evaluation)
-            material, lobes, _ = _patch_materials(self._faces, self._patches)
-            self._materials = material, lobes, {}
-        material, lobes, tables = self._materials
+            material, lobes, _ = _patch_materials(self._faces, P)
+            self._materials = material, lobes, {}, incidence_of(self._faces, P)
+        material, lobes, tables, inc = self._materials
         for m, table in brdf_tables(lobes, [m for m in np.unique(material[patch]) if int(m) not in tables]).items():
             tables[m] = table
-        return lamp_view_light(lamps, point, patch, d, self._patches.normal, self._patches.reflectance, material, lobes,
-                               _sampler(self._F, self._patches), samples, tables=tables)
+        excess = None if inc is None else (lambda lamp: lamp_albedo_excess(lamp, P.center, P.normal, *inc, patches=patch))
+        return lamp_view_light(lamps, point, patch, d, P.normal, P.reflectance, material, lobes,
+                               _sampler(self._F, P), samples, tables=tables, excess=excess)
 
     def shown(self) -> np.ndarray:
         """(k, 3) the rows' values as radiance (merged rows': pixel_error says the pixels')."""
@@ -518,17 +529,20 @@ class ViewTarget(Target):
         return cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row, interp,
                    rows, list(getattr(faces, "lamps", None) or ()))
 
-    def predict(self, B, lamps=()) -> np.ndarray:
+    def predict(self, B, lamps=(), own=None) -> np.ndarray:
         """(n, 3) the radiance the hit pixels show under radiosity ``B`` (P, 3), W m^-2 sr^-1, with
         the highlights of the scene's own lamps and of ``lamps`` [(engine.lamps.Lamp, strength (3,))]
-        (the configuration's lamps: B holds their light Lambertian) at each pixel's point."""
+        (the configuration's lamps: B holds their light Lambertian) at each pixel's point. ``own``
+        (P, 3): what B holds of the emitters' first reflection beyond rho (InverseProblem's
+        first_reflection), which the glossy pixels see through their BSDF instead (``bsdf_rows``)."""
         L = _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces,
                       self.spec.camera, self.interp)
-        return L + self._highlights(self.hits, lamps)
+        return L + self._highlights(self.hits, lamps, own=own)
 
-    def _highlights(self, hits, lamps, samples=PIXEL_LAMP_SAMPLES) -> np.ndarray:
+    def _highlights(self, hits, lamps, samples=PIXEL_LAMP_SAMPLES, own=None) -> np.ndarray:
         """(n, 3) W m^-2 sr^-1: the highlights of the fixed lamps and of ``lamps`` [(Lamp, strength)] at
-        ``hits`` (``samples`` lamp samples a pixel for a lamp with an extent)."""
+        ``hits`` (``samples`` lamp samples a pixel for a lamp with an extent), less ``own`` / pi (P, 3)
+        on the glossy pixels (``predict``)."""
         out = np.zeros((len(hits.pixel), 3))
         pairs = [(lamp, np.ones(3)) for lamp in self.fixed_lamps] + [(lamp, np.asarray(s, dtype=np.float64))
                                                                       for lamp, s in lamps]
@@ -537,19 +551,21 @@ class ViewTarget(Target):
         if len(g) and pairs:
             X = self._lamp_light([lamp for lamp, _ in pairs], hits.patch[g], hits.point[g], hits.direction[g], samples)
             out[g] = np.einsum("nlc,lc->nc", X, np.stack([s for _, s in pairs])) / np.pi
+        if own is not None and len(g):
+            out[g] -= np.asarray(own, dtype=np.float64)[hits.patch[g]] / np.pi
         return out
 
-    def image(self, B, samples=4, lamps=()) -> tuple:
+    def image(self, B, samples=4, lamps=(), own=None) -> tuple:
         """predicted_image of the whole frame under radiosity ``B`` (``samples`` rays a pixel), with
-        the lamps' highlights (``predict``'s)."""
+        the lamps' highlights and less ``own`` on the glossy pixels (``predict``'s)."""
         return predicted_image(self.spec.camera, self._faces, self._patches, self._F, B, samples, interp=self.interp,
-                               highlights=lambda hits: self._highlights(hits, lamps))
+                               highlights=lambda hits: self._highlights(hits, lamps, own=own))
 
-    def pixel_error(self, B, lamps=()) -> dict:
+    def pixel_error(self, B, lamps=(), own=None) -> dict:
         """The error over the painted pixels under radiosity ``B``: the pixels seen, the free ones,
         the mean of each pixel's relative error (|L - L_t| summed over channels / L_t summed; a pixel
         asking 0 is left out), the RMS error in W m^-2 sr^-1 and relative to the target's RMS."""
-        L = self.predict(B, lamps)
+        L = self.predict(B, lamps, own)
         Lt = self.spec.radiance.reshape(-1, 3)[self.hits.pixel]
         asked = Lt.sum(axis=1)
         ok = asked > TINY
