@@ -390,13 +390,16 @@ class InverseProblem:
         #: (P, 3) the scene's own emitters' exitance (None: none)
         self.background_exitance = e_bg
         self.b_target = self.b_target - self.target_rows.of(self.background_radiosity) - self._fixed_beyond(self.target_rows)
-        self.b_target = self.b_target + self._seen_by_bsdf(self.target_rows, e_bg)
+        self.b_target = self.b_target + self._seen_by_bsdf(self._bsdf_rows(self.target_rows), e_bg)
 
-    def _seen_by_bsdf(self, rows, e_bg):
-        """(m, 3) or 0: S D e_bg, what target rows ``rows`` that see their patch's first reflection
-        through its BSDF (TargetRows.bsdf_rows: S) do not read of the fixed emitters' ``e_bg`` in B."""
-        S = None if (self.first_bounce is None or e_bg is None) else rows.bsdf_rows()
-        return 0.0 if S is None else np.asarray(S @ self.first_reflection(e_bg))
+    def _bsdf_rows(self, rows):
+        """TargetRows.bsdf_rows of ``rows`` (S) when B holds a first reflection's excess (``first_bounce``), else None."""
+        return None if self.first_bounce is None else rows.bsdf_rows()
+
+    def _seen_by_bsdf(self, S, e_bg):
+        """(m, 3) or 0: S D e_bg, what target rows that see their patch's first reflection through its
+        BSDF (``_bsdf_rows``: S) do not read of the fixed emitters' ``e_bg`` in B."""
+        return 0.0 if S is None or e_bg is None else np.asarray(S @ self.first_reflection(e_bg))
 
     def _fixed_beyond(self, rows):
         """(m, 3) or 0: what the scene's own lamps add to target rows ``rows`` beyond the radiosity
@@ -550,7 +553,7 @@ class InverseProblem:
             T = [None] * 3
             done = {}
             D = self.first_bounce
-            S = None if D is None else R.bsdf_rows()  # rows that see their patch's first reflection by its BSDF
+            S = self._bsdf_rows(R)  # rows that see their patch's first reflection by its BSDF
             seen = self.lamp_view_terms(R)
             for c in range(3):
                 key = (id(facs[c]), None if D is None else self._same_first_bounce(c))
@@ -675,8 +678,9 @@ class InverseProblem:
         R = self.target_rows
         new.b_target = self.b_target + R.of(self.background_radiosity) - R.of(new.background_radiosity)
         new.background_exitance = shaped[0]
-        new.b_target = new.b_target - self._seen_by_bsdf(R, self.background_exitance) + \
-            self._seen_by_bsdf(R, new.background_exitance)
+        S = self._bsdf_rows(R)
+        new.b_target = new.b_target - self._seen_by_bsdf(S, self.background_exitance) + \
+            self._seen_by_bsdf(S, new.background_exitance)
         return new
 
     def retarget(self, targets) -> "InverseProblem":
@@ -688,11 +692,11 @@ class InverseProblem:
         T_all = self.all_rows_transfer()
         new = copy.copy(self)
         new._set_targets(rows)
+        S = self._bsdf_rows(rows)
         new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows) + \
-            self._seen_by_bsdf(rows, self.background_exitance)
+            self._seen_by_bsdf(S, self.background_exitance)
         shared = {}
         new._transfer = [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
-        S = None if self.first_bounce is None else rows.bsdf_rows()
         if S is not None:  # (less S D: rows that see their patch's first reflection by its BSDF, as transfer's)
             basis = sp.csc_matrix(self.source_basis)
             left = getattr(self, "implausible", None)

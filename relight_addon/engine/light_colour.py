@@ -381,7 +381,7 @@ class ConeColumns:
 
     def columns(self, idx) -> np.ndarray:
         e, j = np.divmod(np.asarray(idx, dtype=np.int64), self.n)
-        return np.vstack([self.T[c][:, j] * self.edges[e, c][None, :] for c in range(3)])
+        return stacked([t[:, j] for t in self.T], self.edges[e])
 
     def norms(self) -> np.ndarray:
         sq = np.stack([np.einsum("ij,ij->j", t, t) for t in self.T], axis=1)  # (n, 3)

@@ -228,12 +228,13 @@ def _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources):
     for g in np.unique(side[near]):
         pn, jn = np.nonzero(near & (side == g))
         src, inv = np.unique(js[jn], return_inverse=True)
+        inv = inv.reshape(-1)
         y, ny = sources(src, int(g))  # (S, K, 3)
-        d = y[inv.reshape(-1)] - x[pn][:, None, :]  # (m, K, 3) from the point to each source point
+        d = y[inv] - x[pn][:, None, :]  # (m, K, 3) from the point to each source point
         r2 = np.maximum(np.einsum("mkc,mkc->mk", d, d), TINY)
         d /= np.sqrt(r2)[..., None]
         loc = d @ R.T
-        w = np.maximum(loc[..., 2], 0.0) * np.maximum(-np.einsum("mkc,mkc->mk", d, ny[inv.reshape(-1)]), 0.0) / r2
+        w = np.maximum(loc[..., 2], 0.0) * np.maximum(-np.einsum("mkc,mkc->mk", d, ny[inv]), 0.0) / r2
         w_sum = w.sum(axis=1, keepdims=True)
         keep = w_sum[:, 0] > 0
         K = d.shape[1]
