@@ -112,7 +112,9 @@ class Twins:
         # moved apart by 1e-9 (a fixed draw): a k-d tree of many equal points (a floor of 180,000
         # coplanar triangles) cannot split them and took 180 s to build
         X += np.random.default_rng(0).uniform(-1e-9, 1e-9, X.shape)
-        dist, _ = cKDTree(X).query(-X, k=1, distance_upper_bound=3 * NORMAL_TOL)
+        # (the tree's shape and the query's threads change no distance: the same flags, faster)
+        tree = cKDTree(X, balanced_tree=False, compact_nodes=False)
+        dist, _ = tree.query(-X, k=1, distance_upper_bound=3 * NORMAL_TOL, workers=-1)
         flagged = idx[np.isfinite(dist)]
         return cls(tv, tn, flagged, offset, trace) if len(flagged) else None
 

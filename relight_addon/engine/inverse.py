@@ -328,6 +328,7 @@ class InverseProblem:
         self._factors = None
         self._transfer = None
         self._all_rows = None  # all_rows_transfer's
+        self._rows_solved = {}  # inverse_rows': id(factors) -> (factors, rows, Y)
         self.condition_warnings = []  # what factors() found (a retargeted problem keeps them)
         self.transfer_seconds = None
         self.warnings = []
@@ -561,7 +562,7 @@ class InverseProblem:
                     T[c] = done[key]
                     continue
                 if R.m <= len(C):
-                    Y = facs[c].solve(R.columns(), trans=True)  # Y^T = R A^-1, the rows' rows of A^-1
+                    Y = self.inverse_rows(facs[c])  # Y^T = R A^-1, the rows' rows of A^-1
                     if D is not None:  # rows P of A^-1 (I + D): Y + D^T Y
                         Y = Y + np.asarray(D[c].T @ Y)
                         if S is not None:  # less S D: those rows' BSDF gives the first reflection itself
@@ -692,6 +693,7 @@ class InverseProblem:
         T_all = self.all_rows_transfer()
         new = copy.copy(self)
         new._set_targets(rows)
+        new._rows_solved = {}
         S = self._bsdf_rows(rows)
         new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows) + \
             self._seen_by_bsdf(S, self.background_exitance)
@@ -736,10 +738,15 @@ class InverseProblem:
         self._transfer = [np.ascontiguousarray(np.hstack([T[c], np.asarray(columns[c], dtype=np.float64)]))
                           for c in range(3)]
 
-    def _inverse_rows(self, fac):
+    def inverse_rows(self, fac):
         """Y (P, m): Y^T = R A^-1 (R the targets' rows; a selection's: rows P of A^-1), from the
-        factors ``fac`` of one channel."""
-        return fac.solve(self.target_rows.columns(), trans=True)
+        factors ``fac`` of one channel; solved once per factors and rows (the transfer, the
+        lamps' columns, the direct light's correction and the lamp refinement read it)."""
+        kept = self._rows_solved.get(id(fac))
+        if kept is None or kept[0] is not fac or kept[1] is not self.target_rows:
+            kept = (fac, self.target_rows, fac.solve(self.target_rows.columns(), trans=True))
+            self._rows_solved[id(fac)] = kept
+        return kept[2]
 
     def correct_direct(self, lights, dH):
         """The direct light of the surface lights ``lights`` (indices) computed anew, e.g. by the
@@ -758,7 +765,7 @@ class InverseProblem:
             if id(T[c]) in done:
                 continue
             done.add(id(T[c]))
-            Y = self._inverse_rows(facs[c])
+            Y = self.inverse_rows(facs[c])
             T[c][:, lights] += (dH.T @ (self.reflectance[:, c:c + 1] * Y)).T
         new = sp.csc_matrix((dH.ravel(), (np.repeat(np.arange(self.n_patches), len(lights)),
                                           np.tile(lights, self.n_patches))), shape=(self.n_patches, self.n_lights))
@@ -788,7 +795,7 @@ class InverseProblem:
     def _irradiance_transfer(self, fac, c, H):
         """(m, n_lights): rows P of A^-1 diag(rho_c) H, the targets' radiosity per unit strength of
         lights whose source is a direct irradiance H (P, n_lights)."""
-        Y = self._inverse_rows(fac)  # Y^T = rows P of A^-1
+        Y = self.inverse_rows(fac)  # Y^T = rows P of A^-1
         T = H.T @ (self.reflectance[:, c:c + 1] * Y)
         if self.lamp_excess is not None:
             T = T + self.lamp_excess[c].T @ Y

@@ -74,7 +74,8 @@ class Transport:
         done = {}
         for c in range(3):
             if id(facs[c]) not in done:
-                done[id(facs[c])] = facs[c].solve(problem.target_rows.columns(), trans=True)  # (P, m): Y^T = R A^-1
+                # (P, m): Y^T = R A^-1, row-major (a lamp's column gathers the rows it lights)
+                done[id(facs[c])] = np.ascontiguousarray(problem.inverse_rows(facs[c]))
             self.Y.append(done[id(facs[c])])
 
     def column(self, h, lamp=None, samples=None) -> np.ndarray:

@@ -11,7 +11,9 @@ KEPT_POSITIONS positions (the candidate lamps of a mounting position share them:
 from __future__ import annotations
 
 import math
+import os
 from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,6 +29,10 @@ __all__ = ["PointSourceKind"]
 #: lamp positions whose patches' solid angles a sampler keeps (the candidate lamps hang at a few
 #: mounting positions, several spots each; a refined lamp at each position it tries): P floats each
 KEPT_POSITIONS = 32
+#: triangles per block of ``_solid_angles_of``: a block's temporaries stay in the cache (about 2 x
+#: faster than one pass over 400,000 triangles), the blocks shared among the CPUs (numpy releases
+#: the GIL): 3 x on 2 cores; each triangle's value is computed alone, so the bits are the same
+SOLID_ANGLE_BLOCK = 32768
 
 
 def _solid_angles(tv, x):
@@ -49,6 +55,15 @@ def _solid_angles(tv, x):
     return np.where(num < 0, omega, 0.0)  # num = a . (b x c) < 0 <=> x on the normal's side
 
 
+def _solid_angles_of(tv, tri, x) -> np.ndarray:
+    """``_solid_angles(tv[tri], x)`` in blocks of SOLID_ANGLE_BLOCK triangles, on the CPUs."""
+    blocks = [tri[i:i + SOLID_ANGLE_BLOCK] for i in range(0, len(tri), SOLID_ANGLE_BLOCK)]
+    if len(blocks) <= 1:
+        return _solid_angles(tv[tri], x)
+    with ThreadPoolExecutor(max_workers=min(len(blocks), os.cpu_count() or 1)) as ex:
+        return np.concatenate(list(ex.map(lambda t: _solid_angles(tv[t], x), blocks)))
+
+
 def _patch_solid_angles(sampler, position, todo, n_patches) -> np.ndarray:
     """(n_patches,) the solid angle (sr) of each patch of ``todo`` seen from ``position`` (the sum
     over its triangles, in the sampler's order), kept on ``sampler`` per position
@@ -65,7 +80,7 @@ def _patch_solid_angles(sampler, position, todo, n_patches) -> np.ndarray:
     if len(new):
         tri = _ragged(sampler.tstart[new], sampler.tcount[new])
         om[new] = np.bincount(sampler.tri_patch[tri] if len(tri) else np.zeros(0, dtype=np.int64),
-                              weights=_solid_angles(sampler.tv[tri], position), minlength=n_patches)[new]
+                              weights=_solid_angles_of(sampler.tv, tri, position), minlength=n_patches)[new]
         done[new] = True
     return om
 
