@@ -167,6 +167,9 @@ class PatchSet:
     #: prepared solve repaints kept patches with the new paint's region and keeps this, so the rays
     #: and kernel rows it draws agree with those it kept (pipeline.prepared)
     ray_scale: float | None = None
+    #: (P,) the illuminance (lx) asked of each patch, when it is not its face's (a prepared solve's
+    #: paint mapped onto a kept cluster of faces: pipeline.prepared); None: its face's (``patch_lux``)
+    target_lux: np.ndarray = None
 
     @property
     def n_patches(self) -> int:
@@ -179,6 +182,15 @@ class PatchSet:
     def bounds(self):
         v = self.tri_vertices.reshape(-1, 3)
         return v.min(axis=0), v.max(axis=0)
+
+
+def patch_lux(faces: FaceSet, patches: PatchSet) -> np.ndarray | None:
+    """(P,) the illuminance (lx) asked of each patch: the patches' own (``target_lux``), else its
+    face's (FaceSet.target_lux); None when no face is asked for one."""
+    own = getattr(patches, "target_lux", None)  # (a patches-like object may have none)
+    if own is not None:
+        return own
+    return None if faces is None or faces.target_lux is None else faces.target_lux[patches.face]
 
 
 def default_max_patch_size(faces: FaceSet) -> float:

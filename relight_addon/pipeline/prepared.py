@@ -12,9 +12,10 @@ paint changed:
   a patch asks for the target of the face it lies on (as engine.scene.build_patches does), which
   is exact for every face that is a patch of its own or split into several (no patch spans it and
   another face). Paint on faces clustered with others maps onto the kept cluster (``painted``: a
-  touched cluster is a target at its painted faces' area-weighted mean radiosity; painted-face
-  error 1.03 x a cold solve's for 12 clustered faces, 1.11 x for 24); only an illuminance target
-  changed on a clustered face cannot be mapped (a patch reads its first face's lux): that solve
+  touched cluster is a target at its painted faces' area-weighted mean radiosity, and at their
+  mean illuminance when they are asked for one (``PatchSet.target_lux``); painted-face error 1.03 x
+  a cold solve's for 12 clustered faces, 1.11 x for 24); only a cluster painted with both kinds
+  (lx on some faces, a radiosity on others) cannot be mapped (one patch is one target): that solve
   starts from scratch, and says so (``unmappable``). The kept patches are not refined again for
   the new targets (refinement passes 0 from the prepared state);
 - the ray-cast form factors (every patch's hemisphere rays: the bulk of a solve's rays, and all of
@@ -246,19 +247,21 @@ class PreparedScene:
 
     def unmappable(self, faces: FaceSet) -> str | None:
         """None when the paint of ``faces`` maps onto the kept patches (``painted``); else why not:
-        an illuminance target (lx) that changed on a face the patch model clustered with others (a
-        patch reads the illuminance target of its first face: a kept cluster cannot ask for it)."""
+        a kept cluster (a patch over several faces) painted with an illuminance target (lx) on some
+        of its faces and a radiosity on others (one patch is one target of one kind)."""
         if self.patches is None:
             return "nothing is kept yet"
         if paint_independent(self.options) or faces.target_lux is None:
             return None
-        target, radiosity = self.paint
-        changed = (faces.target != target) | np.any(faces.target_radiosity != radiosity, axis=1)
-        hit = changed & self._clustered_faces() & (faces.target_lux > 0)
-        if hit.any():
+        mixed = np.flatnonzero(self._cluster_paint(faces)[3])
+        if len(mixed):
+            ps = self.patches
+            hit = np.unique(ps.tri_face[np.isin(ps.tri_patch, mixed)])
+            hit = hit[faces.target[hit]]
             names = sorted({faces.object_names[o] for o in faces.face_object[hit]})
-            return (f"an illuminance target (lx) changed on {int(hit.sum())} face(s) the patch model had clustered "
-                    f"with others (objects: {', '.join(names[:5])}{' ...' if len(names) > 5 else ''})")
+            return (f"an illuminance target (lx) and a painted radiosity on {int(len(hit))} face(s) the patch model "
+                    f"had clustered together ({len(mixed)} patch(es); objects: {', '.join(names[:5])}"
+                    f"{' ...' if len(names) > 5 else ''})")
         return None
 
     def _clustered_faces(self) -> np.ndarray:
@@ -267,11 +270,40 @@ class PreparedScene:
             self._clustered = (self.patches, clustered_faces(self.patches))
         return self._clustered[1]
 
+    def _cluster_paint(self, faces: FaceSet) -> tuple:
+        """What the paint of ``faces`` asks of the kept clusters (patches over several faces): per
+        patch (P,), the painted area of its clustered faces, their area-weighted radiosity (P, 3) and
+        lux (0 where none), and whether it mixes faces asked for lux with faces painted a radiosity;
+        all zero on patches of one face."""
+        patches = self.patches
+        P = patches.n_patches
+        share, radiosity, lux = np.zeros(P), np.zeros((P, 3)), np.zeros(P)
+        mixed = np.zeros(P, dtype=bool)
+        tris = np.flatnonzero(self._clustered_faces()[patches.tri_face])  # the clusters' triangles
+        if not len(tris):
+            return share, radiosity, lux, mixed
+        tp, tf = patches.tri_patch[tris], patches.tri_face[tris]
+        a = triangle_areas(patches.tri_vertices[tris]) * faces.target[tf]
+        share = np.bincount(tp, weights=a, minlength=P)
+        on = share > 0
+        for c in range(3):
+            radiosity[:, c] = np.bincount(tp, weights=a * faces.target_radiosity[tf, c], minlength=P)
+        radiosity[on] /= share[on, None]
+        if faces.target_lux is not None:
+            asked = faces.target_lux[tf] > 0
+            lux_area = np.bincount(tp, weights=a * asked, minlength=P)
+            lux = np.bincount(tp, weights=a * asked * faces.target_lux[tf], minlength=P)
+            lux[on] /= np.maximum(lux_area[on], TINY)
+            mixed = (lux_area > 0) & (lux_area < share)
+        return share, radiosity, lux, mixed
+
     def painted(self, faces: FaceSet) -> PatchSet:
         """The kept patches with the paint of ``faces``: each patch its face's target; a cluster
         (a patch over several faces, which the adaptive model made of unpainted faces) a target
         when any of its faces is painted, at the area-weighted mean radiosity of its painted faces
-        (their least-squares target on one uniform patch). Measured on the staircase against a cold
+        (their least-squares target on one uniform patch), and when they are asked for an
+        illuminance, at their area-weighted mean lux (``PatchSet.target_lux``; a cluster that
+        mixes the two kinds is ``unmappable``). Measured on the staircase against a cold
         solve, which meshes the new paint at the patch size (977 patches -> 988 and 1,001): the
         painted-face error 1.03 x the cold solve's for 12 clustered faces painted, 1.11 x for 24; a
         cluster a target only when painted over half its area, 1.06 x and 1.30 x
@@ -279,20 +311,16 @@ class PreparedScene:
         patches = self.patches
         target = faces.target[patches.face].copy()
         radiosity = faces.target_radiosity[patches.face].copy()
+        lux = None
         if not paint_independent(self.options):
-            tris = np.flatnonzero(self._clustered_faces()[patches.tri_face])  # the clusters' triangles
-            if len(tris):
-                tp, tf = patches.tri_patch[tris], patches.tri_face[tris]
-                area = triangle_areas(patches.tri_vertices[tris])
-                on = faces.target[tf]
-                share = np.bincount(tp, weights=area * on, minlength=patches.n_patches)
-                cl = np.unique(tp)
-                target[cl] = share[cl] > 0
-                for c in range(3):
-                    sums = np.bincount(tp, weights=area * on * faces.target_radiosity[tf, c],
-                                       minlength=patches.n_patches)
-                    radiosity[cl, c] = np.where(target[cl], sums[cl] / np.maximum(share[cl], TINY), 0.0)
-        return replace(patches, target=target, target_radiosity=radiosity)
+            share, mean, lux_mean, _ = self._cluster_paint(faces)
+            cl = np.unique(patches.tri_patch[self._clustered_faces()[patches.tri_face]])
+            target[cl] = share[cl] > 0
+            radiosity[cl] = mean[cl]
+            if faces.target_lux is not None:
+                lux = faces.target_lux[patches.face].copy()
+                lux[cl] = lux_mean[cl]
+        return replace(patches, target=target, target_radiosity=radiosity, target_lux=lux)
 
     def estimate(self, patches, options, progress=None, cancel=None, pairs=None):
         """build_inverse_model's estimator: the prepared ray-cast form factors and, for the estimators

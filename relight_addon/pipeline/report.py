@@ -18,6 +18,7 @@ from ..engine.best_lights import total_power
 from ..engine.candidate_lamps import default_drop, offered_kinds
 from ..engine.light_colour import blackbody_rec709
 from ..engine.plausibility import implausible_mark, implausible_notes
+from ..engine.scene import patch_lux
 from ..engine.units import MIN_REFLECTANCE_LUX, illuminance_lux, luminous_flux_lm
 
 __all__ = ["json_safe", "fixture_schedule", "schedule_notes", "schedule_lines", "solve_report", "radiosity_report", "finish", "light_records", "lamp_records", "placed_record",
@@ -327,6 +328,7 @@ def target_photometry(model, radiosity, exitance) -> dict:
     below MIN_REFLECTANCE_LUX reflects too little to read its illuminance from its radiosity: left
     out, and counted (``unread_patches``). ``radiosity``, ``exitance``: (P, 3) of the configuration."""
     patches = model.patches
+    asked_lux = patch_lux(model.faces, patches)
     tg = np.flatnonzero(patches.target)
     rho = patches.reflectance[tg]
     ok = np.all(rho >= MIN_REFLECTANCE_LUX, axis=1)
@@ -339,7 +341,7 @@ def target_photometry(model, radiosity, exitance) -> dict:
         a = patches.area[tg][sel]
         rec = {"radiosity_mean": (radiosity[tg][sel] * a[:, None]).sum(axis=0) / a.sum(),
                "unread_patches": int(np.sum(~ok[sel])), "patches": int(np.sum(sel & ok))}
-        lux_target = None if model.faces.target_lux is None else model.faces.target_lux[patches.face[tg][sel]]
+        lux_target = None if asked_lux is None else asked_lux[tg][sel]
         if lux_target is not None and np.any(lux_target > 0):  # its illuminance targets (lx), area-weighted
             w = a * (lux_target > 0)
             rec["target_lx"] = float((w * lux_target).sum() / w.sum())

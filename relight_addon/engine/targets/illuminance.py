@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..registry import TARGET_KINDS
+from ..scene import patch_lux
 from .kind import Target, selection_rows
 
 
@@ -38,9 +39,9 @@ class Illuminance(Target):
     @classmethod
     def from_scene(cls, faces, patches, F=None):
         """The patches of faces with an illuminance target (FaceSet.target_lux > 0)."""
-        if faces is None or faces.target_lux is None:
+        lux = patch_lux(faces, patches)
+        if lux is None:
             return None
-        lux = faces.target_lux[patches.face]
         sel = np.flatnonzero(np.asarray(patches.target, dtype=bool) & (lux > 0))
         if len(sel) == 0:
             return None

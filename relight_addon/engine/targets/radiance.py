@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..registry import TARGET_KINDS
+from ..scene import patch_lux
 from .kind import Target, selection_rows
 
 
@@ -32,6 +33,7 @@ class PaintedRadiance(Target):
     def from_scene(cls, faces, patches, F=None):
         """The painted patches that are no illuminance target (engine/targets/illuminance.py)."""
         mask = np.asarray(patches.target, dtype=bool)
-        if faces is not None and faces.target_lux is not None:
-            mask = mask & ~(faces.target_lux[patches.face] > 0)
+        lux = patch_lux(faces, patches)
+        if lux is not None:
+            mask = mask & ~(lux > 0)
         return cls.masked(mask, patches.target_radiosity) if mask.any() else None
