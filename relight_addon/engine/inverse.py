@@ -45,6 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
+from .sampling import Cancelled
 from .lights import LightSet, candidate_mask, kind_code
 from .plausibility import implausible_lights
 from .radiosity import lossless_patches, radiosity_matrix
@@ -307,7 +308,9 @@ class InverseProblem:
     def __init__(self, F, area, reflectance, targets, candidate_mask,
                  center=None, normal=None, light_groups=None, light_basis=None, lights=None,
                  first_bounce=None, background=None, background_irradiance=None, lamp_excess=None,
-                 background_excess=None):
+                 background_excess=None, cancel=None):
+        #: ``cancel()`` returning True stops the factorisation between channels (sampling.Cancelled)
+        self.cancel = cancel
         self.F, share = _form_factor_matrix(F)
         n = self.n_patches = self.F.shape[0]
         #: (P,) or None: the share of a patch's emission that leaves it into the scene
@@ -516,6 +519,8 @@ class InverseProblem:
         if self._factors is None:
             factors = [None] * 3
             for g in channel_groups(self.reflectance):
+                if self.cancel is not None and self.cancel():  # (a channel's LU: 0.2-0.3 s on 2,305 patches)
+                    raise Cancelled("solve cancelled")
                 rho = self.reflectance[:, g[0]]
                 closed = lossless_patches(self.F, rho)
                 if closed.any():

@@ -182,7 +182,7 @@ class _LampParameters:
 
 def refine_configuration(problem, lamps: dict, columns, transport: Transport, mount: Mount, step_length: float,
                          seed=0, max_evaluations=None, rounds=None, budget=None, cancel=None, exitance=None,
-                         upper=None) -> tuple:
+                         upper=None, halt=None) -> tuple:
     """Refine the placed lamps ``lamps`` {position in the configuration: engine.lamps.Lamp (1 W per
     channel)} of a configuration whose lights' transfer columns are ``columns`` (3 arrays (m, k))
     (see the module docstring). ``step_length``: the slide of one unit (m). Returns ([RefinedLamp] of the lamps whose
@@ -193,7 +193,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
     budget = BUDGET if budget is None else int(budget)
-    search = _Search(problem, transport, mount, seed, exitance, upper)
+    search = _Search(problem, transport, mount, seed, exitance, upper, halt)
     cols = [np.array(c, dtype=np.float64, copy=True) for c in columns]
     start = search.error(cols)
     best, evaluations, refined = start, 0, {}
@@ -204,7 +204,10 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             if (cancel is not None and cancel()) or evaluations >= budget:
                 break
             params = _LampParameters(current[j], mount, step_length)
-            lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
+            try:
+                lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
+            except _Halted:  # (``halt``: the lamps refined so far are kept)
+                return list(refined.values()), cols, start, best, evaluations
             evaluations += used
             if cand is not None and lowered:  # kept if it lowers the error at the full points
                 h = search.irradiance(cand, LAMP_POINTS)
@@ -218,14 +221,19 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     return list(refined.values()), cols, start, best, evaluations
 
 
+class _Halted(Exception):
+    """refine_configuration's ``halt()`` said stop, within a lamp's search."""
+
+
 class _Search:
     """What refine_configuration evaluates: a configuration's relative error (the best strengths of
     the problem's light colour: NNLS per channel when free), a lamp's irradiance on the patches it
-    reaches (one seed: the same receiver points at every evaluation), and its column of T."""
+    reaches (one seed: the same receiver points at every evaluation), and its column of T.
+    ``halt()`` returning True stops a search at its next evaluation (_Halted)."""
 
-    def __init__(self, problem, transport, mount, seed, exitance, upper=None):
+    def __init__(self, problem, transport, mount, seed, exitance, upper=None, halt=None):
         self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
-        self.upper = upper
+        self.upper, self.halt = upper, halt
         self.norm = problem.target_norm if problem.target_norm > 0 else 1.0
         self.radius = patch_radius(mount.patches, mount.sampler)
 
@@ -250,6 +258,8 @@ class _Search:
         seen = {}
 
         def f(x):
+            if self.halt is not None and self.halt():
+                raise _Halted
             key = tuple(np.round(x, 9))
             if key not in seen:
                 cand = params.lamp_at(x)

@@ -157,6 +157,10 @@ class SceneSampler:
         return np.asarray(self.scene.run(org, d, dists=tfar, query="OCCLUDED")) == -1
 
 
+#: how often (s) run_chunks looks at ``cancel()`` while its chunks run
+CANCEL_POLL = 0.02
+
+
 def run_chunks(work, total, threads, stop, cancel=None, progress=None):
     """Run ``work(ci)`` for ci in range(total) on ``threads`` worker threads (in this thread when
     1), calling ``progress(done / total)`` and checking ``cancel()`` here between chunks: on
@@ -177,19 +181,21 @@ def run_chunks(work, total, threads, stop, cancel=None, progress=None):
                 progress(done / total)
             check_cancel()
         return
-    with ThreadPoolExecutor(max_workers=int(threads)) as ex:
-        pending = {ex.submit(work, ci) for ci in range(total)}
-        try:
-            while pending:
-                finished, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
-                for f in finished:
-                    f.result()
-                    done += 1
-                if finished and progress is not None:
-                    progress(done / total)
-                check_cancel()
-        except BaseException:
-            stop.set()
-            for f in pending:
-                f.cancel()
-            raise
+    ex = ThreadPoolExecutor(max_workers=int(threads))
+    pending = {ex.submit(work, ci) for ci in range(total)}
+    try:
+        while pending:
+            finished, pending = wait(pending, timeout=CANCEL_POLL, return_when=FIRST_COMPLETED)
+            for f in finished:
+                f.result()
+                done += 1
+            if finished and progress is not None:
+                progress(done / total)
+            check_cancel()
+    except BaseException:
+        # (the chunks running end at their next look at ``stop``, in the background: a cancel is
+        # not kept waiting for them; Live's next stroke starts meanwhile)
+        stop.set()
+        ex.shutdown(wait=False, cancel_futures=True)
+        raise
+    ex.shutdown(wait=True)

@@ -124,7 +124,7 @@ def _no_light_error(options):
                        f"({', '.join(offered_kinds(options))}) lights any face")
 
 
-def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> InverseProblem:
+def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H, cancel=None) -> InverseProblem:
     """The solve's InverseProblem: the painted targets, the candidate lights, their first reflection,
     the scene's own emitters (``background``) and lamps and World (``lamp_H``) as fixed light."""
     emitting = np.any(patches.exitance > 0, axis=1)
@@ -133,7 +133,7 @@ def _inverse_problem(faces, patches, F, mask, lights, background, lamp_H) -> Inv
                           first_bounce=first_bounce(faces, patches, F, mask | emitting),
                           background=background, background_irradiance=lamp_H.sum(axis=1),
                           lamp_excess=lights_excess(faces, patches, lights),
-                          background_excess=scene_light_excess(faces, patches, lamp_H))
+                          background_excess=scene_light_excess(faces, patches, lamp_H), cancel=cancel)
 
 
 def _offer(faces, lights, patches, mask, options, F, warnings, seconds, progress, cancel, offer=None):
@@ -143,7 +143,13 @@ def _offer(faces, lights, patches, mask, options, F, warnings, seconds, progress
     t1 = time.perf_counter()
     sampler = getattr(F, "sampler", None) or SceneSampler(patches)
     lamp_notes = []
-    lights, _ = (offer or offer_lamps)(lights, patches, mask, options, sampler, options.seed, progress,
+
+    def each_lamp(f):  # (after each lamp's irradiance: a cancel is heard within one lamp, not the stage)
+        if progress is not None:
+            progress(f)
+        _check_cancel(cancel)
+
+    lights, _ = (offer or offer_lamps)(lights, patches, mask, options, sampler, options.seed, each_lamp,
                                        notes=lamp_notes, aims=target_aims(faces, patches, sampler))
     warnings.extend(n for n in lamp_notes if n not in warnings)
     seconds["lamps"] += time.perf_counter() - t1
@@ -178,7 +184,7 @@ def _inverse_pass(faces, patches, options, pm, scales, estimate, p, passes, warn
         if np.any(patches.exitance > 0):
             background = patches.exitance.copy()
         lamp_H, lamp_names = scene_light(faces, patches, F, options.seed)
-        problem = _inverse_problem(faces, patches, F, mask, lights, background, lamp_H)
+        problem = _inverse_problem(faces, patches, F, mask, lights, background, lamp_H, cancel)
     seconds["problem"] += time.perf_counter() - t1
     return lights, F, problem, background, lamp_H, lamp_names
 
@@ -227,7 +233,10 @@ def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_s
             break
         patches = refined
     # the lights' colour (an automatic mode chooses it on the final problem)
+    _check_cancel(cancel)  # (the problem is factorised: a cancel is heard before the colour's choice)
     problem.colour, note = light_colour_of(problem, options)
+    _check_cancel(cancel)
+    problem.cancel = None  # (the model outlives this job: a later factorisation is not this job's to stop)
     if note:
         warnings.append(note)
     if np.any(background > 0) or has_scene_light(faces):

@@ -251,8 +251,9 @@ class PreparedScene:
         of its faces and a radiosity on others (one patch is one target of one kind)."""
         if self.patches is None:
             return "nothing is kept yet"
-        if paint_independent(self.options) or faces.target_lux is None:
-            return None
+        if paint_independent(self.options) or faces.target_lux is None \
+                or not np.any(self._clustered_faces() & faces.target & (faces.target_lux > 0)):
+            return None  # (no lux asked on a clustered face: nothing to mix)
         mixed = np.flatnonzero(self._cluster_paint(faces)[3])
         if len(mixed):
             ps = self.patches

@@ -120,7 +120,7 @@ def light_records(model, curve, row: int) -> list:
     colour = getattr(model.problem, "colour", None)
     info = dict(zip(on.tolist(), colour.describe(e[on]))) if colour is not None else {}
     for j in on:
-        rec = _one_light(model, curve, lights, lamps, lamp_of, e, j, info.get(int(j), {}))
+        rec = _one_light(model, curve, lights, (watts, kinds), lamps, lamp_of, e, j, info.get(int(j), {}))
         power = rec["strength"] if rec.get("exitance") is None else np.asarray(e[j]) * watts[j]  # W per channel
         rec["luminous_flux_lm"] = float(luminous_flux_lm(power))
         rec.update(info.get(int(j), {}))
@@ -128,9 +128,10 @@ def light_records(model, curve, row: int) -> list:
     return out
 
 
-def _one_light(model, curve, lights, lamps, lamp_of, e, j, info) -> dict:
-    """light_records' record of light ``j`` (``info``: its colour's, e.g. a blackbody's temperature)."""
-    watts, kinds = lights.watts, lights.kind_names
+def _one_light(model, curve, lights, watts_kinds, lamps, lamp_of, e, j, info) -> dict:
+    """light_records' record of light ``j`` (``watts_kinds``: the lights' watts and kind names, taken
+    once for all; ``info``: its colour's, e.g. a blackbody's temperature)."""
+    watts, kinds = watts_kinds
     if lights.kind_of(j).writer == "placed":
         return placed_record(lights.lamp(j), kinds[j], e[j], info.get("temperature_K"))
     if j in lamp_of:

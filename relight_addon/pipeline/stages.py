@@ -199,7 +199,7 @@ class _Refined:
     evaluations: int = 0
 
 
-def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check):
+def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, halt=None):
     """The placed lamps of one configuration refined (engine.lamp_refinement), each refined lamp
     appended to ``done`` as a new light; the configuration with them, re-fitted (None: unchanged)."""
     T, transport, mount, step, seed = setup
@@ -207,7 +207,7 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check):
     refined, cols, before, after, n_eval = refine_configuration(
         problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
         seed=seed, budget=REFINE_BUDGET - done.evaluations, exitance=pt.exitance, cancel=check(len(placed)),
-        upper=problem.light_upper[pt.lights])
+        upper=problem.light_upper[pt.lights], halt=halt)
     done.evaluations += n_eval
     done.rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
                       "lamps_refined": len(refined), "evaluations": n_eval})
@@ -283,10 +283,12 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         if done.evaluations >= REFINE_BUDGET:
             break
         point = _refine_point(model.problem, lights, curve[i], i == red.final_index, setup, done,
-                              lambda n_lamps: _refining(progress, cancel, n_done, len(todo), n_lamps))
+                              lambda n_lamps: _refining(progress, cancel, n_done, len(todo), n_lamps), cancel)
         curve[i] = curve[i] if point is None else point
         if progress is not None:
             progress("refining lamps", 0.95 + 0.03 * (n_done + 1) / len(todo))
+    if cancel is not None and cancel():  # (heard within a lamp's search: no half-refined answer)
+        raise Cancelled("solve cancelled")
     account = {"points": done.rows, "offered": lights.count_by_kind(), "lamps_refined": len(done.lamps),
                "evaluations": done.evaluations}
     if done.lamps:

@@ -122,8 +122,11 @@ class LightSet:
     # -- sources ---------------------------------------------------------------------------
     def members(self, light) -> np.ndarray:
         """Patch indices of one light's exitance source."""
-        col = self.basis.tocsc()[:, light]
-        return self.patches[col.indices]
+        kept = self.__dict__.get("_csc")
+        if kept is None or kept[0] is not self.basis:  # (the basis in columns, kept while it is the same)
+            kept = self.__dict__["_csc"] = (self.basis, self.basis.tocsc())
+        B = kept[1]
+        return self.patches[B.indices[B.indptr[light]:B.indptr[light + 1]]]
 
     def patch_exitance(self, exitance, n_patches) -> np.ndarray:
         """(n_patches, 3) exitance the lights' ``exitance`` (n_lights, 3) put on the patches."""
