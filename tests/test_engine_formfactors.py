@@ -296,3 +296,26 @@ def test_reciprocity_keeps_a_work_planes_own_rays_dense_and_sparse():
     np.testing.assert_allclose(S.toarray(), W, rtol=1e-6, atol=1e-7)
     # without the mask, the work plane's row is pulled toward the others' zeros (the old bias)
     assert weigh_reciprocity(M, area, 4096)[passes].sum() < 0.9 * M[passes].sum()
+
+
+def test_a_cancel_does_not_wait_for_the_chunks_running():
+    """sampling.run_chunks raises Cancelled while a chunk still runs (it ends in the background at
+    its next look at ``stop``): a newer Live stroke is not kept waiting by the chunks of the answer
+    it cancels (issue 37). The chunk here runs until the test releases it, after the raise."""
+    import threading
+
+    from relight_addon.engine.sampling import run_chunks
+
+    started, release, stop = threading.Event(), threading.Event(), threading.Event()
+    ended = []
+
+    def work(ci):
+        if ci == 0:
+            started.set()
+            release.wait(30.0)
+        ended.append(ci)
+
+    with pytest.raises(Cancelled):
+        run_chunks(work, 2, 2, stop, cancel=started.is_set)
+    assert stop.is_set() and 0 not in ended  # (raised while chunk 0 still ran)
+    release.set()

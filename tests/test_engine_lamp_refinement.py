@@ -152,3 +152,36 @@ def test_a_lamp_hangs_only_in_front_of_a_free_candidate_surface():
     n = mount.normal_at(np.array([2.5, 1.5, H]) + drop * up)
     assert n is not None and n @ up > 0.999
     assert mount.normal_at(np.array([2.5, 1.5, H - 0.5])) is None  # no candidate patch 0.15 m behind it
+
+
+def test_a_cancel_within_a_lamps_search_stops_the_solve_without_a_half_refined_answer(solved):
+    """Issue 37: a newer stroke cancels Live's later answer; the refinement looked at the cancel
+    only before each lamp's search (60 evaluations, over a second). It is now heard at the search's
+    next evaluation, and the solve raises Cancelled instead of returning a half-refined answer."""
+    from relight_addon.engine.sampling import Cancelled
+    from relight_addon.engine import lamps as lamps_module
+
+    faces, refined, _ = solved
+    n_full = refined.report["model"]["lamp_refinement"]["evaluations"]
+    calls = {"irradiance": 0}
+    original = lamps_module.lamp_irradiance
+
+    def counting(*a, **kw):
+        calls["irradiance"] += 1
+        return original(*a, **kw)
+
+    heard = {"at": None}
+
+    def cancel():  # True once the refinement has evaluated 5 lamps
+        if heard["at"] is None and calls["irradiance"] >= 5:
+            heard["at"] = calls["irradiance"]
+        return heard["at"] is not None
+
+    lr.lamp_irradiance = counting
+    try:
+        with pytest.raises(Cancelled):
+            run_solve(faces, JobOptions(**ONE_SPOT, max_patch_size=0.25), cancel=cancel)
+    finally:
+        lr.lamp_irradiance = original
+    assert heard["at"] is not None
+    assert calls["irradiance"] <= heard["at"] + 1 < n_full  # (stopped at the next evaluation)
