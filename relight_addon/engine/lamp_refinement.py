@@ -39,6 +39,7 @@ from .geometry import unit
 from .candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
+from .sampling import Cancelled
 
 __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp"]
 
@@ -189,7 +190,9 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     refinement lowered the error, the columns with theirs replaced, the relative error before and
     after, evaluations). ``budget``: the evaluations it may use at most (default BUDGET). ``exitance``
     (k, 3): the configuration's strengths, whose colours a constrained light colour keeps; ``upper`` (k,):
-    the lights' largest strength per channel (their kinds' strength_upper; None: none), kept in every fit."""
+    the lights' largest strength per channel (their kinds' strength_upper; None: none), kept in every fit.
+    ``cancel()`` is asked before each lamp's search (True: the lamps refined so far are returned);
+    ``halt()`` at each of its evaluations (True: sampling.Cancelled, a newer stroke not kept waiting)."""
     max_evaluations = MAX_EVALUATIONS if max_evaluations is None else int(max_evaluations)
     rounds = ROUNDS if rounds is None else int(rounds)
     budget = BUDGET if budget is None else int(budget)
@@ -204,10 +207,7 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
             if (cancel is not None and cancel()) or evaluations >= budget:
                 break
             params = _LampParameters(current[j], mount, step_length)
-            try:
-                lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
-            except _Halted:  # (``halt``: the lamps refined so far are kept)
-                return list(refined.values()), cols, start, best, evaluations
+            lowered, cand, used = search.minimize(params, cols, j, min(max_evaluations, budget - evaluations))
             evaluations += used
             if cand is not None and lowered:  # kept if it lowers the error at the full points
                 h = search.irradiance(cand, LAMP_POINTS)
@@ -221,15 +221,11 @@ def refine_configuration(problem, lamps: dict, columns, transport: Transport, mo
     return list(refined.values()), cols, start, best, evaluations
 
 
-class _Halted(Exception):
-    """refine_configuration's ``halt()`` said stop, within a lamp's search."""
-
-
 class _Search:
     """What refine_configuration evaluates: a configuration's relative error (the best strengths of
     the problem's light colour: NNLS per channel when free), a lamp's irradiance on the patches it
     reaches (one seed: the same receiver points at every evaluation), and its column of T.
-    ``halt()`` returning True stops a search at its next evaluation (_Halted)."""
+    ``halt()`` returning True stops a search at its next evaluation (sampling.Cancelled)."""
 
     def __init__(self, problem, transport, mount, seed, exitance, upper=None, halt=None):
         self.problem, self.transport, self.mount, self.seed, self.exitance = problem, transport, mount, seed, exitance
@@ -259,7 +255,7 @@ class _Search:
 
         def f(x):
             if self.halt is not None and self.halt():
-                raise _Halted
+                raise Cancelled("solve cancelled")
             key = tuple(np.round(x, 9))
             if key not in seen:
                 cand = params.lamp_at(x)

@@ -153,9 +153,7 @@ def _own_first_reflection(outcome) -> np.ndarray:
     own emitters') first reflection beyond rho (InverseProblem.first_reflection), which a view
     target's glossy pixels see through their BSDF instead."""
     p = outcome.problem
-    s = np.asarray(outcome.stored.exitance[outcome.final_index], dtype=np.float64)
-    e = np.zeros((p.n_patches, 3))
-    e[p.candidates] = p.light_basis @ s
+    e = p.patch_exitance(outcome.stored.exitance[outcome.final_index])
     if p.background_exitance is not None:
         e = e + p.background_exitance
     return p.first_reflection(e)
