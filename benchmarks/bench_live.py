@@ -1,6 +1,7 @@
 """Live mode (issue 20): a stroke of about a dozen faces, through the add-on's Live session in one
 bpy process (blender/live.py, ticked as the modal operator's timer ticks it), against a cold solve
-of the same painted scene, one run each.
+of the same painted scene, one run each; then Solve & Reduce (the operator's export, meshing,
+solve and write) once Live's later answers to the last stroke are in, against that cold solve.
 
 Per scene: Live's first answer (a full solve through the session: the preparation), the transfer
 to every patch (InverseProblem.all_rows_transfer, made at the first stroke) and what the session
@@ -146,6 +147,17 @@ def case(name, source, paint_on, model):
                         "targets": int(rep.target.sum()), "longest_tick_s": max(TICKS),
                         "rss_gb": rss_gb()})
         print(name, "stroke", k, strokes[-1], flush=True)
+    # Solve & Reduce once Live's later answers to the last stroke are in (issue 37: <= 1/5 of a cold
+    # solve of the same paint): the operator's export, meshing (its cost estimate), solve and write
+    run(s, lambda: s.worker is None and s.to_refine is None)
+    t0 = time.perf_counter()
+    button = preparation.SolveJob.export(bpy.context, operators.job_options(scene.relight), session=True)
+    button.mesh()
+    answer = button.run()
+    operators.show_solve(bpy.context, button, answer)
+    t_button = time.perf_counter() - t0
+    print(name, "the button after the later answers", {"s": t_button, "taken": answer.report["prepared"].get("taken"),
+                                                        "error": answer.report["final"]["relative_error"]}, flush=True)
     live.stop(scene.name)
     faces = export.repaint(job.exp)
     options = job.options
@@ -170,7 +182,9 @@ def case(name, source, paint_on, model):
            "first_s": t_first, "all_rows_s": t_rows, "kept_bytes": int(kept), "strokes": strokes,
            "cold_s": t_cold, "cold_error": float(cold.report["final"]["relative_error"]),
            "first_error": first_error, "cold_first_s": t_cold_first,
-           "cold_first_error": float(cold_first.report["final"]["relative_error"])}
+           "cold_first_error": float(cold_first.report["final"]["relative_error"]),
+           "button_s": t_button, "button_error": float(answer.report["final"]["relative_error"]),
+           "button_taken": bool(answer.report["prepared"].get("taken"))}
     print(json.dumps(row), flush=True)
     return row
 
@@ -206,6 +220,12 @@ def main():
         if "cold_first_s" in r:
             print(f"| {r['scene']} | {r['first_s']:.1f} s | {r['cold_first_s']:.1f} s | "
                   f"{r['first_s'] / r['cold_first_s']:.2f} | {r['first_error']:.4f} / {r['cold_first_error']:.4f} |")
+    print("\n| scene | Solve & Reduce after the last stroke's later answers | a cold solve of that paint | ratio "
+          "| error button / cold | the warm solve's answer taken |")
+    for r in rows:
+        if "button_s" in r:
+            print(f"| {r['scene']} | {r['button_s']:.2f} s | {r['cold_s']:.1f} s | {r['button_s'] / r['cold_s']:.3f} | "
+                  f"{r['button_error']:.4f} / {r['cold_error']:.4f} | {r['button_taken']} |")
 
 
 if __name__ == "__main__":

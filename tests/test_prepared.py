@@ -299,6 +299,45 @@ def test_the_button_after_each_kind_of_stroke_gives_the_cold_solve_reusing_the_s
     assert lamps_kept > 0
 
 
+def test_the_button_takes_the_answer_lives_warm_solve_made_for_the_same_paint(monkeypatch):
+    """Solve & Reduce after Live's warm solve of a stroke (PreparedScene.refine_live, its last
+    step) takes that answer whole: nothing solved again, the same lights and strengths to the bit
+    as that solve and as the same solve computed again, its report and warnings saying whose answer
+    it is (issue 37: the button uses what Live prepared); another paint, lux, view target or a
+    lamp moved (the state's key) is another solve's input."""
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
+    state.solve(exp.faces)
+    state.prepare_live(exp.faces)
+    _, faces = _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool))[0]
+    quick = state.live(faces)
+    state.refine_live(quick, prepared.REFINE_STEPS.index("warm solve"))  # (its answer, shown only if better)
+    inputs, made, by, _ = state.answer
+    assert by == "Live's warm solve" and inputs == state.answer_inputs(faces)
+    monkeypatch.setattr(jobs, "run_solve", lambda *a, **k: pytest.fail("solved again"))
+    taken = state.solve(faces)
+    monkeypatch.undo()
+    assert state.reason is None and state.model is made.model and state.patches is made.patches
+    assert "Live's warm solve" in taken.report["prepared"]["taken"] and taken.report["prepared"]["kept"]
+    assert taken.report["prepared"]["taken"] in taken.warnings and taken.report["prepared"]["taken"] in \
+        taken.report["warnings"]
+    assert not any("taken whole" in w for w in made.warnings + made.report["warnings"])  # (a copy's own)
+    assert taken.report["final"] == made.report["final"] and taken.final_index == made.final_index
+    assert np.array_equal(taken.stored.exitance[taken.final_index], made.stored.exitance[made.final_index])
+    # the same solve computed again (nothing kept to take): the answer taken, to the bit
+    state.answer = None
+    again = state.solve(faces)
+    assert "taken" not in again.report["prepared"] and again.report["final"] == taken.report["final"]
+    assert np.array_equal(again.stored.exitance[again.final_index], taken.stored.exitance[taken.final_index])
+    # what else a solve reads: the paint, the lux, the view target, the scene's key
+    lux = np.where(faces.target, 100.0, 0.0)
+    other = {"paint": replace(faces, target_radiosity=faces.target_radiosity * 1.01),
+             "lux": replace(faces, target_lux=lux), "view target": replace(faces, view_target=object())}
+    digests = {name: state.answer_inputs(f) for name, f in other.items()}
+    assert inputs not in digests.values() and len(set(digests.values())) == 3, digests
+    state.key = {**state.key, "lamps and World": "moved"}
+    assert state.answer_inputs(faces) != inputs
+
+
 def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kept(monkeypatch):
     """The warm solve's candidate lamps (prepared.KeptLamps.offer): with nothing kept, the lights
     offer_lamps makes, the same numbers; offered again for the same plan, no lamp computed and the

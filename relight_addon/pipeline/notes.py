@@ -30,7 +30,7 @@ from ..engine.bounds import POSITIVE_GAP
 from ..engine.plausibility import MIN_UTILISATION
 
 __all__ = ["LINE_CHARS", "MAX_LINES", "FIXES", "Line", "sidebar_lines", "for_addon", "NO_EMITTER_WARNING",
-           "BEST_SELECTION", "background_note", "direct_fixed_note", "live_note", "certificate_notes",
+           "BEST_SELECTION", "background_note", "direct_fixed_note", "live_note", "taken_note", "certificate_notes",
            "positivity_notes", "unmet_notes", "colour_text"]
 
 #: characters of a line: what fits the 3D Viewport's sidebar at its default width (Blender's
@@ -186,6 +186,14 @@ def already_brighter_note(name: str, ratio: float) -> str:
     """A target object the fixed light alone makes ``ratio`` times as bright as painted."""
     return (f"{name}: its targets are already {100 * (ratio - 1):.0f} % brighter "
             "than painted without any new light (the scene's own lamps, World and emitters)")
+
+
+def taken_note(by: str, when: str, seconds) -> str:
+    """A solve that took the answer the prepared state already made for the same paint, scene and
+    options (pipeline.prepared.PreparedScene.answer): ``by`` made it at ``when`` in ``seconds``."""
+    took = "" if seconds is None else f" in {seconds:.1f} s"
+    return (f"the answer {by} made for this paint at {when}{took}, taken whole: the same paint, scene "
+            "and options (nothing computed again)")
 
 
 def live_note(n_targets: int) -> str:

@@ -59,6 +59,14 @@ quick answer loses against a cold solve (up to 17 % in error on the staircase, i
 selection's full search and the lamps refined for the stroke's targets on the retargeted model,
 then the warm solve (``solve``'s, not kept).
 
+The last full answer made from the state (a solve's, or Live's warm solve of a stroke) is kept
+with a digest of its inputs (``answer``, ``answer_inputs``: the state's key, the paint, the lux,
+the view target, the polygon counts). Solve & Reduce asked for the same inputs takes it whole (a
+copy of its report, the warnings saying whose answer it is): the same solve computed again gives
+it to the bit (every sampling keyed by the seed and the geometry). So the button after a stroke,
+once Live's later answers are in, is the write alone (issue 37: "the button uses what Live
+prepared"); while Live's warm solve runs, the button waits for it (the scene's lock) and takes it.
+
 Meshing every face as a painted one is (clustered only below 1/16 of its size) would let every
 stroke on a floor or a wall map onto the adaptive model's patches; tried on the staircase, it took
 977 patches to 1,451 and moved the predicted error from 0.063 / 0.051 (seeds 3 / 4) to 0.073 / 0.074,
@@ -230,6 +238,9 @@ class PreparedScene:
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
     lamps: KeptLamps = field(default_factory=KeptLamps)  # the candidate lamps' irradiance on the kept mesh
     drawn: dict = field(default_factory=dict)  # the last estimate's work: {"rays cast", "kernel rows drawn", ...}
+    #: the last full answer made from this state: (digest of its inputs, ``answer_inputs``; the outcome as it
+    #: was returned; what made it; when): ``solve`` and Live's warm solve take it for the same inputs
+    answer: tuple = None
 
     @classmethod
     def prepare(cls, faces: FaceSet, options: JobOptions, default_max_patch_size=None):
@@ -432,19 +443,12 @@ class PreparedScene:
         if stale is not None:
             raise ValueError(f"the prepared scene is stale: {stale}")
         self.reason = self.unmappable(faces)
-        options, patches = self.options, meshed
-        if self.reason is None:  # the kept patches, their rays, with the new paint
-            patches, options = self._warm(faces)
-            self.warm += 1
         self.solves += 1
-        try:
-            outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
-                                     patches=patches, notes=notes, estimate=self.estimate,
-                                     offer=self.offer)
-        except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
-            self.patches = self._cast_for = self.form_factors = self.model = None
-            raise
-        outcome.report["prepared"] = self.account()
+        inputs = self.answer_inputs(faces, polygon_counts)
+        outcome = self._taken(inputs) if self.reason is None else None
+        if outcome is None:
+            outcome = self._solved(faces, polygon_counts, progress, cancel, notes, meshed)
+            self._keep_answer(inputs, outcome, "the last solve")
         if self._cast_for is not outcome.patches:  # not the mesh the rays were cast for: keep nothing
             self.patches = self._cast_for = self.form_factors = self.model = None
         else:
@@ -454,6 +458,49 @@ class PreparedScene:
             self._nnls_start = None if bounds is None else bounds.nnls_exitance
             self.paint = (faces.target.copy(), faces.target_radiosity.copy())
             self.starts = _starts(outcome)
+        return outcome
+
+    def _solved(self, faces, polygon_counts, progress, cancel, notes, meshed):
+        """``solve``'s computation: from the kept patches (``reason`` None) or from scratch."""
+        options, patches = self.options, meshed
+        if self.reason is None:  # the kept patches, their rays, with the new paint
+            patches, options = self._warm(faces)
+            self.warm += 1
+        self.answer = None  # (what this solve casts and keeps is no longer that answer's)
+        try:
+            outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
+                                     patches=patches, notes=notes, estimate=self.estimate,
+                                     offer=self.offer)
+        except BaseException:  # cancelled or refused part-way: what was cast may be another mesh's
+            self.patches = self._cast_for = self.form_factors = self.model = None
+            raise
+        outcome.report["prepared"] = self.account()
+        return outcome
+
+    def answer_inputs(self, faces: FaceSet, polygon_counts=None) -> str:
+        """A digest of what a solve of ``faces`` reads beyond the scene this state serves (its
+        ``key``, checked first): the paint (the painted radiosity, the lux, the view target) and
+        the polygon counts; the key itself (a lamp moved since: ``move_lamps``)."""
+        return digest(self.key, faces.target, faces.target_radiosity, faces.target_lux, faces.view_target,
+                      polygon_counts)
+
+    def _keep_answer(self, inputs: str, outcome, by: str) -> None:
+        """``outcome``, a full answer just made for ``inputs``, kept as it was returned (its
+        report and warnings copied: the caller finishes them)."""
+        self.answer = (inputs, _copied(outcome), by, time.strftime("%H:%M:%S"))
+
+    def _taken(self, inputs: str):
+        """The kept answer (a copy) when it was made for these ``inputs``, its report saying so
+        (``prepared.taken``, a warning); else None. The same paint, scene and options: the same
+        solve, computed again, would give it (Live's warm solve is ``solve``'s)."""
+        if self.answer is None or self.answer[0] != inputs:
+            return None
+        _, kept, by, when = self.answer
+        outcome = _copied(kept)
+        note = texts.taken_note(by, when, outcome.report.get("timings_s", {}).get("total"))
+        outcome.report["prepared"] = {**outcome.report.get("prepared", {}), "taken": note}
+        outcome.warnings.append(note)
+        outcome.report["warnings"].append(note)
         return outcome
 
     def move_lamps(self, faces: FaceSet) -> None:
@@ -537,16 +584,34 @@ class PreparedScene:
         if step == 0:
             outcome = jobs.solve_model(best.model, self.options, polygon_counts, progress, cancel)
         else:
-            patches, options = self._warm(faces)
-            outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress, cancel,
-                                     patches=patches, estimate=self.estimate,
-                                     offer=self.offer)
+            inputs = self.answer_inputs(faces, polygon_counts)
+            outcome = self._taken(inputs)
+            if outcome is None:
+                patches, options = self._warm(faces)
+                self.answer = None
+                outcome = jobs.run_solve(faces, options, polygon_counts, self.default_max_patch_size, progress,
+                                         cancel, patches=patches, estimate=self.estimate, offer=self.offer)
+                outcome.report["prepared"] = self.account()
+                self._keep_answer(inputs, outcome, "Live's warm solve")  # (Solve & Reduce takes it: the same paint)
         self.refined_solves += 1
         if not outcome.reduction.final.relative_error < best.reduction.final.relative_error:
             return None
         outcome.warnings.append(texts.LIVE_NOTE.format(why=f"its {REFINE_STEPS[step]} for these {outcome.problem.m} "
                                                            "target patches, after the quick answer"))
         return outcome
+
+
+def _copied(outcome):
+    """A solve's outcome with its own report, warnings and curve rows, down to what a caller sets
+    in them (report.finish: the warnings, timings, render settings and each object's radiance
+    along the normal; camera_view.predict_view: the view target's block); the rest shared, read
+    only (a deep copy of a large scene's report, a row per polygon, would take seconds)."""
+    report = dict(outcome.report)
+    report["warnings"] = list(report.get("warnings") or [])
+    report["timings_s"] = dict(report.get("timings_s") or {})
+    if report.get("objects"):
+        report["objects"] = {name: dict(rows) for name, rows in report["objects"].items()}
+    return replace(outcome, report=report, warnings=list(outcome.warnings), curve=[dict(r) for r in outcome.curve])
 
 
 def _starts(outcome) -> dict:
