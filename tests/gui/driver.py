@@ -535,23 +535,7 @@ def live_mode(scene, settings, floor):
           f"{changed}; strokes {how}; {live.status_text(s)}")
     check("the brush stays responsive in Live mode", pauses and max(pauses) < PAUSE_LIMIT,
           f"longest main-thread pauses per stroke {pauses} s; answers {waits} s after the stroke")
-    # Solve & Reduce once Live's later answers to the last stroke are in: it takes the answer of Live's
-    # warm solve of this paint (PreparedScene.answer) instead of solving it again (issue 37)
-    operators = mods()["blender.ui.operators"]
-    ready = yield from wait_for(lambda: s.worker is None and s.to_refine is None and s.status == "up to date", 240)
-    st = state.get(scene.name)
-    made = None if st is None or st.answer is None else st.answer[2]
-    found = yield from probe_sidebar()
-    t_click = time.monotonic()
-    yield from press(found, "bpy.ops.relight.solve()", settle=0.2)
-    yield from wait_for(lambda: operators.solve_state(scene) is None, 300)
-    took = round(time.monotonic() - t_click, 2)
-    RESULT["timings"]["live"]["button_after_warm_solve_s"] = took
-    check("Solve & Reduce after Live's later answers takes the answer of Live's warm solve of that paint",
-          ready and made == "Live's warm solve" and "taken whole" in settings.last_warnings,
-          f"{took} s from the click to the answer shown; the state's last answer made by {made!r}; "
-          f"{live.status_text(s)}; warnings {settings.last_warnings[-300:]!r}")
-    shot("11f_live_button_after_warm_solve")
+    yield from button_after_live(scene, settings, s, state)
     # ESC right after a stroke: the re-solve running (if any) is dropped; the scene keeps the last answer
     if bpy.context.mode == "EDIT_MESH":
         yield from key_in_viewport("Tab")
@@ -578,6 +562,28 @@ def live_mode(scene, settings, floor):
     with override():
         bpy.ops.object.mode_set(mode="OBJECT")
     yield 1.0
+
+
+def button_after_live(scene, settings, s, state):
+    """Solve & Reduce once Live's later answers to the last stroke are in: it takes the answer of
+    Live's warm solve of this paint (PreparedScene.answer) instead of solving it again (issue 37)."""
+    m = mods()
+    live, operators, results = m["blender.live"], m["blender.ui.operators"], m["blender.results"]
+    ready = yield from wait_for(lambda: s.worker is None and s.to_refine is None and s.status == "up to date", 240)
+    st = state.get(scene.name)
+    made = None if st is None or st.answer is None else st.answer[2]
+    found = yield from probe_sidebar()
+    rid = results.result_id(scene)
+    t_click = time.monotonic()
+    yield from press(found, "bpy.ops.relight.solve()", settle=0.1)
+    yield from wait_for(lambda: results.result_id(scene) != rid and operators.solve_state(scene) is None, 300)
+    took = round(time.monotonic() - t_click, 2)
+    RESULT["timings"]["live"]["button_after_warm_solve_s"] = took
+    check("Solve & Reduce after Live's later answers takes the answer of Live's warm solve of that paint",
+          ready and made == "Live's warm solve" and "taken whole" in settings.last_warnings,
+          f"{took} s from the click to the answer shown; the state's last answer made by {made!r}; "
+          f"{live.status_text(s)}; warnings {settings.last_warnings[-300:]!r}")
+    shot("11f_live_button_after_warm_solve")
 
 
 def wait_for(cond, timeout):
