@@ -558,8 +558,8 @@ def _clustered_polygons(state, name):
 
 def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     """Solve & Reduce, a stroke, Solve & Reduce: the second solve starts from the scene's prepared
-    state (no hemisphere ray again); after an object moved, it is solved from scratch, and the
-    panel's warnings say why."""
+    state (no hemisphere ray again, nothing meshed for the operator's estimate); after an object
+    moved, it is meshed and solved from scratch, and the panel's warnings say why."""
     from relight_addon.blender import preparation
 
     preparation.PREPARED.clear()
@@ -572,12 +572,19 @@ def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     _stroke(12, "flight_1", _clustered_polygons(state, "flight_1"))  # where the adaptive model keeps faces whole
     monkeypatch.setattr(prepared, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
     monkeypatch.setattr(kernel_estimator, "compute_form_factors", lambda *a, **k: pytest.fail("rays cast again"))
+    # (nor meshed: the operator's cost estimate is the kept patches', with the stroke's paint)
+    monkeypatch.setattr(preparation.meshing, "mesh_for_job", lambda *a, **k: pytest.fail("meshed again"))
     assert bpy.ops.relight.solve() == {"FINISHED"}
     monkeypatch.undo()
     assert preparation.PREPARED[scene.name] is state and state.solves == 2 and state.warm == 1
     assert "solved from scratch" not in scene.relight.last_warnings
     bpy.data.objects["ceiling"].location.z += 0.05
+    meshed = []
+    real = preparation.meshing.mesh_for_job
+    monkeypatch.setattr(preparation.meshing, "mesh_for_job", lambda *a, **k: meshed.append(1) or real(*a, **k))
     assert bpy.ops.relight.solve() == {"FINISHED"}
+    monkeypatch.undo()
+    assert meshed == [1]  # (a scene the state does not serve: meshed, its cost estimated, as before)
     assert preparation.PREPARED[scene.name] is not state
     assert "solved from scratch: the geometry changed since it was prepared" in scene.relight.last_warnings
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
