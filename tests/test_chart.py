@@ -98,6 +98,24 @@ def test_clipped_range_when_some_configurations_are_far_off():
     assert g["y_max"] >= 40.0
 
 
+def test_a_clipped_range_with_a_bound_per_configuration():
+    """Some configurations far off (above the clip) and a bound per configuration (the stored
+    certificate): the axis is clipped, and kept up to the shown configuration's bound when that is
+    above the clip (it raised in the Results panel's draw: a per-point bound read as one number)."""
+    lights = np.arange(20, 0, -1)
+    err = np.linspace(0.05, 0.5, 20)
+    err[-1] = 40.0
+    bound = 0.8 * err
+    bound[0] = np.nan
+    img, g = chart.render(lights, err, current=10, bound=bound, size=(228, 182))
+    assert g["y_max"] <= chart.CLIP and g["bound_y"] is not None
+    img, g = chart.render(lights, err, current=19, bound=bound, size=(228, 182))
+    assert g["y_max"] >= 40.0
+    img, g = chart.render(lights, 0.8 * err, current=10, bound=np.where(lights == 10, 30.0, np.nan),
+                          size=(228, 182))
+    assert g["y_max"] >= 30.0  # (the shown configuration's bound, above the clip: in view)
+
+
 def test_degenerate_inputs():
     img, g = chart.render([], [], size=(100, 80))
     assert img.shape == (80, 100, 4) and g["marker"] is None

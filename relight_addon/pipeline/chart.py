@@ -210,7 +210,7 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
         _draw_text(img, 4 * s, 4 * s, "no curve", COLORS["text"], s)
         return img[::-1].copy(), geometry
     cur_err = float(err[current]) if current is not None and 0 <= current < len(err) and ok[current] else None
-    ymax, yt = _y_range(err[ok], cur_err, bound)
+    ymax, yt = _y_range(err[ok], cur_err, _shown_bound(bound, current))
     xlo, xhi, log = _x_range(n_lights[ok])
     plot = _Plot(w, h, s, [_fmt(v) for v in yt], ymax, xlo, xhi, log)
     geometry.update(plot=[plot.x0, plot.y0, plot.x1, plot.y1], y_max=ymax, x_log=bool(log), x_range=[xlo, xhi])
@@ -230,13 +230,24 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     return img[::-1].copy(), geometry
 
 
+def _shown_bound(bound, current):
+    """The bound the axis keeps in view: a single bound, or a per-point one's at the shown
+    configuration; None when there is none (NaN)."""
+    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
+    if b is None or not b.size:
+        return None
+    v = b[0] if b.size == 1 else b[current] if current is not None and 0 <= current < b.size else np.nan
+    return float(v) if np.isfinite(v) else None
+
+
 def _y_range(e_ok, cur_err, bound) -> tuple:
     """(the top of the y axis, its ticks): linear from 0; the top is a round number above the
-    curve ``e_ok`` (its finite errors), clipped at CLIP unless the shown point or the bound is above."""
+    curve ``e_ok`` (its finite errors), clipped at CLIP unless the shown point or ``bound`` (a
+    number: _shown_bound's) is above."""
     top = float(e_ok.max())
     if top > CLIP:
         top = max(CLIP * 2 / 3, cur_err * 1.05 if cur_err is not None else 0.0,
-                  bound * 1.05 if bound is not None and np.isfinite(bound) else 0.0)
+                  bound * 1.05 if bound is not None else 0.0)
         top = min(top, float(e_ok.max()))
     ymax = nice_ceil(max(top, 1e-6))
     yt = y_ticks(ymax)
