@@ -583,6 +583,7 @@ def button_after_live(scene, settings, s, state):
           ready and made == "Live's warm solve" and "taken whole" in settings.last_warnings,
           f"{took} s from the click to the answer shown; the state's last answer made by {made!r}; "
           f"{live.status_text(s)}; warnings {settings.last_warnings[-300:]!r}")
+    yield 1.0  # (the sidebar redrawn with the answer before the screenshot)
     shot("11f_live_button_after_warm_solve")
 
 
