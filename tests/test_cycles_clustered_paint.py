@@ -82,6 +82,7 @@ def _rendered(outcome, faces, stroke, path):
     ours = face_mean(outcome.patches, outcome.stored.radiosity[outcome.final_index])  # (F, 3) W/m^2
     area = face_areas(faces)
     rows = {"ours": [], "cycles": [], "target": [], "noise": [], "area": [], "stroke": []}
+    stroked = set(stroke.tolist())
     for f in np.flatnonzero(faces.target):
         name, p = faces.object_names[faces.face_object[f]], int(faces.face_index[f])
         rows["ours"].append(ours[f])
@@ -89,7 +90,7 @@ def _rendered(outcome, faces, stroke, path):
         rows["target"].append(faces.target_radiosity[f])
         rows["noise"].append(float(np.mean(baked[name].rel_noise[p])))
         rows["area"].append(area[f])
-        rows["stroke"].append(f in set(stroke.tolist()))
+        rows["stroke"].append(f in stroked)
     ours, cyc, tgt, noise, a, on = (np.asarray(rows[k]) for k in ("ours", "cycles", "target", "noise", "area",
                                                                      "stroke"))
     rel = (ours.sum(axis=1) - cyc.sum(axis=1)) / cyc.sum(axis=1)
@@ -106,7 +107,8 @@ def _rendered(outcome, faces, stroke, path):
             "face_mean_stroke": float(np.abs(rel[on]).mean()), "face_max_stroke": float(np.abs(rel[on]).max()),
             "signed_rest": float((rel[~on] * a[~on]).sum() / a[~on].sum()),
             "face_mean_rest": float(np.abs(rel[~on]).mean()), "face_max": float(np.abs(rel).max()),
-            "noise": float(noise.mean()), "taken": outcome.report.get("prepared", {}).get("from_prepared_state")}
+            "noise": float(noise.mean()),
+            "from_prepared_state": outcome.report.get("prepared", {}).get("from_prepared_state")}
 
 
 @pytest.fixture(scope="module")

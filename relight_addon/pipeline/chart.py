@@ -210,13 +210,13 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
         _draw_text(img, 4 * s, 4 * s, "no curve", COLORS["text"], s)
         return img[::-1].copy(), geometry
     cur_err = float(err[current]) if current is not None and 0 <= current < len(err) and ok[current] else None
-    ymax, yt = _y_range(err[ok], cur_err, _shown_bound(bound, current))
+    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
+    ymax, yt = _y_range(err[ok], cur_err, _shown_bound(b, current))
     xlo, xhi, log = _x_range(n_lights[ok])
     plot = _Plot(w, h, s, [_fmt(v) for v in yt], ymax, xlo, xhi, log)
     geometry.update(plot=[plot.x0, plot.y0, plot.x1, plot.y1], y_max=ymax, x_log=bool(log), x_range=[xlo, xhi])
     img[plot.y0:plot.y1 + 1, plot.x0:plot.x1 + 1] = COLORS["plot"]
     _draw_axes(img, plot, yt, *x_ticks(xlo, xhi, log))
-    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
     if b is not None and b.size == 1 and np.isfinite(b[0]):
         _draw_bound(img, plot, b[0], bound_n_lights, geometry)
     elif b is not None and b.size == len(n_lights):
@@ -230,10 +230,9 @@ def render(n_lights, relative_error, n_negative=None, current=None, bound=None, 
     return img[::-1].copy(), geometry
 
 
-def _shown_bound(bound, current):
-    """The bound the axis keeps in view: a single bound, or a per-point one's at the shown
-    configuration; None when there is none (NaN)."""
-    b = None if bound is None else np.asarray(bound, dtype=np.float64).reshape(-1)
+def _shown_bound(b, current):
+    """The bound the axis keeps in view of ``b`` (a 1-D array, or None): a single bound, or a
+    per-point one's at the shown configuration; None when there is none (NaN)."""
     if b is None or not b.size:
         return None
     v = b[0] if b.size == 1 else b[current] if current is not None and 0 <= current < b.size else np.nan

@@ -78,6 +78,7 @@ from __future__ import annotations
 import hashlib
 import time
 from dataclasses import dataclass, field, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -212,6 +213,18 @@ def clustered_faces(patches: PatchSet) -> np.ndarray:
     return out
 
 
+class _Clusters(NamedTuple):
+    """The patches over several faces (clusters) of a mesh: its faces in them, their triangles'
+    patch, face and area (m^2), and the clusters' patch indices."""
+
+    patches: PatchSet
+    faces: np.ndarray  # (n_faces,) bool: clustered_faces
+    tri_patch: np.ndarray
+    tri_face: np.ndarray
+    tri_area: np.ndarray
+    ids: np.ndarray
+
+
 @dataclass
 class PreparedScene:
     """The paint-independent part of a scene's last solve (see the module docstring)."""
@@ -232,7 +245,7 @@ class PreparedScene:
     live_solves: int = 0  # live re-solves made
     refined_solves: int = 0  # live strokes' second answers made (refine_live)
     starts: dict = field(default_factory=dict)  # {n_lights: lights} the last answer's curve (live starts there)
-    _clustered: tuple = None  # _clusters(): paint-independent, computed once per mesh
+    _clustered: "_Clusters" = None  # _clusters(): paint-independent, computed once per mesh
     _face_area: np.ndarray = None  # checks.face_areas of the prepared scene's faces (geometry only)
     _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
@@ -278,19 +291,18 @@ class PreparedScene:
 
     def _clustered_faces(self) -> np.ndarray:
         """clustered_faces of the kept patches (paint-independent: computed once per mesh)."""
-        return self._clusters()[1]
+        return self._clusters().faces
 
-    def _clusters(self) -> tuple:
-        """(patches, clustered_faces of them, the clusters' triangles: their patch, their face and
-        their area, the clusters (patch indices)), paint-independent: computed once per mesh (a
-        stroke on the million-triangle room took their areas again: 0.17 s of its 0.39 s)."""
-        if self._clustered is None or self._clustered[0] is not self.patches:
+    def _clusters(self) -> "_Clusters":
+        """The kept patches' clusters (_Clusters), paint-independent: computed once per mesh (a
+        stroke on the million-triangle room took their triangles' areas again: 0.17 s of its 0.39 s)."""
+        if self._clustered is None or self._clustered.patches is not self.patches:
             patches = self.patches
             faces = clustered_faces(patches)
             tris = np.flatnonzero(faces[patches.tri_face])
             tp = patches.tri_patch[tris]
-            self._clustered = (patches, faces, tp, patches.tri_face[tris], triangle_areas(patches.tri_vertices[tris]),
-                               np.unique(tp))
+            self._clustered = _Clusters(patches, faces, tp, patches.tri_face[tris],
+                                        triangle_areas(patches.tri_vertices[tris]), np.unique(tp))
         return self._clustered
 
     def _cluster_paint(self, faces: FaceSet) -> tuple:
@@ -298,15 +310,15 @@ class PreparedScene:
         patch (P,), the painted area of its clustered faces, their area-weighted radiosity (P, 3) and
         lux (0 where none), and whether it mixes faces asked for lux with faces painted a radiosity;
         all zero on patches of one face."""
-        patches, _, tp, tf, area, _ = self._clusters()  # the clusters' triangles
-        P = patches.n_patches
+        cl = self._clusters()
+        P = cl.patches.n_patches
         share, radiosity, lux = np.zeros(P), np.zeros((P, 3)), np.zeros(P)
         mixed = np.zeros(P, dtype=bool)
         # (the painted ones only: the others' terms are 0, which leave every sum as it is, bit for bit)
-        on = np.flatnonzero(faces.target[tf])
+        on = np.flatnonzero(faces.target[cl.tri_face])
         if not len(on):
             return share, radiosity, lux, mixed
-        tp, tf, a = tp[on], tf[on], area[on]
+        tp, tf, a = cl.tri_patch[on], cl.tri_face[on], cl.tri_area[on]
         share = np.bincount(tp, weights=a, minlength=P)
         on = share > 0
         for c in range(3):
@@ -337,7 +349,7 @@ class PreparedScene:
         lux = None
         if not paint_independent(self.options):
             share, mean, lux_mean, _ = self._cluster_paint(faces)
-            cl = self._clusters()[5]  # (the clusters)
+            cl = self._clusters().ids
             target[cl] = share[cl] > 0
             radiosity[cl] = mean[cl]
             if faces.target_lux is not None:
