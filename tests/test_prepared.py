@@ -12,6 +12,7 @@ import bpy  # noqa: E402
 from artist_scenes import paint  # noqa: E402
 from relight_addon.blender import blend_files, export  # noqa: E402
 from relight_addon.engine import best_lights as bl, kernel_transfer  # noqa: E402
+from relight_addon.engine.by_content import digest  # noqa: E402
 from relight_addon.engine.estimators import kernel as kernel_estimator  # noqa: E402
 from relight_addon.engine.options import JobOptions  # noqa: E402
 from relight_addon.pipeline import jobs, prepared  # noqa: E402
@@ -358,7 +359,7 @@ def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kep
     kept = prepared.KeptLamps()
     warm, n_warm = kept.offer(None, patches, mask, options, sampler, options.seed)
     assert n_cold == n_warm > 0 and kept.computed == n_cold and kept.reused == 0
-    assert list(map(prepared.digest, warm.lamps)) == list(map(prepared.digest, cold.lamps))
+    assert list(map(digest, warm.lamps)) == list(map(digest, cold.lamps))
     assert (warm.irradiance != cold.irradiance).nnz == 0  # bit for bit
     calls = []
     real = prepared.lamps_irradiance
@@ -379,7 +380,7 @@ def test_kept_lamps_compute_what_offer_lamps_computes_and_only_the_lamps_not_kep
     new = [lamp for lamp in moved.lamps if candidate_lamps.lamp_key(lamp) not in before]
     assert n_moved == n_fresh and kept.computed + kept.reused == n_fresh and 0 < len(new) <= kept.computed
     assert kept.reused > 0 and calls == [kept.computed]
-    assert list(map(prepared.digest, moved.lamps)) == list(map(prepared.digest, fresh.lamps))
+    assert list(map(digest, moved.lamps)) == list(map(digest, fresh.lamps))
     assert (moved.irradiance != fresh.irradiance).nnz == 0  # bit for bit, kept lamps included
 
 

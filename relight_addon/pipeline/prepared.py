@@ -75,7 +75,6 @@ the kept clusters instead (above).
 """
 from __future__ import annotations
 
-import hashlib
 import time
 from dataclasses import dataclass, field, replace
 from typing import NamedTuple
@@ -83,6 +82,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..engine.blas_threads import one_blas_thread
+from ..engine.by_content import digest
 from ..engine.bounces import ColumnProducts
 from ..engine.candidate_lamps import lamp_key, lamps_irradiance, plan_lamps
 from ..engine.extent import decisive_region
@@ -107,34 +107,6 @@ REFINE_STEPS = ("full search", "warm solve")
 #: the FaceSet arrays a solve depends on apart from the paint
 _SCENE_ARRAYS = ("vertices", "triangles", "triangle_face", "loop_vertices", "loop_start", "loop_total",
                  "face_object", "face_index", "reflectance", "exitance", "forbidden", "face_material", "passes")
-
-
-def _feed(h, x):
-    """Hash ``x`` into ``h``: every value whole (a repr would cut a large array short)."""
-    if isinstance(x, np.ndarray):
-        h.update(f"{x.dtype}{x.shape}".encode())
-        h.update(np.ascontiguousarray(x).tobytes())
-    elif isinstance(x, (list, tuple)):
-        h.update(f"{type(x).__name__}{len(x)}".encode())
-        for v in x:
-            _feed(h, v)
-    elif isinstance(x, dict):
-        for k in sorted(x, key=repr):
-            _feed(h, k)
-            _feed(h, x[k])
-    elif hasattr(x, "__dict__") and not isinstance(x, type):
-        h.update(type(x).__name__.encode())
-        _feed(h, vars(x))
-    else:
-        h.update(repr(x).encode())
-
-
-def digest(*items) -> str:
-    """sha1 of ``items``, every value whole (scene_key's parts)."""
-    h = hashlib.sha1()
-    for x in items:
-        _feed(h, x)
-    return h.hexdigest()
 
 
 def scene_key(faces: FaceSet, options: JobOptions, default_max_patch_size=None) -> dict:
