@@ -158,3 +158,47 @@ def test_open_faces_and_mixed_orientation():
     assert two_sided.mixed_orientation(flipped, two_sided.open_faces(flipped)[1]).all()
     is_open, _ = two_sided.open_faces(card(1.0, 1.0, up=True))
     assert is_open.all()
+
+
+def test_the_same_chunks_checked_again_cast_no_ray_and_a_moved_card_casts_them(monkeypatch):
+    """The ray checks' answers are kept by the content of what they read (engine.by_content): the
+    same scene exported again (Solve & Reduce after Live's strokes) turns and doubles the same
+    faces without a ray; a face moved by a millimetre is cast again."""
+    def room(z):
+        return chunks(("Room", box(*ROOM, inward=True), DARK), ("Shelf", card(z, 1.0, up=True), DARK),
+                      ("Card", card(0.25, 0.5, up=True, centre=(1.2, 1.2)), DARK),
+                      ("Under", card(0.25, 0.5, up=False, centre=(1.2, 1.2)), DARK))  # (back to back)
+
+    first = room(1.37)
+    said = two_sided.faces_seen_from_behind(first)
+    built = []
+    real = two_sided.embree_scene
+    monkeypatch.setattr(two_sided, "embree_scene", lambda *a: built.append(1) or real(*a))
+    again = room(1.37)
+    assert two_sided.faces_seen_from_behind(again) == said and not built
+    assert again.nf == first.nf and all(np.array_equal(x, y) for x, y in zip(again.tris, first.tris))
+    assert said == ["1 face(s) (1 of 'Shelf') are seen from both sides (single planes lit on one side, seen from "
+                    "the other): their back sides are modelled as faces of their own (never targets or lights)"]
+    moved = room(1.371)
+    assert two_sided.faces_seen_from_behind(moved) == said and built  # (the same answer: cast again)
+
+
+def test_an_answer_kept_by_content_is_read_only_and_follows_its_arguments():
+    from relight_addon.engine.by_content import kept_by_content
+
+    calls = []
+
+    @kept_by_content(kept=2)
+    def doubled(x, scene=None):
+        calls.append(1)
+        return 2 * x
+
+    x = np.arange(4.0)
+    a = doubled(x, scene=lambda: pytest.fail("not keyed"))
+    assert doubled(x.copy(), scene=None) is a and len(calls) == 1  # (the content, not the array object)
+    with pytest.raises(ValueError):
+        a[0] = 5.0  # (shared by the calls that take it)
+    x[0] = 1.0  # changed in place: computed anew
+    assert doubled(x)[0] == 2.0 and len(calls) == 2
+    doubled(x + 1), doubled(x + 2)  # only the last two are kept
+    assert doubled(np.arange(4.0))[1] == 2.0 and len(calls) == 5

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .by_content import kept_by_content
 from .geometry import triangle_cross, unit
 from .rays import embree_scene, side_rays
 
@@ -126,6 +127,7 @@ class SidesView:
     back_in: np.ndarray = None
 
 
+@kept_by_content()
 def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, rays_per_face: int = 16,
                seed: int = 0, box=None, scene=None) -> SidesView:
     """Cast ``rays_per_face`` cosine-weighted rays from each side of every face of ``chosen``
@@ -136,8 +138,9 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
     this lies against it (a floor on a ground plane), those rays do not count. ``box`` ((n, 2, 3):
     per chosen face the corners of a box, its island's): a back counts only the fronts it reaches
     outside it (the inside of a block standing on a floor, closed by the floor, is not the scene's),
-    and ``front_in``, ``back_in`` count what each side reaches inside it. ``scene``: an Embree
-    scene of exactly these triangles (engine.rays.embree_scene), built here when not given."""
+    and ``front_in``, ``back_in`` count what each side reaches inside it. ``scene``: a function
+    returning an Embree scene of exactly these triangles (engine.rays.embree_scene), one is built
+    here otherwise. The answers are kept by content (the same scene exported again: no ray cast)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     triangle_face = np.asarray(triangle_face, dtype=np.int64)
     face_object = np.asarray(face_object, dtype=np.int64)
@@ -148,8 +151,7 @@ def sides_view(vertices, triangles, triangle_face, face_object, chosen, gap, ray
         z = np.zeros(0)
         return SidesView(idx, z, z, z, z, z)
     triangles = np.asarray(triangles, dtype=np.int64)
-    if scene is None:
-        scene = embree_scene(vertices, triangles)
+    scene = embree_scene(vertices, triangles) if scene is None else scene()
     rng = np.random.default_rng(seed)
     out = []
     for side in (1, -1):

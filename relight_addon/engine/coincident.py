@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .by_content import kept_by_content
 from .geometry import triangle_cross, unit
 from .rays import RAY_OFFSET, embree_scene
 
@@ -195,13 +196,15 @@ COVER_POINTS = np.array([(1 / 3, 1 / 3), (1 / 6, 1 / 6), (2 / 3, 1 / 6), (1 / 6,
                          (0.1, 0.45), (0.45, 0.1), (0.45, 0.45)])
 
 
+@kept_by_content()
 def covered_share(vertices, triangles, triangle_face, n_faces: int, among=None, scene=None):
     """(n_faces,) the share of each face's area (a FaceSet's or FaceChunks' world-space
     ``vertices``, ``triangles``, ``triangle_face``) whose back lies against a coincident face that
     faces the other way (at COVER_POINTS of each triangle, weighted by area), among the faces
     ``among`` ((n_faces,) bool; default all), or None when no such pair exists. ``scene``: a
     function returning an Embree scene of exactly these triangles (called only when some
-    triangle has a partner: the probes' rays); one is built here otherwise."""
+    triangle has a partner: the probes' rays); one is built here otherwise. The answers are kept by
+    content (engine.by_content: the same scene exported again casts no ray)."""
     V = np.asarray(vertices, dtype=np.float64)
     tv = V[np.asarray(triangles, dtype=np.int64)]
     cross = triangle_cross(tv)
