@@ -336,6 +336,56 @@ def test_live_pauses_naming_an_object_deleted_or_hidden_and_follows_lamps(addon)
     live.stop(scene.name)
 
 
+def test_live_follows_or_pauses_on_the_scenes_switches(addon):
+    """What Live did not read before: Forbid Selected Faces changes the lights the model may offer,
+    which the prepared state cannot follow: Live pauses naming the object (before, it went on
+    answering with lights on the forbidden faces and said "up to date"); Solve & Reduce prepares
+    again, from scratch, with the ceiling's faces forbidden, and Live follows it. The target scale
+    changed is followed (the paint read again with it); an object's work plane switch and the
+    scene's patch size pause it, named."""
+    from relight_addon.blender import live, preparation
+    from relight_addon.blender.ui import operators
+
+    preparation.PREPARED.clear()
+    bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
+    scene = bpy.context.scene
+    s = live.start(bpy.context, operators.job_options, operators.show_solve)
+    _run(s, lambda: s.status == "up to date" and s.updates == 1)
+    ceiling = bpy.data.objects["ceiling"]
+    faces = preparation.PREPARED_JOBS[scene.name].exp.faces
+    assert not faces.forbidden[faces.face_object == list(faces.object_names).index("ceiling")].any()
+    bpy.context.view_layer.objects.active = ceiling
+    bpy.ops.object.mode_set(mode="EDIT")
+    bpy.ops.mesh.select_all(action="SELECT")
+    assert bpy.ops.relight.forbid_faces() == {"FINISHED"}
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)  # (in Edit Mode: its edit mesh read)
+    assert s.paused == "object 'ceiling': faces forbidden or allowed: Solve & Reduce prepares again", s.paused
+    bpy.ops.object.mode_set(mode="OBJECT")
+    assert s.updates == 1
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    assert "solved from scratch: the forbidden faces changed" in scene.relight.last_warnings
+    _run(s, lambda: s.paused is None and s.status == "up to date", timeout=60, pause=True)
+    faces = preparation.PREPARED_JOBS[scene.name].exp.faces
+    assert faces.forbidden[faces.face_object == list(faces.object_names).index("ceiling")].all()
+
+    # the target scale (a scene custom property) doubled: followed, every object's paint read again
+    n, asked = s.updates, s.paint[1].copy()
+    scene["relight_target_scale"] = 2.0 * float(scene.get("relight_target_scale", 1.0))
+    _run(s, lambda: s.updates == n + 1)
+    assert np.allclose(s.paint[1], 2.0 * asked) and np.any(asked > 0)
+    # a wall made a work plane (light passes through it): the model's, paused naming it
+    bpy.data.objects["wall_east"]["relight_work_plane"] = True
+    bpy.data.objects["wall_east"].update_tag()
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "object 'wall_east': its work plane switch changed: Solve & Reduce prepares again", s.paused
+    del bpy.data.objects["wall_east"]["relight_work_plane"]
+    assert bpy.ops.relight.solve() == {"FINISHED"}
+    _run(s, lambda: s.paused is None and s.status == "up to date", timeout=60, pause=True)
+    scene["relight_max_patch_size"] = 0.5  # the patch model's: paused
+    _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+    assert s.paused == "the patch size (relight_max_patch_size) changed: Solve & Reduce prepares again", s.paused
+
+
 def test_live_follows_undo_by_name(addon):
     """Issue 35, case 14: Undo or Redo with Live on (Blender reads the scene back; the undo_post
     handler): the exported objects found again by name, Live goes on; one that Undo takes away

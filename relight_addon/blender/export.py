@@ -326,30 +326,38 @@ def _face_set(b, objs, rho, e, warnings, lamps) -> FaceSet:
     )
 
 
-def repaint(exp: ExportedScene, objects=None, base: FaceSet | None = None) -> FaceSet:
+def repaint(exp: ExportedScene, objects=None, base: FaceSet | None = None, target_scale=None) -> FaceSet:
     """The exported faces with the paint their objects hold now (Live mode, after a stroke): the
     targets and their radiosity read again from each object's base mesh (an object in Edit Mode:
-    from its edit mesh), mapped onto the exported faces as export_scene maps them; everything else
-    as exported. ``objects``: the names of the objects to read again (None: all), the others'
-    paint as in ``base`` (an earlier repaint of ``exp``; default: the export). The caller checks
-    that nothing else changed (pipeline.prepared's stale check)."""
+    from its edit mesh), mapped onto the exported faces as export_scene maps them, and the forbidden
+    faces read again with them (the caller compares them with the export's: the prepared state
+    cannot follow a change); everything else as exported. ``objects``: the names of the objects to
+    read again (None: all), the others' paint as in ``base`` (an earlier repaint of ``exp``;
+    default: the export). ``target_scale``: the scene's now (default: the export's). The caller
+    checks that nothing else changed (pipeline.prepared's stale check)."""
     faces = exp.faces
     was = faces if base is None else base
     target, radiosity = was.target.copy(), was.target_radiosity.copy()
     lux = np.zeros(faces.n_faces) if was.target_lux is None else was.target_lux.copy()
-    scale = exp.settings["target_scale"]
+    forbidden = was.forbidden.copy()
+    passes = np.zeros(faces.n_faces, dtype=bool) if faces.passes is None else faces.passes
+    scale = exp.settings["target_scale"] if target_scale is None else float(target_scale)
     rows_of = _object_rows(exp)
     read = []
     for oi, ob in enumerate(exp.objects):
         if objects is not None and ob.name not in objects:
             continue
-        t, b, _, lx = base_attributes(ob, scale, forbidden_too=False)  # (in Edit Mode: its edit mesh's paint)
+        t, b, forb, lx = base_attributes(ob, scale, strict=False)  # (in Edit Mode: its edit mesh's paint)
         rows = rows_of[oi]
         idx = faces.face_index[rows]
         ok = (idx >= 0) & (idx < len(t))
         target[rows] = np.where(ok, t[np.where(ok, idx, 0)], False)
         radiosity[rows] = np.where(ok[:, None], b[np.where(ok, idx, 0)], 0.0)
         lux[rows] = np.where(ok, lx[np.where(ok, idx, 0)], 0.0)
+        # (a face of no base polygon, a back the export added: as exported; a layer Edit Mode cannot
+        # read, a Boolean one before Blender 4.3: as read before, read again out of Edit Mode)
+        if forb is not None:
+            forbidden[rows] = np.where(ok, forb[np.where(ok, idx, 0)] | passes[rows], faces.forbidden[rows])
         read.append(rows)
     if objects is None:
         target, radiosity = illuminance_targets(target, radiosity, lux, faces.reflectance, faces.face_object,
@@ -360,7 +368,7 @@ def repaint(exp: ExportedScene, objects=None, base: FaceSet | None = None) -> Fa
         target[rows], radiosity[rows] = illuminance_targets(target[rows], radiosity[rows], lux[rows],
                                                             faces.reflectance[rows], faces.face_object[rows],
                                                             faces.object_names)
-    return replace(faces, target=target, target_radiosity=radiosity, target_lux=lux)
+    return replace(faces, target=target, target_radiosity=radiosity, target_lux=lux, forbidden=forbidden)
 
 
 def _object_rows(exp: ExportedScene) -> list:

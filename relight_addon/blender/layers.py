@@ -148,6 +148,25 @@ def srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4))
 
 
+def _edit_forbidden(ob, attr, n, strict=True):
+    """(n,) bool: the forbidden faces of ``ob`` in Edit Mode, read from its edit mesh (the mesh's
+    own attribute data is empty there); a layer BMesh cannot read (a Boolean one before Blender
+    4.3, an 8-bit integer one): SceneError naming the object (not ``strict``: None)."""
+    import bmesh
+
+    bm = bmesh.from_edit_mesh(ob.data)
+    kind = {"BOOLEAN": "bool", "INT": "int", "FLOAT": "float"}.get(attr.data_type)
+    group = getattr(bm.faces.layers, kind, None) if kind else None
+    layer = group.get(FORBIDDEN_ATTRIBUTE) if group is not None else None
+    if layer is None or len(bm.faces) != n:
+        if not strict:
+            return None
+        raise SceneError(f"{ob.name}: its {FORBIDDEN_ATTRIBUTE} ({attr.data_type}) cannot be read in Edit Mode in "
+                         f"this Blender: leave Edit Mode (Tab), then solve")
+    v = np.array([f[layer] for f in bm.faces], dtype=np.float64)
+    return (v != 0) | np.isnan(v)
+
+
 def _edit_target_colours(ob):
     """(loops, 4) linear RGBA of the target layer of ``ob`` in Edit Mode, read from its edit mesh
     (the mesh's own attribute data is not current there), in the mesh's loop order; None
@@ -223,12 +242,12 @@ def illuminance_targets(target, target_b, lux, reflectance, face_object, names):
     return target, target_b
 
 
-def base_attributes(ob, target_scale, notes=None, forbidden_too=True):
+def base_attributes(ob, target_scale, notes=None, strict=True):
     """Per base-mesh polygon: target (bool), target radiosity (W/m^2), forbidden (bool) and
     illuminance target (lx, 0: none; a face painted and given an illuminance both is refused).
     ``notes``: a list that gets the messages about layers found but not used. An object in
-    Edit Mode: its edit mesh's paint. ``forbidden_too``: False leaves the forbidden faces unread
-    (all False: export.repaint reads the paint alone)."""
+    Edit Mode: its edit mesh's paint and forbidden faces; a forbidden layer BMesh cannot read
+    there: SceneError, or (not ``strict``: Live's read of the paint) forbidden None."""
     me = ob.data
     n = len(me.polygons)
     target = np.zeros(n, dtype=bool)
@@ -262,10 +281,11 @@ def base_attributes(ob, target_scale, notes=None, forbidden_too=True):
                              "set to 0 (light cannot be negative)")
             rgb = np.maximum(rgb, 0.0)
         target_b[target] = exitance_from_radiance(rgb * target_scale)
-    attr = forbidden_layer(me, ob.name) if forbidden_too else None  # another domain or type: refused
+    attr = forbidden_layer(me, ob.name)  # another domain or type: refused
     if attr is not None:
-        forbidden = read_forbidden(attr, n)
-    if no_lights(ob):
+        forbidden = _edit_forbidden(ob, attr, n, strict) if ob.mode == "EDIT" and me.is_editmode \
+            else read_forbidden(attr, n)
+    if no_lights(ob) and forbidden is not None:
         forbidden[:] = True
     lux = _lux_values(ob, n)
     both = target & (lux > 0)

@@ -31,7 +31,9 @@ operator's timer):
 - a lamp added, deleted, hidden from or shown to renders (its object, a collection, the view
   layer) is followed the same way (``_watch``: the depsgraph's updates do not name what is gone);
 - a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
-  the World, options; an exported object deleted or hidden from renders, or a mesh shown to them)
+  the World, options, the scene's patch size; faces forbidden or allowed, an object's "no lights"
+  or "work plane" switch; an exported object deleted or hidden from renders, or a mesh shown to
+  them)
   pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
   prepares again;
 - Undo and Redo (Blender reads the scene back): the exported objects found again by name (Live
@@ -52,6 +54,7 @@ import numpy as np
 
 from . import camera_view, export, lamp_state, light_paths, meshes, preparation, results, visibility
 from .lamps import export_lamps
+from .layers import MAX_PATCH_SIZE_PROP, scene_settings, work_plane
 from ..engine.blas_threads import one_blas_thread
 from ..pipeline import jobs
 from ..pipeline.prepared import REFINE_STEPS, scene_lamps_differ
@@ -99,6 +102,7 @@ class LiveSession:
         self.lamps_moved = set()  # the lamps whose placement or settings changed (followed, not paused)
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
+        self.target_scale = None  # the scene's target scale the paint is read with (followed: a new one reads it all)
         self.exported = {}  # name -> as_pointer() of the base's exported objects (the deletion watch)
         self.watched = None  # (_watched: the meshes and lamps a render shows) when the base was taken
         self.reloaded = False  # Undo or Redo read the scene back since the last read
@@ -137,6 +141,8 @@ class LiveSession:
                     self.paused, self.status = None, "up to date"
         if not self.changed and self.options_fn(context.scene.relight).to_dict() != state.options.to_dict():
             self.changed.add("the options changed")
+        if not self.changed:
+            self._scene_settings(context.scene, job)
         if self.changed:
             self.paused = f"{', '.join(sorted(self.changed))}: Solve & Reduce prepares again"
             self.status = "paused"
@@ -178,6 +184,7 @@ class LiveSession:
             self.changed.update(gone)
             return
         self.exported = {n: ob.as_pointer() for n, ob in zip(names, job.exp.objects)}
+        self.target_scale = job.exp.settings["target_scale"]
         self.watched = _watched(context)
         self.geometry = _geometry_digest(job.exp.objects)
         self.status = "preparing the transfer to every patch"
@@ -194,6 +201,15 @@ class LiveSession:
         self._run(prewarm, job)
         self.result["prewarm"] = True
 
+    def _scene_settings(self, scene, job) -> None:
+        """The scene's Relight settings: a new target scale is followed (every object's paint read
+        again with it), a new patch size (the model's) added to ``changed``."""
+        settings = scene_settings(scene)
+        if settings["max_patch_size"] != job.exp.settings["max_patch_size"]:
+            self.changed.add(f"the patch size ({MAX_PATCH_SIZE_PROP}) changed")
+        elif settings["target_scale"] != self.target_scale:
+            self.target_scale, self.dirty, self.touched_all = settings["target_scale"], True, True
+
     def _read_paint(self, context, job) -> None:
         """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that
         moved or was edited, deleted, hidden from or shown to renders is added to ``changed`` (the
@@ -209,13 +225,23 @@ class LiveSession:
         objs = [ob for ob in job.exp.objects
                 if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
         faces = export.repaint(job.exp, None if every else {ob.name for ob in objs},
-                               None if every else self._faces)  # (in Edit Mode: its edit mesh first)
+                               None if every else self._faces, self.target_scale)  # (in Edit Mode: its edit mesh first)
         if self.lamps is not None:
             faces = replace(faces, lamps=self.lamps)
         now = _geometry_digest(objs)
         moved = sorted(name for name in now if now[name] != self.geometry.get(name))
         if moved:
             self.changed.update(f"object {name!r} moved or edited" for name in moved)
+            return
+        forbid = np.unique(faces.face_object[faces.forbidden != job.exp.faces.forbidden])
+        if len(forbid):  # (the lights the model offers change: Forbid or Allow, the no-lights switch)
+            self.changed.update(f"object {faces.object_names[o]!r}: faces forbidden or allowed" for o in forbid)
+            return
+        planes = set() if faces.passes is None else {faces.object_names[o] for o in np.unique(
+            faces.face_object[faces.passes])}
+        switched = sorted(ob.name for ob in objs if work_plane(ob) != (ob.name in planes))
+        if switched:  # (its faces pass light or reflect it: the model's)
+            self.changed.update(f"object {name!r}: its work plane switch changed" for name in switched)
             return
         self._faces = faces
         if self.paint is None or not _same((faces.target, faces.target_radiosity), self.paint):
