@@ -239,7 +239,8 @@ def test_live_solves_with_the_view_target(addon, room, tmp_path):
     """Live's first answer (a full solve, no prepared model) reads the view target as Solve & Reduce
     does (camera_view.scene_view_target) and writes the prediction; a stroke on a wall is re-solved
     with the pixels' rows (the model retargeted keeps them), and, its lights new, the earlier
-    prediction goes with its result (a stroke's answer writes none: Solve & Reduce does)."""
+    prediction goes with its result (a stroke's answer writes none: Solve & Reduce does); the
+    camera moved pauses Live, said."""
     from artist_scenes import paint
     from test_live import _run
 
@@ -268,6 +269,12 @@ def test_live_solves_with_the_view_target(addon, room, tmp_path):
         assert answers and any(isinstance(t, ViewTarget) for t in answers[0].problem.target_rows.targets)
         assert view_target_ops.prediction_image(scene) is None
         assert not [i for i in bpy.data.images if view_target_ops.ERROR_PROP in i.keys()]
+        # the camera moved: the pixels' rows are the model's, Live pauses and says why (it went on
+        # answering for the camera as it was before)
+        scene.camera.location.x += 0.2
+        _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+        assert s.paused == ("the view target changed (its image, the camera or Use in Solve): Solve & Reduce "
+                            "prepares again"), s.paused
     finally:
         live.stop(scene.name)
 

@@ -31,7 +31,7 @@ operator's timer):
 - a lamp added, deleted, hidden from or shown to renders (its object, a collection, the view
   layer) is followed the same way (``_watch``: the depsgraph's updates do not name what is gone);
 - a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
-  the World, options, the scene's patch size; faces forbidden or allowed, an object's "no lights"
+  the World, options, the scene's patch size, the view target (its image, the camera); faces forbidden or allowed, an object's "no lights"
   or "work plane" switch; an exported object deleted or hidden from renders, or a mesh shown to
   them)
   pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
@@ -56,6 +56,7 @@ from . import camera_view, export, lamp_state, light_paths, meshes, preparation,
 from .lamps import export_lamps
 from .layers import MAX_PATCH_SIZE_PROP, scene_settings, work_plane
 from ..engine.blas_threads import one_blas_thread
+from ..engine.by_content import digest
 from ..pipeline import jobs
 from ..pipeline.prepared import REFINE_STEPS, scene_lamps_differ
 
@@ -210,6 +211,16 @@ class LiveSession:
         elif settings["target_scale"] != self.target_scale:
             self.target_scale, self.dirty, self.touched_all = settings["target_scale"], True, True
 
+    def _view_changed(self, context, job) -> bool:
+        """Whether the scene's view target (its image, the camera, the working resolution, Use in
+        Solve) is no longer the one prepared (its pixels are rows of the model's problem): added
+        to ``changed``."""
+        now, was = camera_view.scene_view_target(context.scene), job.exp.faces.view_target
+        if (now is None and was is None) or (now is not None and was is not None and digest(now) == digest(was)):
+            return False
+        self.changed.add("the view target changed (its image, the camera or Use in Solve)")
+        return True
+
     def _read_paint(self, context, job) -> None:
         """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that
         moved or was edited, deleted, hidden from or shown to renders is added to ``changed`` (the
@@ -222,6 +233,10 @@ class LiveSession:
         # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
         touched, every = self.touched, self.touched_all or self._faces is None
         self.touched, self.touched_all = set(), False
+        camera = context.scene.camera
+        if (every or any(kind in _VIEW_KINDS for kind, _ in touched)
+                or (camera is not None and ("OBJECT", camera.name) in touched)) and self._view_changed(context, job):
+            return
         objs = [ob for ob in job.exp.objects
                 if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
         faces = export.repaint(job.exp, None if every else {ob.name for ob in objs},
@@ -570,6 +585,9 @@ def _on_undo(scene, _arg=None):
         s.reloaded, s.dirty, s.touched_all = True, True, True
 
 
+#: the data-blocks a view target is read from besides the scene camera's object (an update of one
+#: reads it again: LiveSession._view_changed)
+_VIEW_KINDS = ("Image", "Camera", "Scene")
 #: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
 _WATCHED = {"Material": "material", "World": "the World"}  # (lamps and objects: by their bpy type)
 
@@ -589,6 +607,8 @@ def _on_depsgraph(scene, depsgraph=None):
             s.touched.add(("MESH", idb.name))
         elif isinstance(idb, bpy.types.Object):
             s.touched.add(("OBJECT", idb.name))
+        elif type(idb).__name__ in _VIEW_KINDS:  # (what the view target is read from)
+            s.touched.add((type(idb).__name__, idb.name))
         kind = ("object" if isinstance(idb, bpy.types.Object) else "lamp" if isinstance(idb, bpy.types.Light)
                 else _WATCHED.get(type(idb).__name__))
         if kind is None or visibility.owner_of(idb) is not None:
