@@ -319,3 +319,32 @@ def test_a_cancel_does_not_wait_for_the_chunks_running():
         run_chunks(work, 2, 2, stop, cancel=started.is_set)
     assert stop.is_set() and 0 not in ended  # (raised while chunk 0 still ran)
     release.set()
+
+
+def test_a_cancel_does_not_wait_for_one_long_call():
+    """sampling.run_cancellable raises Cancelled while its call (a channel's LU: one LAPACK call,
+    0.2-0.3 s on 2,305 patches) still runs, which ends in the background, its answer dropped: a
+    newer Live stroke is not kept waiting by a later answer's factorisation (issue 37). Without a
+    cancel it is the call's answer, and the call's error is raised as it is."""
+    import threading
+    import time
+
+    from relight_addon.engine.sampling import run_cancellable
+
+    started, release = threading.Event(), threading.Event()
+    ended = []
+
+    def call():
+        started.set()
+        release.wait(30.0)
+        ended.append(1)
+        return 7
+
+    t0 = time.perf_counter()
+    with pytest.raises(Cancelled, match="solve cancelled"):
+        run_cancellable(call, started.is_set, "solve cancelled")
+    assert time.perf_counter() - t0 < 5.0 and not ended  # (raised while the call still ran)
+    release.set()
+    assert run_cancellable(lambda: 7, lambda: False) == 7 and run_cancellable(lambda: 8) == 8
+    with pytest.raises(ZeroDivisionError):
+        run_cancellable(lambda: 1 / 0, lambda: False)

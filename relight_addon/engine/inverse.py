@@ -45,7 +45,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .geometry import group_mean_basis, unit
-from .sampling import Cancelled
+from .sampling import Cancelled, run_cancellable
 from .lights import LightSet, candidate_mask, kind_code
 from .plausibility import implausible_lights
 from .radiosity import lossless_patches, radiosity_matrix
@@ -527,8 +527,10 @@ class InverseProblem:
                     raise InverseError(
                         f"the radiosity system I - rho F is singular: {int(closed.sum())} patch(es) with reflectance "
                         "1 form a closed scene that never loses light (lower the reflectance below 1)")
+                # (a cancel does not wait for the LU: it ends in the background, dropped)
                 fac = (_Iterative(self.F, rho) if self.n_patches > DIRECT_SOLVE_LIMIT
-                       else _Factor(radiosity_matrix(self.F, rho)))  # may raise
+                       else run_cancellable(lambda: _Factor(radiosity_matrix(self.F, rho)), self.cancel,
+                                            "solve cancelled"))  # may raise
                 for c in g:
                     factors[c] = fac
             self._factors = factors  # only once every channel is factorised

@@ -218,12 +218,21 @@ def _inverse_done(progress, cancel) -> None:
         raise Cancelled("solve cancelled")
 
 
+def _listening(model: Model, cancel) -> None:
+    """The model's problem hears this job's ``cancel`` (its factorisations and inverse solve look
+    at it): a model retargeted for a Live stroke kept the cancel of the solve it was prepared by,
+    which a later job never sets (its inverse solve could not be cancelled)."""
+    if cancel is not None:
+        model.problem.cancel = cancel
+
+
 def solve_model(model: Model, options: JobOptions, polygon_counts=None, progress=None, cancel=None,
                 t0=None) -> SolveOutcome:
     """Stages 2-5 of a solve on a built model (build_inverse_model's): the inverse solve, the
     reduction, the direct light, the certificate, the lamp refinement, the curve and the report.
     ``t0``: when the job started (perf_counter), for the report's total."""
     t0 = time.perf_counter() if t0 is None else t0
+    _listening(model, cancel)
     t1 = time.perf_counter()
     e_x, inv = solve_stage(model, options)
     seconds = {"inverse": time.perf_counter() - t1 + model.seconds["problem"]}
@@ -256,6 +265,7 @@ def solve_stroke(model: Model, options: JobOptions, polygon_counts=None, progres
     refined for the earlier targets, are candidates); no per-face block in its report (the scene
     holds them)."""
     t0 = time.perf_counter() if t0 is None else t0
+    _listening(model, cancel)
     t1 = time.perf_counter()
     if not SELECTIONS[options.selection].traits.distributes:  # (the selection never reads e_x)
         e_x, inv = np.zeros((model.problem.n_lights, 3)), None

@@ -8,6 +8,7 @@ import numpy as np
 
 from .common import SolverOutput, default_rcond, lstsq_min_norm
 from ..registry import SOLVERS
+from ..sampling import run_cancellable
 
 
 @SOLVERS.register("reduced", "Reduced (T)",
@@ -19,7 +20,9 @@ def solve_reduced(problem, rcond=None, svd_driver="auto"):
     ranks, used = [], None
     for c in range(3):
         used = default_rcond(rcond, T[c].shape)
-        X, rank = lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used, svd_driver)
+        # (a cancel does not wait for the factorisation: it ends in the background, dropped)
+        X, rank = run_cancellable(lambda: lstsq_min_norm(T[c], problem.b_target[:, c:c + 1], used, svd_driver),
+                                  getattr(problem, "cancel", None), "solve cancelled")
         e[:, c] = X[:, 0]
         ranks.append(rank)
     return SolverOutput(e, min(ranks), used)
