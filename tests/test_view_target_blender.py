@@ -275,6 +275,12 @@ def test_live_solves_with_the_view_target(addon, room, tmp_path):
         _run(s, lambda: s.paused is not None, timeout=30, pause=True)
         assert s.paused == ("the view target changed (its image, the camera or Use in Solve): Solve & Reduce "
                             "prepares again"), s.paused
+        # Solve & Reduce prepares again; then Use in Solve turned off (a scene setting): paused again
+        assert bpy.ops.relight.solve() == {"FINISHED"}
+        _run(s, lambda: s.paused is None and s.status == "up to date", timeout=120, pause=True)
+        scene.relight_camera_target.use = False
+        _run(s, lambda: s.paused is not None, timeout=30, pause=True)
+        assert s.paused.startswith("the view target changed"), s.paused
     finally:
         live.stop(scene.name)
 

@@ -103,6 +103,7 @@ class LiveSession:
         self.lamps_moved = set()  # the lamps whose placement or settings changed (followed, not paused)
         self.lamps = None  # the scene's lamps as the next re-solve takes them (None: as prepared)
         self._faces = None
+        self.view_setting = None  # _view_setting of the scene at the last read
         self.target_scale = None  # the scene's target scale the paint is read with (followed: a new one reads it all)
         self.exported = {}  # name -> as_pointer() of the base's exported objects (the deletion watch)
         self.watched = None  # (_watched: the meshes and lamps a render shows) when the base was taken
@@ -203,19 +204,33 @@ class LiveSession:
         self.result["prewarm"] = True
 
     def _scene_settings(self, scene, job) -> None:
-        """The scene's Relight settings: a new target scale is followed (every object's paint read
-        again with it), a new patch size (the model's) added to ``changed``."""
+        """The scene's Relight settings (each tick): a new target scale is followed (every object's
+        paint read again with it), a new patch size (the model's) added to ``changed``, the view
+        target's settings changed read at once (``_view_changed``)."""
         settings = scene_settings(scene)
         if settings["max_patch_size"] != job.exp.settings["max_patch_size"]:
             self.changed.add(f"the patch size ({MAX_PATCH_SIZE_PROP}) changed")
         elif settings["target_scale"] != self.target_scale:
             self.target_scale, self.dirty, self.touched_all = settings["target_scale"], True, True
+        elif _view_setting(scene) != self.view_setting:  # (a property set by a script: no depsgraph update)
+            self.dirty = True
 
-    def _view_changed(self, context, job) -> bool:
+    def _view_changed(self, context, job, touched, every) -> bool:
         """Whether the scene's view target (its image, the camera, the working resolution, Use in
-        Solve) is no longer the one prepared (its pixels are rows of the model's problem): added
-        to ``changed``."""
-        now, was = camera_view.scene_view_target(context.scene), job.exp.faces.view_target
+        Solve, the render's size and view transform) is no longer the one prepared (its pixels are
+        rows of the model's problem): added to ``changed``. Its pixels are read again only when an
+        image, a camera or the scene camera's object was updated, or its settings changed (Live's
+        own writes update the scene at every answer: a large reference image read then would stall
+        the brush)."""
+        scene = context.scene
+        setting, was = _view_setting(scene), job.exp.faces.view_target
+        camera = scene.camera
+        look = every or setting != self.view_setting or any(kind in _VIEW_KINDS for kind, _ in touched) \
+            or (camera is not None and ("OBJECT", camera.name) in touched)
+        self.view_setting = setting
+        if not look or (setting is None and was is None):
+            return False
+        now = camera_view.scene_view_target(scene)
         if (now is None and was is None) or (now is not None and was is not None and digest(now) == digest(was)):
             return False
         self.changed.add("the view target changed (its image, the camera or Use in Solve)")
@@ -233,9 +248,7 @@ class LiveSession:
         # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
         touched, every = self.touched, self.touched_all or self._faces is None
         self.touched, self.touched_all = set(), False
-        camera = context.scene.camera
-        if (every or any(kind in _VIEW_KINDS for kind, _ in touched)
-                or (camera is not None and ("OBJECT", camera.name) in touched)) and self._view_changed(context, job):
+        if self._view_changed(context, job, touched, every):
             return
         objs = [ob for ob in job.exp.objects
                 if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
@@ -585,9 +598,22 @@ def _on_undo(scene, _arg=None):
         s.reloaded, s.dirty, s.touched_all = True, True, True
 
 
-#: the data-blocks a view target is read from besides the scene camera's object (an update of one
-#: reads it again: LiveSession._view_changed)
-_VIEW_KINDS = ("Image", "Camera", "Scene")
+#: the data-blocks a view target is read from besides the scene camera's object and the scene's
+#: settings (an update of one reads it again: LiveSession._view_changed)
+_VIEW_KINDS = ("Image", "Camera")
+
+
+def _view_setting(scene):
+    """What a view target reads from the scene besides its image's pixels and the camera's placement
+    and lens (None: no view target used): the image, the working resolution, the scene camera,
+    the render's size and the view transform (a PNG's pixels are read through it)."""
+    props = getattr(scene, "relight_camera_target", None)
+    if props is None or props.image is None or not props.use:
+        return None
+    r, v = scene.render, scene.view_settings
+    return (props.image.as_pointer(), props.resolution, None if scene.camera is None else scene.camera.as_pointer(),
+            r.resolution_x, r.resolution_y, r.resolution_percentage, r.pixel_aspect_x, r.pixel_aspect_y,
+            v.view_transform, v.look, v.exposure, v.gamma)
 #: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
 _WATCHED = {"Material": "material", "World": "the World"}  # (lamps and objects: by their bpy type)
 
