@@ -31,9 +31,9 @@ operator's timer):
 - a lamp added, deleted, hidden from or shown to renders (its object, a collection, the view
   layer) is followed the same way (``_watch``: the depsgraph's updates do not name what is gone);
 - a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
-  the World, options, the scene's patch size, the view target (its image, the camera); faces forbidden or allowed, an object's "no lights"
-  or "work plane" switch; an exported object deleted or hidden from renders, or a mesh shown to
-  them)
+  the World, options, the scene's patch size, the view target (its image, the camera); faces
+  forbidden or allowed, an object's "no lights" or "work plane" switch; an exported object
+  deleted or hidden from renders, or a mesh shown to them)
   pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
   prepares again;
 - Undo and Redo (Blender reads the scene back): the exported objects found again by name (Live
@@ -614,6 +614,8 @@ def _view_setting(scene):
     return (props.image.as_pointer(), props.resolution, None if scene.camera is None else scene.camera.as_pointer(),
             r.resolution_x, r.resolution_y, r.resolution_percentage, r.pixel_aspect_x, r.pixel_aspect_y,
             v.view_transform, v.look, v.exposure, v.gamma)
+
+
 #: what the prepared state depends on besides the meshes, by data-block type, as the pause names it
 _WATCHED = {"Material": "material", "World": "the World"}  # (lamps and objects: by their bpy type)
 
