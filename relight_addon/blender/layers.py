@@ -148,22 +148,30 @@ def srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, np.power((c + 0.055) / 1.055, 2.4))
 
 
-def _edit_forbidden(ob, attr, n, strict=True):
-    """(n,) bool: the forbidden faces of ``ob`` in Edit Mode, read from its edit mesh (the mesh's
-    own attribute data is empty there); a layer BMesh cannot read (a Boolean one before Blender
-    4.3, an 8-bit integer one): SceneError naming the object (not ``strict``: None)."""
+def _edit_face_values(me, name, data_type, n):
+    """(n,) float64: the Face attribute ``name`` of ``data_type`` (BOOLEAN, INT, FLOAT) of mesh
+    ``me`` in Edit Mode, read from its edit mesh (the mesh's own attribute data is empty there);
+    None when BMesh cannot read it (a Boolean layer before Blender 4.3, an 8-bit integer one)."""
     import bmesh
 
-    bm = bmesh.from_edit_mesh(ob.data)
-    kind = {"BOOLEAN": "bool", "INT": "int", "FLOAT": "float"}.get(attr.data_type)
+    bm = bmesh.from_edit_mesh(me)
+    kind = {"BOOLEAN": "bool", "INT": "int", "FLOAT": "float"}.get(data_type)
     group = getattr(bm.faces.layers, kind, None) if kind else None
-    layer = group.get(FORBIDDEN_ATTRIBUTE) if group is not None else None
+    layer = group.get(name) if group is not None else None
     if layer is None or len(bm.faces) != n:
+        return None
+    return np.array([f[layer] for f in bm.faces], dtype=np.float64)
+
+
+def _edit_forbidden(ob, attr, n, strict=True):
+    """(n,) bool: the forbidden faces of ``ob`` in Edit Mode (_edit_face_values); a layer BMesh
+    cannot read: SceneError naming the object (not ``strict``: None)."""
+    v = _edit_face_values(ob.data, FORBIDDEN_ATTRIBUTE, attr.data_type, n)
+    if v is None:
         if not strict:
             return None
         raise SceneError(f"{ob.name}: its {FORBIDDEN_ATTRIBUTE} ({attr.data_type}) cannot be read in Edit Mode in "
                          f"this Blender: leave Edit Mode (Tab), then solve")
-    v = np.array([f[layer] for f in bm.faces], dtype=np.float64)
     return (v != 0) | np.isnan(v)
 
 
@@ -202,11 +210,8 @@ def _lux_values(ob, n) -> np.ndarray:
     if attr is None:
         return np.zeros(n)
     if ob.mode == "EDIT" and me.is_editmode:
-        import bmesh
-
-        bm = bmesh.from_edit_mesh(me)
-        layer = bm.faces.layers.float.get(LUX_ATTRIBUTE)
-        v = np.array([f[layer] for f in bm.faces], dtype=np.float64) if layer is not None else np.zeros(n)
+        v = _edit_face_values(me, LUX_ATTRIBUTE, "FLOAT", n)
+        v = np.zeros(n) if v is None else v
     else:
         v = foreach_array(attr.data, "value", n, np.float64)
     if len(v) != n:
