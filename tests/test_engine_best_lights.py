@@ -516,3 +516,66 @@ def test_the_certificate_started_from_another_nnls_reaches_the_same_optimum(kind
         assert got.nnls == pytest.approx(cold * (1 - bl.BOUND_MARGIN), rel=1e-9, abs=1e-12)
         r = np.stack([T[c] @ got.nnls_exitance[:, c] for c in range(3)], axis=1) - b
         assert np.all(got.nnls_exitance >= 0) and np.linalg.norm(r) == pytest.approx(cold, rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_a_tall_fit_on_the_gram_factor_is_scipys_nnls(seed):
+    """_Model.fit takes a fit of k lights on >= GRAM_FIT_ROWS x k rows (a camera-view target's 941)
+    on the Cholesky factor of the lights' Gram matrix: the same optimum as scipy's NNLS on the
+    columns themselves (checked on sets where some lights go to 0), and the fit's error straight
+    from T. Nearly dependent columns (a light twice, up to 1e-9) fall back to scipy on T."""
+    rng = np.random.default_rng(seed)
+    m, n = 120, 16
+    t = rng.uniform(0, 1, (m, n)) ** 2
+    b = rng.uniform(0, 1, (m, 3)) - 0.3
+    model = bl._Model([t, t, t], b, np.ones(n))
+    zeros = 0
+    for S in itertools.chain(itertools.combinations(range(n), 3), [tuple(range(12)), tuple(range(0, n, 2))]):
+        assert m >= bl.GRAM_FIT_ROWS * len(S)
+        lights, e, err2, _ = model.fit(S)
+        for c in range(3):
+            x, res = sopt.nnls(t[:, list(S)], b[:, c])
+            got = np.zeros(len(S))
+            got[np.searchsorted(S, lights)] = e[:, c]
+            np.testing.assert_allclose(got, x, rtol=1e-9, atol=1e-12)
+            assert err2[c] == pytest.approx(res ** 2, rel=1e-10)
+            zeros += int(np.sum(x == 0))
+    assert zeros > 0  # the bounds were active somewhere
+    # a light twice (to 1e-9): the Gram factor's pivot is ~1e-18 of the diagonal, scipy on T instead
+    A = np.column_stack([t[:, :3], t[:, 0] * (1 + 1e-9)])
+    y = b[:, 0] + 0.5
+    calls = []
+    real = bl._nnls
+    try:
+        bl._nnls = lambda M, v: calls.append(M.shape) or real(M, v)
+        x = bl._nnls_normal(A.T @ A, A.T @ y, A, y)
+    finally:
+        bl._nnls = real
+    assert calls == [A.shape]
+    np.testing.assert_allclose(A @ x, A @ sopt.nnls(A, y)[0], rtol=1e-8, atol=1e-10)
+
+
+def test_the_all_lights_nnls_is_computed_once_per_problem():
+    """The light colour's choice, the certificate and the report each ask lower_bounds for the
+    all-lights NNLS of one problem (a view target's: 0.28 s each): computed once per content; the
+    same targets changed, or another start, computed anew."""
+    T, b, _ = geo_problem(11, m=40, n=30)
+    calls = []
+    real = bl._nnls
+    try:
+        bl._nnls = lambda M, v: calls.append(M.shape) or real(M, v)
+        first = bl.lower_bounds(T, b, 1, exhaustive_limit=0)
+        n_first = len(calls)
+        again = bl.lower_bounds([t.copy() for t in T], b.copy(), 1, exhaustive_limit=0)
+        assert len(calls) == n_first == 3  # one per channel, the first time only
+        assert again.nnls == first.nnls and np.array_equal(again.nnls_exitance, first.nnls_exitance)
+        again.nnls_exitance[:] = -1.0  # (a copy: the kept answer is not changed by its user)
+        b2 = b.copy()
+        b2[0, 0] += 0.5
+        other = bl.lower_bounds(T, b2, 1, exhaustive_limit=0)
+        assert len(calls) == n_first + 3
+        cold = np.sqrt(sum(sopt.nnls(T[c], b2[:, c])[1] ** 2 for c in range(3)))
+        assert other.nnls == pytest.approx(cold * (1 - bl.BOUND_MARGIN), rel=1e-9)
+        assert np.all(bl.lower_bounds(T, b, 1, exhaustive_limit=0).nnls_exitance >= 0)
+    finally:
+        bl._nnls = real
