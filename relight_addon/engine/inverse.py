@@ -552,8 +552,7 @@ class InverseProblem:
         """T per channel: list of 3 arrays (m, |C|), rows P and columns C of A^-1.
 
         Computed with the smaller of ``A^T Y = I[:, P]`` (m right-hand sides) and
-        ``A X = I[:, C]`` (|C| right-hand sides) from the LU factors; with Y when lights of
-        irradiance kinds (lamps) need Y for their columns anyway.
+        ``A X = I[:, C]`` (|C| right-hand sides) from the LU factors.
         """
         if self._transfer is None:
             t0 = time.perf_counter()
@@ -569,7 +568,7 @@ class InverseProblem:
                 if key in done:
                     T[c] = done[key]
                     continue
-                if R.m <= len(C) or self.lights.irradiance is not None:  # (lamps: Y is solved for them)
+                if R.m <= len(C):
                     Y = self.inverse_rows(facs[c])  # Y^T = R A^-1, the rows' rows of A^-1
                     if D is not None:  # rows P of A^-1 (I + D): Y + D^T Y
                         Y = Y + np.asarray(D[c].T @ Y)
