@@ -244,7 +244,8 @@ def _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources):
     return out
 
 
-def view_rows(F, reflectance, center, normal, patch, points, views, material, material_lobes, sources=None):
+def view_rows(F, reflectance, center, normal, patch, points, views, material, material_lobes, sources=None,
+              tables=None):
     """The radiance seen along ``views`` (n, 3) unit world directions from the viewer at ``points``
     (n, 3) on patches ``patch`` (n,), as rows on the radiosity: (js, W), W (n, len(js), 3) the
     coefficients such that pi L_c = sum_j W[:, j, c] B[js[j], c] (pi times the radiance: W/m^2, the
@@ -259,14 +260,19 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
     patch with the point) to source j's centre. A Lambertian patch (f = rho/pi) reads B_i alone.
     A lamp's direct light (in B_i, not in F B) is seen Lambertian here; its glossy reflection is
     added beyond these rows (engine.view_lamps, a view target's ``lamp_terms``). Every patch of ``patch`` is one
-    patch (group the points by patch first); ``views`` point from the viewer to the surface."""
+    patch (group the points by patch first); ``views`` point from the viewer to the surface.
+    ``tables``: a dict the calls of one image share, material -> its BRDFTable (built once)."""
     M = getattr(F, "matrix", F)
     i = int(np.unique(np.asarray(patch, dtype=np.int64))[0]) if len(patch) else 0
     if np.any(np.asarray(patch) != i):
         raise ValueError("view_rows reads one patch at a time")
-    row = M[i]
-    row = row.tocsr() if sp.issparse(row) else sp.csr_matrix(np.asarray(row).reshape(1, -1))
-    js, fij = row.indices, np.asarray(row.data, dtype=np.float64)
+    if sp.issparse(M) and M.format == "csr":
+        js, fij = _row(M, i)
+    else:
+        row = M[i]
+        row = row.tocsr() if sp.issparse(row) else sp.csr_matrix(np.asarray(row).reshape(1, -1))
+        js, fij = row.indices, row.data
+    fij = np.asarray(fij, dtype=np.float64)
     keep = js != i
     js, fij = js[keep], fij[keep]
     n = len(points)
@@ -277,7 +283,10 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
     dist = np.linalg.norm(d, axis=2)
     d /= np.maximum(dist, TINY)[..., None]
     l_loc = _above(d @ R.T)
-    table = BRDFTable(material_lobes[int(material[i])])
+    tables = {} if tables is None else tables
+    if int(material[i]) not in tables:
+        tables[int(material[i])] = BRDFTable(material_lobes[int(material[i])])
+    table = tables[int(material[i])]
     f = table(np.repeat(v_loc, len(js), axis=0), l_loc.reshape(-1, 3)).reshape(n, len(js), 3)
     alpha = min([float(t.alpha) for kind, _, t in table.terms if kind == "ggx"] or [np.inf])
     if sources is not None and np.isfinite(alpha) and len(js):

@@ -312,6 +312,7 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     one more block of the patch's pixels, each at its own point (the blocks of a patch add up)."""
     material, lobes, alpha = _patch_materials(faces, patches)
     sources = SourcePoints(patches, _sampler(F, patches)) if np.isfinite(alpha[hits.patch]).any() else None
+    tables = {}  # (the materials' BRDF tables, built once for the image)
     order = np.argsort(hits.patch, kind="stable")
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
     for group in np.split(order, cuts) if len(order) else []:
@@ -329,7 +330,7 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
         n_tiles, tile = _tiles(hits.pixel[group], camera.width, _tile(camera, alpha[i], lobe))
         point, d = _tile_means(hits, group, tile, n_tiles)
         js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
-                          material, lobes, sources=sources)
+                          material, lobes, sources=sources, tables=tables)
         if interp is not None and not exact:
             js, W = _interpolated(interp, i, point, js, W)
         yield i, group, js, W, tile
