@@ -724,10 +724,51 @@ def view_target(scene):
           f"prediction {None if pred is None else tuple(pred.size)}, shown in {len(beside)} editor(s), {block}")
     shot("20_view_prediction")
     found = yield from probe_sidebar()  # (the 3D View is narrower since the prediction's editor split it)
+    yield from live_on_view_target(scene, found, img)
+    found = yield from probe_sidebar()
     yield from press(found, "bpy.ops.relight.clear_results()", settle=2.0)
     check("Clear Results removes the prediction, the painted view target stays",
           vt.prediction_image(scene) is None and not [i for i in bpy.data.images if i.name.startswith("Relight Prediction")]
           and scene.relight_camera_target.image == img, [i.name for i in bpy.data.images])
+
+
+def live_on_view_target(scene, found, img):
+    """Live on, the view target painted again in the Image Editor: Live's answers are of the pixels
+    prepared, so it pauses and names the view target (it never says "up to date" of paint it did
+    not read); ESC turns it off."""
+    live = mods()["blender.live"]
+    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
+    s = live.session(scene)
+    if not check("Live turns on with a view target used", s is not None and (
+            yield from wait_for(lambda: s.base is not None and s.worker is None and s.status == "up to date", 300)),
+            None if s is None else live.status_text(s)):
+        return
+    areas = [a for a in window().screen.areas if a.type == "IMAGE_EDITOR" and a.spaces.active.image == img]
+    if not check("the painted view target is still in an Image Editor", areas, [a.type for a in window().screen.areas]):
+        return
+    before = np.asarray(img.pixels[:], dtype=np.float32)[3::4].copy()
+    reg = region("WINDOW", areas[0])
+    cx, cy = to_screen(reg, reg.width // 2, reg.height // 3)
+    move(cx - 60, cy)
+    yield 0.5
+    xdo("mousedown", "1")
+    for dx in range(-60, 61, 10):
+        move(cx + dx, cy)
+        yield 0.05
+    xdo("mouseup", "1")
+    yield from wait_for(lambda: s.paused, 20)
+    yield 1.0
+    changed = int((np.asarray(img.pixels[:], dtype=np.float32)[3::4] != before).sum())
+    shot("20b_live_view_target_painted")
+    text = yield from reports()
+    check("a stroke on the view target in the Image Editor with Live on pauses Live and names the view target",
+          changed > 0 and s.paused is not None and "view target" in s.paused
+          and not any("Relight Live:" in t for t in text),
+          f"{changed} pixels changed; {live.status_text(s)}; reports {text[-2:]}")
+    move(*viewport_center())
+    xdo("key", "Escape")
+    yield 2.0
+    check("ESC turns Live off", live.session(scene) is None, live.status_text(s))
 
 
 def scenario():
