@@ -5,6 +5,7 @@ BSDF table evaluated here in a frame of the test's own (a) ; a matte surface sho
 (exactly 0); the transfer's lamp column is the forward model's rows (linear in the strength); a
 painted highlight picks, of two candidate lamps, the one whose reflection it is. Cycles:
 tests/test_cycles_view_highlight.py."""
+import copy
 import math
 
 import numpy as np
@@ -220,3 +221,35 @@ def test_a_painted_highlight_gives_a_mounting_position_where_its_mirror_ray_land
         assert np.all(on.min(axis=0) - 1e-6 <= aims.mounts[0]) and np.all(aims.mounts[0] <= on.max(axis=0) + 1e-6)
         seen = aims.radiosity[aims.radiosity > 0]  # (pi x 3 x 0.05 on a patch of dim pixels only)
         assert len(seen) > 10 and np.median(seen) == pytest.approx(np.pi * 0.15)
+
+
+def test_a_strokes_retarget_takes_the_lamps_highlights_once():
+    """The lamps' highlights on a kept view target's rows (TargetRows.lamp_terms: a shadow ray per
+    glossy row, lamp and sample) are computed once per problem and lights (lamp_view_terms with
+    ``kept``): a second stroke asks the view target for none, and T is the first's, bit for bit;
+    lights appended (a refined lamp) make them anew."""
+    lamps = [point_lamp((2.2, 2.1, 2.2), 1.0, "a"), point_lamp((1.0, 1.0, 2.2), 1.0, "b")]
+    faces, patches, F = room()
+    t = _target(faces, patches, F)
+    prob, H = _problem(faces, patches, F, lamps)
+    t = prob.target_rows.targets[0]
+    prob.all_rows_transfer()
+    calls = []
+    real = t.lamp_terms
+    t.lamp_terms = lambda *a, **k: calls.append(1) or real(*a, **k)
+    first = prob.retarget([t])
+    again = prob.retarget([t])
+    assert len(calls) == 1
+    for c in range(3):
+        assert np.array_equal(first.transfer[c], again.transfer[c])
+        np.testing.assert_allclose(first.transfer[c], prob.transfer[c], rtol=1e-9, atol=1e-12 * np.abs(prob.transfer[c]).max())
+    moved = point_lamp((2.6, 2.0, 2.2), 1.0, "c")
+    h = lamp_irradiance(patches, [moved], sampler=F.sampler, seed=0)[:, 0, :]
+    more = copy.copy(prob)
+    more.add_lights(append_lamps(prob.lights, prob.lights.patches, patches.n_patches, [moved], ["point"], h[:, :1],
+                                 np.zeros(1)), [np.asarray(Transport(prob).column(h[:, 0], moved)[:, c:c + 1])
+                                                 for c in range(3)])
+    n = len(calls)
+    more.retarget([t])
+    more.retarget([t])
+    assert len(calls) == n + 1

@@ -452,3 +452,52 @@ def test_the_solved_lights_direct_light_on_the_pixels_patches_is_the_kernels():
           f"{np.mean(np.abs(rel)):.4f}, max {np.max(np.abs(rel)):.4f}, signed {np.mean(rel):+.4f}")
     assert lit.sum() >= 20
     assert np.mean(np.abs(rel)) < 0.02 and np.max(np.abs(rel)) < 0.06
+
+
+def test_a_strokes_retarget_keeps_the_view_targets_rows(glossy_room, monkeypatch):
+    """A Live stroke retargets the prepared problem (InverseProblem.retarget) with new paint: the view
+    target, its spec the same on the same form factors, is taken again (Target.serves: scene_targets
+    keeps it; a pixel repainted or other form factors make a new one), its rows of the transfer to
+    every patch are computed once (InverseProblem._rows_of: 0.47 s a stroke on the living room, now
+    none) and the stroke's T and b are the ones computed anew, bit for bit (the glossy rows' first
+    reflection taken off as transfer takes it)."""
+    from relight_addon.engine.first_reflection import first_bounce
+
+    faces, patches, F = glossy_room
+    cam = camera()
+    spec = ViewSpec(cam, np.full((cam.height, cam.width, 3), 0.1), np.ones((cam.height, cam.width), bool), "t")
+    faces.view_target = spec
+    try:
+        t = ViewTarget.from_scene(faces, patches, F)
+        assert next(x for x in scene_targets(faces, patches, F, kept=[t]) if x.kind == "view") is t
+        faces.view_target = ViewSpec(cam, spec.radiance, spec.painted, "t")  # (another object, the same content)
+        assert next(x for x in scene_targets(faces, patches, F, kept=[t]) if x.kind == "view") is t
+        other = spec.radiance.copy()
+        other[10, 20] = 0.2
+        faces.view_target = ViewSpec(cam, other, spec.painted, "t")
+        assert next(x for x in scene_targets(faces, patches, F, kept=[t]) if x.kind == "view") is not t
+        faces.view_target = spec
+        assert not t.serves(faces, compute_form_factors(patches, QUALITY["default"], seed=2))
+    finally:
+        faces.view_target = None
+    mask = candidate_mask(patches, "inverse") & (patches.normal[:, 2] < -0.9)
+    D = first_bounce(faces, patches, F, mask)
+    wall = np.flatnonzero(patches.face == 2)
+    problem = InverseProblem(F, patches.area, patches.reflectance, [t, PaintedRadiance(wall[:2], np.full((2, 3), 5.0))],
+                             mask, patches.center, patches.normal, first_bounce=D)
+    problem.all_rows_transfer()
+    calls = []
+    real = t.rows
+    t.rows = lambda n: calls.append(n) or real(n)
+    stroke = [t, PaintedRadiance(wall[2:6], np.full((4, 3), 3.0))]
+    first = problem.retarget(stroke)
+    n_first = len(calls)
+    again = problem.retarget(stroke)
+    assert len(calls) - n_first == 1  # (its rows stacked with the stroke's: no product of them again)
+    with monkeypatch.context() as m:
+        m.setattr(ViewTarget, "kept_by_retarget", False)
+        anew = problem.retarget(stroke)
+    for got in (first, again):
+        for c in range(3):
+            assert np.array_equal(got.transfer[c], anew.transfer[c])
+        assert np.array_equal(got.b_target, anew.b_target)

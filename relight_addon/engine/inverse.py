@@ -332,6 +332,7 @@ class InverseProblem:
         self._transfer = None
         self._all_rows = None  # all_rows_transfer's
         self._rows_solved = {}  # inverse_rows': id(factors) -> (factors, rows, Y)
+        self._kept_rows = {}  # _rows_of's: (id(target), id(T)) -> (target, its rows of T), "of": the T_all
         self.condition_warnings = []  # what factors() found (a retargeted problem keeps them)
         self.transfer_seconds = None
         self.warnings = []
@@ -602,17 +603,31 @@ class InverseProblem:
             self._check_reachable()
         return self._transfer
 
-    def lamp_view_terms(self, rows):
+    def lamp_view_terms(self, rows, kept=False):
         """(the lights that are lamps (n,), X (m, n, 3)): what each adds per unit strength to target
         rows ``rows`` (a TargetRows) beyond the radiosity (TargetRows.lamp_terms: a camera-view
         target's glossy pixels reflect a lamp's direct light through their BSDF), or None when no
-        row's kind adds anything (channels that share T share the first's: one reflectance)."""
+        row's kind adds anything (channels that share T share the first's: one reflectance).
+        ``kept``: a target ``kept_by_retarget`` has its block computed once for these lights
+        (_kept_rows: a Live stroke's retarget asks again)."""
         lamps = self.lights.lamps
         idx = [] if lamps is None else [j for j, lamp in enumerate(lamps) if lamp is not None]
         if not idx:
             return None
         H = self.lights.irradiance
-        X = rows.lamp_terms([lamps[j] for j in idx], None if H is None else sp.csc_matrix(H)[:, idx])
+        ls, Hs = [lamps[j] for j in idx], None if H is None else sp.csc_matrix(H)[:, idx]
+        if not kept:
+            X = rows.lamp_terms(ls, Hs)
+        else:
+            blocks = []
+            for target in rows.targets:
+                block = self._kept_rows.get(("lamp terms", id(target)))
+                if block is None or block[0] is not target or block[1] is not self.lights:
+                    block = (target, self.lights, target.lamp_terms(ls, Hs))
+                    if target.kept_by_retarget:
+                        self._kept_rows[("lamp terms", id(target))] = block
+                blocks.append(block[2])
+            X = rows._stacked(blocks)
         return None if X is None else (np.asarray(idx, dtype=np.int64), X)
 
     def _leave_out_implausible(self):
@@ -704,17 +719,15 @@ class InverseProblem:
         S = self._bsdf_rows(rows)
         new.b_target = rows.values - rows.of(self.background_radiosity) - self._fixed_beyond(rows) + \
             self._seen_by_bsdf(S, self.background_exitance)
-        shared = {}
-        new._transfer = [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
+        new._transfer = self._rows_of(rows, T_all)
         if S is not None:  # (less S D: rows that see their patch's first reflection by its BSDF, as transfer's)
-            basis = sp.csc_matrix(self.source_basis)
             left = getattr(self, "implausible", None)
             for c in sorted({id(t): c for c, t in reversed(list(enumerate(new._transfer)))}.values()):
-                corr = (S @ (self.first_bounce[c][:, self.candidates] @ basis)).toarray()
+                corr = (S @ self._first_bounce_of_lights(c)).toarray()
                 if left is not None and left.any():
                     corr[:, left] = 0.0
                 new._transfer[c] -= corr
-        seen = self.lamp_view_terms(rows)
+        seen = self.lamp_view_terms(rows, kept=True)
         if seen is not None:
             for c in sorted({id(t): c for c, t in reversed(list(enumerate(new._transfer)))}.values()):
                 new._transfer[c][:, seen[0]] += seen[1][:, :, c]
@@ -723,13 +736,53 @@ class InverseProblem:
         new._check_reachable()
         return new
 
+    def _first_bounce_of_lights(self, c):
+        """(P, n_lights) sparse: D_c's columns of the candidates, per light (``source_basis``):
+        what retarget's rows seeing their patch through its BSDF take off, computed once per
+        problem (_kept_rows)."""
+        key = ("first bounce", c)
+        kept = self._kept_rows.get(key)
+        if kept is None or kept[0] is not self.lights:
+            kept = (self.lights, self.first_bounce[c][:, self.candidates] @ sp.csc_matrix(self.source_basis))
+            self._kept_rows[key] = kept
+        return kept[1]
+
+    def _rows_of(self, rows, T_all) -> list:
+        """rows.of(t) for each channel's t of ``T_all`` (channels sharing one array share the
+        answer). A target its kind keeps between paints (``kept_by_retarget``: a camera-view
+        target's 941 rows read hundreds of patches each, 0.47 s a stroke on the living room) has its
+        block computed once for this problem's T_all (``_kept_rows``, shared by the retargeted
+        copies); the blocks stacked as TargetRows stacks the rows (the same bits)."""
+        if not any(t.kept_by_retarget for t in rows.targets):
+            shared = {}
+            return [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
+        kept = self._kept_rows
+        if kept.get("of") is not T_all:
+            kept.clear()
+            kept["of"] = T_all
+        shared = {}
+        for t in T_all:
+            if id(t) in shared:
+                continue
+            blocks = []
+            for target in rows.targets:
+                block = kept.get((id(target), id(t)))
+                if block is None or block[0] is not target:
+                    M = sp.csr_matrix(target.rows(self.n_patches), dtype=np.float64).sorted_indices()
+                    block = (target, np.asarray(M @ t))
+                    if target.kept_by_retarget:
+                        kept[(id(target), id(t))] = block
+                blocks.append(block[1])
+            shared[id(t)] = np.ascontiguousarray(rows._stacked(blocks))
+        return [shared[id(t)] for t in T_all]
+
     def add_lights(self, lights, columns, excess=None):
         """Extend the problem to ``lights`` (a LightSet: the problem's lights followed by new ones,
         engine.lights.append_lamps) whose new lights' columns of T are ``columns`` (3 arrays (m, n_new),
         computed by the caller from their sources, e.g. engine.lamp_refinement.Transport); ``excess``
         their columns of ``lamp_excess`` (3 sparse (P, n_new)) when the problem has it."""
         n0 = self.n_lights
-        self._all_rows = None
+        self._all_rows, self._kept_rows = None, {}  # (a dict of its own: copies share the one before)
         if self.lamp_excess is not None:
             n_new = lights.n_lights - n0
             new = excess if excess is not None else [sp.csc_matrix((self.n_patches, n_new))] * 3
@@ -761,7 +814,7 @@ class InverseProblem:
         minus F's. Their columns of T gain rows P of A^-1 diag(rho) dH, and every forward solve
         (``configuration_radiosity``) the reflection rho dH s of their light."""
         lights = np.asarray(lights, dtype=np.int64)
-        self._all_rows = None
+        self._all_rows, self._kept_rows = None, {}  # (a dict of its own: copies share the one before)
         dH = np.asarray(dH, dtype=np.float64).reshape(self.n_patches, len(lights))
         if not np.all(np.isfinite(dH)):
             raise InverseError("the lights' direct light is not finite")

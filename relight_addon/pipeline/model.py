@@ -299,7 +299,8 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
     refined for the earlier targets among them), form factors, solvers and fixed light; the
     problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
     t0 = time.perf_counter()
-    problem = model.problem.retarget(scene_targets(faces, patches, model.form_factors))
+    problem = model.problem.retarget(scene_targets(faces, patches, model.form_factors,
+                                                   kept=model.problem.target_rows.targets))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

@@ -516,8 +516,13 @@ class PreparedScene:
 
     def prepare_live(self, faces: FaceSet) -> None:
         """What every live stroke reads, made once before the first (Live's worker): the transfer
-        from every light to every patch, the faces the patch model clustered, the face areas."""
-        self.model.problem.all_rows_transfer()
+        from every light to every patch, the rows of it of the targets a stroke keeps (a camera-view
+        target's: InverseProblem._rows_of, 1.1 s on the living room), the faces the patch model
+        clustered, the face areas."""
+        problem = self.model.problem
+        problem.all_rows_transfer()
+        if any(t.kept_by_retarget for t in problem.target_rows.targets):
+            problem.retarget(list(problem.target_rows.targets))
         self._clustered_faces()
         self._face_area = face_areas(faces)
 

@@ -130,10 +130,13 @@ class TargetRows:
         return self.matrix.T.toarray()
 
 
-def scene_targets(faces, patches, F=None) -> list:
+def scene_targets(faces, patches, F=None, kept=()) -> list:
     """The targets of a scene (FaceSet ``faces`` meshed into ``patches``, form factors ``F``): every
-    registered kind's (``from_scene``), in registration order."""
-    found = (kind.impl.from_scene(faces, patches, F) for kind in TARGET_KINDS)
+    registered kind's (``from_scene``), in registration order. ``kept``: the targets of an earlier
+    paint on the same model, each taken again where it ``serves`` (a Live stroke's retarget: a
+    camera-view target's rows took 1.3 s to make on the living room)."""
+    found = (next((t for t in kept if type(t) is kind.impl and t.serves(faces, F)), None)
+             or kind.impl.from_scene(faces, patches, F) for kind in TARGET_KINDS)
     return [t for t in found if t is not None]
 
 

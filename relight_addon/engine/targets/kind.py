@@ -37,6 +37,9 @@ class Target:
     kind = ""
     unit = "W/m^2"
     values: np.ndarray
+    #: whether a retargeted model keeps this kind's target between paints (``serves``) and its rows'
+    #: products (InverseProblem._rows_of)
+    kept_by_retarget = False
 
     def rows(self, n_patches) -> sp.csr_matrix:
         raise NotImplementedError
@@ -80,3 +83,10 @@ class Target:
     def from_scene(cls, faces, patches, F=None):
         """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None."""
         return None
+
+    def serves(self, faces, F) -> bool:
+        """Whether this target, made for another paint of the same scene on the same model (its
+        form factors ``F``), is the one ``from_scene(faces, ...)`` would make: a retargeted model
+        (a Live stroke's) keeps it instead of making it again. False by default: the painted kinds'
+        rows are read again (cheap)."""
+        return False

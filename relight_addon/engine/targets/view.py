@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ..by_content import digest
 from ..first_reflection import incidence_of
 from ..incidence import lamp_albedo_excess
 from ..registry import TARGET_KINDS
@@ -383,6 +384,7 @@ class ViewTarget(Target):
 
     kind = "view"
     unit = "W/(m^2 sr)"
+    kept_by_retarget = True
 
     def __init__(self, spec, hits, matrix, values, offset, channel_spread, F, patches, faces, pixel_row=None,
                  interp=None, glossy_rows=None, fixed_lamps=()):
@@ -404,6 +406,12 @@ class ViewTarget(Target):
         self.offset = np.asarray(offset, dtype=np.float64)
         self.channel_spread = float(channel_spread)
         self._F, self._patches, self._faces = F, patches, faces
+
+    def serves(self, faces, F) -> bool:
+        """The same view target (its spec: the camera, the painted pixels and their radiance) on the
+        same model (``F``): its rows are the ones ``build`` would make again."""
+        spec = getattr(faces, "view_target", None)
+        return F is self._F and spec is not None and (spec is self.spec or digest(spec) == digest(self.spec))
 
     def rows(self, n_patches):
         if self.matrix.shape[1] != n_patches:
