@@ -238,13 +238,15 @@ def test_use_in_solve_off_solves_without_it(addon, room, tmp_path):
 def test_live_solves_with_the_view_target(addon, room, tmp_path):
     """Live's first answer (a full solve, no prepared model) reads the view target as Solve & Reduce
     does (camera_view.scene_view_target) and writes the prediction; a stroke on a wall is re-solved
-    with the pixels' rows (the model retargeted keeps them), and, its lights new, the earlier
-    prediction goes with its result (a stroke's answer writes none: Solve & Reduce does); the
-    camera moved pauses Live, said."""
+    with the pixels' rows, the very target the model holds (Target.serves: not made again), and,
+    its lights new, the earlier prediction goes with its result (a stroke's answer writes none:
+    Solve & Reduce does). The view target itself is followed as a stroke, never paused: pixels
+    painted (the answer's rows are of the new pixels: as many rows as the target built anew), the
+    camera moved (the rows of its new view), Use in Solve off (no view rows)."""
     from artist_scenes import paint
     from test_live import _run
 
-    from relight_addon.blender import live, preparation
+    from relight_addon.blender import camera_view, live, preparation
     from relight_addon.blender.ui import operators, view_target_ops
     from relight_addon.engine.targets.view import ViewTarget
 
@@ -256,31 +258,48 @@ def test_live_solves_with_the_view_target(addon, room, tmp_path):
     paint(wall, [27, 28], (0.1, 0.1, 0.1))
     assert bpy.ops.relight.load_view_reference(filepath=str(tmp_path / "target.exr")) == {"FINISHED"}
     s = live.start(bpy.context, operators.job_options, operators.show_solve)
+
+    def view_of(outcome):
+        return next((t for t in outcome.problem.target_rows.targets if isinstance(t, ViewTarget)), None)
+
     try:
         _run(s, lambda: s.updates == 1)
         state = preparation.PREPARED[scene.name]
         assert preparation.PREPARED_JOBS[scene.name].exp.faces.view_target is not None
-        assert any(isinstance(t, ViewTarget) for t in state.model.problem.target_rows.targets)
+        prepared = view_of(state.model)
+        assert prepared is not None
         assert view_target_ops.prediction_image(scene) is not None
         answers, stroke = [], state.live
         state.live = lambda *a, **k: (lambda out: answers.append(out) or out)(stroke(*a, **k))
         paint(wall, [19, 20, 35, 36], (0.1, 0.1, 0.1))
         _run(s, lambda: s.updates == 2)
-        assert answers and any(isinstance(t, ViewTarget) for t in answers[0].problem.target_rows.targets)
+        assert answers and view_of(answers[-1]) is prepared  # (kept: its rows not made again)
         assert view_target_ops.prediction_image(scene) is None
         assert not [i for i in bpy.data.images if view_target_ops.ERROR_PROP in i.keys()]
-        # the camera moved: the pixels' rows are the model's, Live pauses and says why (it went on
-        # answering for the camera as it was before)
+        # the view target painted again (half its pixels freed, as Erase Alpha does): followed
+        img = scene.relight_camera_target.image
+        px = np.asarray(img.pixels[:], dtype=np.float32).reshape(img.size[1], img.size[0], 4)
+        px[: img.size[1] // 2, :, 3] = 0.0
+        img.pixels.foreach_set(px.ravel())
+        img.update_tag()  # (as a brush stroke in the Image Editor: the depsgraph updates the image)
+        n = len(answers)
+        _run(s, lambda: len(answers) > n, pause=True)
+        assert s.paused is None, s.paused
+        now = view_of(answers[-1])
+        anew = camera_view.scene_view_target(scene)
+        assert now is not prepared and now.pixels == int(anew.painted.sum()) < prepared.pixels
+        # the camera moved: the rows of its new view (Live went on answering for the camera before)
         scene.camera.location.x += 0.2
-        _run(s, lambda: s.paused is not None, timeout=30, pause=True)
-        assert s.paused == ("the view target changed (its image, the camera or Use in Solve): Solve & Reduce "
-                            "prepares again"), s.paused
-        # Solve & Reduce prepares again; then Use in Solve turned off (a scene setting): paused again
-        assert bpy.ops.relight.solve() == {"FINISHED"}
-        _run(s, lambda: s.paused is None and s.status == "up to date", timeout=120, pause=True)
+        n = len(answers)
+        _run(s, lambda: len(answers) > n, timeout=60, pause=True)
+        assert s.paused is None, s.paused
+        moved = view_of(answers[-1])
+        assert moved is not now and not np.allclose(moved.spec.camera.origin, now.spec.camera.origin)
+        # Use in Solve off (a scene setting): answered without the view rows
         scene.relight_camera_target.use = False
-        _run(s, lambda: s.paused is not None, timeout=30, pause=True)
-        assert s.paused.startswith("the view target changed"), s.paused
+        n = len(answers)
+        _run(s, lambda: len(answers) > n, timeout=60, pause=True)
+        assert s.paused is None and view_of(answers[-1]) is None, s.paused
     finally:
         live.stop(scene.name)
 

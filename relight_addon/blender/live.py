@@ -30,8 +30,11 @@ operator's timer):
   and the rest re-solved around it, without a full solve;
 - a lamp added, deleted, hidden from or shown to renders (its object, a collection, the view
   layer) is followed the same way (``_watch``: the depsgraph's updates do not name what is gone);
+- the camera-view target painted in the Image Editor, its image replaced, the camera moved, Use
+  in Solve switched: read again (``_view_read``) and answered as a stroke on the prepared model
+  (its rows made again for the new pixels; a stroke elsewhere keeps them: engine.targets.view);
 - a change the prepared state cannot follow (a mesh moved or edited, its modifiers, a material,
-  the World, options, the scene's patch size, the view target (its image, the camera); faces
+  the World, options, the scene's patch size; faces
   forbidden or allowed, an object's "no lights" or "work plane" switch; an exported object
   deleted or hidden from renders, or a mesh shown to them)
   pauses Live with the reason naming the object, the scene as last written, until Solve & Reduce
@@ -83,7 +86,7 @@ class LiveSession:
         self.show_fn = show_fn  # (context, job, outcome, finished=, trusted=, show=, packed=): ui.operators.show_solve
         self.dirty = True
         self.last_change = 0.0  # time.monotonic() of the last depsgraph update
-        self.paint = None  # (target, radiosity) last read
+        self.paint = None  # _paint_of the faces last read
         self.shown = None  # the paint of the answer in the scene
         self.worker = None
         self.result = {}
@@ -206,7 +209,7 @@ class LiveSession:
     def _scene_settings(self, scene, job) -> None:
         """The scene's Relight settings (each tick): a new target scale is followed (every object's
         paint read again with it), a new patch size (the model's) added to ``changed``, the view
-        target's settings changed read at once (``_view_changed``)."""
+        target's settings changed read at once (``_view_read``)."""
         settings = scene_settings(scene)
         if settings["max_patch_size"] != job.exp.settings["max_patch_size"]:
             self.changed.add(f"the patch size ({MAX_PATCH_SIZE_PROP}) changed")
@@ -215,26 +218,31 @@ class LiveSession:
         elif _view_setting(scene) != self.view_setting:  # (a property set by a script: no depsgraph update)
             self.dirty = True
 
-    def _view_changed(self, context, job, touched, every) -> bool:
-        """Whether the scene's view target (its image, the camera, the working resolution, Use in
-        Solve, the render's size and view transform) is no longer the one prepared (its pixels are
-        rows of the model's problem): added to ``changed``. Its pixels are read again only when an
-        image, a camera or the scene camera's object was updated, or its settings changed (Live's
-        own writes update the scene at every answer: a large reference image read then would stall
-        the brush)."""
+    def _view_read(self, context, job, touched, every):
+        """The scene's view target (its image, the camera, the working resolution, Use in Solve, the
+        render's size and view transform: camera_view.scene_view_target) for the next answer: the
+        one read before unless an image, a camera or the scene camera's object was updated or its
+        settings changed (Live's own writes update the scene at every answer: a large reference
+        image read then would stall the brush), and the one read before when the same (its rows are
+        kept by the prepared model's strokes: engine.targets.view, ``serves``). A view target that
+        cannot be read (its image gone unreadable) adds to ``changed``, said."""
         scene = context.scene
-        setting, was = _view_setting(scene), job.exp.faces.view_target
+        setting = _view_setting(scene)
+        was = (self._faces or job.exp.faces).view_target
         camera = scene.camera
         look = every or setting != self.view_setting or any(kind in _VIEW_KINDS for kind, _ in touched) \
             or (camera is not None and ("OBJECT", camera.name) in touched)
         self.view_setting = setting
         if not look or (setting is None and was is None):
-            return False
-        now = camera_view.scene_view_target(scene)
+            return was
+        try:
+            now = camera_view.scene_view_target(scene)
+        except ValueError as exc:  # (SceneError too: the user's image or camera, a message naming it)
+            self.changed.add(f"the view target cannot be read ({exc})")
+            return was
         if (now is None and was is None) or (now is not None and was is not None and digest(now) == digest(was)):
-            return False
-        self.changed.add("the view target changed (its image, the camera or Use in Solve)")
-        return True
+            return was
+        return now
 
     def _read_paint(self, context, job) -> None:
         """The paint read again (Blender reported a change): ``paint`` and ``_faces``; a mesh that
@@ -248,7 +256,8 @@ class LiveSession:
         # million-triangle scene's every mesh took 0.17 s of the main thread each tick)
         touched, every = self.touched, self.touched_all or self._faces is None
         self.touched, self.touched_all = set(), False
-        if self._view_changed(context, job, touched, every):
+        view = self._view_read(context, job, touched, every)
+        if self.changed:
             return
         objs = [ob for ob in job.exp.objects
                 if every or ("OBJECT", ob.name) in touched or ("MESH", ob.data.name) in touched]
@@ -256,6 +265,8 @@ class LiveSession:
                                None if every else self._faces, self.target_scale)  # (in Edit Mode: its edit mesh first)
         if self.lamps is not None:
             faces = replace(faces, lamps=self.lamps)
+        if faces.view_target is not view:  # (painted in the Image Editor, the camera moved: followed)
+            faces = replace(faces, view_target=view)
         now = _geometry_digest(objs)
         moved = sorted(name for name in now if now[name] != self.geometry.get(name))
         if moved:
@@ -272,8 +283,8 @@ class LiveSession:
             self.changed.update(f"object {name!r}: its work plane switch changed" for name in switched)
             return
         self._faces = faces
-        if self.paint is None or not _same((faces.target, faces.target_radiosity), self.paint):
-            self.paint = (faces.target, faces.target_radiosity)
+        if self.paint is None or not _same(_paint_of(faces), self.paint):
+            self.paint = _paint_of(faces)
 
     def _watch(self, context, job) -> None:
         """What the depsgraph's updates do not say object by object: an exported object deleted
@@ -376,7 +387,7 @@ class LiveSession:
             self.paused = f"{exc}"
             self.status = "paused"
             return
-        self.paint = (job.exp.faces.target, job.exp.faces.target_radiosity)
+        self.paint = _paint_of(job.exp.faces)
         self.solving = self.paint
         self.status = "preparing (a full solve)"
         self._run(lambda: self._predicted(job.run(cancel=self.cancel.is_set)), job)
@@ -556,8 +567,15 @@ def stroke_running(context, last_change: float) -> bool:
     return False
 
 
+def _paint_of(faces) -> tuple:
+    """What Live answers for: (target, radiosity, the view target (its spec, read anew only when it
+    changed: compared as the same object))."""
+    return faces.target, faces.target_radiosity, faces.view_target
+
+
 def _same(a, b) -> bool:
-    return a is not None and b is not None and np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    return a is not None and b is not None and np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1]) \
+        and a[2] is b[2]
 
 
 def session(scene) -> LiveSession | None:
@@ -599,7 +617,7 @@ def _on_undo(scene, _arg=None):
 
 
 #: the data-blocks a view target is read from besides the scene camera's object and the scene's
-#: settings (an update of one reads it again: LiveSession._view_changed)
+#: settings (an update of one reads it again: LiveSession._view_read)
 _VIEW_KINDS = ("Image", "Camera")
 
 

@@ -332,7 +332,9 @@ class InverseProblem:
         self._transfer = None
         self._all_rows = None  # all_rows_transfer's
         self._rows_solved = {}  # inverse_rows': id(factors) -> (factors, rows, Y)
-        self._kept_rows = {}  # _rows_of's: (id(target), id(T)) -> (target, its rows of T), "of": the T_all
+        #: what a retarget keeps (_rows_of, lamp_view_terms, _first_bounce_of_lights): ("rows", id(target),
+        #: id(T)), ("lamp terms", id(target)), ("first bounce", channel); ("of",): the T_all of the rows
+        self._kept_rows = {}
         self.condition_warnings = []  # what factors() found (a retargeted problem keeps them)
         self.transfer_seconds = None
         self.warnings = []
@@ -628,6 +630,7 @@ class InverseProblem:
                         self._kept_rows[("lamp terms", id(target))] = block
                 blocks.append(block[2])
             X = rows._stacked(blocks)
+            self._prune_kept(rows)
         return None if X is None else (np.asarray(idx, dtype=np.int64), X)
 
     def _leave_out_implausible(self):
@@ -757,24 +760,32 @@ class InverseProblem:
             shared = {}
             return [shared.setdefault(id(t), np.ascontiguousarray(rows.of(t))) for t in T_all]
         kept = self._kept_rows
-        if kept.get("of") is not T_all:
+        if kept.get(("of",)) is not T_all:
             kept.clear()
-            kept["of"] = T_all
+            kept[("of",)] = T_all
         shared = {}
         for t in T_all:
             if id(t) in shared:
                 continue
             blocks = []
             for target in rows.targets:
-                block = kept.get((id(target), id(t)))
+                block = kept.get(("rows", id(target), id(t)))
                 if block is None or block[0] is not target:
                     M = sp.csr_matrix(target.rows(self.n_patches), dtype=np.float64).sorted_indices()
                     block = (target, np.asarray(M @ t))
                     if target.kept_by_retarget:
-                        kept[(id(target), id(t))] = block
+                        kept[("rows", id(target), id(t))] = block
                 blocks.append(block[1])
             shared[id(t)] = np.ascontiguousarray(rows._stacked(blocks))
+        self._prune_kept(rows)
         return [shared[id(t)] for t in T_all]
+
+    def _prune_kept(self, rows) -> None:
+        """_kept_rows keeps the blocks of this problem's own targets and of ``rows``' (the last
+        stroke's: a view target painted anew is the next stroke's too), no others (each a few MB)."""
+        live = {id(t) for t in list(rows.targets) + list(self.target_rows.targets)}
+        for key in [k for k in self._kept_rows if k[0] in ("rows", "lamp terms") and k[1] not in live]:
+            del self._kept_rows[key]
 
     def add_lights(self, lights, columns, excess=None):
         """Extend the problem to ``lights`` (a LightSet: the problem's lights followed by new ones,

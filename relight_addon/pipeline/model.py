@@ -293,14 +293,15 @@ def light_colour_of(problem, options) -> tuple:
     return (None if mode.free else mode), note
 
 
-def retarget_model(model: Model, faces: FaceSet, patches: PatchSet) -> Model:
+def retarget_model(model: Model, faces: FaceSet, patches: PatchSet, kept=()) -> Model:
     """A solved model (inverse mode) with the paint of ``faces`` on its own patches (``patches``:
     the model's mesh, each patch its face's target): the same lights (the lamps offered and
     refined for the earlier targets among them), form factors, solvers and fixed light; the
-    problem retargeted (InverseProblem.retarget: rows of the transfer to every patch)."""
+    problem retargeted (InverseProblem.retarget: rows of the transfer to every patch). Its targets
+    and ``kept`` (an earlier stroke's) are taken again where they serve (scene_targets)."""
     t0 = time.perf_counter()
     problem = model.problem.retarget(scene_targets(faces, patches, model.form_factors,
-                                                   kept=model.problem.target_rows.targets))
+                                                   kept=list(model.problem.target_rows.targets) + list(kept)))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

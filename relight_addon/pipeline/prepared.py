@@ -220,6 +220,7 @@ class PreparedScene:
     _clustered: "_Clusters" = None  # _clusters(): paint-independent, computed once per mesh
     _face_area: np.ndarray = None  # checks.face_areas of the prepared scene's faces (geometry only)
     _nnls_start: np.ndarray = None  # the last solve's or stroke's all-lights NNLS (the next certificate's start)
+    _stroke_targets: list = field(default_factory=list)  # the last stroke's targets kept_by_retarget (the next's)
     _products: object = None  # bounces.ColumnProducts of the model's transfer to every patch (column_products)
     lamps: KeptLamps = field(default_factory=KeptLamps)  # the candidate lamps' irradiance on the kept mesh
     drawn: dict = field(default_factory=dict)  # the last estimate's work: {"rays cast", "kernel rows drawn", ...}
@@ -551,7 +552,8 @@ class PreparedScene:
             self._face_area = face_areas(faces)
         check_solvable(faces, notes, area=self._face_area)
         t0 = time.perf_counter()
-        model = retarget_model(self.model, faces, self.painted(faces))
+        model = retarget_model(self.model, faces, self.painted(faces), kept=self._stroke_targets)
+        self._stroke_targets = [t for t in model.problem.target_rows.targets if t.kept_by_retarget]
         with one_blas_thread():  # (small products: a second thread costs more than it gives)
             outcome = jobs.solve_stroke(model, self.options, polygon_counts, progress, cancel, t0=t0,
                                         initial=dict(self.starts),  # (the last solve's: of the paint alone)

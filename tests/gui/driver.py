@@ -733,9 +733,9 @@ def view_target(scene):
 
 
 def live_on_view_target(scene, found, img):
-    """Live on, the view target painted again in the Image Editor: Live's answers are of the pixels
-    prepared, so it pauses and names the view target (it never says "up to date" of paint it did
-    not read); ESC turns it off."""
+    """Live on, the view target painted again in the Image Editor: Live follows it as a stroke (its
+    answer's rows are of the new pixels), never says "up to date" of paint it did not read, and the
+    brush does not stall; ESC turns it off."""
     live = mods()["blender.live"]
     yield from press(found, "bpy.ops.relight.live()", settle=1.0)
     s = live.session(scene)
@@ -747,24 +747,30 @@ def live_on_view_target(scene, found, img):
     if not check("the painted view target is still in an Image Editor", areas, [a.type for a in window().screen.areas]):
         return
     before = np.asarray(img.pixels[:], dtype=np.float32)[3::4].copy()
+    spec, updates = (s._faces or s.base.exp.faces).view_target, s.updates
     reg = region("WINDOW", areas[0])
     cx, cy = to_screen(reg, reg.width // 2, reg.height // 3)
     move(cx - 60, cy)
     yield 0.5
+    t0 = time.monotonic()
     xdo("mousedown", "1")
     for dx in range(-60, 61, 10):
         move(cx + dx, cy)
         yield 0.05
     xdo("mouseup", "1")
-    yield from wait_for(lambda: s.paused, 20)
+    yield from wait_for(lambda: s.updates > updates and s.worker is None or s.paused, 120)
+    took = time.monotonic() - t0
     yield 1.0
     changed = int((np.asarray(img.pixels[:], dtype=np.float32)[3::4] != before).sum())
+    now = s._faces.view_target if s._faces is not None else None
     shot("20b_live_view_target_painted")
     text = yield from reports()
-    check("a stroke on the view target in the Image Editor with Live on pauses Live and names the view target",
-          changed > 0 and s.paused is not None and "view target" in s.paused
-          and not any("Relight Live:" in t for t in text),
-          f"{changed} pixels changed; {live.status_text(s)}; reports {text[-2:]}")
+    check("a stroke on the view target in the Image Editor with Live on is answered as a stroke",
+          changed > 0 and s.paused is None and s.updates > updates and now is not None and now is not spec
+          and int(now.painted.sum()) > int(spec.painted.sum()) and not any("Relight Live:" in t for t in text),
+          f"{changed} pixels changed, painted {int(spec.painted.sum())} -> "
+          f"{None if now is None else int(now.painted.sum())}; answered {took:.1f} s after the stroke began; "
+          f"{live.status_text(s)}; reports {text[-2:]}")
     move(*viewport_center())
     xdo("key", "Escape")
     yield 2.0
