@@ -594,6 +594,18 @@ def wait_for(cond, timeout):
     return cond()
 
 
+def live_on(scene, found, name):
+    """Live's button pressed (``found``: the sidebar's buttons): its session once its first answer is
+    in and it is up to date, else None (checked as ``name``)."""
+    live = mods()["blender.live"]
+    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
+    s = live.session(scene)
+    ok = check(name, s is not None and (
+        yield from wait_for(lambda: s.base is not None and s.worker is None and s.status == "up to date", 300)),
+        None if s is None else live.status_text(s))
+    return s if ok else None
+
+
 def live_watch(scene):
     """Issue 35 (cases 13, 14): with Live on, a candidate hidden from renders and an object deleted
     with the Delete key pause Live, the object named in the sidebar's line and the status bar, the
@@ -602,11 +614,8 @@ def live_watch(scene):
     live, operators, results = m["blender.live"], m["blender.ui.operators"], m["blender.results"]
     set_active(scene.objects["floor_0"])
     found = yield from probe_sidebar()
-    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
-    s = live.session(scene)
-    if not check("Live turns on again (after Clear: a full solve first)", s is not None and (
-            yield from wait_for(lambda: s.base is not None and s.worker is None and s.status == "up to date", 300)),
-            None if s is None else live.status_text(s)):
+    s = yield from live_on(scene, found, "Live turns on again (after Clear: a full solve first)")
+    if s is None:
         return
 
     def said(text, name):
@@ -737,11 +746,8 @@ def live_on_view_target(scene, found, img):
     answer's rows are of the new pixels), never says "up to date" of paint it did not read, and the
     brush does not stall; ESC turns it off."""
     live = mods()["blender.live"]
-    yield from press(found, "bpy.ops.relight.live()", settle=1.0)
-    s = live.session(scene)
-    if not check("Live turns on with a view target used", s is not None and (
-            yield from wait_for(lambda: s.base is not None and s.worker is None and s.status == "up to date", 300)),
-            None if s is None else live.status_text(s)):
+    s = yield from live_on(scene, found, "Live turns on with a view target used")
+    if s is None:
         return
     areas = [a for a in window().screen.areas if a.type == "IMAGE_EDITOR" and a.spaces.active.image == img]
     if not check("the painted view target is still in an Image Editor", areas, [a.type for a in window().screen.areas]):
