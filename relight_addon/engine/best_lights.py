@@ -122,12 +122,17 @@ def _digest(t) -> bytes:
                                                                                                    "ascii")
 
 
+def _keep(store, limit, key, value):
+    """``value`` kept in ``store`` under ``key``, the oldest dropped beyond ``limit``; returned."""
+    store[key] = value
+    while len(store) > limit:
+        del store[next(iter(store))]
+    return value
+
+
 def _keep_gram(key, G):
     G.setflags(write=False)
-    _GRAMS[key] = G
-    while len(_GRAMS) > GRAMS_KEPT:
-        del _GRAMS[next(iter(_GRAMS))]
-    return G
+    return _keep(_GRAMS, GRAMS_KEPT, key, G)
 
 
 def gram(t) -> np.ndarray:
@@ -1200,9 +1205,7 @@ def _all_lights_nnls(model, nnls_start=None) -> tuple:
     if kept is None:
         kept = _all_lights_nnls_of(model, nnls_start)
         if nnls_start is None:
-            _ALL_LIGHTS[model.content] = kept
-            while len(_ALL_LIGHTS) > ALL_LIGHTS_KEPT:
-                del _ALL_LIGHTS[next(iter(_ALL_LIGHTS))]
+            _keep(_ALL_LIGHTS, ALL_LIGHTS_KEPT, model.content, kept)
     return kept[0].copy(), kept[1].copy()
 
 
