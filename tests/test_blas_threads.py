@@ -48,3 +48,33 @@ def test_given_back_after_an_error_and_across_threads():
         t.join()
     assert seen == [{1}] * 3
     assert blas_threads_now() == before
+
+
+def test_the_controller_is_made_once_and_before_a_stroke(monkeypatch):
+    """The ThreadpoolController lists the loaded libraries (17 ms, which Live's first stroke paid
+    in its one_blas_thread): made once, shared by every span, and made by PreparedScene.prepare_live
+    (before the first stroke: the worker's prewarm)."""
+    made = []
+    real = blas_threads.ThreadpoolController
+    monkeypatch.setattr(blas_threads, "ThreadpoolController", lambda: made.append(1) or real())
+    monkeypatch.setattr(blas_threads, "_CONTROLLER", [])
+    first = blas_threads.controller()
+    with blas_threads.one_blas_thread():
+        pass
+    assert blas_threads.controller() is first and len(made) == 1
+    from relight_addon.pipeline import prepared
+
+    monkeypatch.setattr(blas_threads, "_CONTROLLER", [])
+
+    class Problem:  # (what prepare_live reads of the model: nothing kept by retarget here)
+        target_rows = type("Rows", (), {"targets": []})()
+
+        def all_rows_transfer(self):
+            return None
+
+    state = prepared.PreparedScene.__new__(prepared.PreparedScene)
+    state.model = type("Model", (), {"problem": Problem()})()
+    monkeypatch.setattr(prepared.PreparedScene, "_clustered_faces", lambda self: None)
+    monkeypatch.setattr(prepared, "face_areas", lambda faces: None)
+    state.prepare_live(None)
+    assert len(blas_threads._CONTROLLER) == 1 and len(made) == 2

@@ -567,7 +567,7 @@ def test_a_tall_fit_on_the_gram_factor_is_scipys_nnls(seed):
 def test_the_all_lights_nnls_is_computed_once_per_problem():
     """The light colour's choice, the certificate and the report each ask lower_bounds for the
     all-lights NNLS of one problem (a view target's: 0.28 s each): computed once per content; the
-    same targets changed, or another start, computed anew."""
+    same targets changed, computed anew."""
     T, b, _ = geo_problem(11, m=40, n=30)
     calls = []
     real = bl._nnls
@@ -588,3 +588,47 @@ def test_the_all_lights_nnls_is_computed_once_per_problem():
         assert np.all(bl.lower_bounds(T, b, 1, exhaustive_limit=0).nnls_exitance >= 0)
     finally:
         bl._nnls = real
+
+
+def test_a_strokes_warm_all_lights_nnls_serves_the_later_cold_ask():
+    """A Live stroke's quick answer takes the all-lights NNLS from the earlier answer's lights
+    (``nnls_start``), its later answer's full search asks it cold of the same problem: computed
+    once, the optimum of a cold NNLS (scipy's on every light)."""
+    T, b, _ = geo_problem(23, m=40, n=30)
+    start = bl.lower_bounds(T, b * 1.3, 1, exhaustive_limit=0).nnls_exitance  # (an earlier paint's optimum)
+    warm_calls, cold_calls = [], []
+    real_from, real = bl._nnls_from, bl._nnls
+    try:
+        bl._nnls_from = lambda *a: warm_calls.append(1) or real_from(*a)
+        bl._nnls = lambda M, v: cold_calls.append(1) or real(M, v)
+        warm = bl.lower_bounds(T, b, 1, exhaustive_limit=0, nnls_start=start)
+        assert len(warm_calls) == 3
+        del cold_calls[:]  # (the working sets' fits)
+        cold = bl.lower_bounds(T, b, 1, exhaustive_limit=0)
+    finally:
+        bl._nnls_from, bl._nnls = real_from, real
+    assert len(warm_calls) == 3 and not cold_calls  # (the cold ask took the warm answer)
+    assert cold.nnls == warm.nnls and np.array_equal(cold.nnls_exitance, warm.nnls_exitance)
+    scipy_cold = np.sqrt(sum(sopt.nnls(T[c], b[:, c])[1] ** 2 for c in range(3)))
+    assert cold.nnls == pytest.approx(scipy_cold * (1 - bl.BOUND_MARGIN), rel=1e-9)
+
+
+def test_a_halt_stops_the_all_lights_nnls_between_channels():
+    """A newer stroke's halt heard before each channel's all-lights NNLS (30-90 ms each on the
+    living room, holding the interpreter): Cancelled, nothing kept, the next ask computes it whole."""
+    from relight_addon.engine.sampling import Cancelled
+
+    T, b, _ = geo_problem(29, m=40, n=30)
+    calls = []
+    real = bl._nnls
+    try:
+        bl._nnls = lambda M, v: calls.append(1) or real(M, v)
+        with pytest.raises(Cancelled):
+            bl.lower_bounds(T, b, 1, exhaustive_limit=0, halt=lambda: len(calls) >= 1)
+        assert len(calls) == 1  # (the first channel's, then the halt)
+        whole = bl.lower_bounds(T, b, 1, exhaustive_limit=0, halt=lambda: False)
+        assert len(calls) == 4
+    finally:
+        bl._nnls = real
+    scipy_cold = np.sqrt(sum(sopt.nnls(T[c], b[:, c])[1] ** 2 for c in range(3)))
+    assert whole.nnls == pytest.approx(scipy_cold * (1 - bl.BOUND_MARGIN), rel=1e-9)

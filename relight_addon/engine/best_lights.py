@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 import scipy.optimize as sopt
+from .sampling import Cancelled
 from .units import TINY
 
 __all__ = [
@@ -1005,15 +1006,16 @@ def _monotone(curve):
 
 
 def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, nnls_start=None, upper=None,
-                            **kw):
+                            halt=None, **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
     exact, and the swap search starts from there above (best_k_curve enumerates nothing again:
     the certificate's enumeration reaches at least as far). ``initial`` (best_k_curve's: a list
     indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others;
-    ``nnls_start``: lower_bounds'. Returns (curve, bounds)."""
+    ``nnls_start``, ``halt``: lower_bounds'. Returns (curve, bounds)."""
     model = _Model(T, b, light_watts, upper)  # one for both (its Gram matrices, its fits)
-    bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit, nnls_start=nnls_start, _model=model)
+    bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit, nnls_start=nnls_start, _model=model,
+                          halt=halt)
     given = kw.pop("initial", None) or {}
     starts = dict(given) if isinstance(given, dict) else {k + 1: st for k, st in enumerate(given)}
     starts.update({k + 1: st for k, st in enumerate(bounds.optimum_lights) if st is not None})
@@ -1142,7 +1144,7 @@ def _exhaustive(model, k_top, chunk=50000):
     return best_err2, best_sets
 
 
-def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=None, upper=None):
+def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=None, upper=None, halt=None):
     """Certificate: a lower bound on the best error with at most k non-negative lights, k = 1..k_max.
 
     The all-lights NNLS error bounds every k. For every k with at most ``exhaustive_limit``
@@ -1155,7 +1157,10 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
     is also a bound for fewer lights, so each k takes the largest valid bound of k..k_max.
     ``nnls_start``: an earlier, nearby problem's all-lights NNLS exitance (n, 3) (``nnls_exitance``
     of a Live stroke's bounds): its active lights start a working-set NNLS (``_nnls_from``),
-    the same optimum, sooner. Returns a :class:`LowerBounds`.
+    the same optimum, sooner. ``halt()`` returning True stops it (sampling.Cancelled) before each
+    channel's all-lights NNLS (30-90 ms on the living room, holding the interpreter: Live's next
+    stroke waited for the three when it came during a later answer's certificate). Returns a
+    :class:`LowerBounds`.
 
     With bounds (``upper`` (n,), best_k_curve's), every configuration of k lights within them is a
     configuration of all the lights within them, so the all-lights *bounded* least squares bounds
@@ -1167,7 +1172,7 @@ def lower_bounds(T, b, k_max, exhaustive_limit=300_000, nnls_start=None, _model=
     k_max = int(k_max)
     if k_max < 1:
         raise ValueError(f"k_max must be at least 1, got {k_max}")
-    err2, e_nnls = _all_lights_nnls(model, nnls_start)
+    err2, e_nnls = _all_lights_nnls(model, nnls_start, halt)
     nnls_err = math.sqrt(max(err2.sum(), 0.0)) * (1 - BOUND_MARGIN)
     k_exh = 0
     while k_exh < min(k_max, model.n) and _n_subsets(model.n, k_exh + 1) <= exhaustive_limit:
@@ -1197,25 +1202,28 @@ _ALL_LIGHTS = {}
 ALL_LIGHTS_KEPT = 4
 
 
-def _all_lights_nnls(model, nnls_start=None) -> tuple:
+def _all_lights_nnls(model, nnls_start=None, halt=None) -> tuple:
     """(squared error per channel (3,), exitance (n, 3)): the all-lights NNLS optimum, from
-    ``nnls_start``'s active lights where given (lower_bounds); computed cold once per content
-    (a view target's problem: 0.28 s, asked three times by a solve)."""
-    kept = _ALL_LIGHTS.get(model.content) if nnls_start is None else None
+    ``nnls_start``'s active lights where given (lower_bounds); computed once per content (a view
+    target's problem: 0.28 s, asked three times by a solve; a Live stroke's quick answer, from the
+    earlier answer's lights, and its later answer's full search on the same problem: 30-90 ms).
+    ``halt``: lower_bounds'."""
+    kept = _ALL_LIGHTS.get(model.content)
     if kept is None:
-        kept = _all_lights_nnls_of(model, nnls_start)
-        if nnls_start is None:
-            _keep(_ALL_LIGHTS, ALL_LIGHTS_KEPT, model.content, kept)
+        kept = _all_lights_nnls_of(model, nnls_start, halt)
+        _keep(_ALL_LIGHTS, ALL_LIGHTS_KEPT, model.content, kept)
     return kept[0].copy(), kept[1].copy()
 
 
-def _all_lights_nnls_of(model, nnls_start) -> tuple:
+def _all_lights_nnls_of(model, nnls_start, halt=None) -> tuple:
     cols = np.flatnonzero(model.usable)
     err2 = model.bb.copy()
     e_nnls = np.zeros((model.n, 3))
     if len(cols):
         for c in model.chans:
             A = model.T[c][:, cols]
+            if halt is not None and halt():
+                raise Cancelled("solve cancelled")
             if model.upper is not None:
                 x = _bounded(A, model.b[:, c], model.upper[cols])
             elif nnls_start is not None and np.shape(nnls_start) == (model.n, 3):

@@ -23,7 +23,7 @@ try:
 except ImportError:  # (a Python without it: BLAS keeps its threads)
     ThreadpoolController = None
 
-__all__ = ["AVAILABLE", "one_blas_thread"]
+__all__ = ["AVAILABLE", "one_blas_thread", "controller"]
 
 #: whether the limit can be set here (threadpoolctl importable)
 AVAILABLE = ThreadpoolController is not None
@@ -39,7 +39,17 @@ def one_blas_thread():
         yield
         return
     with _LOCK:  # (one span at a time: two threads' spans would restore each other's limits)
+        with controller().limit(limits=1, user_api="blas"):
+            yield
+
+
+def controller():
+    """The process's ThreadpoolController (None without threadpoolctl), made at the first call: it
+    lists the loaded libraries (17 ms, which Live's first stroke paid: PreparedScene.prepare_live
+    makes it before)."""
+    if not AVAILABLE:
+        return None
+    with _LOCK:
         if not _CONTROLLER:
             _CONTROLLER.append(ThreadpoolController())
-        with _CONTROLLER[0].limit(limits=1, user_api="blas"):
-            yield
+        return _CONTROLLER[0]

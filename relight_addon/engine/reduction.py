@@ -211,7 +211,8 @@ class Selection:
     (given as keywords): the problem, the starting configuration e_x (n_lights, 3), the
     distributor (None for selections that do not redistribute), ``record(lights, exitance,
     changed)`` to add a configuration to the curve, ``step(done, total)`` returning True when
-    cancelled, and ``max_steps`` for constructions. A selection that computes the certificate
+    cancelled (the curve stops where it is), ``cancel()`` the job's own (None: none; a long call
+    that hears it raises sampling.Cancelled at once), and ``max_steps`` for constructions. A selection that computes the certificate
     (lower bounds) on the way gives it in ``certificate``."""
 
     problem: InverseProblem
@@ -223,6 +224,7 @@ class Selection:
     max_lights: int | None = None  # the stop criterion (selections that build a curve per k use it)
     certificate: object = None  # set by the selection: best_lights.LowerBounds, or left None
     stroke: StrokeStart | None = None  # a stroke's re-solve (Live): the selection's quicker search, where it has one
+    cancel: object = None
 
 
 class _ErrorEval:
@@ -378,7 +380,7 @@ def reduce_lights(problem: InverseProblem, e_x, selection="exitance-elimination"
     curve = _Curve(_ErrorEval(work, error_route, compare_cold=gs_compare_cold),
                    problem.target_norm if problem.target_norm > 0 else 1.0, progress, cancel)
     dist = Distributor(work, distribution) if selection.traits.distributes else None
-    sel = Selection(work, e_x, dist, curve.record, curve.step, max_steps, stop.max_lights, stroke=stroke)
+    sel = Selection(work, e_x, dist, curve.record, curve.step, max_steps, stop.max_lights, stroke=stroke, cancel=cancel)
     notes = selection(sel) or []
     if not curve.points:
         raise ValueError("the reduction produced no configuration")

@@ -81,7 +81,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..engine.blas_threads import one_blas_thread
+from ..engine.blas_threads import controller as blas_controller, one_blas_thread
 from ..engine.by_content import digest
 from ..engine.bounces import ColumnProducts
 from ..engine.candidate_lamps import lamp_key, lamps_irradiance, plan_lamps
@@ -519,9 +519,10 @@ class PreparedScene:
         """What every live stroke reads, made once before the first (Live's worker): the transfer
         from every light to every patch, the rows of it of the targets a stroke keeps (a camera-view
         target's: InverseProblem._rows_of, 1.1 s on the living room), the faces the patch model
-        clustered, the face areas."""
+        clustered, the face areas, the BLAS controller a stroke's one_blas_thread sets (17 ms)."""
         problem = self.model.problem
         problem.all_rows_transfer()
+        blas_controller()
         if any(t.kept_by_retarget for t in problem.target_rows.targets):
             problem.retarget(list(problem.target_rows.targets))
         self._clustered_faces()

@@ -58,7 +58,7 @@ def greedy_swap(s):
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
                                             cancel=lambda: stop["cancel"], progress=progress,
                                             nnls_start=stroke.nnls_start if stroke is not None else None,
-                                            upper=p.light_upper, **quick)
+                                            upper=p.light_upper, halt=s.cancel, **quick)
     if both and not stop["cancel"]:
         T = column_subset(p.transfer, surface)
         cells = best_k_curve(T, p.b_target, min(k_max, len(surface)), p.light_watts[surface], upper=p.light_upper[surface],
