@@ -2,7 +2,8 @@
 surface paint and a 480 x 270 OpenEXR asking 0.1 W m^-2 sr^-1 of every pixel, loaded as the view
 target), prepared as Live prepares it (PreparedScene: a solve, then prepare_live), then a stroke's
 re-solve (PreparedScene.live, in this thread) for strokes of 12 floor faces, with the view target
-used and without, and for the view target painted anew (its top half freed: another ViewSpec);
+used and without, and for the view target painted anew (``repaints``: a dab brighter, the dab
+erased, the top half freed: each another ViewSpec);
 each stroke's seconds and final relative error, and a cold solve (jobs.run_solve) of the last
 paint with its error.
 
@@ -42,6 +43,23 @@ def strokes(faces, n=3):
         yield replace(faces, target=tgt, target_radiosity=rad)
 
 
+def repaints(view, radius=24):
+    """(what, ViewSpec) of the view target painted anew, one after the other (Live's strokes in the
+    Image Editor): a dab of ``radius`` pixels twice as bright, then the same dab erased (its pixels
+    free), then the top half freed."""
+    H, W = view.painted.shape
+    r, c = np.mgrid[:H, :W]
+    dab = (r - H // 2) ** 2 + (c - W // 3) ** 2 <= radius ** 2
+    radiance = view.radiance.copy()
+    radiance[dab] *= 2.0
+    yield "view target, a dab twice as bright", ViewSpec(view.camera, radiance, view.painted, view.name)
+    painted = view.painted & ~dab
+    yield "view target, the dab erased", ViewSpec(view.camera, radiance, painted, view.name)
+    painted = painted.copy()
+    painted[: H // 2] = False
+    yield "view target, its top half freed", ViewSpec(view.camera, radiance, painted, view.name)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=None)
@@ -72,16 +90,17 @@ def main():
             out = st.live(f, inputs["polygon_counts"])
             rows.append((time.perf_counter() - t, out.reduction.final.relative_error, "floor"))
             last = f
-        if use_view:  # the view target painted anew: its top half freed
-            painted = view.painted.copy()
-            painted[: painted.shape[0] // 2] = False
-            last = replace(last, view_target=ViewSpec(view.camera, view.radiance, painted, view.name))
-            for what in ("view target, painted anew", "floor again, the new view target kept"):
+        if use_view:  # the view target painted anew: a dab brighter, a dab erased, its top half freed
+            for what, spec in repaints(view):
+                last = replace(last, view_target=spec)
                 t = time.perf_counter()
                 out = st.live(last, inputs["polygon_counts"])
                 rows.append((time.perf_counter() - t, out.reduction.final.relative_error, what))
-                if what.startswith("view"):
-                    last = next(strokes(last, 1))
+            last = next(strokes(last, 1))
+            t = time.perf_counter()
+            out = st.live(last, inputs["polygon_counts"])
+            rows.append((time.perf_counter() - t, out.reduction.final.relative_error,
+                         "floor again, the new view target kept"))
         print(f"view target {'used' if use_view else 'none'}: solve {t1 - t0:.1f} s, prepare_live {t2 - t1:.1f} s")
         for s, err, what in rows:
             print(f"  stroke on the {what}: {1e3 * s:.0f} ms, relative error {err:.4f}")

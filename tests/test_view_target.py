@@ -501,3 +501,75 @@ def test_a_strokes_retarget_keeps_the_view_targets_rows(glossy_room, monkeypatch
         for c in range(3):
             assert np.array_equal(got.transfer[c], anew.transfer[c])
         assert np.array_equal(got.b_target, anew.b_target)
+
+
+def test_a_repainted_view_target_makes_only_the_rows_of_the_patches_whose_pixels_changed(glossy_room, monkeypatch):
+    """A Live stroke that repaints part of the view target (the image painted anew, another colour
+    elsewhere) builds a new target: the patches that see the same painted pixels as the target
+    before take its rows again (``from_scene``'s ``kept``), only the others' are made (view_rows,
+    1.3 s for the whole image on the living room); the target is the one built anew, bit for bit.
+    Another camera or other form factors take nothing."""
+    import relight_addon.engine.targets.view as view_mod
+
+    faces, patches, F = glossy_room
+    cam = camera()
+    H, W = cam.height, cam.width
+    painted = np.zeros((H, W), bool)
+    painted[4:30, 6:58] = True
+    first = ViewSpec(cam, np.full((H, W, 3), 0.1), painted, "t")
+    radiance = first.radiance.copy()
+    radiance[4:30, 6:20] = (0.3, 0.2, 0.1)  # (another colour: the same pixels, the same rows)
+    more = painted.copy()
+    more[30:34, 40:58] = True  # (more pixels: their patches' rows made anew)
+    second = ViewSpec(cam, radiance, more, "t")
+    calls = []
+    real = view_mod.view_rows
+    monkeypatch.setattr(view_mod, "view_rows", lambda *a, **k: calls.append(len(a[4])) or real(*a, **k))
+    try:
+        faces.view_target = first
+        before = ViewTarget.from_scene(faces, patches, F)
+        n_all = len(calls)
+        faces.view_target = second
+        taken = ViewTarget.from_scene(faces, patches, F, kept=[before])
+        n_taken = len(calls) - n_all
+        anew = ViewTarget.from_scene(faces, patches, F)
+        n_anew = len(calls) - n_all - n_taken
+        faces.view_target = ViewSpec(camera(origin=(2.0, 0.35, 1.6)), radiance, more, "t")
+        n0 = len(calls)
+        ViewTarget.from_scene(faces, patches, F, kept=[taken])
+        assert len(calls) - n0 == n_anew  # (another camera: every row made)
+        faces.view_target = second
+        n0 = len(calls)
+        ViewTarget.from_scene(faces, patches, compute_form_factors(patches, QUALITY["default"], seed=2), kept=[taken])
+        assert len(calls) - n0 == n_anew  # (other form factors: every row made)
+    finally:
+        faces.view_target = None
+    assert 0 < n_taken < n_anew, (n_taken, n_anew)  # (the glossy patches the new pixels fall on)
+    assert (taken.matrix != anew.matrix).nnz == 0 and taken.matrix.shape == anew.matrix.shape
+    for a, b in ((taken.values, anew.values), (taken.offset, anew.offset), (taken.pixel_row, anew.pixel_row),
+                 (taken.hits.pixel, anew.hits.pixel)):
+        assert np.array_equal(a, b)
+    assert all(np.array_equal(a, b) for a, b in zip(taken.glossy_rows, anew.glossy_rows))
+    assert taken.channel_spread == anew.channel_spread
+    assert taken.rows_taken[0] is before and anew.rows_taken is None
+    # the stroke's rows of the transfer to every patch: the rows taken copied from the target
+    # before's product (kept by the problem), the same bits as the product computed anew
+    from relight_addon.engine import inverse as inverse_mod
+    from relight_addon.engine.first_reflection import first_bounce
+
+    mask = candidate_mask(patches, "inverse") & (patches.normal[:, 2] < -0.9)
+    problem = InverseProblem(F, patches.area, patches.reflectance, [before], mask, patches.center, patches.normal,
+                             first_bounce=first_bounce(faces, patches, F, mask))
+    problem.all_rows_transfer()
+    problem.retarget([before])  # (its product kept: the last stroke's)
+    products = []
+    real_product = inverse_mod._product
+    monkeypatch.setattr(inverse_mod, "_product", lambda M, t, tk, kept: products.append(
+        kept.get(("rows", id(before), id(t))) is not None and tk is not None) or real_product(M, t, tk, kept))
+    got = problem.retarget([taken])
+    monkeypatch.setattr(inverse_mod, "_product", real_product)
+    want = problem.retarget([anew])
+    assert products and all(products)  # (each channel's product took the rows of the one before)
+    for c in range(3):
+        assert np.array_equal(got.transfer[c], want.transfer[c])
+    assert np.array_equal(got.b_target, want.b_target)

@@ -772,7 +772,7 @@ class InverseProblem:
                 block = kept.get(("rows", id(target), id(t)))
                 if block is None or block[0] is not target:
                     M = sp.csr_matrix(target.rows(self.n_patches), dtype=np.float64).sorted_indices()
-                    block = (target, np.asarray(M @ t))
+                    block = (target, _product(M, t, target.rows_taken, kept))
                     if target.kept_by_retarget:
                         kept[("rows", id(target), id(t))] = block
                 blocks.append(block[1])
@@ -1072,3 +1072,19 @@ def solve_inverse(problem: InverseProblem, solver="svd", rcond=None, svd_driver=
     return InverseResult(solver=solver, exitance=e, rank=int(out.rank), error=err, relative_error=rel,
                          n_negative=int((e < 0).any(axis=1).sum()), seconds=seconds,
                          rcond=out.rcond, warnings=warns)
+
+
+def _product(M, t, taken, kept) -> np.ndarray:
+    """M @ t (M sparse (k, P), t (P, n)), the rows its target took from an earlier target
+    (``taken``: Target.rows_taken, a repainted view target's unchanged patches') copied from that
+    target's product when ``kept`` (InverseProblem._kept_rows) holds it for this t: row by row the
+    same bits, the others' product only (a view target's 941 rows by 844 lights: 0.3 s a stroke)."""
+    earlier = None if taken is None else kept.get(("rows", id(taken[0]), id(t)))
+    if earlier is None or earlier[0] is not taken[0]:
+        return np.asarray(M @ t)
+    _, new, old = taken
+    out = np.empty((M.shape[0], t.shape[1]))
+    out[new] = earlier[1][old]
+    rest = np.setdiff1d(np.arange(M.shape[0]), new)
+    out[rest] = np.asarray(M[rest] @ t)
+    return out

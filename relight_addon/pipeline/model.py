@@ -297,11 +297,12 @@ def retarget_model(model: Model, faces: FaceSet, patches: PatchSet, kept=()) -> 
     """A solved model (inverse mode) with the paint of ``faces`` on its own patches (``patches``:
     the model's mesh, each patch its face's target): the same lights (the lamps offered and
     refined for the earlier targets among them), form factors, solvers and fixed light; the
-    problem retargeted (InverseProblem.retarget: rows of the transfer to every patch). Its targets
-    and ``kept`` (an earlier stroke's) are taken again where they serve (scene_targets)."""
+    problem retargeted (InverseProblem.retarget: rows of the transfer to every patch). ``kept`` (an
+    earlier stroke's targets) and its own are taken again where they serve, or what of them is the
+    same (scene_targets; the last stroke's first: the nearest paint)."""
     t0 = time.perf_counter()
     problem = model.problem.retarget(scene_targets(faces, patches, model.form_factors,
-                                                   kept=list(model.problem.target_rows.targets) + list(kept)))
+                                                   kept=list(kept) + list(model.problem.target_rows.targets)))
     return replace(model, faces=faces, patches=patches, problem=problem, warnings=list(model.warnings),
                    seconds={"meshing": 0.0, "form_factors": 0.0, "lamps": 0.0, "problem": time.perf_counter() - t0},
                    refinement={"passes": 0, "target_change": []}, lamp_refinement=None, direct=None)

@@ -134,9 +134,10 @@ def scene_targets(faces, patches, F=None, kept=()) -> list:
     """The targets of a scene (FaceSet ``faces`` meshed into ``patches``, form factors ``F``): every
     registered kind's (``from_scene``), in registration order. ``kept``: the targets of an earlier
     paint on the same model, each taken again where it ``serves`` (a Live stroke's retarget: a
-    camera-view target's rows took 1.3 s to make on the living room)."""
+    camera-view target's rows took 1.3 s to make on the living room), else given to the kind's
+    ``from_scene`` (what of it is the same: a repainted view target's unchanged patches' rows)."""
     found = (next((t for t in kept if type(t) is kind.impl and t.serves(faces, F)), None)
-             or kind.impl.from_scene(faces, patches, F) for kind in TARGET_KINDS)
+             or kind.impl.from_scene(faces, patches, F, kept) for kind in TARGET_KINDS)
     return [t for t in found if t is not None]
 
 

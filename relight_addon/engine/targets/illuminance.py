@@ -37,7 +37,7 @@ class Illuminance(Target):
         return np.repeat(self.lux[:, None], 3, axis=1)
 
     @classmethod
-    def from_scene(cls, faces, patches, F=None):
+    def from_scene(cls, faces, patches, F=None, kept=()):
         """The patches of faces with an illuminance target (FaceSet.target_lux > 0)."""
         lux = patch_lux(faces, patches)
         if lux is None:

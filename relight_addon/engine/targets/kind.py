@@ -79,9 +79,16 @@ class Target:
         such a row must not count the albedo's excess over rho twice."""
         return None
 
+    #: None, or (an earlier target, rows of this one (r,), its rows (r,)): rows of this target that
+    #: are that target's, bit for bit (a repainted camera-view target's unchanged patches': its
+    #: from_scene with ``kept``); the inverse problem takes their products with the transfer from it
+    rows_taken = None
+
     @classmethod
-    def from_scene(cls, faces, patches, F=None):
-        """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None."""
+    def from_scene(cls, faces, patches, F=None, kept=()):
+        """This kind's target of a scene (FaceSet ``faces`` meshed into ``patches``), or None.
+        ``kept``: the targets an earlier paint made on the same model (a Live stroke's), whose work
+        a kind may take again where it is the same."""
         return None
 
     def serves(self, faces, F) -> bool:

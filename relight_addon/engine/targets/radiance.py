@@ -30,7 +30,7 @@ class PaintedRadiance(Target):
         return selection_rows(self.patches, n_patches)
 
     @classmethod
-    def from_scene(cls, faces, patches, F=None):
+    def from_scene(cls, faces, patches, F=None, kept=()):
         """The painted patches that are no illuminance target (engine/targets/illuminance.py)."""
         mask = np.asarray(patches.target, dtype=bool)
         lux = patch_lux(faces, patches)
