@@ -211,9 +211,10 @@ class Selection:
     (given as keywords): the problem, the starting configuration e_x (n_lights, 3), the
     distributor (None for selections that do not redistribute), ``record(lights, exitance,
     changed)`` to add a configuration to the curve, ``step(done, total)`` returning True when
-    cancelled (the curve stops where it is), ``cancel()`` the job's own (None: none; a long call
-    that hears it raises sampling.Cancelled at once), and ``max_steps`` for constructions. A selection that computes the certificate
-    (lower bounds) on the way gives it in ``certificate``."""
+    cancelled (the curve stops where it is), ``cancel()`` the job's own (None: none; a step too
+    long to wait for looks at it and raises sampling.Cancelled: the certificate's all-lights NNLS
+    between channels), and ``max_steps`` for constructions. A selection that computes the
+    certificate (lower bounds) on the way gives it in ``certificate``."""
 
     problem: InverseProblem
     e_x: np.ndarray
