@@ -424,7 +424,8 @@ class ViewTarget(Target):
         self.offset = np.asarray(offset, dtype=np.float64)
         self.channel_spread = float(channel_spread)
         self._F, self._patches, self._faces = F, patches, faces
-        self._blocks = (None, {}, {})  # (build's key, its _pixel_blocks and their first rows: a later paint's build takes them again)
+        # (build's key, its _pixel_blocks and their first rows: a later paint's build takes them again)
+        self._blocks = (None, {}, {})
 
     def serves(self, faces, F) -> bool:
         """The same view target (its spec: the camera, the painted pixels and their radiance) on the
