@@ -361,6 +361,26 @@ def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, mater
             yield i, group, np.r_[i, nb], np.repeat(Wx[:, :, None], 3, axis=2), np.arange(len(group))
 
 
+def _block_rows(blocks) -> dict:
+    """{block key: its rows (arange)} of _pixel_blocks' blocks in the order a target stacks them (a
+    block of W (n_tiles, J, 3) is n_tiles rows)."""
+    out, k = {}, 0
+    for key, (_, W, _) in blocks.items():
+        out[key] = np.arange(k, k + len(W))
+        k += len(W)
+    return out
+
+
+def _rows_taken(earlier, made, kept):
+    """Target.rows_taken of a target whose blocks ``made`` took the blocks ``kept`` of ``earlier``
+    where they were the same (None: none)."""
+    mine, theirs = _block_rows(made), _block_rows(kept)
+    same = [key for key in made if key in kept and made[key] is kept[key]]
+    if not same:
+        return None
+    return (earlier, np.concatenate([mine[key] for key in same]), np.concatenate([theirs[key] for key in same]))
+
+
 def _tile_means(hits, group, tile, n_tiles):
     """(point (n_tiles, 3), direction (n_tiles, 3)): the mean point and unit direction of the pixels
     ``group`` of ``hits`` in each tile (their row's, as _pixel_blocks evaluates a glossy patch's)."""
@@ -424,8 +444,8 @@ class ViewTarget(Target):
         self.offset = np.asarray(offset, dtype=np.float64)
         self.channel_spread = float(channel_spread)
         self._F, self._patches, self._faces = F, patches, faces
-        # (build's key, its _pixel_blocks and their first rows: a later paint's build takes them again)
-        self._blocks = (None, {}, {})
+        # (build's key, its _pixel_blocks in row order: a later paint's build takes them again)
+        self._blocks = (None, {})
 
     def serves(self, faces, F) -> bool:
         """The same view target (its spec: the camera, the painted pixels and their radiance) on the
@@ -529,7 +549,7 @@ class ViewTarget(Target):
         P = patches.n_patches
         key = digest(spec.camera, getattr(faces, "face_material", None), getattr(faces, "material_lobes", None))
         kept = earlier._blocks[1] if earlier is not None and earlier._F is F and earlier._blocks[0] == key else None
-        made, starts, taken = {}, {}, []  # (the blocks, their first rows, the rows taken from ``earlier``)
+        made = {}
         hits = cast_pixels(spec.camera, _sampler(F, patches), np.flatnonzero(spec.painted.reshape(-1)))
         if len(hits.pixel) == 0:
             raise ValueError(f"no painted pixel of the view target {spec.name!r} sees a surface (they see the World "
@@ -561,10 +581,6 @@ class ViewTarget(Target):
             if np.isfinite(alpha[i]):
                 point, d = _tile_means(hits, group, tile, len(W))
                 glossy.append((k + np.arange(len(W)), np.full(len(W), i), point, d, w[:, 0]))
-            block = (i, hits.pixel[group].tobytes())
-            starts[block] = k
-            if kept is not None and block in kept:  # (its rows are the earlier target's, bit for bit)
-                taken.append(np.stack([k + np.arange(len(W)), earlier._blocks[2][block] + np.arange(len(W))]))
             k += len(Gc)
         matrix = sp.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))), shape=(k, P))
         values = np.concatenate(values)
@@ -573,9 +589,9 @@ class ViewTarget(Target):
             (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
         target = cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row, interp,
                      rows, list(getattr(faces, "lamps", None) or ()))
-        target._blocks = (key, made, starts)
-        if taken:
-            target.rows_taken = (earlier, *np.concatenate(taken, axis=1))
+        target._blocks = (key, made)
+        if kept is not None:  # (the rows of the blocks taken are the earlier target's, bit for bit)
+            target.rows_taken = _rows_taken(earlier, made, kept)
         return target
 
     def predict(self, B, lamps=(), own=None) -> np.ndarray:
