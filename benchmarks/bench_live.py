@@ -11,8 +11,11 @@ on the main thread (the lights, the radiosity layer, the chart: operators.show_s
 relative error, the main thread's longest tick while the stroke was read, solved and written (the
 depsgraph update and Live's tick: what the brush would wait for), the process's memory, the time
 from the stroke (its depsgraph update) to the answer written, ticked every live.TICK as the timer
-ticks (Live reads the paint QUIET seconds after the last update), and a cold solve (jobs.run_solve) of the last stroke's painted scene with its error and stages; then Live's first answer against a cold solve
-(the export and jobs.run_solve) of the same, first, paint.
+ticks (Live reads the paint QUIET seconds after the last update), each stroke painted as soon as the
+answer before is written; then a fourth stroke once the later answer to the third has run for
+LATER_AFTER seconds (it is cancelled: what a stroke during a later answer waits); and a cold solve
+(jobs.run_solve) of the last stroke's painted scene with its error and stages; then Live's first
+answer against a cold solve (the export and jobs.run_solve) of the same, first, paint.
 
     .venv/bin/python benchmarks/bench_live.py [--only NAME]
 
@@ -68,6 +71,8 @@ def nbytes(x, seen=None) -> int:
 
 #: the longest main-thread tick (the depsgraph update and Live's tick) since the last stroke, s
 TICKS = []
+#: seconds a later answer (live.LATER_PAUSE after a quick answer) has run when the last stroke comes
+LATER_AFTER = 0.5
 
 
 def rss_gb() -> float:
@@ -133,8 +138,12 @@ def case(name, source, paint_on, model):
     t_rows = s.prewarm_seconds
     ob = bpy.data.objects[paint_on]
     strokes = []
-    for k in range(3):
+    for k in range(4):
         faces, rgb = stroke_faces(ob, 12, k)
+        if k == 3:  # the last stroke once the later answer to the one before has run for LATER_AFTER s
+            run(s, lambda: s.worker is not None and "refining" in s.result)
+            t_later = time.monotonic()
+            run(s, lambda: time.monotonic() - t_later >= LATER_AFTER)
         artist_scenes.paint(ob, faces, rgb)
         n = s.updates
         TICKS.clear()
@@ -147,7 +156,7 @@ def case(name, source, paint_on, model):
                         "error": float(bpy.context.scene.relight.curve[
                             bpy.context.scene.relight.curve_index].relative_error),
                         "targets": int(rep.target.sum()), "longest_tick_s": max(TICKS),
-                        "rss_gb": rss_gb()})
+                        "rss_gb": rss_gb(), "during_later": k == 3})
         print(name, "stroke", k, strokes[-1], flush=True)
     # Solve & Reduce once Live's later answers to the last stroke are in (issue 37: <= 1/5 of a cold
     # solve of the same paint): the operator's export, meshing (its cost estimate), solve and write
@@ -212,12 +221,18 @@ def main():
     print("| scene | triangles | patches | lights | preparation (first answer) | transfer to every patch | kept "
           "| stroke: solve / write | stroke to answer written | error live / cold | cold solve |")
     for r in rows:
-        st = r["strokes"]
+        st = [x for x in r["strokes"] if not x.get("during_later")]
         print(f"| {r['scene']}, {r['model']} | {r['triangles']:,} | {r['patches']:,} | {r['lights']} | "
               f"{r['first_s']:.1f} s | {r['all_rows_s']:.2f} s | {r['kept_bytes'] / 2**20:.0f} MB | "
               + ", ".join(f"{1000 * x['solve_s']:.0f} / {1000 * x['write_s']:.0f} ms" for x in st) + " | "
               + ", ".join(f"{1000 * x['latency_s']:.0f} ms" if "latency_s" in x else "-" for x in st)
-              + f" | {st[-1]['error']:.4f} / {r['cold_error']:.4f} | {r['cold_s']:.1f} s |")
+              + f" | {r['strokes'][-1]['error']:.4f} / {r['cold_error']:.4f} | {r['cold_s']:.1f} s |")
+    print("\n| scene | a stroke during a later answer: solve / write | stroke to answer written | main thread's longest tick |")
+    for r in rows:
+        for x in r["strokes"]:
+            if x.get("during_later"):
+                print(f"| {r['scene']} | {1000 * x['solve_s']:.0f} / {1000 * x['write_s']:.0f} ms | "
+                      f"{1000 * x['latency_s']:.0f} ms | {1000 * x['longest_tick_s']:.0f} ms |")
     print("\n| scene | Live's first answer | a cold solve of the same paint (export + solve) | ratio | error first / cold |")
     for r in rows:
         if "cold_first_s" in r:

@@ -15,11 +15,12 @@ operator's timer):
   newer paint waits, and supersedes it: an answer whose paint is no longer the newest is dropped;
 - an answer for the newest paint is written into the scene (operators.show_solve), and the
   time of the update and its cost are shown;
-- once a stroke's quick answer is written and no newer paint waits, its later answers are
-  computed in the worker, step by step (pipeline.prepared.REFINE_STEPS: the selection's full search
-  and the lamps refined for its targets on the retargeted model, then the warm solve from the
-  prepared state), each written when its error is lower than the answer shown (``refined``; not
-  better: ``kept_quick``); a newer stroke, a pause or ``stop()`` cancels the one running. The quick
+- once a stroke's quick answer is written and no newer paint waits for LATER_PAUSE seconds (the
+  artist paused: a stroke soon after finds the worker idle), its later answers are computed in the
+  worker, step by step (pipeline.prepared.REFINE_STEPS: the selection's full search and the lamps
+  refined for its targets on the retargeted model, then the warm solve from the prepared state),
+  each written when its error is lower than the answer shown (``refined``; not better:
+  ``kept_quick``); a newer stroke, a pause or ``stop()`` cancels the one running. The quick
   answer lost up to 17 % against a cold solve's error; the later ones are within 1 % of it on the
   staircase and the living room (docs/benchmarks.md, issue 37);
 - paint on faces the patch model clustered with others is mapped onto the kept clusters
@@ -77,6 +78,11 @@ STROKE_OPERATORS = ("PAINT_OT_", "SCULPT_OT_")
 #: seconds without a depsgraph update before the paint is read where Blender cannot list the modal
 #: operators running (the brush at rest: a stroke ended, or paused)
 QUIET = 0.04
+#: seconds after a stroke's quick answer is written before its later answers start (the artist has
+#: paused): a stroke that comes sooner finds the worker idle. Started at once, a later answer that
+#: the next stroke cancelled held that stroke 35-50 ms and shared the two CPUs with its solve
+#: (130-147 against 70-94 ms: its LAPACK calls end in the background), on the 22k living room
+LATER_PAUSE = 0.3
 
 
 class LiveSession:
@@ -114,6 +120,7 @@ class LiveSession:
         self.prepared = None  # the job of Live's first answer (a solve of the scene as it was turned on)
         self.prewarm_seconds = None  # the transfer to every patch and the check's products: their time (before the first stroke)
         self.to_refine = None  # (job, the answer shown, its paint, the step): a stroke's next answer
+        self.refine_at = 0.0  # time.monotonic() from which it may start (LATER_PAUSE after a quick answer)
         self.refined = 0  # a stroke's later answers written (better than the one shown: REFINE_STEPS)
         self.kept_quick = 0  # ... not written (not better: the one shown stands)
 
@@ -172,7 +179,8 @@ class LiveSession:
             return
         if self.shown is not None and _same(self.paint, self.shown):
             if self.to_refine is not None and self.to_refine[0] is job and _same(self.to_refine[2], self.paint):
-                self._start_refine(state, *self.to_refine)  # (the stroke's next, better answer)
+                if time.monotonic() >= self.refine_at:
+                    self._start_refine(state, *self.to_refine)  # (the stroke's next, better answer)
             elif self.status != "up to date":
                 self.status = "up to date"
             return
@@ -482,6 +490,7 @@ class LiveSession:
             self.updates += 1
             quick = result.get("quick")
             self.to_refine = None if quick is None else (self.base, quick, solving, 0)
+            self.refine_at = time.monotonic() + LATER_PAUSE
         self.last_update = time.strftime("%H:%M:%S")
         self.last_seconds = (result.get("seconds", outcome.report["timings_s"]["total"]), time.perf_counter() - t0)
         self.status = "up to date"
