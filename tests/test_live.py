@@ -79,6 +79,11 @@ def test_live_mode_follows_strokes_from_the_prepared_model(addon):
     assert bpy.ops.relight.fill_targets() == {"FINISHED"}
     _run(s, lambda: s.updates == 3)
     assert bpy.context.mode == "EDIT_MESH" and s.paused is None
+    # its later answers wait for the artist's pause (live.LATER_PAUSE): a stroke that comes sooner
+    # finds the worker idle, not busy with an answer it would cancel
+    shown = time.monotonic()
+    _run(s, lambda: s.worker is not None or time.monotonic() - shown > live.LATER_PAUSE / 2)
+    assert s.worker is None and s.to_refine is not None and s.to_refine[3] == 0
     # then its later answers (prepared.REFINE_STEPS), each written when better than the one shown
     _run(s, lambda: s.worker is None and s.to_refine is None)
     # (the first stroke's, if the Fill came while they ran, were dropped: cancelled)
