@@ -632,3 +632,28 @@ def test_a_halt_stops_the_all_lights_nnls_between_channels():
         bl._nnls = real
     scipy_cold = np.sqrt(sum(sopt.nnls(T[c], b[:, c])[1] ** 2 for c in range(3)))
     assert whole.nnls == pytest.approx(scipy_cold * (1 - bl.BOUND_MARGIN), rel=1e-9)
+
+
+def test_a_halt_stops_the_curve_within_a_swap_search():
+    """A newer stroke's halt heard before each greedy addition and each swap round of the curve
+    (not only after a whole k: 55 ms of a later answer's search on the living room): Cancelled at
+    the first round after it says so; never saying so, the curve is the one found without it."""
+    from relight_addon.engine.sampling import Cancelled
+
+    T, b, w = geo_problem(31, m=40, n=30)
+    rounds = []
+    real = bl._swap_search
+    try:
+        bl._swap_search = lambda *a, **k: rounds.append(1) or real(*a, **k)
+        heard = []
+        free = bl.best_k_curve(T, b, 4, w, halt=lambda: heard.append(1) and False)
+        n_rounds = len(rounds)
+        assert len(heard) > 4 + n_rounds  # (the additions' and the rounds': more often than once a k)
+        with pytest.raises(Cancelled):
+            bl.best_k_curve(T, b, 4, w, halt=lambda: len(rounds) > n_rounds + 1)
+        assert len(rounds) == n_rounds + 2  # (stopped in the second swap search it started)
+    finally:
+        bl._swap_search = real
+    plain = bl.best_k_curve(T, b, 4, w)
+    assert [tuple(p.lights) for p in free] == [tuple(p.lights) for p in plain]
+    np.testing.assert_array_equal(np.array([p.error for p in free]), np.array([p.error for p in plain]))

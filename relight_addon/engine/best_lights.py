@@ -767,10 +767,12 @@ def _add_one(model, S, fit, score, max_exact):
     return f
 
 
-def _swap_search(model, fit, max_rounds, max_exact):
-    """Best-improvement swaps (one light out, one in) while the error (then the power) drops."""
+def _swap_search(model, fit, max_rounds, max_exact, halt=None):
+    """Best-improvement swaps (one light out, one in) while the error (then the power) drops.
+    ``halt()`` returning True before a round: sampling.Cancelled."""
     rounds = 0
     while rounds < max_rounds:
+        _listen(halt)
         S = np.asarray(fit[0], dtype=np.int64)
         if len(S) == 0:
             break
@@ -792,6 +794,12 @@ def _swap_search(model, fit, max_rounds, max_exact):
     return fit, rounds
 
 
+def _listen(halt):
+    """sampling.Cancelled when ``halt()`` says so (a newer stroke: not kept waiting)."""
+    if halt is not None and halt():
+        raise Cancelled("solve cancelled")
+
+
 def fit_lights(T, b, lights, light_watts=None, upper=None):
     """NNLS per channel on a given set of lights (bounded least squares where ``upper`` (n,) bounds
     them): (lights on, exitance (k, 3), error, power)."""
@@ -802,7 +810,7 @@ def fit_lights(T, b, lights, light_watts=None, upper=None):
 
 def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0, max_swap_rounds=None,
                  max_exact=24, restarts=0, initial=None, exhaustive_limit=20_000, swap_all=True, cancel=None,
-                 progress=None, stats=None, _model=None, upper=None):
+                 progress=None, stats=None, _model=None, upper=None, halt=None):
     """The best configuration found with at most k lights, for k = 1 .. k_max.
 
     ``upper`` (n,): each light's largest strength per channel (inf: none; a catalogue fixture's
@@ -830,7 +838,8 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
     with at most that many subsets of at most k lights, the exact optimum (found by
     :func:`lower_bounds`' enumeration) is such a start too, so small problems get their
     optimum (0 turns it off). ``cancel()`` returning True stops after the current k (the
-    list is then shorter); ``progress(done, total)`` is called after every k. ``stats``:
+    list is then shorter); ``halt()`` returning True stops it within a swap search's round
+    (sampling.Cancelled: no curve). ``progress(done, total)`` is called after every k. ``stats``:
     optional dict filled with counters.
 
     Returns a list of :class:`KLightPoint`, one per k (``point.k``), monotone
@@ -843,7 +852,7 @@ def best_k_curve(T, b, k_max, light_watts=None, swap=True, score="error", seed=0
     model = _model or _Model(T, b, light_watts, upper)
     k_max = _checked_k_max(k_max, model.n)
     search = _KSearch(model, score, max(1, int(max_exact)), max_swap_rounds, swap_all, restarts,
-                      np.random.default_rng(seed), initial)
+                      np.random.default_rng(seed), initial, halt)
     empty = model.fit(())
     cur = empty  # chained configuration (at most k lights)
     curve = []
@@ -889,8 +898,8 @@ class _KSearch:
     """best_k_curve's search at one k: the greedy paths, then the swap searches from every start
     (the paths, the chained configuration, the exact optimum, the initial sets, random restarts)."""
 
-    def __init__(self, model, score, max_exact, max_swap_rounds, swap_all, restarts, rng, initial):
-        self.model, self.score, self.max_exact = model, score, max_exact
+    def __init__(self, model, score, max_exact, max_swap_rounds, swap_all, restarts, rng, initial, halt=None):
+        self.model, self.score, self.max_exact, self.halt = model, score, max_exact, halt
         self.max_swap_rounds, self.swap_all, self.restarts = max_swap_rounds, swap_all, restarts
         self.rng, self.initial = rng, initial
         self.usable = np.flatnonzero(model.usable)
@@ -908,6 +917,7 @@ class _KSearch:
         for _ in range(2 * k + 2):
             if len(fit[0]) >= k:
                 break
+            _listen(self.halt)
             nxt = _add_one(self.model, fit[0], fit, sc, self.max_exact)
             if nxt is None:
                 break
@@ -925,7 +935,7 @@ class _KSearch:
 
     def _swap(self, start, cand, source, rounds, won):
         """The swap search from ``start``: (cand, source) replaced by its result where better."""
-        alt, r = _swap_search(self.model, start, rounds, self.max_exact)
+        alt, r = _swap_search(self.model, start, rounds, self.max_exact, self.halt)
         self.counts["swap_rounds"] += r
         return (alt, won) if self.model.better(alt, cand) else (cand, source)
 
@@ -1012,7 +1022,7 @@ def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_
     exact, and the swap search starts from there above (best_k_curve enumerates nothing again:
     the certificate's enumeration reaches at least as far). ``initial`` (best_k_curve's: a list
     indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others;
-    ``nnls_start``, ``halt``: lower_bounds'. Returns (curve, bounds)."""
+    ``nnls_start``: lower_bounds'; ``halt``: lower_bounds' and best_k_curve's. Returns (curve, bounds)."""
     model = _Model(T, b, light_watts, upper)  # one for both (its Gram matrices, its fits)
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit, nnls_start=nnls_start, _model=model,
                           halt=halt)
@@ -1020,7 +1030,7 @@ def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_
     starts = dict(given) if isinstance(given, dict) else {k + 1: st for k, st in enumerate(given)}
     starts.update({k + 1: st for k, st in enumerate(bounds.optimum_lights) if st is not None})
     kw["exhaustive_limit"] = 0
-    return best_k_curve(T, b, k_max, light_watts, initial=starts or None, _model=model, **kw), bounds
+    return best_k_curve(T, b, k_max, light_watts, initial=starts or None, _model=model, halt=halt, **kw), bounds
 
 
 def best_k_for_problem(problem, k_max, **kw):
