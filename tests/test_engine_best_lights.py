@@ -657,3 +657,31 @@ def test_a_halt_stops_the_curve_within_a_swap_search():
     plain = bl.best_k_curve(T, b, 4, w)
     assert [tuple(p.lights) for p in free] == [tuple(p.lights) for p in plain]
     np.testing.assert_array_equal(np.array([p.error for p in free]), np.array([p.error for p in plain]))
+
+
+@pytest.mark.parametrize("kind,seed", [("geo", 3), ("geo", 5), ("rand", 2)])
+def test_gram_rows_are_the_gram_matrix_computed_as_read(kind, seed):
+    """A stroke's quick search reads its Gram matrices' rows as it needs them (GramRows): each
+    index form gives T^T T's entries, only the rows read are computed, and the curve and the
+    certificate are those of the whole products (the same lights; errors to rounding)."""
+    T, b, w = (geo_problem(seed, m=12, n=40) if kind == "geo" else rand_problem(seed, m=12, n=40))
+    t = np.ascontiguousarray(T[0])
+    full = np.dot(t.T, t)
+    G = bl.GramRows(t)
+    np.testing.assert_allclose(G[np.array([3, 7, 3])], full[[3, 7, 3]], rtol=1e-13, atol=0)
+    assert np.flatnonzero(G._have).tolist() == [3, 7]
+    A = np.array([1, 4, 7])
+    np.testing.assert_allclose(G[np.ix_(A, A)], full[np.ix_(A, A)], rtol=1e-13, atol=0)
+    C = np.array([[0, 9], [2, 5]])
+    np.testing.assert_allclose(G[C[:, 0], C[:, 1]], full[C[:, 0], C[:, 1]], rtol=1e-13, atol=0)
+    np.testing.assert_allclose(G[C[:, :, None], C[:, None, :]], full[C[:, :, None], C[:, None, :]], rtol=1e-13)
+    assert np.flatnonzero(G._have).tolist() == [0, 1, 2, 3, 4, 5, 7, 9]
+    np.testing.assert_allclose(G.diagonal(), np.diag(full), rtol=1e-13)
+    bl._GRAMS.clear()
+    bl._ALL_LIGHTS.clear()
+    lazy, lb_lazy = bl.best_k_with_certificate(T, b, 5, w, lazy_gram=True, swap_all=False, max_swap_rounds=2)
+    assert not bl._GRAMS  # (no whole product was made)
+    whole, lb_whole = bl.best_k_with_certificate(T, b, 5, w, swap_all=False, max_swap_rounds=2)
+    assert [tuple(p.lights) for p in lazy] == [tuple(p.lights) for p in whole]
+    np.testing.assert_allclose([p.error for p in lazy], [p.error for p in whole], rtol=1e-12)
+    np.testing.assert_allclose(lb_lazy.bound, lb_whole.bound, rtol=1e-12)

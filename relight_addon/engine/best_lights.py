@@ -149,6 +149,33 @@ def _keyed_gram(t) -> tuple:
     return key, (G if G is not None else _keep_gram(key, np.dot(t.T, t)))
 
 
+class GramRows:
+    """T^T T of an (m, n) array ``t`` whose rows are computed when first indexed (``G[rows]``,
+    ``G[rows, cols]``, ``G[np.ix_(rows, cols)]``), each row once: a Live stroke's quick search reads
+    the rows of the few lights it tries, where the whole product (m small, n the candidates: 10-16
+    ms of a 70-100 ms stroke on the 22k living room) reads every row. The rows are the gemm product
+    T[:, rows]^T T, not syrk's (last bits may differ from ``gram``)."""
+
+    def __init__(self, t):
+        self.t = t
+        n = t.shape[1]
+        self.shape = (n, n)
+        self._G = np.empty((n, n))
+        self._have = np.zeros(n, dtype=bool)
+
+    def __getitem__(self, key):
+        rows = np.asarray(key[0] if isinstance(key, tuple) else key, dtype=np.int64).ravel()
+        miss = ~self._have[rows]
+        if miss.any():
+            new = np.unique(rows[miss])
+            self._G[new] = self.t[:, new].T @ self.t
+            self._have[new] = True
+        return self._G[key]
+
+    def diagonal(self) -> np.ndarray:
+        return np.einsum("ij,ij->j", self.t, self.t)
+
+
 def column_subset(T, columns) -> list:
     """The 3 transfer matrices' ``columns`` (channels sharing an array still share one), their
     Gram matrices taken from the whole ones' when those are known (no new product)."""
@@ -393,7 +420,7 @@ def _swap_used(q, d, N, ia, MN, tolN, val, beta, kkt_ok):
 class _Model:
     """Gram matrices, NNLS fits of light sets (cached), and the screening bounds."""
 
-    def __init__(self, T, b, area, upper=None):
+    def __init__(self, T, b, area, upper=None, lazy_gram=False):
         self.T = _as_transfer(T)
         m, n = self.T[0].shape
         self.m, self.n = m, n
@@ -417,10 +444,14 @@ class _Model:
         for c in self.chans:
             self.groups.setdefault(id(self.T[c]), []).append(c)
         self.G, self.d, digests = {}, {}, {}
-        for key, chans in self.groups.items():
-            digests[key], G = _keyed_gram(self.T[chans[0]])
+        for key, chans in self.groups.items():  # (``lazy_gram``: GramRows, a row when read)
+            if lazy_gram:
+                digests[key], G = _digest(self.T[chans[0]]), GramRows(self.T[chans[0]])
+                self.d[key] = G.diagonal()
+            else:
+                digests[key], G = _keyed_gram(self.T[chans[0]])
+                self.d[key] = np.diag(G).copy()
             self.G[key] = G
-            self.d[key] = np.diag(G).copy()
         #: what the all-lights NNLS is a function of (_all_lights_nnls: the light colour's choice, the
         #: certificate and the report's each ask it of one problem)
         self.content = (tuple(digests[id(self.T[c])] for c in self.chans), _digest(self.b),
@@ -1016,14 +1047,15 @@ def _monotone(curve):
 
 
 def best_k_with_certificate(T, b, k_max, light_watts=None, exhaustive_limit=300_000, nnls_start=None, upper=None,
-                            halt=None, **kw):
+                            halt=None, lazy_gram=False, **kw):
     """The certificate first (lower_bounds: exact optima where the subsets are few enough), then
     best_k_curve seeded with those optimal sets: the curve is optimal wherever the certificate is
     exact, and the swap search starts from there above (best_k_curve enumerates nothing again:
     the certificate's enumeration reaches at least as far). ``initial`` (best_k_curve's: a list
     indexed by k - 1 or a dict {k: lights}, e.g. an earlier answer's curve) seeds the others;
-    ``nnls_start``: lower_bounds'; ``halt``: lower_bounds' and best_k_curve's. Returns (curve, bounds)."""
-    model = _Model(T, b, light_watts, upper)  # one for both (its Gram matrices, its fits)
+    ``nnls_start``: lower_bounds'; ``halt``: lower_bounds' and best_k_curve's; ``lazy_gram``: the
+    Gram matrices' rows computed as read (GramRows: a stroke's quick search). Returns (curve, bounds)."""
+    model = _Model(T, b, light_watts, upper, lazy_gram)  # one for both (its Gram matrices, its fits)
     bounds = lower_bounds(T, b, k_max, exhaustive_limit=exhaustive_limit, nnls_start=nnls_start, _model=model,
                           halt=halt)
     given = kw.pop("initial", None) or {}

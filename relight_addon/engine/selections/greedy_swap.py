@@ -53,8 +53,9 @@ def greedy_swap(s):
     initial = {k: v for k, v in starts.items() if k <= k_max and np.all(np.asarray(v) < p.n_lights)}
     # quick: the swap search from the best start only, 2 rounds (the earlier answer's
     # configurations are starts: measured on the living room and the staircase, the same final
-    # error as the full search at 60-75 % of its time; docs/benchmarks.md, "Live")
-    quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS) if stroke is not None else {}
+    # error as the full search at 60-75 % of its time; docs/benchmarks.md, "Live"), the Gram
+    # matrices' rows computed as the search reads them (best_lights.GramRows)
+    quick = dict(swap_all=False, max_swap_rounds=QUICK_SWAP_ROUNDS, lazy_gram=True) if stroke is not None else {}
     curve, bounds = best_k_with_certificate(p.transfer, p.b_target, k_max, p.light_watts, initial=initial,
                                             cancel=lambda: stop["cancel"], progress=progress,
                                             nnls_start=stroke.nnls_start if stroke is not None else None,
