@@ -56,7 +56,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg as sla
 import scipy.optimize as sopt
-from .sampling import Cancelled
+from .sampling import check_cancel
 from .units import TINY
 
 __all__ = [
@@ -803,7 +803,7 @@ def _swap_search(model, fit, max_rounds, max_exact, halt=None):
     ``halt()`` returning True before a round: sampling.Cancelled."""
     rounds = 0
     while rounds < max_rounds:
-        _listen(halt)
+        check_cancel(halt)
         S = np.asarray(fit[0], dtype=np.int64)
         if len(S) == 0:
             break
@@ -823,12 +823,6 @@ def _swap_search(model, fit, max_rounds, max_exact, halt=None):
             break
         fit = best
     return fit, rounds
-
-
-def _listen(halt):
-    """sampling.Cancelled when ``halt()`` says so (a newer stroke: not kept waiting)."""
-    if halt is not None and halt():
-        raise Cancelled("solve cancelled")
 
 
 def fit_lights(T, b, lights, light_watts=None, upper=None):
@@ -948,7 +942,7 @@ class _KSearch:
         for _ in range(2 * k + 2):
             if len(fit[0]) >= k:
                 break
-            _listen(self.halt)
+            check_cancel(self.halt)
             nxt = _add_one(self.model, fit[0], fit, sc, self.max_exact)
             if nxt is None:
                 break
@@ -1264,8 +1258,7 @@ def _all_lights_nnls_of(model, nnls_start, halt=None) -> tuple:
     if len(cols):
         for c in model.chans:
             A = model.T[c][:, cols]
-            if halt is not None and halt():
-                raise Cancelled("solve cancelled")
+            check_cancel(halt)
             if model.upper is not None:
                 x = _bounded(A, model.b[:, c], model.upper[cols])
             elif nnls_start is not None and np.shape(nnls_start) == (model.n, 3):

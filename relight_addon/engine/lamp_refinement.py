@@ -39,7 +39,7 @@ from .geometry import unit
 from .candidate_lamps import LAMP_POINTS, lamp_reach, patch_radius
 from .lamps import lamp_irradiance
 from .lights.placed import frame
-from .sampling import Cancelled
+from .sampling import check_cancel
 
 __all__ = ["Transport", "Mount", "refine_configuration", "RefinedLamp"]
 
@@ -254,8 +254,7 @@ class _Search:
         seen = {}
 
         def f(x):
-            if self.halt is not None and self.halt():
-                raise Cancelled("solve cancelled")
+            check_cancel(self.halt)
             key = tuple(np.round(x, 9))
             if key not in seen:
                 cand = params.lamp_at(x)

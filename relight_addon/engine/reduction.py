@@ -213,8 +213,9 @@ class Selection:
     changed)`` to add a configuration to the curve, ``step(done, total)`` returning True when
     cancelled (the curve stops where it is), ``cancel()`` the job's own (None: none; a step too
     long to wait for looks at it and raises sampling.Cancelled: the certificate's all-lights NNLS
-    between channels, the curve's greedy additions and swap rounds), and ``max_steps`` for constructions. A selection that computes the
-    certificate (lower bounds) on the way gives it in ``certificate``."""
+    between channels, the curve's greedy additions and swap rounds), and ``max_steps`` for
+    constructions. A selection that computes the certificate (lower bounds) on the way gives it in
+    ``certificate``."""
 
     problem: InverseProblem
     e_x: np.ndarray

@@ -46,6 +46,12 @@ class Cancelled(Exception):
     """The user cancelled the computation (``cancel()`` returned True)."""
 
 
+def check_cancel(cancel, what="solve cancelled") -> None:
+    """Cancelled(``what``) when ``cancel()`` says so (None: never)."""
+    if cancel is not None and cancel():
+        raise Cancelled(what)
+
+
 class SceneSampler:
     """Triangle table, area tables, ray offset and Embree scene of a PatchSet (see the module
     docstring), built once and shared by the estimators of one solve."""
@@ -172,8 +178,7 @@ def run_cancellable(fn, cancel=None, what="cancelled"):
     own arrays. Without ``cancel``: ``fn()`` here."""
     if cancel is None:
         return fn()
-    if cancel():
-        raise Cancelled(what)
+    check_cancel(cancel, what)
     ex = ThreadPoolExecutor(max_workers=1)
     try:
         call = ex.submit(fn)

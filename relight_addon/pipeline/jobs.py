@@ -31,7 +31,7 @@ from ..engine.inverse import InverseError
 from ..engine.options import JobOptions, check_light_kinds
 from ..engine.radiosity import solve_radiosity
 from ..engine.registry import ESTIMATORS, SELECTIONS
-from ..engine.sampling import Cancelled
+from ..engine.sampling import Cancelled, check_cancel
 from ..engine.scene import FaceSet, PatchSet, SceneError, face_mean
 from ..engine.scene_light import has_scene_light, placed_light_at, scene_light, scene_light_at, scene_light_excess
 from . import notes as texts
@@ -67,8 +67,7 @@ def _forward_radiosity(faces: FaceSet, patches: PatchSet, options: JobOptions, p
     """(F, B (P, 3) W/m^2, the solve's info, H: the scene's light) of the scene's emitters and lamps."""
     ff_progress = (lambda f: progress("form_factors", f)) if progress is not None else None
     F = ESTIMATORS[options.estimator](patches, options, progress=ff_progress, cancel=cancel)
-    if cancel is not None and cancel():
-        raise Cancelled("radiosity cancelled")
+    check_cancel(cancel, "radiosity cancelled")
     t1 = time.perf_counter()
     # a partly buried emitter sends the exitance of its visible part (InverseProblem.emission_share)
     share = getattr(F, "emission_share", None)
@@ -107,8 +106,7 @@ def run_radiosity(faces: FaceSet, options: JobOptions | None = None, polygon_cou
         patches = mesh_for_job(faces, options, default_max_patch_size, mode="direct")
     t_mesh = time.perf_counter() - t0
     cost = check_memory(radiosity_cost(patches, options), f"this job ({patches.n_patches} patches)")
-    if cancel is not None and cancel():
-        raise Cancelled("radiosity cancelled")
+    check_cancel(cancel, "radiosity cancelled")
     warnings = list(faces.warnings) + [w for w in cost["warnings"] if w not in faces.warnings]
     F = H = None
     t_ff = t_solve = 0.0
@@ -214,8 +212,7 @@ def run_reduce(faces: FaceSet, options: JobOptions | None = None, polygon_counts
 def _inverse_done(progress, cancel) -> None:
     if progress is not None:
         progress("inverse", 0.8)
-    if cancel is not None and cancel():
-        raise Cancelled("solve cancelled")
+    check_cancel(cancel)
 
 
 def _listening(model: Model, cancel) -> None:

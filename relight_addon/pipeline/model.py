@@ -23,7 +23,7 @@ from ..engine.lights import LightSet, candidate_mask
 from ..engine.options import REFINE_RAY_FRACTION, JobOptions, OptionError
 from ..engine.patch_models.adaptive import refinement_measure
 from ..engine.registry import ESTIMATORS, LIGHT_COLOURS, SELECTIONS
-from ..engine.sampling import Cancelled, SceneSampler
+from ..engine.sampling import SceneSampler, check_cancel
 from ..engine.scene import FaceSet, PatchSet
 from ..engine.targets import target_aims
 from ..engine.targets import scene_targets
@@ -69,11 +69,6 @@ def progress_slice(progress, name, lo, hi):
     return lambda f: progress(name, lo + (hi - lo) * float(f))
 
 
-def _check_cancel(cancel):
-    if cancel is not None and cancel():
-        raise Cancelled("solve cancelled")
-
-
 @contextmanager
 def transport_named(patches: PatchSet, faces: FaceSet):
     """A DivergentTransport raised inside names the objects of its patches."""
@@ -113,7 +108,7 @@ def _form_factors(faces, patches, options, estimate, pairs, progress, cancel, wa
     if getattr(F, "kernel_unfit", None):
         n, objs = F.kernel_unfit
         warnings.append(texts.kernel_unfit_note(n, [faces.object_names[o] for o in objs]))
-    _check_cancel(cancel)
+    check_cancel(cancel)
     return F
 
 
@@ -147,13 +142,13 @@ def _offer(faces, lights, patches, mask, options, F, warnings, seconds, progress
     def each_lamp(f):  # (after each lamp's irradiance: a cancel is heard within one lamp, not the stage)
         if progress is not None:
             progress(f)
-        _check_cancel(cancel)
+        check_cancel(cancel)
 
     lights, _ = (offer or offer_lamps)(lights, patches, mask, options, sampler, options.seed, each_lamp,
                                        notes=lamp_notes, aims=target_aims(faces, patches, sampler))
     warnings.extend(n for n in lamp_notes if n not in warnings)
     seconds["lamps"] += time.perf_counter() - t1
-    _check_cancel(cancel)
+    check_cancel(cancel)
     return lights
 
 
@@ -233,9 +228,9 @@ def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_s
             break
         patches = refined
     # the lights' colour (an automatic mode chooses it on the final problem)
-    _check_cancel(cancel)  # (the problem is factorised: a cancel is heard before the colour's choice)
+    check_cancel(cancel)  # (the problem is factorised: a cancel is heard before the colour's choice)
     problem.colour, note = light_colour_of(problem, options)
-    _check_cancel(cancel)
+    check_cancel(cancel)
     problem.cancel = None  # (the model outlives this job: a later factorisation is not this job's to stop)
     if note:
         warnings.append(note)

@@ -33,7 +33,7 @@ from ..engine.lights.placed import WRITER as PLACED
 from ..engine.options import JobOptions
 from ..engine.reduction import ReductionResult, StopCriteria, StrokeStart, reduce_lights
 from ..engine.registry import DISTRIBUTIONS, SELECTIONS
-from ..engine.sampling import Cancelled, SceneSampler
+from ..engine.sampling import Cancelled, SceneSampler, check_cancel
 from ..engine.scene import SceneError
 from ..engine.scene_light import brighter_than_painted, fixed_light_shares
 from . import notes as texts
@@ -278,8 +278,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
     setup = _refine_setup(model, options)
     done, curve = _Refined([], [], [], [[], [], []], {}, []), list(red.curve)
     for n_done, i in enumerate(todo):
-        if cancel is not None and cancel():
-            raise Cancelled("solve cancelled")
+        check_cancel(cancel)
         if done.evaluations >= REFINE_BUDGET:
             break
         point = _refine_point(model.problem, lights, curve[i], i == red.final_index, setup, done,
@@ -287,8 +286,7 @@ def refine_stage(model: Model, red: ReductionResult, options: JobOptions, progre
         curve[i] = curve[i] if point is None else point
         if progress is not None:
             progress("refining lamps", 0.95 + 0.03 * (n_done + 1) / len(todo))
-    if cancel is not None and cancel():  # (heard within a lamp's search: no half-refined answer)
-        raise Cancelled("solve cancelled")
+    check_cancel(cancel)  # (heard within a lamp's search: no half-refined answer)
     account = {"points": done.rows, "offered": lights.count_by_kind(), "lamps_refined": len(done.lamps),
                "evaluations": done.evaluations}
     if done.lamps:
