@@ -512,7 +512,7 @@ def _geometry_digest(objects) -> dict:
     out = {}
     depsgraph = bpy.context.evaluated_depsgraph_get()
     for ob in objects:
-        h = hashlib.blake2b(digest_size=16)
+        h = hashlib.sha256()  # (in memory only: best_lights._digest's choice)
         ob_eval = ob.evaluated_get(depsgraph)
         editing = ob.mode == "EDIT"  # (its evaluated mesh wraps the edit mesh: converted to read it)
         me = ob_eval.to_mesh() if editing else ob_eval.data
