@@ -8,7 +8,7 @@ import pytest
 import flatland
 from relight_addon.engine.inverse import InverseProblem
 from relight_addon.engine.targets import PaintedRadiance
-from relight_addon.engine.lamps import Lamp, lamp_irradiance
+from relight_addon.engine.lamps import Lamp, PatchDraws, lamp_irradiance
 from relight_addon.engine.lights.area import AREA
 from relight_addon.engine.lights.point import POINT
 from relight_addon.engine.lights.spot import SPOT
@@ -324,3 +324,27 @@ def test_a_narrow_spots_footprint_across_patches_is_their_quadrature():
             lit += 1
             assert H[p] == pytest.approx(ref, rel=0.01), p
         assert lit == 4
+
+
+def test_per_patch_draws_are_each_patchs_own_and_estimate_the_cone():
+    """The lamp refinement's search (lamps.PatchDraws): a patch's receiver points and lamp samples
+    are its own, so its mean is the same whichever patches are lit with it (a stream's draws give
+    a patch the values after the patches before it: a moved spot reaching other patches changed
+    every later patch's points, and the search's objective jumped); and the means still estimate
+    the cone: its flux on the floor is the closed form I 2 pi (1 - cos(size / 2)) (1 - blend / 2)."""
+    ps, _ = _grid(n=12, side=6.0)
+    spot = Lamp("s", SPOT, (0.13, 0.21, 1.0), DOWN, X, Y, (100.0,) * 3, spot_size=math.radians(70),
+                spot_blend=0.3)
+    some = np.flatnonzero(ps.center[:, 0] > -0.4)
+    for k in (4, 16):
+        draws = PatchDraws(0)
+        whole = lamp_irradiance(ps, [spot], points_per_patch=k, per_patch=draws)[:, 0, 0]
+        part = lamp_irradiance(ps, [spot], points_per_patch=k, per_patch=PatchDraws(0), only=some)[:, 0, 0]
+        np.testing.assert_array_equal(part[some], whole[some])
+        again = lamp_irradiance(ps, [spot], points_per_patch=k, per_patch=draws, only=some)[:, 0, 0]
+        np.testing.assert_array_equal(again[some], whole[some])  # (kept: drawn once)
+        ref = 100.0 / (4 * math.pi) * _spot_flux(math.radians(35), 0.3)
+        assert float(np.sum(whole * ps.area)) == pytest.approx(ref, rel=0.01)
+        stream_part = lamp_irradiance(ps, [spot], points_per_patch=k, only=some)[:, 0, 0]
+        stream = lamp_irradiance(ps, [spot], points_per_patch=k)[:, 0, 0]
+        assert not np.array_equal(stream_part[some], stream[some])  # (what the search's draws change)

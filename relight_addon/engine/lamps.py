@@ -64,7 +64,7 @@ from .geometry import unit
 from .kernel_transfer import _sample_patches, kernel_geometry
 from .sampling import SceneSampler
 
-__all__ = ["Lamp", "LampJob", "lamp_irradiance"]
+__all__ = ["Lamp", "LampJob", "PatchDraws", "PatchStreams", "lamp_irradiance"]
 
 #: receiver points per patch and lamp samples per receiver point (soft lamps; a point lamp of
 #: radius 0 takes one ray per receiver point, a sun of angle 0 one direction)
@@ -184,22 +184,124 @@ def _lamp_uniforms(rng, m, k, j, ns):
     return o + (o_sub + rng.random((m * k, 2)) * c_sub) * c
 
 
-def _patch_means(lamp, g, s, k, ns, rng, far, exact):
+_MASK64 = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+def _mix64(x):
+    """splitmix64's finaliser on uint64 arrays (wrapping arithmetic): a well-mixed hash of each."""
+    with np.errstate(over="ignore"):
+        z = (np.asarray(x, dtype=np.uint64) + np.uint64(0x9E3779B97F4A7C15)) & _MASK64
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return z ^ (z >> np.uint64(31))
+
+
+class PatchStreams:
+    """Uniforms (a generator's ``random`` and ``permuted``, for _sample_patches and _lamp_uniforms)
+    that depend only on (``key``, the draw, the patch, the index within the patch's share): each
+    of the patches ``patches``' receiver points and lamp samples is its own, the same whichever
+    patches are asked with it. (A generator's stream gives
+    a patch the values after those of the patches before it: when a moved lamp reaches other
+    patches, every later patch's points change.) Counter-based: splitmix64 of the counters."""
+
+    def __init__(self, key, patches):
+        h = np.uint64(0)
+        for part in key:
+            h = _mix64(h ^ np.uint64(int(part) & 0xFFFFFFFFFFFFFFFF))
+        self.key, self.patches, self.draws = h, np.asarray(patches, dtype=np.uint64), 0
+
+    def _bits(self, shape) -> np.ndarray:
+        m = len(self.patches)
+        n = int(np.prod(shape))
+        if m == 0 or n % m:
+            raise ValueError(f"{shape} values are not a share per patch of {m} patches")
+        self.draws += 1
+        row = _mix64(_mix64(self.key ^ np.uint64(self.draws)) ^ self.patches)  # (m,)
+        return _mix64(row[:, None] ^ np.arange(n // m, dtype=np.uint64)[None, :]).reshape(shape)
+
+    def random(self, shape, dtype=np.float64) -> np.ndarray:
+        """Uniforms in [0, 1) of ``shape``, its first axis (or its rows, patch-major) the patches'."""
+        bits = self._bits(shape)
+        if np.dtype(dtype) == np.float32:
+            return ((bits >> np.uint64(40)).astype(np.float32) * np.float32(2.0 ** -24))
+        return (bits >> np.uint64(11)).astype(np.float64) * (2.0 ** -53)
+
+    def permuted(self, a, axis=1) -> np.ndarray:
+        """Each row of ``a`` (m, n) in an order of its patch's own."""
+        if axis != 1 or np.ndim(a) != 2:
+            raise ValueError("PatchStreams.permuted permutes the rows of an (m, n) array")
+        return np.take_along_axis(a, np.argsort(self._bits(np.shape(a)), axis=1), axis=1)
+
+
+class _StreamDraws:
+    """A chunk's receiver points and lamp uniforms drawn in turn from one generator ``rng``."""
+
+    def __init__(self, rng):
+        self.rng = rng
+
+    def points(self, g, s, k):
+        return _sample_patches(g, s, k, self.rng)
+
+    def uniforms(self, s, k, j, ns):
+        return _lamp_uniforms(self.rng, len(s), k, j, ns)
+
+
+class PatchDraws:
+    """Each patch's own receiver points and lamp uniforms (PatchStreams of ``seed``), kept once
+    drawn: ``lamp_irradiance(per_patch=)`` of a lamp evaluated again and again (the lamp
+    refinement's search: a patch's points are the same at every evaluation, and drawn once)."""
+
+    def __init__(self, seed):
+        self.seed, self._kept = int(seed), {}
+
+    def of_run(self, index, run, k, ns) -> "_KeptDraws":
+        """The draws of a lamp job's run ``run`` (LampJob.run) of lamp ``index``, k points, ns samples."""
+        key = (index, run, k, ns)
+        if key not in self._kept:
+            self._kept[key] = _KeptDraws((self.seed, 7) + key, k, ns)
+        return self._kept[key]
+
+
+class _KeptDraws:
+    def __init__(self, key, k, ns):
+        self.key, self.k, self.ns, self.have = key, k, ns, None
+
+    def points(self, g, s, k):
+        if self.have is None:  # (np.empty: the memory of the patches never asked stays untouched)
+            P, k, ns = g.P, self.k, self.ns
+            self.have = np.zeros(P, dtype=bool)
+            self.y, self.ny = np.empty((P, k, 3), np.float32), np.empty((P, k, 3), np.float32)
+            self.u = np.empty((ns, P, k, 2))
+        new = np.unique(s[~self.have[s]])
+        if len(new):
+            streams = PatchStreams(self.key, new)
+            self.y[new], self.ny[new] = _sample_patches(g, new, k, streams)
+            for j in range(self.ns):
+                self.u[j, new] = _lamp_uniforms(streams, len(new), k, j, self.ns).reshape(len(new), k, 2)
+            self.have[new] = True
+        return self.y[s], self.ny[s]
+
+    def uniforms(self, s, k, j, ns):
+        return self.u[j, s].reshape(-1, 2)
+
+
+def _patch_means(lamp, g, s, k, ns, draws, far, exact):
     """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
-    each and ns lamp samples per point; for a point or a spot, the bare point lamp's exact patch
+    each and ns lamp samples per point (drawn by ``draws``: _StreamDraws, PatchDraws'); for a
+    point or a spot, the bare point lamp's exact patch
     means (``exact(patches)``: LampJob.exact) times the sampled ratio (shadows, cone, disk), asked
     only for the patches some point of which got light (elsewhere the mean is 0 whatever the exact
     one: a spot's cone or a shadow leaves most of a dense prop's triangles out of the sum). And
     (len(s),) whether the patch is partly lit: some of its points got light, some none (an edge
     crosses it)."""
     sm = g.sampler
-    y, ny = _sample_patches(g, s, k, rng)
+    y, ny = draws.points(g, s, k)
     y = np.asarray(y, dtype=np.float64).reshape(-1, 3)
     ny = np.asarray(ny, dtype=np.float64).reshape(-1, 3)
     acc = np.zeros(len(y))
     ref = None
     for j in range(ns):
-        e, r = _irradiance_at(lamp, y, ny, _lamp_uniforms(rng, len(s), k, j, ns), sm, far)
+        e, r = _irradiance_at(lamp, y, ny, draws.uniforms(s, k, j, ns), sm, far)
         acc += e
         if r is not None:
             ref = r if ref is None else ref + r
@@ -238,14 +340,16 @@ class LampJob:
     ``todo`` the patches asked for (``restricted``: fewer than all ``n_patches``), ``k`` receiver
     points per patch, ``g`` the kernel geometry (its sampler, centres, radii, areas); ``run``
     samples patches with some points each, ``put`` sets means computed otherwise, ``rng(stream)``
-    a generator of this lamp's own for one more stream."""
+    a generator of this lamp's own for one more stream. ``per_patch``: a PatchDraws (each patch's
+    points and lamp samples its own, kept), or None: drawn in turn from one stream."""
 
-    def __init__(self, lamp, index, g, out, todo, restricted, k, seed, far):
+    def __init__(self, lamp, index, g, out, todo, restricted, k, seed, far, per_patch=None):
         self.lamp, self.index, self.g, self.out, self.todo, self.restricted, self.k = \
             lamp, index, g, out, todo, restricted, k
         self.n_patches, self.seed, self.far = out.shape[0], int(seed), far
         self.ns = lamp.kind.samples_per_point(lamp)
-        self._rng = self.rng(7)
+        self._draws = _StreamDraws(self.rng(7))
+        self.per_patch, self.runs = per_patch, 0
 
     def rng(self, stream):
         return np.random.default_rng([self.seed, stream, self.index])
@@ -264,9 +368,11 @@ class LampJob:
         """The means of ``patches_of_pass`` from kp points each; returns those partly lit."""
         partly = [np.zeros(0, dtype=np.int64)]
         step = max(1, CHUNK_PATCHES * self.k // kp)
+        self.runs += 1
         for c0 in range(0, len(patches_of_pass), step):
             s = patches_of_pass[c0:c0 + step]
-            mean, part = _patch_means(self.lamp, self.g, s, kp, self.ns, self._rng, self.far, self.exact)
+            draws = self._draws if self.per_patch is None else self.per_patch.of_run(self.index, self.runs, kp, self.ns)
+            mean, part = _patch_means(self.lamp, self.g, s, kp, self.ns, draws, self.far, self.exact)
             self.put(s, mean)
             partly.append(s[part])
         return np.concatenate(partly)
@@ -281,12 +387,15 @@ def _far(sampler) -> float:
 
 
 def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: int = 0,
-                    points_per_patch: int = POINTS_PER_PATCH, only=None) -> np.ndarray:
+                    points_per_patch: int = POINTS_PER_PATCH, only=None, per_patch=None) -> np.ndarray:
     """(P, n_lamps, 3) direct irradiance (W/m^2) of each lamp on each patch (area mean), with
     shadow rays on ``sampler`` (built here when not given: pass the form factors' one).
     ``only``: the indices of the patches to light (the others get 0), default all; or a list of
     such index arrays, one per lamp (e.g. the patches a spot's cone can reach). Each lamp's kind
-    computes its means (``light_patches``, on a LampJob)."""
+    computes its means (``light_patches``, on a LampJob). ``per_patch``: a PatchDraws, each
+    patch's receiver points and lamp samples drawn for it alone (the same whichever patches are
+    lit, so a moved lamp's means change only as the lamp does: the lamp refinement's search), kept
+    across calls; None: drawn in turn from a stream of the seed, per call."""
     P = patches.n_patches
     out = np.zeros((P, len(lamps), 3))
     if not lamps:
@@ -298,5 +407,6 @@ def lamp_irradiance(patches, lamps, sampler: SceneSampler | None = None, seed: i
     for li, lamp in enumerate(lamps):
         sel = only[li] if per_lamp else only
         todo = np.arange(P) if sel is None else np.asarray(sel, dtype=np.int64).reshape(-1)
-        lamp.kind.light_patches(lamp, LampJob(lamp, li, g, out, todo, sel is not None, points_per_patch, seed, far))
+        lamp.kind.light_patches(lamp, LampJob(lamp, li, g, out, todo, sel is not None, points_per_patch, seed, far,
+                                                    per_patch))
     return out
