@@ -200,9 +200,9 @@ class PatchStreams:
     """Uniforms (a generator's ``random`` and ``permuted``, for _sample_patches and _lamp_uniforms)
     that depend only on (``key``, the draw, the patch, the index within the patch's share): each
     of the patches ``patches``' receiver points and lamp samples is its own, the same whichever
-    patches are asked with it. (A generator's stream gives
-    a patch the values after those of the patches before it: when a moved lamp reaches other
-    patches, every later patch's points change.) Counter-based: splitmix64 of the counters."""
+    patches are asked with it. (A generator's stream gives a patch the values after those of the
+    patches before it: when a moved lamp reaches other patches, every later patch's points
+    change.) Counter-based: splitmix64 of the counters."""
 
     def __init__(self, key, patches):
         h = np.uint64(0)
@@ -263,15 +263,19 @@ class PatchDraws:
 
 
 class _KeptDraws:
+    """One run's draws of a PatchDraws: every patch's k points and ns x k lamp uniforms, filled as
+    patches are asked (each patch's from PatchStreams of ``key``: the order they come in changes
+    nothing)."""
+
     def __init__(self, key, k, ns):
         self.key, self.k, self.ns, self.have = key, k, ns, None
 
     def points(self, g, s, k):
         if self.have is None:  # (np.empty: the memory of the patches never asked stays untouched)
-            P, k, ns = g.P, self.k, self.ns
+            P = g.P
             self.have = np.zeros(P, dtype=bool)
-            self.y, self.ny = np.empty((P, k, 3), np.float32), np.empty((P, k, 3), np.float32)
-            self.u = np.empty((ns, P, k, 2))
+            self.y, self.ny = np.empty((P, self.k, 3), np.float32), np.empty((P, self.k, 3), np.float32)
+            self.u = np.empty((self.ns, P, self.k, 2))
         new = np.unique(s[~self.have[s]])
         if len(new):
             streams = PatchStreams(self.key, new)
@@ -287,9 +291,9 @@ class _KeptDraws:
 
 def _patch_means(lamp, g, s, k, ns, draws, far, exact):
     """(len(s),) mean irradiance per unit power of ``lamp`` on patches s, from k stratified points
-    each and ns lamp samples per point (drawn by ``draws``: _StreamDraws, PatchDraws'); for a
-    point or a spot, the bare point lamp's exact patch
-    means (``exact(patches)``: LampJob.exact) times the sampled ratio (shadows, cone, disk), asked
+    each and ns lamp samples per point (drawn by ``draws``: a _StreamDraws, or a PatchDraws' run);
+    for a point or a spot, the bare point lamp's exact patch means (``exact(patches)``:
+    LampJob.exact) times the sampled ratio (shadows, cone, disk), asked
     only for the patches some point of which got light (elsewhere the mean is 0 whatever the exact
     one: a spot's cone or a shadow leaves most of a dense prop's triangles out of the sum). And
     (len(s),) whether the patch is partly lit: some of its points got light, some none (an edge
