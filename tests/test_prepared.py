@@ -512,7 +512,7 @@ def _lux_fill(faces, ids):
 
 
 @pytest.mark.slow
-def test_paint_on_clustered_faces_is_solved_from_the_prepared_state_as_well_as_cold():
+def test_paint_on_clustered_faces_is_solved_from_the_prepared_state_within_a_quarter_of_cold():
     """A stroke of 12 faces the adaptive model had clustered, solved from the prepared state (the
     paint mapped onto the kept clusters, no ray cast) against a cold solve of the same paint (its
     mesh meshes them at the patch size). Issue 37 asks the painted-face error within 5 %: not met

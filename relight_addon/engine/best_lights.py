@@ -120,8 +120,8 @@ GRAMS_KEPT = 8
 
 def _digest(t) -> bytes:
     """What keys an array by its content: sha256 of its bytes (processors' SHA extensions: 2 x
-    blake2b's speed here, 1.2 against 2.4 ms on a Live stroke's 332 x 847 transfer, three per
-    stroke) and its shape."""
+    blake2b's speed here, 1.2 against 2.4 ms on a Live stroke's 332 x 847 transfer, three or
+    four a stroke) and its shape."""
     return hashlib.sha256(np.ascontiguousarray(t).view(np.uint8)).digest()[:16] + bytes(str(t.shape), "ascii")
 
 

@@ -184,13 +184,10 @@ def _lamp_uniforms(rng, m, k, j, ns):
     return o + (o_sub + rng.random((m * k, 2)) * c_sub) * c
 
 
-_MASK64 = np.uint64(0xFFFFFFFFFFFFFFFF)
-
-
 def _mix64(x):
     """splitmix64's finaliser on uint64 arrays (wrapping arithmetic): a well-mixed hash of each."""
     with np.errstate(over="ignore"):
-        z = (np.asarray(x, dtype=np.uint64) + np.uint64(0x9E3779B97F4A7C15)) & _MASK64
+        z = np.asarray(x, dtype=np.uint64) + np.uint64(0x9E3779B97F4A7C15)
         z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
         z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
         return z ^ (z >> np.uint64(31))
