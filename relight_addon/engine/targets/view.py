@@ -303,7 +303,8 @@ def _tiles(pixels, width, side):
     return len(tiles), tile.reshape(-1)
 
 
-def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact=False, kept=None, made=None):
+def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact=False, kept=None, made=None,
+                  fine=None):
     """Per patch seen: (patch, pixel positions in ``hits``, columns js, W (n_tiles, J, 3), tile (n,)):
     the rows of its pixels, pixel k's row W[tile[k]]. A glossy patch: view_rows at the mean point and
     direction of the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile). A matte
@@ -314,7 +315,10 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     ``made`` (not ``exact``): filled with {(patch, its pixels' bytes): (js, W, tile)}, every block
     yielded; ``kept``: such blocks made before with the same camera, model, materials and
     arguments, taken again where a patch sees the same pixels (a Live stroke on the view target:
-    the patches whose pixels it did not change)."""
+    the patches whose pixels it did not change). ``fine``: {(patch, its pixels' bytes): (js, W, tile)}
+    of a glossy patch on PREDICT_LOBE's tiles, without the interpolation (what ``exact`` evaluates
+    it on): not ``exact``, filled for each glossy patch evaluated, whose W is then the mean of these
+    rows over the pixels of each tile of ``lobe`` (_coarse); ``exact``, taken from it where present."""
     material, lobes, alpha = _patch_materials(faces, patches)
     sources = SourcePoints(patches, _sampler(F, patches)) if np.isfinite(alpha[hits.patch]).any() else None
     tables = {}  # (the materials' BRDF tables, built once for the image)
@@ -322,20 +326,22 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
     for group in np.split(order, cuts) if len(order) else []:
         i = int(hits.patch[group[0]])
-        key = None if made is None or exact else (i, hits.pixel[group].tobytes())
-        if key is not None and kept is not None and key in kept:
+        key = (i, hits.pixel[group].tobytes()) if (made is not None and not exact) or fine is not None else None
+        if made is not None and not exact and kept is not None and key in kept:
             made[key] = kept[key]
             yield (i, group) + kept[key]
             continue
         for block in _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, material, lobes, alpha,
-                                   sources, tables):
-            if key is not None:
+                                   sources, tables, fine, key):
+            if made is not None and not exact:
                 made[key] = block[2:]
             yield block
 
 
-def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, material, lobes, alpha, sources, tables):
-    """_pixel_blocks' blocks of patch ``i`` seen by the pixels ``group`` of ``hits``."""
+def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, material, lobes, alpha, sources, tables,
+                  fine=None, key=None):
+    """_pixel_blocks' blocks of patch ``i`` seen by the pixels ``group`` of ``hits`` (``fine``, ``key``:
+    its fine rows', _pixel_blocks')."""
     if np.isinf(alpha[i]):
         js, R = (np.array([i]), None) if interp is None else interp.rows(i, hits.point[group])
         if len(js) == 1:  # (its own B_i at every pixel: one row)
@@ -346,12 +352,17 @@ def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, mater
         W /= np.bincount(tile, minlength=n_tiles)[:, None]
         yield i, group, js, np.repeat(W[:, :, None], 3, axis=2), tile
         return
-    n_tiles, tile = _tiles(hits.pixel[group], camera.width, _tile(camera, alpha[i], lobe))
-    point, d = _tile_means(hits, group, tile, n_tiles)
-    js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
-                      material, lobes, sources=sources, tables=tables)
+    if exact and fine is not None and key in fine:
+        js, W, tile = fine[key]
+    elif fine is not None and not exact:  # the fine rows, kept; the tiles of ``lobe`` their means
+        if key not in fine:
+            fine[key] = _view_tiles(i, group, hits, patches, F, camera, PREDICT_LOBE, material, lobes, alpha, sources,
+                                    tables)
+        js, W, tile = _coarse(fine[key], hits.pixel[group], camera, _tile(camera, alpha[i], lobe))
+    else:
+        js, W, tile = _view_tiles(i, group, hits, patches, F, camera, lobe, material, lobes, alpha, sources, tables)
     if interp is not None and not exact:
-        js, W = _interpolated(interp, i, point, js, W)
+        js, W = _interpolated(interp, i, _tile_means(hits, group, tile, len(W))[0], js, W)
     yield i, group, js, W, tile
     if interp is not None and exact:  # (the interpolation at each pixel's own point: one more block)
         nb, G = interp.gradient(i)
@@ -359,6 +370,26 @@ def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, mater
             w = (hits.point[group] - interp.center[i]) @ G
             Wx = np.concatenate([-w.sum(axis=1, keepdims=True), w], axis=1)
             yield i, group, np.r_[i, nb], np.repeat(Wx[:, :, None], 3, axis=2), np.arange(len(group))
+
+
+def _view_tiles(i, group, hits, patches, F, camera, lobe, material, lobes, alpha, sources, tables):
+    """(js, W (n_tiles, J, 3), tile (n,)): glossy patch i's view_rows at the mean point and direction
+    of its pixels ``group`` in each tile of ``lobe``."""
+    n_tiles, tile = _tiles(hits.pixel[group], camera.width, _tile(camera, alpha[i], lobe))
+    point, d = _tile_means(hits, group, tile, n_tiles)
+    js, W = view_rows(F, patches.reflectance, patches.center, patches.normal, np.full(n_tiles, i), point, d,
+                      material, lobes, sources=sources, tables=tables)
+    return js, W, tile
+
+
+def _coarse(fine, pixels, camera, side):
+    """(js, W (n_tiles, J, 3), tile (n,)): the rows ``fine`` (_view_tiles' of the same pixels) averaged
+    over the pixels in each image tile of ``side`` pixels: each pixel weighs its fine row once."""
+    js, Wf, tf = fine
+    n_tiles, tile = _tiles(pixels, camera.width, side)
+    A = np.bincount(tile * len(Wf) + tf, minlength=n_tiles * len(Wf)).reshape(n_tiles, len(Wf)).astype(np.float64)
+    A /= A.sum(axis=1, keepdims=True)
+    return js, (A @ Wf.reshape(len(Wf), -1)).reshape(n_tiles, *Wf.shape[1:]), tile
 
 
 def _block_rows(blocks) -> dict:
@@ -446,6 +477,9 @@ class ViewTarget(Target):
         self._F, self._patches, self._faces = F, patches, faces
         # (build's key, its _pixel_blocks in row order: a later paint's build takes them again)
         self._blocks = (None, {})
+        # (the glossy patches' rows on PREDICT_LOBE's tiles, by _pixel_blocks' key: ``predict``'s, and the
+        # rows' means)
+        self._fine = {}
 
     def serves(self, faces, F) -> bool:
         """The same view target (its spec: the camera, the painted pixels and their radiance) on the
@@ -550,6 +584,8 @@ class ViewTarget(Target):
         key = digest(spec.camera, getattr(faces, "face_material", None), getattr(faces, "material_lobes", None))
         kept = earlier._blocks[1] if earlier is not None and earlier._F is F and earlier._blocks[0] == key else None
         made = {}
+        # (each glossy patch's fine rows, kept for ``predict``: a block taken again keeps its own)
+        fine = {} if kept is None else dict(getattr(earlier, "_fine", {}))
         hits = cast_pixels(spec.camera, _sampler(F, patches), np.flatnonzero(spec.painted.reshape(-1)))
         if len(hits.pixel) == 0:
             raise ValueError(f"no painted pixel of the view target {spec.name!r} sees a surface (they see the World "
@@ -563,7 +599,7 @@ class ViewTarget(Target):
         alpha = _patch_materials(faces, patches)[2]
         glossy = []  # per glossy block: (its rows, its tiles' mean points and directions, weights)
         for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, spec.camera, interp=interp, kept=kept,
-                                                   made=made):
+                                                   made=made, fine=fine):
             # the pixels sharing a row (a tile's, a matte patch's): one row of weight sqrt(n) asking
             # sqrt(n) x their mean
             w = np.sqrt(np.bincount(tile, minlength=len(W)))[:, None]
@@ -589,7 +625,7 @@ class ViewTarget(Target):
             (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
         target = cls(spec, hits, matrix, values, np.maximum(offset, 0.0), spread, F, patches, faces, pixel_row, interp,
                      rows, list(getattr(faces, "lamps", None) or ()))
-        target._blocks = (key, made)
+        target._blocks, target._fine = (key, made), {k: fine[k] for k in made if k in fine}
         if kept is not None:  # (the rows of the blocks taken are the earlier target's, bit for bit)
             target.rows_taken = _rows_taken(earlier, made, kept)
         return target
@@ -601,7 +637,7 @@ class ViewTarget(Target):
         (P, 3): what B holds of the emitters' first reflection beyond rho (InverseProblem's
         first_reflection), which the glossy pixels see through their BSDF instead (``bsdf_rows``)."""
         L = _radiance(self.hits, np.asarray(B, dtype=np.float64), self._patches, self._F, self._faces,
-                      self.spec.camera, self.interp)
+                      self.spec.camera, self.interp, self._fine)
         return L + self._highlights(self.hits, lamps, own=own)
 
     def _highlights(self, hits, lamps, samples=PIXEL_LAMP_SAMPLES, own=None) -> np.ndarray:
@@ -643,9 +679,10 @@ class ViewTarget(Target):
                 "channel_spread": self.channel_spread}
 
 
-def _radiance(hits, B, patches, F, faces, camera, interp) -> np.ndarray:
+def _radiance(hits, B, patches, F, faces, camera, interp, fine=None) -> np.ndarray:
     out = np.zeros((len(hits.pixel), 3))
-    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE, interp, exact=True):
+    for i, group, js, W, tile in _pixel_blocks(hits, patches, F, faces, camera, PREDICT_LOBE, interp, exact=True,
+                                               fine=fine):
         out[group] += np.einsum("njc,jc->nc", W, B[js])[tile] / np.pi
     return out
 
