@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.optimize as sopt
+import scipy.sparse as sp
 
 from .light_colour import fit_columns
 from .geometry import unit
@@ -93,7 +94,11 @@ class Transport:
         x = None if self.albedo_excess is None or lamp is None else self.albedo_excess(lamp)
         if x is not None:
             albedo = albedo + x[nz]
-        col = np.stack([(albedo[:, c] * h[nz]) @ self.Y[c][nz] for c in range(3)], axis=1)
+        # (a sparse row of the lit patches times Y: it reads their rows of Y in place, 2-3 x quicker
+        # than gathering them on the view target's 941 rows)
+        P, ptr = len(h), np.array([0, len(nz)])
+        col = np.stack([(sp.csr_matrix((albedo[:, c] * h[nz], nz, ptr), shape=(1, P)) @ self.Y[c])[0]
+                        for c in range(3)], axis=1)
         X = None if lamp is None else self.rows.lamp_terms([lamp], h.reshape(-1, 1), samples)
         return col if X is None else col + X[:, 0, :]  # (a view target's highlight of the moved lamp)
 

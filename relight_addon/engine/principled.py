@@ -106,6 +106,11 @@ def fresnel_dielectric(cos_i, eta):
     an incident cosine ``cos_i`` (1 on total internal reflection)."""
     c = np.abs(np.asarray(cos_i, dtype=np.float64))
     g2 = eta * eta - 1.0 + c * c
+    if np.ndim(eta) == 0 and eta > 1.0:  # (into a denser medium: no total reflection, g > c >= 0, F finite)
+        g = np.sqrt(g2)
+        A = (g - c) / (g + c)
+        B = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        return 0.5 * A * A * (1.0 + B * B)
     g = np.sqrt(np.maximum(g2, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         A = (g - c) / (g + c)

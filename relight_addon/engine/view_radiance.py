@@ -202,14 +202,35 @@ class SourcePoints:
     def __init__(self, patches, sampler):
         self.patches, self.sampler = patches, sampler
         self.area = np.asarray(sampler.area, dtype=np.float64)
+        # g -> (slot (P,) of each patch's points in the store, -1 before they are made; points, normals,
+        # how many stored): a patch's points are its own (the middles of its strata), made once
+        self._kept = {}
 
     def __call__(self, s, g) -> tuple:
         """(points (len(s), g*g, 3), normals (len(s), g*g, 3)) of the patches ``s``."""
         from .kernel_transfer import _sample_patches, kernel_geometry
 
-        y, ny = _sample_patches(kernel_geometry(self.patches, g * g, self.sampler), np.asarray(s, dtype=np.int64),
-                                g * g, _Midpoints())
-        return np.asarray(y, dtype=np.float64), np.asarray(ny, dtype=np.float64)
+        s = np.asarray(s, dtype=np.int64)
+        if g not in self._kept:
+            self._kept[g] = [np.full(self.patches.n_patches, -1, dtype=np.int64), np.empty((0, g * g, 3)),
+                             np.empty((0, g * g, 3)), 0]
+        kept = self._kept[g]
+        slot = kept[0]
+        new = np.unique(s[slot[s] < 0])
+        if len(new):
+            y, ny = _sample_patches(kernel_geometry(self.patches, g * g, self.sampler), new, g * g, _Midpoints())
+            n = kept[3]
+            if n + len(new) > len(kept[1]):  # (the store doubles as it fills)
+                size = max(2 * len(kept[1]), n + len(new))
+                for a in (1, 2):
+                    grown = np.empty((size, g * g, 3))
+                    grown[:n] = kept[a][:n]
+                    kept[a] = grown
+            kept[1][n:n + len(new)] = y
+            kept[2][n:n + len(new)] = ny
+            slot[new] = np.arange(n, n + len(new))
+            kept[3] = n + len(new)
+        return kept[1][slot[s]], kept[2][slot[s]]
 
 
 def _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources):
