@@ -131,8 +131,9 @@ def test_merged_rows_keep_the_least_squares_problem(glossy_room):
     painted = rng.random((cam.height, cam.width)) < 0.7
     t = ViewTarget.build(ViewSpec(cam, radiance, painted), faces, patches, F)
     rows, cols, vals = [], [], []
-    for i, group, js, W, tile in _pixel_blocks(t.hits, patches, F, faces, cam):
-        G = W.mean(axis=2)[tile]  # (each pixel's row)
+    # (each pixel's row: its tile's, the mean of the finer tiles' rows, as the target makes them)
+    for i, group, js, W, tile in _pixel_blocks(t.hits, patches, F, faces, cam, fine={}):
+        G = W.mean(axis=2)[tile]
         r, c = np.nonzero(G)
         rows.append(group[r])
         cols.append(js[c])
