@@ -185,3 +185,53 @@ def test_a_cancel_within_a_lamps_search_stops_the_solve_without_a_half_refined_a
         lr.lamp_irradiance = original
     assert heard["at"] is not None
     assert calls["irradiance"] <= heard["at"] + 1 < n_full  # (stopped at the next evaluation)
+
+
+@pytest.fixture(scope="module")
+def gallery_curve():
+    """Issue 17's gallery (tests/artist_scenes.gallery) solved at seed 0 with the default candidates:
+    its final configuration's spot is also in its 2- and 1-light configurations."""
+    import bpy  # noqa: F401 (artist_scenes' bmesh comes with it)
+    import artist_scenes
+    import cycles_reference as cr
+    from relight_addon.blender import export
+
+    cr.reset_blender()
+    try:
+        artist_scenes.gallery()
+        faces = export.export_scene().faces
+    finally:
+        cr.reset_blender()
+    return run_solve(faces, JobOptions(seed=0))
+
+
+def test_a_smaller_configuration_starts_from_the_lamp_the_final_one_refined(gallery_curve):
+    """A smaller configuration of the curve that holds a lamp the final configuration refined starts
+    its search from that refined lamp (when it fits it better than the lamp as offered) and searches
+    one round: it ends no worse than that start, which is below the configuration as the selection
+    chose it, in at most one round of evaluations a lamp. Reference: the start's error fitted again
+    here from the problem's own columns (light_colour.fit_lights), not the search's."""
+    from relight_addon.engine.light_colour import fit_lights
+
+    out = gallery_curve
+    problem, red, info = out.problem, out.reduction, out.report["model"]["lamp_refinement"]
+    lamps = problem.lights.lamps
+    offered = problem.n_lights - info["lamps_refined"]  # (the refined lamps are the last lights)
+    # the final's refined lamps by name (a lamp keeps its name as it moves)
+    final_refined = {lamps[j].name: int(j) for j in red.final.lights if j >= offered}
+    assert final_refined, red.final.lights
+    rows = [r for r in info["points"] if r.get("lamps_carried")]
+    assert [r["n_lights"] for r in rows] == [2, 1], info["points"]
+    norm = problem.target_norm
+    for r in rows:
+        pt = next(p for p in red.curve if p.n_lights == r["n_lights"])
+        # its own refined lamp (if the search moved it further) back to the final's: the start
+        start = [j if j < offered else final_refined[lamps[j].name] for j in map(int, pt.lights)]
+        start_error = fit_lights(problem, np.array(sorted(set(start))))[1] / norm
+        assert start_error < r["relative_error_before"], (start_error, r)
+        assert pt.relative_error <= start_error * (1 + 1e-9), (pt.relative_error, start_error)
+        assert r["relative_error_after"] == pytest.approx(pt.relative_error, rel=1e-9)
+        n_lamps = sum(lamps[j] is not None for j in pt.lights)
+        assert 0 < r["evaluations"] <= lr.MAX_EVALUATIONS * n_lamps, r
+    # the final configuration searched its rounds from the lamp as offered
+    assert info["points"][0]["lamps_carried"] == 0 and info["points"][0]["evaluations"] > lr.MAX_EVALUATIONS

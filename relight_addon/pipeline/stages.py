@@ -201,19 +201,29 @@ class _Refined:
 
 def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, halt=None):
     """The placed lamps of one configuration refined (engine.lamp_refinement), each refined lamp
-    appended to ``done`` as a new light; the configuration with them, re-fitted (None: unchanged)."""
+    appended to ``done`` as a new light; the configuration with them, re-fitted (None: unchanged).
+    A smaller configuration holding a lamp the final one refined (``done.carried``) starts from that
+    refined lamp when it fits this configuration better than the lamp as offered, and searches one
+    round from there (_carried_start)."""
     T, transport, mount, step, seed = setup
     placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights) if _placed(lights, j)}
-    refined, cols, before, after, n_eval = refine_configuration(
-        problem, placed, [T[c][:, pt.lights] for c in range(3)], transport, mount, step,
-        seed=seed, budget=REFINE_BUDGET - done.evaluations, exitance=pt.exitance, cancel=check(len(placed)),
-        upper=problem.light_upper[pt.lights], halt=halt)
-    done.evaluations += n_eval
-    done.rows.append({"n_lights": pt.n_lights, "relative_error_before": before, "relative_error_after": after,
-                      "lamps_refined": len(refined), "evaluations": n_eval})
-    if not refined:
-        return None
+    cols = [T[c][:, pt.lights] for c in range(3)]
     ids = np.array(pt.lights, dtype=np.int64)
+    carried = {} if is_final else _carried_start(problem, lights, pt, placed, cols, done)
+    for pos, k in carried.items():
+        placed[pos], ids[pos] = done.lamps[k], lights.n_lights + k
+        for c in range(3):
+            cols[c][:, pos] = done.columns[c][k]
+    refined, cols, before, after, n_eval = refine_configuration(
+        problem, placed, cols, transport, mount, step, seed=seed, budget=REFINE_BUDGET - done.evaluations,
+        exitance=pt.exitance, cancel=check(len(placed)), upper=problem.light_upper[pt.lights], halt=halt,
+        rounds=1 if carried else None)
+    done.evaluations += n_eval
+    done.rows.append({"n_lights": pt.n_lights, "relative_error_before": pt.relative_error if carried else before,
+                      "relative_error_after": after, "lamps_refined": len(refined), "lamps_carried": len(carried),
+                      "evaluations": n_eval})
+    if not refined and not carried:
+        return None
     for r in refined:
         ids[r.index] = lights.n_lights + len(done.lamps)
         if is_final:
@@ -228,6 +238,23 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, h
     on = e[order].max(axis=1) > 0
     return replace(pt, n_lights=int(on.sum()), lights=ids[order][on], exitance=e[order][on],
                    error=error, relative_error=error / (problem.target_norm or 1.0))
+
+
+def _carried_start(problem, lights, pt, placed, cols, done: _Refined) -> dict:
+    """{position in ``pt``: index in ``done.lamps``} of the placed lamps of configuration ``pt`` that
+    the final configuration refined (``done.carried``), when this configuration with them in their
+    place (columns ``cols``) fits better than with the lamps as offered; else {}."""
+    k = {pos: done.carried[int(pt.lights[pos])] - lights.n_lights for pos in placed
+         if int(pt.lights[pos]) in done.carried}
+    if not k:
+        return {}
+    upper = problem.light_upper[pt.lights]
+    swapped = [c.copy() for c in cols]
+    for pos, i in k.items():
+        for c in range(3):
+            swapped[c][:, pos] = done.columns[c][i]
+    as_offered = fit_columns(problem, cols, pt.exitance, refit=False, upper=upper)[1]
+    return k if fit_columns(problem, swapped, pt.exitance, refit=False, upper=upper)[1] < as_offered else {}
 
 
 def _refine_setup(model: Model, options: JobOptions) -> tuple:
