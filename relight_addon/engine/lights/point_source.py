@@ -105,12 +105,14 @@ class PointSourceKind(LampKind):
 
     def irradiance_at(self, lamp, y, n, u, far) -> tuple:
         toy = y - lamp.position  # from the lamp to the points, and its unit direction
-        nd = unit(toy)
-        q = np.broadcast_to(lamp.position, y.shape)
         if lamp.radius > 0:  # the disk facing the shading point (soft falloff)
-            q = q + _disk_offsets(u, lamp.radius, nd)
-        d = q - y
-        t = np.linalg.norm(d, axis=1)
+            nd = unit(toy)
+            d = np.broadcast_to(lamp.position, y.shape) + _disk_offsets(u, lamp.radius, nd) - y
+            t = np.linalg.norm(d, axis=1)
+        else:  # (the point itself: d = -toy, its length toy's, computed once; the same numbers)
+            t = np.linalg.norm(toy, axis=1)
+            nd = toy / np.where(t > 0, t, 1.0)[:, None]
+            d = -toy
         w = d / np.maximum(t, TINY)[:, None]
         cos_r = np.einsum("ij,ij->i", n, w)
         if lamp.radius > 0:  # radiance I / (pi r^2) over the disk of area pi r^2, facing y
