@@ -33,7 +33,9 @@ patch seen by many pixels would give as many rows; pixels that share a row are o
 sqrt(n) asking sqrt(n) x their mean (the least-squares problem unchanged, its values non-negative):
 a matte patch's pixels all read B_i; a glossy patch's rows are evaluated on tiles of the image
 (TILE_LOBE: a fraction of its lobe's width, about 13 pixels for Roughness 0.25 at 480 pixels over
-a 57 degree view; the radiance reported and shown on finer tiles, PREDICT_LOBE), its pixels in a tile sharing the row at their mean point and direction. Then
+a 57 degree view), its pixels in a tile sharing one row: the mean over them of the rows made on finer
+tiles (PREDICT_LOBE's, each at its pixels' mean point and direction), which the radiance reported and
+shown reads (made once, kept by the target). Then
 ||R B - t||^2 over the pixels is ||R' B - t'||^2 plus the constant ``offset`` (the spread of the
 pixels that share a row, which no B changes): the same solution; the pixels' own error is
 ``pixel_error`` (the report's), not the rows'.
@@ -59,14 +61,14 @@ __all__ = ["Camera", "ViewSpec", "ViewTarget", "PixelHits", "cast_pixels", "pred
 
 #: the angle of the image tiles on which a glossy patch's rows are evaluated for the solve, relative
 #: to its narrowest lobe's GGX alpha (Roughness^2, at least principled.VIEW_ALPHA_MIN): the pixels
-#: of a patch in one tile share the row at their mean point and direction (a lobe is about 2 alpha
+#: of a patch in one tile share one row, the mean of their PREDICT_LOBE rows (a lobe is about 2 alpha
 #: wide). 0.5: 13 pixels for Roughness 0.25 at 480 pixels over a 57 degree view; against each
 #: pixel's own row 0.5 % mean, 2.2 % at the 95th percentile (tests/test_view_target.py), with 7 x
 #: fewer rows than 0.15 (the solve's cost grows with the rows: docs/benchmarks.md)
 TILE_LOBE = 0.5
 #: the same for the radiance reported and shown (``predict``, ``predicted_image``: a forward
 #: evaluation, no solve): finer, the pixels' error and the predicted image within 0.2 % of each
-#: pixel's own row on average
+#: pixel's own row on average; a glossy patch's rows on them at its pixels' mean point and direction
 PREDICT_LOBE = 0.15
 #: a painted highlight (``highlight_mounts``): a painted pixel on a glossy patch at least this many
 #: times the median of the painted glossy pixels; at most MAX_HIGHLIGHTS of them, HIGHLIGHT_SPACING
