@@ -452,15 +452,19 @@ def test_cancel_during_the_save_tells_the_truth(run_cli, scenes, tmp_path, monke
 
     def save_and_signal(**kw):
         out = real(**kw)
-        # to this (the main) thread once the save returns: raise_signal is thread-directed (os.kill's
-        # process-directed signal may be taken by another of the process's threads, whose arrival
-        # CPython 3.11 does not always pass on to the main thread's eval loop: this test failed
-        # twice in ~10 runs with exit 0, the signal never seen)
-        signal.raise_signal(sig)
+        signal.raise_signal(sig)  # to this (the main) thread once the save returns
         return out
 
     monkeypatch.setattr(results, "_save_mainfile", save_and_signal)
-    code, _, err = _solve(run_cli, _room_scene(scenes), tmp_path, out=True)
+    # as from a terminal: the signal's default handler. In the whole suite an earlier test leaves
+    # SIGINT ignored (getsignal: SIG_IGN when this test ran; which test, not found yet), and the CLI
+    # rightly keeps an ignored SIGINT (a shell's background job): the signal was never seen, exit 0
+    previous = signal.getsignal(sig)
+    signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
+    try:
+        code, _, err = _solve(run_cli, _room_scene(scenes), tmp_path, out=True)
+    finally:
+        signal.signal(sig, signal.SIG_DFL if previous is None else previous)
     assert code == (130 if sig == signal.SIGINT else 143), err
     last = err.strip().splitlines()[-1]
     assert last.startswith("relight: cancelled") and "--out was not written" in last, last
