@@ -209,11 +209,9 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, h
     placed = {pos: lights.lamp(j) for pos, j in enumerate(pt.lights) if _placed(lights, j)}
     cols = [T[c][:, pt.lights] for c in range(3)]
     ids = np.array(pt.lights, dtype=np.int64)
-    carried = {} if is_final else _carried_start(problem, lights, pt, placed, cols, done)
+    carried, cols = ({}, cols) if is_final else _carried_start(problem, lights, pt, placed, cols, done)
     for pos, k in carried.items():
         placed[pos], ids[pos] = done.lamps[k], lights.n_lights + k
-        for c in range(3):
-            cols[c][:, pos] = done.columns[c][k]
     refined, cols, before, after, n_eval = refine_configuration(
         problem, placed, cols, transport, mount, step, seed=seed, budget=REFINE_BUDGET - done.evaluations,
         exitance=pt.exitance, cancel=check(len(placed)), upper=problem.light_upper[pt.lights], halt=halt,
@@ -241,20 +239,22 @@ def _refine_point(problem, lights, pt, is_final, setup, done: _Refined, check, h
 
 
 def _carried_start(problem, lights, pt, placed, cols, done: _Refined) -> dict:
-    """{position in ``pt``: index in ``done.lamps``} of the placed lamps of configuration ``pt`` that
-    the final configuration refined (``done.carried``), when this configuration with them in their
-    place (columns ``cols``) fits better than with the lamps as offered; else {}."""
+    """({position in ``pt``: index in ``done.lamps``} of the placed lamps of configuration ``pt`` that
+    the final configuration refined (``done.carried``), the columns with theirs in their place), when
+    this configuration fits better with them than with the lamps as offered (columns ``cols``); else
+    ({}, ``cols``)."""
     k = {pos: done.carried[int(pt.lights[pos])] - lights.n_lights for pos in placed
          if int(pt.lights[pos]) in done.carried}
     if not k:
-        return {}
+        return {}, cols
     upper = problem.light_upper[pt.lights]
     swapped = [c.copy() for c in cols]
     for pos, i in k.items():
         for c in range(3):
             swapped[c][:, pos] = done.columns[c][i]
     as_offered = fit_columns(problem, cols, pt.exitance, refit=False, upper=upper)[1]
-    return k if fit_columns(problem, swapped, pt.exitance, refit=False, upper=upper)[1] < as_offered else {}
+    better = fit_columns(problem, swapped, pt.exitance, refit=False, upper=upper)[1] < as_offered
+    return (k, swapped) if better else ({}, cols)
 
 
 def _refine_setup(model: Model, options: JobOptions) -> tuple:

@@ -308,8 +308,9 @@ def _tiles(pixels, width, side):
 def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact=False, kept=None, made=None,
                   fine=None):
     """Per patch seen: (patch, pixel positions in ``hits``, columns js, W (n_tiles, J, 3), tile (n,)):
-    the rows of its pixels, pixel k's row W[tile[k]]. A glossy patch: view_rows at the mean point and
-    direction of the patch's pixels in each tile of the image, tiles of ``lobe`` (_tile). A matte
+    the rows of its pixels, pixel k's row W[tile[k]]. A glossy patch: the means over the pixels in each
+    tile of ``lobe`` (_tile) of its rows on PREDICT_LOBE's tiles (``fine``); ``exact``: view_rows at
+    the mean point and direction of its pixels in each tile of ``lobe``. A matte
     patch: the radiosity interpolated at its pixels' points (``interp``: MatteInterpolation; None:
     the patch's own B_i), their mean in tiles of _matte_side (``exact``: each pixel alone). With
     ``interp`` a glossy patch's B_i is interpolated too: at its tiles' mean points, or (``exact``) in
@@ -319,8 +320,10 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     arguments, taken again where a patch sees the same pixels (a Live stroke on the view target:
     the patches whose pixels it did not change). ``fine``: {(patch, its pixels' bytes): (js, W, tile)}
     of a glossy patch on PREDICT_LOBE's tiles, without the interpolation (what ``exact`` evaluates
-    it on): not ``exact``, filled for each glossy patch evaluated, whose W is then the mean of these
-    rows over the pixels of each tile of ``lobe`` (_coarse); ``exact``, taken from it where present."""
+    it on): not ``exact``, filled for each glossy patch evaluated (a dict of its own when None);
+    ``exact``, taken from it where present."""
+    if fine is None and not exact:
+        fine = {}
     material, lobes, alpha = _patch_materials(faces, patches)
     sources = SourcePoints(patches, _sampler(F, patches)) if np.isfinite(alpha[hits.patch]).any() else None
     tables = {}  # (the materials' BRDF tables, built once for the image)
@@ -328,7 +331,7 @@ def _pixel_blocks(hits, patches, F, faces, camera, lobe=None, interp=None, exact
     cuts = np.flatnonzero(np.diff(hits.patch[order])) + 1
     for group in np.split(order, cuts) if len(order) else []:
         i = int(hits.patch[group[0]])
-        key = (i, hits.pixel[group].tobytes()) if (made is not None and not exact) or fine is not None else None
+        key = (i, hits.pixel[group].tobytes()) if not exact or fine is not None else None
         if made is not None and not exact and kept is not None and key in kept:
             made[key] = kept[key]
             yield (i, group) + kept[key]
@@ -354,17 +357,17 @@ def _patch_blocks(i, group, hits, patches, F, camera, lobe, interp, exact, mater
         W /= np.bincount(tile, minlength=n_tiles)[:, None]
         yield i, group, js, np.repeat(W[:, :, None], 3, axis=2), tile
         return
-    if exact and fine is not None and key in fine:
-        js, W, tile = fine[key]
-    elif fine is not None and not exact:  # the fine rows, kept; the tiles of ``lobe`` their means
+    if not exact:  # the fine rows, kept; the tiles of ``lobe`` their means
         if key not in fine:
             fine[key] = _view_tiles(i, group, hits, patches, F, camera, PREDICT_LOBE, material, lobes, alpha, sources,
                                     tables)
         js, W, tile = _coarse(fine[key], hits.pixel[group], camera, _tile(camera, alpha[i], lobe))
+        if interp is not None:
+            js, W = _interpolated(interp, i, _tile_means(hits, group, tile, len(W))[0], js, W)
+    elif fine is not None and key in fine:
+        js, W, tile = fine[key]
     else:
         js, W, tile = _view_tiles(i, group, hits, patches, F, camera, lobe, material, lobes, alpha, sources, tables)
-    if interp is not None and not exact:
-        js, W = _interpolated(interp, i, _tile_means(hits, group, tile, len(W))[0], js, W)
     yield i, group, js, W, tile
     if interp is not None and exact:  # (the interpolation at each pixel's own point: one more block)
         nb, G = interp.gradient(i)
