@@ -523,8 +523,10 @@ def test_a_tall_fit_on_the_gram_factor_is_scipys_nnls(seed):
     """_Model.fit takes a fit of k lights on m rows, m >= GRAM_FIT_ROWS k and m k >= GRAM_FIT_SIZE (a
     camera-view target's 941 rows), on the Cholesky factor of the lights' Gram matrix: the same
     optimum as scipy's NNLS on the columns themselves (checked on sets where some lights go to 0),
-    and the fit's error straight from T; smaller fits are scipy's on T. Nearly dependent columns
-    (a light twice, up to 1e-9) fall back to scipy on T."""
+    and the fit's error the same to 1e-10 (from the Gram matrix: ||b||^2 - 2 h.x + x.G x; from T
+    when that would cancel: targets met to 1e-8 get their error from the rows, not rounding's
+    1e-14 ||b||^2); smaller fits are scipy's on T. Nearly dependent columns (a light twice, up to
+    1e-9) fall back to scipy on T."""
     rng = np.random.default_rng(seed)
     m, n = 1024, 24
     t = rng.uniform(0, 1, (m, n)) ** 2
@@ -548,6 +550,12 @@ def test_a_tall_fit_on_the_gram_factor_is_scipys_nnls(seed):
     finally:
         bl._nnls_normal = real_normal
     assert zeros > 0  # (the bounds were active somewhere)
+    # targets that 12 of the lights meet exactly: the error is the rows' (~1e-30 ||b||^2), not the
+    # Gram sum's cancellation (~1e-14 ||b||^2)
+    S = tuple(range(12))
+    met = np.stack([t[:, list(S)] @ rng.uniform(0.5, 1.5, 12) for _ in range(3)], axis=1)
+    _, _, err2, _ = bl._Model([t, t, t], met, np.ones(n)).fit(S)
+    assert np.all(err2 <= 1e-20 * (met * met).sum(axis=0))
     assert sorted(set(routed)) == [8, 12, 16, 20]  # (m k >= 8192: 8 lights and more on 1,024 rows)
     assert len(routed) == 3 * len({S for S in sets if len(S) * m >= bl.GRAM_FIT_SIZE})
     # a light twice (to 1e-9): the Gram factor's pivot is ~1e-18 of the diagonal, scipy on T instead
@@ -557,7 +565,7 @@ def test_a_tall_fit_on_the_gram_factor_is_scipys_nnls(seed):
     real = bl._nnls
     try:
         bl._nnls = lambda M, v: calls.append(M.shape) or real(M, v)
-        x = bl._nnls_normal(A.T @ A, A.T @ y, A, y)
+        x = bl._nnls_normal(A.T @ A, A.T @ y, lambda: A, y)
     finally:
         bl._nnls = real
     assert calls == [A.shape]
