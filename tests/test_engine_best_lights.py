@@ -621,6 +621,35 @@ def test_a_strokes_warm_all_lights_nnls_serves_the_later_cold_ask():
     assert cold.nnls == pytest.approx(scipy_cold * (1 - bl.BOUND_MARGIN), rel=1e-9)
 
 
+def test_a_large_cold_all_lights_nnls_is_the_working_sets_with_scipys_optimum():
+    """A problem with WORKING_SET_SIZE entries per channel or more (a view target's 941 rows) and no
+    earlier answer: the every-light NNLS grown from no light (_nnls_from), its error and lights
+    those of scipy's NNLS over every light; below the size, scipy's over every light."""
+    rng = np.random.default_rng(5)
+    m, n = 700, 400  # (280,000 entries: above 2^18)
+    assert m * n >= bl.WORKING_SET_SIZE
+    t = rng.uniform(0, 1, (m, n)) ** 3
+    b = t[:, :3] @ rng.uniform(0.5, 1.5, (3, 3)) + 0.3 * rng.uniform(-1, 1, (m, 3))
+    calls = []
+    real_from = bl._nnls_from
+    try:
+        bl._nnls_from = lambda *a: calls.append(1) or real_from(*a)
+        got = bl.lower_bounds([t, t, t], b, 1, exhaustive_limit=0)
+        assert len(calls) == 3
+        small = bl.lower_bounds([t[:300, :200]] * 3, b[:300], 1, exhaustive_limit=0)
+        assert len(calls) == 3  # (60,000 entries: scipy's)
+    finally:
+        bl._nnls_from = real_from
+    for c in range(3):
+        x, res = sopt.nnls(t, b[:, c])
+        assert np.linalg.norm(t @ got.nnls_exitance[:, c] - b[:, c]) == pytest.approx(res, rel=1e-10)
+        assert np.array_equal(got.nnls_exitance[:, c] > 0, x > 0)
+        assert 0 < np.count_nonzero(x) < n  # (some lights on, some off)
+    scipy_cold = np.sqrt(sum(sopt.nnls(t, b[:, c])[1] ** 2 for c in range(3)))
+    assert got.nnls == pytest.approx(scipy_cold * (1 - bl.BOUND_MARGIN), rel=1e-10)
+    assert small.nnls > 0
+
+
 def test_a_halt_stops_the_all_lights_nnls_between_channels():
     """A newer stroke's halt heard before each channel's all-lights NNLS (30-90 ms each on the
     living room, holding the interpreter): Cancelled, nothing kept, the next ask computes it whole."""
