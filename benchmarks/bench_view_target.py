@@ -4,7 +4,7 @@ for a view target at 480 x 270 instead (an OpenEXR asking every pixel for a unif
 paint removed). Prints each solve's timings (the report's timings_s), its peak memory, the view target's rows and
 pixels (one ray a painted pixel), and the ratio pixel / surface of the solve time and of the total.
 
-    flock /tmp/relight-bench.lock .venv/bin/python benchmarks/bench_view_target.py [--out DIR]
+    flock /tmp/relight-bench.lock .venv/bin/python benchmarks/bench_view_target.py [--out DIR] [--rounds 3]
 """
 import argparse
 import json
@@ -75,6 +75,9 @@ def solve(blend, report, *extra):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default=None)
+    ap.add_argument("--rounds", type=int, default=3,
+                    help="surface and pixel solves alternated this many times (this machine's runs of one code "
+                         "differ by up to 10-30 %%: the ratio of the medians, and of the sums)")
     args = ap.parse_args()
     folder = args.out or tempfile.mkdtemp(prefix="bench_view_")
     os.makedirs(folder, exist_ok=True)
@@ -82,17 +85,29 @@ def main():
     print("uptime:", os.popen("uptime").read().strip())
     # a first solve fills the caches both solves share (the form factors' on disk): not timed
     solve(surface, os.path.join(folder, "warm.json"))
-    rs, ws = solve(surface, os.path.join(folder, "surface.json"))
-    rp, wp = solve(pixel, os.path.join(folder, "pixel.json"), "--view-target", image)
+    rounds = []
+    for k in range(max(1, args.rounds)):
+        rs, ws = solve(surface, os.path.join(folder, "surface.json"))
+        rp, wp = solve(pixel, os.path.join(folder, "pixel.json"), "--view-target", image)
+        rounds.append((rs, ws, rp, wp))
+        print(f"round {k + 1}: total surface {rs['timings_s']['total']:.2f} s, pixel {rp['timings_s']['total']:.2f} s "
+              f"({rp['timings_s']['total'] / rs['timings_s']['total']:.2f} x); wall {ws:.1f} / {wp:.1f} s "
+              f"({wp / ws:.2f} x)", flush=True)
+    rs, ws, rp, wp = rounds[-1]
     for name, r, w in (("surface", rs, ws), ("pixel", rp, wp)):
         t = r["timings_s"]
-        print(f"{name}: wall {w:.1f} s, " + ", ".join(f"{k} {v:.2f}" for k, v in t.items()))
+        print(f"{name} (last round): wall {w:.1f} s, " + ", ".join(f"{k} {v:.2f}" for k, v in t.items()))
         print(f"  {r['model'].get('n_patches', '?')} patches, {r['final']['n_lights']} lights, relative error "
               f"{r['final']['relative_error']:.3f}")
     print("view target:", rp["view_target"])
-    ts, tp = rs["timings_s"], rp["timings_s"]
-    print(f"ratio pixel / surface: solve {tp['solve'] / ts['solve']:.2f}, total {tp['total'] / ts['total']:.2f}, "
-          f"wall {wp / ws:.2f}")
+
+    def of(i, key=None):
+        return np.array([r[i]["timings_s"][key] if key else r[i] for r in rounds])
+
+    for label, a, b in (("solve", of(0, "solve"), of(2, "solve")), ("total", of(0, "total"), of(2, "total")),
+                        ("wall", of(1), of(3))):
+        print(f"ratio pixel / surface, {label}: median {np.median(b) / np.median(a):.2f}, sums {b.sum() / a.sum():.2f}, "
+              f"rounds {', '.join(f'{x:.2f}' for x in b / a)}")
     print("uptime:", os.popen("uptime").read().strip())
 
 
