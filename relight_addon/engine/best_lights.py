@@ -242,7 +242,8 @@ GRAM_FIT_SIZE = 8192
 GRAM_PIVOT = 1e-10
 #: a Gram fit's squared error is ||y||^2 - 2 h.x + x.G x (no pass over the m rows) unless it is
 #: below this share of ||y||^2 (a fit within 0.1 % of its targets: the sum cancels, the rows
-#: give it); above, its rounding (~1e-14 ||y||^2) is below 1e-11 of the error
+#: give it); above, its rounding (~1e-14 ||y||^2) moves the error by less than 1e-11 ||y||, a
+#: hundredth of EQUAL_ERROR_RTOL
 GRAM_RESIDUAL = 1e-6
 _TRTRS = sla.lapack.dtrtrs
 
@@ -334,7 +335,8 @@ class DenseColumns:
 
 def _nnls_from(A, y, start, tol):
     """NNLS of ``A x ~ y`` started from the columns ``start`` (an earlier, nearby problem's active
-    set: a Live stroke's): scipy's NNLS on a working set of columns, grown by the columns that
+    set: a Live stroke's; none: a large problem's every-light NNLS, WORKING_SET_SIZE): scipy's NNLS
+    on a working set of columns, grown by the columns that
     violate the optimality (KKT) conditions on the whole of A, ``a_j . (y - A x) > tol_j``, until
     none does; then x is the NNLS optimum over every column to that tolerance, as a cold NNLS is.
     A few small fits instead of one over every column (the living room: 3-4 x faster). ``A``: an
@@ -1290,13 +1292,14 @@ def _all_lights_nnls_of(model, nnls_start, halt=None) -> tuple:
     cols = np.flatnonzero(model.usable)
     err2 = model.bb.copy()
     e_nnls = np.zeros((model.n, 3))
+    warm = nnls_start is not None and np.shape(nnls_start) == (model.n, 3)
     if len(cols):
         for c in model.chans:
             A = model.T[c][:, cols]
             check_cancel(halt)
             if model.upper is not None:
                 x = _bounded(A, model.b[:, c], model.upper[cols])
-            elif (warm := nnls_start is not None and np.shape(nnls_start) == (model.n, 3)) or A.size >= WORKING_SET_SIZE:
+            elif warm or A.size >= WORKING_SET_SIZE:  # (from the earlier answer's lights, or from none)
                 on = np.flatnonzero(np.asarray(nnls_start)[cols, c] > 0) if warm else []
                 d = model.d[id(model.T[c])][cols]
                 x = _nnls_from(A, model.b[:, c], on, model._kkt_tol(d, c))
