@@ -336,9 +336,8 @@ class DenseColumns:
 def _nnls_from(A, y, start, tol):
     """NNLS of ``A x ~ y`` started from the columns ``start`` (an earlier, nearby problem's active
     set: a Live stroke's; none: a large problem's every-light NNLS, WORKING_SET_SIZE): scipy's NNLS
-    on a working set of columns, grown by the columns that
-    violate the optimality (KKT) conditions on the whole of A, ``a_j . (y - A x) > tol_j``, until
-    none does; then x is the NNLS optimum over every column to that tolerance, as a cold NNLS is.
+    on a working set of columns, grown by the columns that violate the optimality (KKT) conditions
+    on the whole of A, ``a_j . (y - A x) > tol_j``, until none does; then x is the NNLS optimum over every column to that tolerance, as a cold NNLS is.
     A few small fits instead of one over every column (the living room: 3-4 x faster). ``A``: an
     array, or columns read as DenseColumns reads them."""
     A = DenseColumns(A) if isinstance(A, np.ndarray) else A
