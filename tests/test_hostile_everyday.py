@@ -456,9 +456,10 @@ def test_cancel_during_the_save_tells_the_truth(run_cli, scenes, tmp_path, monke
         return out
 
     monkeypatch.setattr(results, "_save_mainfile", save_and_signal)
-    # as from a terminal: the signal's default handler. In the whole suite an earlier test leaves
-    # SIGINT ignored (getsignal: SIG_IGN when this test ran; which test, not found yet), and the CLI
-    # rightly keeps an ignored SIGINT (a shell's background job): the signal was never seen, exit 0
+    # as from a terminal: the signal's default handler. A suite started as a background job of a
+    # non-interactive shell (`make test-all &`) inherits SIGINT ignored (getsignal: SIG_IGN), and the
+    # CLI rightly keeps an ignored SIGINT: the signal was never seen, exit 0 (no test changes it:
+    # checked around every test of the fast tier)
     previous = signal.getsignal(sig)
     signal.signal(sig, signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL)
     try:
