@@ -240,7 +240,7 @@ def probe_sidebar(max_pages=6, want=()):
     middle of the places where it answered), scrolling down page by page (each page scrolled by
     at most PAGE_OVERLAP of the region, so that no row falls between two pages). ``want``: the
     commands the caller presses next; the probe stops at the first page by which every one of
-    them has answered (a page is 15-35 s of hovers: the probes were 1,070 s of the 1,394 s
+    them has answered (a page is 15-35 s of hovers: the probes were 1,088 s of the 1,394 s
     run when every probe read every page). When every one has a known place (PLACES) within half a region of the others, their
     page is probed first, from the topmost one in the region's upper half: the probe ends there if
     they all answer (a layout that moved them less than that), else it goes on from the top. A
