@@ -640,62 +640,59 @@ VIEW_ALPHA_MIN = 0.05
 
 
 def _fresnel_eval(fres, c):
-    c = np.clip(c, 0.0, 1.0)[:, None]
+    c = np.clip(c, 0.0, 1.0)[..., None]
     if fres[0] == "gs":
         _, f0, eta = fres
         F0 = float(F0_from_ior(eta))
         s = np.clip((fresnel_dielectric(c, eta) - F0) / (1.0 - F0), 0.0, 1.0) if F0 < 1 else np.ones_like(c)
-        return f0[None, :] + (1.0 - f0[None, :]) * s
+        return f0 + (1.0 - f0) * s
     if fres[0] == "diel":
-        return np.repeat(fresnel_dielectric(c, fres[1]), 3, axis=1)
+        return np.repeat(fresnel_dielectric(c, fres[1]), 3, axis=-1)
     _, f0, b = fres
-    return np.clip(f0[None, :] + (1.0 - f0[None, :]) * (1.0 - c) ** 5 - b[None, :] * c * (1.0 - c) ** 6, 0.0, 1.0)
-
-
-def _rows(v, n):
-    v = np.asarray(v, dtype=np.float64)
-    return np.broadcast_to(v, (n, 3)) if v.ndim == 1 else v
+    return np.clip(f0 + (1.0 - f0) * (1.0 - c) ** 5 - b * c * (1.0 - c) ** 6, 0.0, 1.0)
 
 
 def _ggx_eval(alpha, fres, v, l):
-    """Single-scattering GGX BRDF f(l, v) (k, 3) for unit views v ((3,) or (k, 3)) and unit
-    incident directions l (k, 3), local frame (normal z); 0 below the horizon."""
+    """Single-scattering GGX BRDF f(l, v) (..., 3) for unit incident directions l (..., 3) and unit
+    views v that broadcast against them ((3,), l's shape, or (n, 1, 3) against l (n, J, 3): a
+    view's own terms computed once for its J directions), local frame (normal z); 0 below the
+    horizon."""
     alpha = max(alpha, VIEW_ALPHA_MIN)
     a2 = alpha * alpha
-    v = _rows(v, len(l))
-    mu_v = np.maximum(v[:, 2], _MU_MIN)
-    mu_l = l[:, 2]
-    ok = (mu_l > 0) & (v[:, 2] > 0)
+    v = np.asarray(v, dtype=np.float64)
+    mu_v = np.maximum(v[..., 2], _MU_MIN)
+    mu_l = l[..., 2]
+    ok = (mu_l > 0) & (v[..., 2] > 0)
     h = l + v
-    h /= np.maximum(np.linalg.norm(h, axis=1, keepdims=True), TINY)
-    c_nh = np.clip(h[:, 2], 0.0, 1.0)
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), TINY)
+    c_nh = np.clip(h[..., 2], 0.0, 1.0)
     D = a2 / (np.pi * ((1.0 - c_nh ** 2) + a2 * c_nh ** 2) ** 2)
     G2 = 1.0 / (1.0 + _lambda(a2, mu_v) + _lambda(a2, np.where(ok, mu_l, 1.0)))
-    F = _fresnel_eval(fres, np.einsum("ij,ij->i", h, v))
-    f = F * (D * G2 / (4.0 * mu_v * np.where(ok, mu_l, 1.0)))[:, None]
-    return np.where(ok[:, None], f, 0.0)
+    F = _fresnel_eval(fres, np.einsum("...j,...j->...", h, v))
+    f = F * (D * G2 / (4.0 * mu_v * np.where(ok, mu_l, 1.0)))[..., None]
+    return np.where(ok[..., None], f, 0.0)
 
 
 def _oren_nayar_eval(color, sigma, v, l):
-    """Cycles' rough diffuse BRDF (per unit weight), Fujii + OpenPBR multiple scattering;
-    views v (3,) or (k, 3)."""
-    mu_l = l[:, 2]
-    v = _rows(v, len(l))
-    ok = (mu_l > 0) & (v[:, 2] > 0)
+    """Cycles' rough diffuse BRDF (per unit weight), Fujii + OpenPBR multiple scattering; views v
+    that broadcast against the directions l (as _ggx_eval's)."""
+    mu_l = l[..., 2]
+    v = np.asarray(v, dtype=np.float64)
+    ok = (mu_l > 0) & (v[..., 2] > 0)
     if sigma < 1e-5:
-        return np.where(ok[:, None], 1.0 / np.pi, 0.0) * np.ones((1, 3))
+        return np.where(ok[..., None], 1.0 / np.pi, 0.0) * np.ones(3)
     A = 1.0 / (np.pi + sigma * (np.pi / 2 - 2.0 / 3.0))
     B = sigma * A
-    nv = np.maximum(v[:, 2], 0.0)
-    t = np.einsum("ij,ij->i", l, v) - mu_l * nv
+    nv = np.maximum(v[..., 2], 0.0)
+    t = np.einsum("...j,...j->...", l, v) - mu_l * nv
     t = np.where(t > 0, t / np.maximum(np.maximum(mu_l, nv), 1e-30), t)
     c = np.clip(np.asarray(color, dtype=np.float64), 0.0, 1.0)
     E_fit = A * np.pi + (2 * np.pi - 5.6) / 3.0 * B
     ms = c * c * (E_fit / (1.0 - E_fit)) / (1.0 - c * (1.0 - E_fit)) / np.pi
     Ev = A * np.pi + B * _fujii_G(np.maximum(nv, 1e-6))
     El = A * np.pi + B * _fujii_G(np.where(ok, mu_l, 1.0))
-    f = (A + B * t)[:, None] + ms[None, :] * ((1.0 - Ev) * (1.0 - El))[:, None]
-    return np.where(ok[:, None], f, 0.0)
+    f = (A + B * t)[..., None] + ms * ((1.0 - Ev) * (1.0 - El))[..., None]
+    return np.where(ok[..., None], f, 0.0)
 
 
 #: view cosines at which a material's layer weights are tabulated (BRDFTable)
@@ -722,14 +719,16 @@ class BRDFTable:
                 self.terms.append(("diffuse", w * np.broadcast_to(color, (len(VIEW_MU), 3)), (color, float(sigma))))
 
     def __call__(self, v, l) -> np.ndarray:
-        """(k, 3) f(l, v) (1/sr, without the cosine) for unit views ``v`` ((3,) or (k, 3)) and
-        unit incident directions ``l`` (k, 3) in the surface's local frame (normal +z)."""
-        l = np.atleast_2d(np.asarray(l, dtype=np.float64))
-        v = _rows(v, len(l))
-        mu = np.clip(v[:, 2], _MU_MIN, 1.0)
-        out = np.zeros((len(l), 3))
+        """(..., 3) f(l, v) (1/sr, without the cosine) for unit incident directions ``l`` (..., 3) in
+        the surface's local frame (normal +z) and unit views ``v`` that broadcast against them
+        ((3,), l's shape, or (n, 1, 3) for l (n, J, 3): each view's weights and terms once)."""
+        l = np.asarray(l, dtype=np.float64)
+        l = l[None] if l.ndim == 1 else l
+        v = np.asarray(v, dtype=np.float64)
+        mu = np.clip(v[..., 2], _MU_MIN, 1.0)
+        out = np.zeros(np.broadcast_shapes(l.shape, v.shape))
         for kind, table, detail in self.terms:
-            wt = np.stack([np.interp(mu, VIEW_MU, table[:, c]) for c in range(3)], axis=1)
+            wt = np.stack([np.interp(mu, VIEW_MU, table[:, c]) for c in range(3)], axis=-1)
             if kind == "ggx":
                 out += wt * _ggx_eval(detail.alpha, detail.fresnel, v, l)
             else:

@@ -156,8 +156,7 @@ class _GlossySources:
         vj = _above(np.einsum("jab,jb->ja", self.frames[js], -d))  # towards i, in each source's frame
         for m in np.unique(material[js]):
             sel = np.flatnonzero(material[js] == m)
-            n, nE = len(sel), len(E)
-            g = self.tables[int(m)](np.repeat(vj[sel], nE, axis=0), self.lE[js[sel]].reshape(-1, 3)).reshape(n, nE, 3)
+            g = self.tables[int(m)](vj[sel][:, None, :], self.lE[js[sel]])  # (n, nE, 3)
             src[sel] += np.einsum("jkc,jk,kc->jc", g, self.FE[js[sel]], e[E])
             if self.XE is not None:
                 src[sel] += np.einsum("jkc,jk,kc->jc", g, self.XE[js[sel]], self.e_own[E])
@@ -248,18 +247,15 @@ def _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources):
     out = f.copy()
     for g in np.unique(side[near]):
         pn, jn = np.nonzero(near & (side == g))
-        src, inv = np.unique(js[jn], return_inverse=True)
-        inv = inv.reshape(-1)
-        y, ny = sources(src, int(g))  # (S, K, 3)
-        d = y[inv] - x[pn][:, None, :]  # (m, K, 3) from the point to each source point
+        y, ny = sources(js[jn], int(g))  # (m, K, 3): each pair's source's points
+        d = y - x[pn][:, None, :]  # (m, K, 3) from the point to each source point
         r2 = np.maximum(np.einsum("mkc,mkc->mk", d, d), TINY)
         d /= np.sqrt(r2)[..., None]
         loc = d @ R.T
-        w = np.maximum(loc[..., 2], 0.0) * np.maximum(-np.einsum("mkc,mkc->mk", d, ny[inv]), 0.0) / r2
+        w = np.maximum(loc[..., 2], 0.0) * np.maximum(-np.einsum("mkc,mkc->mk", d, ny), 0.0) / r2
         w_sum = w.sum(axis=1, keepdims=True)
         keep = w_sum[:, 0] > 0
-        K = d.shape[1]
-        fk = table(np.repeat(v_loc[pn], K, axis=0), _above(loc).reshape(-1, 3)).reshape(len(pn), K, 3)
+        fk = table(v_loc[pn][:, None, :], _above(loc))  # (m, K, 3)
         mean = np.einsum("mk,mkc->mc", w / np.where(w_sum > 0, w_sum, 1.0), fk)
         out[pn[keep], jn[keep]] = mean[keep]
     return out
@@ -308,7 +304,7 @@ def view_rows(F, reflectance, center, normal, patch, points, views, material, ma
     if int(material[i]) not in tables:
         tables[int(material[i])] = BRDFTable(material_lobes[int(material[i])])
     table = tables[int(material[i])]
-    f = table(np.repeat(v_loc, len(js), axis=0), l_loc.reshape(-1, 3)).reshape(n, len(js), 3)
+    f = table(v_loc[:, None, :], l_loc)  # (n, J, 3)
     alpha = min([float(t.alpha) for kind, _, t in table.terms if kind == "ggx"] or [np.inf])
     if sources is not None and np.isfinite(alpha) and len(js):
         f = _lobe_means(f, x, v_loc, R, js, l_loc, dist, table, alpha, sources)

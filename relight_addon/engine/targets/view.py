@@ -537,7 +537,11 @@ class ViewTarget(Target):
         material, lobes, tables, inc = self._materials
         for m, table in brdf_tables(lobes, [m for m in np.unique(material[patch]) if int(m) not in tables]).items():
             tables[m] = table
-        excess = None if inc is None else (lambda lamp: lamp_albedo_excess(lamp, P.center, P.normal, *inc, patches=patch))
+        if inc is None:
+            excess = None
+        else:  # (per patch, then per point: the points of a patch share its excess)
+            own, at = np.unique(patch, return_inverse=True)
+            excess = lambda lamp: lamp_albedo_excess(lamp, P.center, P.normal, *inc, patches=own)[at.reshape(-1)]
         return lamp_view_light(lamps, point, patch, d, P.normal, P.reflectance, material, lobes,
                                _sampler(self._F, P), samples, tables=tables, excess=excess)
 
