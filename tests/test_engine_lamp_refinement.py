@@ -187,10 +187,8 @@ def test_a_cancel_within_a_lamps_search_stops_the_solve_without_a_half_refined_a
     assert calls["irradiance"] <= heard["at"] + 1 < n_full  # (stopped at the next evaluation)
 
 
-@pytest.fixture(scope="module")
-def gallery_curve():
-    """Issue 17's gallery (tests/artist_scenes.gallery) solved at seed 0 with the default candidates:
-    its final configuration's spot is also in its 2- and 1-light configurations."""
+def _gallery_faces():
+    """Issue 17's gallery (tests/artist_scenes.gallery) as the export makes it."""
     import bpy  # noqa: F401 (artist_scenes' bmesh comes with it)
     import artist_scenes
     import cycles_reference as cr
@@ -199,10 +197,16 @@ def gallery_curve():
     cr.reset_blender()
     try:
         artist_scenes.gallery()
-        faces = export.export_scene().faces
+        return export.export_scene().faces
     finally:
         cr.reset_blender()
-    return run_solve(faces, JobOptions(seed=0))
+
+
+@pytest.fixture(scope="module")
+def gallery_curve():
+    """The gallery solved at seed 0 with the default candidates: its final configuration's spot is
+    also in its 2- and 1-light configurations."""
+    return run_solve(_gallery_faces(), JobOptions(seed=0))
 
 
 def test_a_smaller_configuration_starts_from_the_lamp_the_final_one_refined(gallery_curve):
@@ -282,19 +286,8 @@ def test_the_round_that_keeps_the_aim_finds_the_gallerys_spots_a_lower_error(gal
     coordinates and stopped far above where the spots can be. With the aim kept in the second round
     (AIM_ROUNDS), the final error at seed 0 is at least 10 % lower than the same solve's with the
     direction kept in both (0.183 against 0.243 measured)."""
-    import bpy  # noqa: F401
-    import artist_scenes
-    import cycles_reference as cr
-    from relight_addon.blender import export
-
-    cr.reset_blender()
-    try:
-        artist_scenes.gallery()
-        faces = export.export_scene().faces
-    finally:
-        cr.reset_blender()
     monkeypatch.setattr(lr, "AIM_ROUNDS", (False, False))
-    direction_kept = run_solve(faces, JobOptions(seed=0))
+    direction_kept = run_solve(_gallery_faces(), JobOptions(seed=0))
     new, old = gallery_curve.report["final"]["relative_error"], direction_kept.report["final"]["relative_error"]
     assert gallery_curve.report["model"]["lamp_refinement"]["points"][0]["evaluations"] > lr.MAX_EVALUATIONS
     assert new < 0.9 * old, (new, old)

@@ -67,7 +67,7 @@ BUDGET = 8 * MAX_EVALUATIONS
 MIN_GAIN = 1e-4
 #: per round (in turn): whether a lamp slid along its surface keeps aiming at the point its axis met
 #: (True) or keeps its direction (False). The second round's search from the first's lamp in the
-#: other coordinates: the final error 0.2-7 % lower on the view target, 19-29 % on the gallery, the
+#: other coordinates: the final error 0.2-7 % lower on the view target, 18-30 % on the gallery, the
 #: staircase within -0.6 / +1.6 %, at five seeds each (docs/benchmarks.md, "a slid lamp keeps its aim")
 AIM_ROUNDS = (False, True)
 #: a size stays within this range of factors of its first size
