@@ -113,14 +113,19 @@ def test_free_is_no_worse_than_the_constrained(solved):
     are constraints of it): the final configurations the selection chose, before the lamp refinement
     (a local search from each solve's own answer, over lamps no longer the candidates: after it,
     free colours' 3 lights were 0.242 and white's 0.241 on the same three lights, 0.263 and 0.265
-    before). The constrained solves' certificates are below their own answers."""
+    before). The constrained solves' certificates are below their own configurations as chosen; a
+    refined answer may go below its certificate (of the candidate lights), and its warnings say so
+    (with the second round's aim kept: 0.175 against the bound 0.240)."""
     free = _unrefined(solved["free"][0])
     for mode in ("white", "blackbody"):
         r = solved[mode][0]
         mine = _unrefined(r)
         n = r["final"]["n_lights"]  # (other rows: the selection's own heuristic choices may differ)
         assert free[n] <= mine[n] * (1 + 1e-6), (mode, n, free[n], mine[n])
-        assert r["final"]["bound_relative_error"] <= r["final"]["relative_error"] * (1 + 1e-9)
+        bound = r["final"]["bound_relative_error"]
+        assert bound <= mine[n] * (1 + 1e-9), (mode, bound, mine[n])
+        if r["final"]["relative_error"] < bound * (1 - 1e-6):
+            assert any("were refined" in w for w in r["warnings"]), (mode, r["warnings"])
 
 
 def test_written_blackbody_lamps_carry_their_temperature(solved):
