@@ -115,7 +115,7 @@ def test_free_is_no_worse_than_the_constrained(solved):
     free colours' 3 lights were 0.242 and white's 0.241 on the same three lights, 0.263 and 0.265
     before). The constrained solves' certificates are below their own configurations as chosen; a
     refined answer may go below its certificate (of the candidate lights), and its warnings say so
-    (with the second round's aim kept: 0.175 against the bound 0.240)."""
+    (with the second round's aim kept, one reached 0.175 under its bound 0.240)."""
     free = _unrefined(solved["free"][0])
     for mode in ("white", "blackbody"):
         r = solved[mode][0]
