@@ -193,8 +193,10 @@ class _LampParameters:
             if not self.mount.holds(position, self.normal):
                 return None
         direction, axis_u, axis_v = lamp.direction, lamp.axis_u, lamp.axis_v
-        if self.aim_point is not None and (values.get("slide_u", 0.0) or values.get("slide_v", 0.0)):
-            direction, axis_u, axis_v = frame(self.aim_point - position)
+        to_aim = None if self.aim_point is None or not (values.get("slide_u", 0.0) or values.get("slide_v", 0.0)) \
+            else self.aim_point - position
+        if to_aim is not None and np.linalg.norm(to_aim) > 1e-6 * self.step_length:  # (slid: turned to its aim)
+            direction, axis_u, axis_v = frame(to_aim)
         if "aim_u" in values:
             direction = unit((direction + math.tan(self.step_angle * values["aim_u"]) * axis_u
                               + math.tan(self.step_angle * values["aim_v"]) * axis_v)[None, :])[0]
@@ -203,8 +205,6 @@ class _LampParameters:
         d, u, v = frame(direction)
         return lamp.kind.refined(replace(lamp, position=position, direction=d, axis_u=u, axis_v=v, notes=[]),
                                  values, self)
-
-
 
 
 def _aimed_point(lamp, sampler):
