@@ -188,15 +188,16 @@ class _LampParameters:
         """The engine.lamps.Lamp at parameters ``x``; None when the lamp would not be valid."""
         lamp, values = self.lamp, dict(zip(self.names, x))
         position = lamp.position.copy()
-        if values.get("slide_u", 0.0) or values.get("slide_v", 0.0):
+        slid = bool(values.get("slide_u", 0.0) or values.get("slide_v", 0.0))
+        if slid:
             position = position + self.step_length * (values["slide_u"] * self.mount_u + values["slide_v"] * self.mount_v)
             if not self.mount.holds(position, self.normal):
                 return None
         direction, axis_u, axis_v = lamp.direction, lamp.axis_u, lamp.axis_v
-        to_aim = None if self.aim_point is None or not (values.get("slide_u", 0.0) or values.get("slide_v", 0.0)) \
-            else self.aim_point - position
-        if to_aim is not None and np.linalg.norm(to_aim) > 1e-6 * self.step_length:  # (slid: turned to its aim)
-            direction, axis_u, axis_v = frame(to_aim)
+        if slid and self.aim_point is not None:  # (turned to its aim, unless it hangs at that point)
+            to_aim = self.aim_point - position
+            if np.linalg.norm(to_aim) > 1e-6 * self.step_length:
+                direction, axis_u, axis_v = frame(to_aim)
         if "aim_u" in values:
             direction = unit((direction + math.tan(self.step_angle * values["aim_u"]) * axis_u
                               + math.tan(self.step_angle * values["aim_v"]) * axis_v)[None, :])[0]
