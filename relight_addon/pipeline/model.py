@@ -229,7 +229,10 @@ def build_inverse_model(faces: FaceSet, options: JobOptions, default_max_patch_s
         patches = refined
     # the lights' colour (an automatic mode chooses it on the final problem)
     check_cancel(cancel)  # (the problem is factorised: a cancel is heard before the colour's choice)
+    t_colour = time.perf_counter()
     problem.colour, note = light_colour_of(problem, options)
+    # (an automatic mode's choice factorises the system and builds the transfer: the inverse stage's)
+    seconds["problem"] += time.perf_counter() - t_colour
     check_cancel(cancel)
     problem.cancel = None  # (the model outlives this job: a later factorisation is not this job's to stop)
     if note:
