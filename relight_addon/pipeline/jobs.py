@@ -50,7 +50,7 @@ __all__ = ["Cancelled", "RadiosityResult", "SolveOutcome", "run_radiosity", "run
 FEW_RAYS = 256
 #: a live re-solve's curve covers the Max Lights and this many more (the chart's neighbourhood; the
 #: later answers bring the whole curve). The quick search's swaps grow with k: at 4 more the living
-#: room's strokes took 63-128 ms, at 2 46-95 ms, the same final configurations to the bit
+#: room's strokes took 65-128 ms, at 2 46-95 ms, the same final configurations to the bit
 #: (docs/benchmarks.md, "Live's quick answer: its curve's neighbourhood")
 LIVE_CURVE_EXTRA = 2
 
