@@ -593,3 +593,32 @@ def test_the_add_on_re_solves_a_stroke_from_its_session(addon, monkeypatch):
     assert "solved from scratch: the geometry changed since it was prepared" in scene.relight.last_warnings
     bpy.ops.wm.open_mainfile(filepath=os.path.join(SAMPLES, "staircase_targets.blend"))
     assert not preparation.PREPARED  # another file: the session lets the state go
+
+
+def test_a_strokes_quick_curve_ends_near_the_max_lights_with_the_answer_a_longer_one_gives(monkeypatch):
+    """A stroke's quick answer computes its curve to the Max Lights and LIVE_CURVE_EXTRA more (the
+    chart's neighbourhood; the later answers bring the whole curve): its final configuration is the
+    one the curve computed further gives, to the bit (the stop criteria keep it within the Max
+    Lights; the curve is built upward), only the points beyond are left to the later answers."""
+    exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
+    state.solve(exp.faces)
+    state.prepare_live(exp.faces)
+    answers, quick = {}, jobs.LIVE_CURVE_EXTRA
+    for extra in (quick, quick + 4):
+        monkeypatch.setattr(jobs, "LIVE_CURVE_EXTRA", extra)
+        out = []
+        for kind, faces in _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool))[:2]:
+            live = state.live(faces)
+            assert state.reason is None, (kind, state.reason)
+            out.append(live)
+        answers[extra] = out
+    short, long_ = answers.values()
+    for a, b in zip(short, long_):
+        fa, fb = a.reduction.final, b.reduction.final
+        assert fa.n_lights <= options.max_lights
+        assert np.array_equal(fa.lights, fb.lights) and np.array_equal(fa.exitance, fb.exitance)
+        assert fa.error == fb.error
+        ks = [len(p.lights) for p in a.reduction.curve]
+        assert len(a.reduction.curve) < len(b.reduction.curve)
+        assert max(ks) <= options.max_lights + quick
+        assert [p.error for p in a.reduction.curve] == [p.error for p in b.reduction.curve][:len(a.reduction.curve)]
