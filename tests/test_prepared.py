@@ -603,17 +603,16 @@ def test_a_strokes_quick_curve_ends_near_the_max_lights_with_the_answer_a_longer
     exp, options, size, state = _prepared_staircase(JobOptions(**OPTIONS))
     state.solve(exp.faces)
     state.prepare_live(exp.faces)
-    answers, quick = {}, jobs.LIVE_CURVE_EXTRA
+    strokes = _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool))[:2]
+    answers, quick = [], jobs.LIVE_CURVE_EXTRA
     for extra in (quick, quick + 4):
         monkeypatch.setattr(jobs, "LIVE_CURVE_EXTRA", extra)
         out = []
-        for kind, faces in _strokes(exp.faces, "flight_1", np.zeros(exp.faces.n_faces, dtype=bool))[:2]:
-            live = state.live(faces)
+        for kind, faces in strokes:
+            out.append(state.live(faces))
             assert state.reason is None, (kind, state.reason)
-            out.append(live)
-        answers[extra] = out
-    short, long_ = answers.values()
-    for a, b in zip(short, long_):
+        answers.append(out)
+    for a, b in zip(*answers):
         fa, fb = a.reduction.final, b.reduction.final
         assert fa.n_lights <= options.max_lights
         assert np.array_equal(fa.lights, fb.lights) and np.array_equal(fa.exitance, fb.exitance)
